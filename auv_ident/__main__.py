@@ -1,0 +1,6 @@
+"""python -m auv_ident ..."""
+import sys
+
+from .cli import main
+
+sys.exit(main())

@@ -1,0 +1,421 @@
+"""The one place where ROS messages meet numpy arrays.
+
+Conventions
+-----------
+State vector ``x12 = [u v w p q r x y z phi theta psi]``:
+
+- ``u v w`` (m/s) and ``p q r`` (rad/s): body velocities in the body frame FRD
+  (x forward, y starboard, z down).
+- ``x y z`` (m): position in a world frame NED (x north, y east, z down).
+- ``phi theta psi`` (rad): ZYX Euler angles (SNAME / Fossen): the rotation body FRD -> world
+  NED is ``R = Rz(psi) Ry(theta) Rx(phi)``. Angles leaving this module are canonical:
+  ``phi, psi`` in (-pi, pi], ``theta`` in [-pi/2, pi/2].
+
+Actuator vector ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]``: rudder, stern
+planes, bow planes, port bow plane, starboard bow plane (rad) and propeller speed (rpm).
+
+nav_msgs/Odometry (REP-105 semantics):
+
+- ``header.stamp`` is the sample time; ``header.frame_id`` the world frame,
+  ``child_frame_id`` the body frame.
+- ``pose.pose.position`` is the world position; ``pose.pose.orientation`` the quaternion of the
+  rotation body -> world.
+- ``twist.twist.linear`` / ``angular`` are body-frame velocities (twist is in the child frame).
+- ``pose.covariance`` / ``twist.covariance`` are 6x6 row-major over
+  ``(x, y, z, rotX, rotY, rotZ)``. The rotation block of the pose covariance is taken as the
+  covariance of the fixed-axis roll/pitch/yaw angles, i.e. of ``(phi, theta, psi)`` in the NED
+  convention (the reading used by robot_localization), so an EKF can put its Euler-angle
+  covariance there unchanged.
+
+Two frame conventions, selected by the string ``frame``:
+
+- ``'ned'``: world NED, body FRD; default frame ids ``'odom_ned'`` / ``'base_link_frd'``.
+- ``'enu'`` (REP-103): world ENU, body FLU; default frame ids ``'odom'`` / ``'base_link'``.
+
+NED/FRD -> ENU/FLU: position ``(y, x, -z)``; body vectors (linear and angular) ``(x, -y, -z)``;
+orientation ``q_enu_flu = q(NED->ENU) * q_ned_frd * q(FRD->FLU)``. In Euler angles this is
+exactly ``(phi, -theta, pi/2 - psi)``, so the pose covariance transforms with
+``T_pose = blockdiag(P, E)``, ``P = [[0,1,0],[1,0,0],[0,0,-1]]``, ``E = diag(1,-1,-1)``, and the
+twist covariance with ``T_twist = blockdiag(E, E)``: ``C' = T C T^T``. All T are signed
+permutations, so the transforms are exact and their own inverses (T^-1 = T^T).
+
+JointState layout for actuator commands: ``name = JOINT_NAMES``; ``position`` = fin angles (rad),
+propeller entry 0.0 (meaningless); ``velocity = [0, 0, 0, 0, 0, shaft speed (rad/s)]``;
+``effort`` empty. Readers match joints by name, in any order.
+
+Non-finite values pass through unchanged: the caller decides (see :func:`is_finite_state`).
+Bad input raises :class:`ConversionError` naming the field.
+"""
+import math
+
+from builtin_interfaces.msg import Time
+import numpy as np
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+NS_PER_S = 1_000_000_000
+
+FRAMES = ('ned', 'enu')
+DEFAULT_FRAME_IDS = {
+    'ned': ('odom_ned', 'base_link_frd'),
+    'enu': ('odom', 'base_link'),
+}
+
+JOINT_NAMES = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
+               'bow_plane_starboard', 'propeller')
+PROPELLER_JOINT = 'propeller'
+RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+
+# q(NED->ENU): rotation by pi about (1, 1, 0)/sqrt(2); q(FRD->FLU): rotation by pi about x.
+# Both are their own inverses as rotations. Quaternions are (x, y, z, w).
+_S = math.sqrt(0.5)
+_Q_NED_ENU = (_S, _S, 0.0, 0.0)
+_Q_FRD_FLU = (1.0, 0.0, 0.0, 0.0)
+
+# World position NED -> ENU and the Euler-angle / body-vector flip FRD -> FLU.
+_P = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_E = np.diag([1.0, -1.0, -1.0])
+_Z3 = np.zeros((3, 3))
+T_POSE_NED_TO_ENU = np.block([[_P, _Z3], [_Z3, _E]])
+T_TWIST_FRD_TO_FLU = np.block([[_E, _Z3], [_Z3, _E]])
+
+# Below this cos(theta) the split of the rotation about the vertical into phi and psi is
+# numerically meaningless (rounding error ~1e-16 / cos(theta)); phi is then set to 0.
+_GIMBAL_COS = 1e-8
+
+
+class ConversionError(ValueError):
+    """A ROS message or array could not be converted; the message names the culprit."""
+
+
+# ---------------------------------------------------------------------------------------------
+# time
+
+
+def stamp_to_ns(stamp):
+    """Return a builtin_interfaces/Time as integer nanoseconds (exact)."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def stamp_to_sec(stamp):
+    """Return a builtin_interfaces/Time as float seconds (correctly rounded)."""
+    # int / int true division is correctly rounded; sec + nanosec * 1e-9 is not.
+    return stamp_to_ns(stamp) / NS_PER_S
+
+
+def sec_to_ns(t_sec):
+    """Return float seconds as the nearest integer nanoseconds.
+
+    Splitting off the integer part first keeps ns resolution at epoch-scale times, where
+    ``t_sec * 1e9`` alone would lose ~100 ns.
+    """
+    t = float(t_sec)
+    if not math.isfinite(t):
+        raise ConversionError(f'time must be finite, got {t_sec!r}')
+    whole = math.floor(t)
+    frac_ns = round((t - whole) * NS_PER_S)  # t - floor(t) is exact in binary floating point
+    return int(whole) * NS_PER_S + int(frac_ns)
+
+
+def ns_to_stamp(t_ns):
+    """Return integer nanoseconds as a builtin_interfaces/Time (nanosec in [0, 1e9))."""
+    sec, nanosec = divmod(int(t_ns), NS_PER_S)
+    if not -2**31 <= sec < 2**31:
+        raise ConversionError(f'time {t_ns} ns does not fit builtin_interfaces/Time.sec (int32)')
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def sec_to_stamp(t_sec):
+    """Return float seconds as a builtin_interfaces/Time, rounded to the nearest ns."""
+    return ns_to_stamp(sec_to_ns(t_sec))
+
+
+def clock_msg(t_sec):
+    """Return a rosgraph_msgs/Clock for simulation time ``t_sec`` (s)."""
+    return Clock(clock=sec_to_stamp(t_sec))
+
+
+# ---------------------------------------------------------------------------------------------
+# rotations
+
+
+def wrap_angle(a):
+    """Wrap an angle (rad) to (-pi, pi]."""
+    w = math.atan2(math.sin(a), math.cos(a)) if abs(a) > math.pi else float(a)
+    # atan2 returns -pi for a sine of -0.0; the half-open interval wants +pi.
+    return math.pi if w <= -math.pi else w
+
+
+def euler_to_quat(phi, theta, psi):
+    """Return the quaternion (x, y, z, w) of ZYX Euler angles (rad): Rz(psi) Ry(theta) Rx(phi)."""
+    cr, sr = math.cos(0.5 * phi), math.sin(0.5 * phi)
+    cp, sp = math.cos(0.5 * theta), math.sin(0.5 * theta)
+    cy, sy = math.cos(0.5 * psi), math.sin(0.5 * psi)
+    return (sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
+
+
+def _unit_quat(x, y, z, w, name='quaternion'):
+    vals = (float(x), float(y), float(z), float(w))
+    if not all(math.isfinite(v) for v in vals):
+        raise ConversionError(f'{name} is not finite: {vals}')
+    n = math.sqrt(sum(v * v for v in vals))
+    if n == 0.0:
+        raise ConversionError(f'{name} has zero norm')
+    return tuple(v / n for v in vals)
+
+
+def quat_to_euler(x, y, z, w):
+    """Return ZYX Euler angles (phi, theta, psi) (rad) of a quaternion (x, y, z, w).
+
+    The quaternion is normalised first; a zero-norm or non-finite one raises ConversionError.
+    At gimbal lock (cos(theta) < 1e-8) phi is set to 0 and psi carries the whole rotation
+    about the vertical.
+    """
+    x, y, z, w = _unit_quat(x, y, z, w)
+    # Rotation-matrix entries in homogeneous form (no 1 - 2(..) cancellation).
+    r11 = w * w + x * x - y * y - z * z
+    r21 = 2.0 * (x * y + w * z)
+    r31 = 2.0 * (x * z - w * y)
+    r32 = 2.0 * (y * z + w * x)
+    r33 = w * w - x * x - y * y + z * z
+    cos_theta = math.hypot(r11, r21)
+    # atan2 instead of asin(-r31): full precision near theta = +-pi/2.
+    theta = math.atan2(-r31, cos_theta)
+    if cos_theta < _GIMBAL_COS:
+        r12 = 2.0 * (x * y - w * z)
+        r22 = w * w - x * x + y * y - z * z
+        phi = 0.0
+        psi = math.atan2(-r12, r22)
+    else:
+        phi = math.atan2(r32, r33)
+        psi = math.atan2(r21, r11)
+    return wrap_angle(phi), theta, wrap_angle(psi)
+
+
+def quat_multiply(a, b):
+    """Return the Hamilton product a * b of quaternions given as (x, y, z, w)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+def euler_to_rotation_matrix(phi, theta, psi):
+    """Return the 3x3 rotation body FRD -> world NED, Rz(psi) Ry(theta) Rx(phi)."""
+    cr, sr = math.cos(phi), math.sin(phi)
+    cp, sp = math.cos(theta), math.sin(theta)
+    cy, sy = math.cos(psi), math.sin(psi)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr]])
+
+
+# ---------------------------------------------------------------------------------------------
+# Odometry
+
+
+def is_finite_state(x12):
+    """Return True if every entry of the state vector is finite."""
+    return bool(np.all(np.isfinite(np.asarray(x12, dtype=float))))
+
+
+def _check_frame(frame):
+    if frame not in FRAMES:
+        raise ConversionError(f'frame must be one of {FRAMES}, got {frame!r}')
+
+
+def _as_vector(values, n, name):
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConversionError(f'{name} is not numeric: {exc}') from None
+    if arr.shape != (n,):
+        raise ConversionError(f'{name} must have shape ({n},), got {arr.shape}')
+    return arr
+
+
+def _as_cov6(values, name):
+    """Return a 6x6 float array from None (zeros), a 6x6 or a flat 36 array."""
+    if values is None:
+        return np.zeros((6, 6))
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConversionError(f'{name} is not numeric: {exc}') from None
+    if arr.shape == (36,):
+        arr = arr.reshape(6, 6)
+    if arr.shape != (6, 6):
+        raise ConversionError(f'{name} must be 6x6 or 36 long, got shape {arr.shape}')
+    return arr
+
+
+def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
+                      frame_id=None, child_frame_id=None):
+    """Return a nav_msgs/Odometry for a NED/FRD state, expressed in convention ``frame``.
+
+    Parameters
+    ----------
+    t_sec : float
+        Sample time (s), goes to header.stamp (rounded to ns).
+    x12 : array_like, shape (12,)
+        ``[u v w p q r x y z phi theta psi]`` (m/s, rad/s, m, rad), always NED/FRD.
+    frame : {'ned', 'enu'}
+        Convention of the message.
+    pose_cov, twist_cov : array_like, shape (6, 6) or (36,), optional
+        NED/FRD covariances over (x, y, z, phi, theta, psi) and (u, v, w, p, q, r); zeros if
+        omitted. Transformed with ``T C T^T`` for 'enu'.
+    frame_id, child_frame_id : str, optional
+        Override the convention's default frame ids.
+    """
+    _check_frame(frame)
+    x = _as_vector(x12, 12, 'x12')
+    pcov = _as_cov6(pose_cov, 'pose_cov')
+    tcov = _as_cov6(twist_cov, 'twist_cov')
+    lin, ang, pos = x[0:3], x[3:6], x[6:9]
+    quat = euler_to_quat(x[9], x[10], x[11])
+    if frame == 'enu':
+        pos = _P @ pos
+        lin = _E @ lin
+        ang = _E @ ang
+        quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
+        pcov = T_POSE_NED_TO_ENU @ pcov @ T_POSE_NED_TO_ENU.T
+        tcov = T_TWIST_FRD_TO_FLU @ tcov @ T_TWIST_FRD_TO_FLU.T
+    default_world, default_body = DEFAULT_FRAME_IDS[frame]
+
+    msg = Odometry()
+    msg.header.stamp = sec_to_stamp(t_sec)
+    msg.header.frame_id = default_world if frame_id is None else frame_id
+    msg.child_frame_id = default_body if child_frame_id is None else child_frame_id
+    p = msg.pose.pose.position
+    p.x, p.y, p.z = (float(v) for v in pos)
+    o = msg.pose.pose.orientation
+    o.x, o.y, o.z, o.w = quat
+    tl, ta = msg.twist.twist.linear, msg.twist.twist.angular
+    tl.x, tl.y, tl.z = (float(v) for v in lin)
+    ta.x, ta.y, ta.z = (float(v) for v in ang)
+    msg.pose.covariance = pcov.reshape(36)
+    msg.twist.covariance = tcov.reshape(36)
+    return msg
+
+
+def _field(msg, path):
+    """Return a nested attribute of an Odometry, naming a missing one in a ConversionError."""
+    obj = msg
+    for part in path.split('.'):
+        try:
+            obj = getattr(obj, part)
+        except AttributeError:
+            raise ConversionError(
+                f'{type(msg).__name__} has no field {path!r}; expected a nav_msgs/Odometry'
+            ) from None
+    return obj
+
+
+def _xyz(msg, path):
+    return np.array([float(_field(msg, f'{path}.{axis}')) for axis in 'xyz'])
+
+
+def odometry_to_state(msg, frame='ned'):
+    """Return ``(t_sec, x12, pose_cov, twist_cov)`` in NED/FRD from an Odometry in ``frame``.
+
+    Accepts rclpy messages and rosbags-decoded ones alike (attribute access only). A non-finite
+    orientation gives NaN Euler angles (the caller decides); a zero quaternion, which only an
+    unset message has, raises ConversionError.
+
+    Returns
+    -------
+    t_sec : float
+        header.stamp (s).
+    x12 : ndarray, shape (12,)
+        ``[u v w p q r x y z phi theta psi]`` (m/s, rad/s, m, rad), NED/FRD.
+    pose_cov, twist_cov : ndarray, shape (6, 6)
+        Covariances over (x, y, z, phi, theta, psi) and (u, v, w, p, q, r), NED/FRD.
+    """
+    _check_frame(frame)
+    t_sec = stamp_to_sec(_field(msg, 'header.stamp'))
+    pos = _xyz(msg, 'pose.pose.position')
+    quat = tuple(float(_field(msg, f'pose.pose.orientation.{c}')) for c in 'xyzw')
+    lin = _xyz(msg, 'twist.twist.linear')
+    ang = _xyz(msg, 'twist.twist.angular')
+    pcov = _as_cov6(_field(msg, 'pose.covariance'), 'pose.covariance')
+    tcov = _as_cov6(_field(msg, 'twist.covariance'), 'twist.covariance')
+    if frame == 'enu':
+        # Every transform is an involution: applying it again maps ENU/FLU back to NED/FRD.
+        pos = _P @ pos
+        lin = _E @ lin
+        ang = _E @ ang
+        quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
+        pcov = T_POSE_NED_TO_ENU.T @ pcov @ T_POSE_NED_TO_ENU
+        tcov = T_TWIST_FRD_TO_FLU.T @ tcov @ T_TWIST_FRD_TO_FLU
+    if all(math.isfinite(c) for c in quat):
+        try:
+            eul = quat_to_euler(*quat)
+        except ConversionError:
+            raise ConversionError('pose.pose.orientation is a zero quaternion') from None
+    else:
+        eul = (math.nan, math.nan, math.nan)
+    x12 = np.concatenate([lin, ang, pos, eul])
+    return t_sec, x12, pcov, tcov
+
+
+# ---------------------------------------------------------------------------------------------
+# JointState
+
+
+def actuators_to_joint_state(t_sec, u6):
+    """Return a sensor_msgs/JointState for actuator vector ``u6`` at time ``t_sec`` (s).
+
+    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm).
+    """
+    u = _as_vector(u6, 6, 'u6')
+    msg = JointState()
+    msg.header.stamp = sec_to_stamp(t_sec)
+    msg.name = list(JOINT_NAMES)
+    msg.position = [float(v) for v in u[:5]] + [0.0]
+    msg.velocity = [0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]
+    msg.effort = []
+    return msg
+
+
+def joint_state_to_actuators(msg):
+    """Return ``(t_sec, u6)`` from a JointState in the layout of :data:`JOINT_NAMES`.
+
+    Joints are matched by name in any order; other joints are ignored. Raises ConversionError
+    for a missing or duplicated joint, or a position/velocity array whose length differs from
+    name's.
+    """
+    try:
+        names = list(msg.name)
+        position = np.asarray(msg.position, dtype=float)
+        velocity = np.asarray(msg.velocity, dtype=float)
+        stamp = msg.header.stamp
+    except AttributeError as exc:
+        raise ConversionError(f'not a sensor_msgs/JointState: {exc}') from None
+    if len(position) != len(names):
+        raise ConversionError(
+            f'JointState.position has {len(position)} entries for {len(names)} names')
+    if len(velocity) != len(names):
+        raise ConversionError(
+            f'JointState.velocity has {len(velocity)} entries for {len(names)} names '
+            f'(the {PROPELLER_JOINT!r} shaft speed is read from velocity)')
+    index = {}
+    for i, name in enumerate(names):
+        if name in index:
+            raise ConversionError(f'JointState.name lists joint {name!r} twice')
+        index[name] = i
+    missing = [n for n in JOINT_NAMES if n not in index]
+    if missing:
+        raise ConversionError(
+            f'JointState lacks joint(s) {missing}; present: {names}')
+    u6 = np.empty(6)
+    for k, name in enumerate(JOINT_NAMES[:5]):
+        u6[k] = position[index[name]]
+    u6[5] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
+    return stamp_to_sec(stamp), u6

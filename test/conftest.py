@@ -1,0 +1,49 @@
+"""Test-run isolation for every test that may start a ROS node.
+
+DDS stays on loopback: each pytest run gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own
+ROS_DOMAIN_ID (1-101) and its own ROS_LOG_DIR, set here before any test imports rclpy, and
+inherited by every node process a test spawns. Fast DDS shared-memory files that killed
+processes leave behind are removed at the end of the run (`fastdds shm clean`).
+"""
+import os
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import pytest
+
+_LOG_DIR = tempfile.mkdtemp(prefix='auv_ident_roslog_')
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.pop('ROS_LOCALHOST_ONLY', None)  # deprecated; RANGE supersedes it
+if 'AUV_IDENT_TEST_DOMAIN_ID' in os.environ:
+    os.environ['ROS_DOMAIN_ID'] = os.environ['AUV_IDENT_TEST_DOMAIN_ID']
+else:
+    os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+os.environ['ROS_LOG_DIR'] = _LOG_DIR
+
+
+def require_loopback_dds():
+    """Fail loudly (never skip) if DDS discovery could leave this machine."""
+    if os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') != 'LOCALHOST':
+        raise RuntimeError(
+            'refusing to start a ROS node: ROS_AUTOMATIC_DISCOVERY_RANGE is not LOCALHOST '
+            '(DDS discovery must stay on loopback)')
+    dom = int(os.environ.get('ROS_DOMAIN_ID', '-1'))
+    if not 1 <= dom <= 101:
+        raise RuntimeError(f'refusing to start a ROS node: ROS_DOMAIN_ID={dom} not in 1..101')
+
+
+@pytest.fixture
+def ros_env():
+    """Environment for a node process a test spawns (loopback DDS, this run's domain)."""
+    require_loopback_dds()
+    return dict(os.environ)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    fastdds = os.path.join(os.path.dirname(sys.executable), 'fastdds')
+    if os.path.exists(fastdds):
+        subprocess.run([fastdds, 'shm', 'clean'], capture_output=True, check=False)
+    shutil.rmtree(_LOG_DIR, ignore_errors=True)
