@@ -54,6 +54,8 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from auv_ident.core.errors import AuvIdentError
+
 NS_PER_S = 1_000_000_000
 
 FRAMES = ('ned', 'enu')
@@ -79,13 +81,31 @@ _E = np.diag([1.0, -1.0, -1.0])
 _Z3 = np.zeros((3, 3))
 T_POSE_NED_TO_ENU = np.block([[_P, _Z3], [_Z3, _E]])
 T_TWIST_FRD_TO_FLU = np.block([[_E, _Z3], [_Z3, _E]])
+# The same maps as index permutations and signs: a matmul would turn a single inf into NaNs
+# elsewhere (0 * inf), and non-finite values must pass through unchanged.
+_POS_PERM, _POS_SIGN = np.array([1, 0, 2]), np.array([1.0, 1.0, -1.0])
+_VEC_PERM, _VEC_SIGN = np.array([0, 1, 2]), np.array([1.0, -1.0, -1.0])
+_POSE_PERM = np.array([1, 0, 2, 3, 4, 5])
+_POSE_SIGN = np.array([1.0, 1.0, -1.0, 1.0, -1.0, -1.0])
+_TWIST_PERM = np.arange(6)
+_TWIST_SIGN = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
 
 # Below this cos(theta) the split of the rotation about the vertical into phi and psi is
 # numerically meaningless (rounding error ~1e-16 / cos(theta)); phi is then set to 0.
 _GIMBAL_COS = 1e-8
 
 
-class ConversionError(ValueError):
+def _signed_perm(v, perm, sign):
+    """Return T v for the signed permutation T with rows sign[i] * e_perm[i]."""
+    return v[perm] * sign
+
+
+def _signed_perm_cov(c, perm, sign):
+    """Return T C T^T for the signed permutation T of :func:`_signed_perm`."""
+    return c[np.ix_(perm, perm)] * np.outer(sign, sign)
+
+
+class ConversionError(AuvIdentError, ValueError):
     """A ROS message or array could not be converted; the message names the culprit."""
 
 
@@ -281,12 +301,12 @@ def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
     lin, ang, pos = x[0:3], x[3:6], x[6:9]
     quat = euler_to_quat(x[9], x[10], x[11])
     if frame == 'enu':
-        pos = _P @ pos
-        lin = _E @ lin
-        ang = _E @ ang
+        pos = _signed_perm(pos, _POS_PERM, _POS_SIGN)
+        lin = _signed_perm(lin, _VEC_PERM, _VEC_SIGN)
+        ang = _signed_perm(ang, _VEC_PERM, _VEC_SIGN)
         quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
-        pcov = T_POSE_NED_TO_ENU @ pcov @ T_POSE_NED_TO_ENU.T
-        tcov = T_TWIST_FRD_TO_FLU @ tcov @ T_TWIST_FRD_TO_FLU.T
+        pcov = _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN)
+        tcov = _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN)
     default_world, default_body = DEFAULT_FRAME_IDS[frame]
 
     msg = Odometry()
@@ -348,12 +368,12 @@ def odometry_to_state(msg, frame='ned'):
     tcov = _as_cov6(_field(msg, 'twist.covariance'), 'twist.covariance')
     if frame == 'enu':
         # Every transform is an involution: applying it again maps ENU/FLU back to NED/FRD.
-        pos = _P @ pos
-        lin = _E @ lin
-        ang = _E @ ang
+        pos = _signed_perm(pos, _POS_PERM, _POS_SIGN)
+        lin = _signed_perm(lin, _VEC_PERM, _VEC_SIGN)
+        ang = _signed_perm(ang, _VEC_PERM, _VEC_SIGN)
         quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
-        pcov = T_POSE_NED_TO_ENU.T @ pcov @ T_POSE_NED_TO_ENU
-        tcov = T_TWIST_FRD_TO_FLU.T @ tcov @ T_TWIST_FRD_TO_FLU
+        pcov = _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN)
+        tcov = _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN)
     if all(math.isfinite(c) for c in quat):
         try:
             eul = quat_to_euler(*quat)

@@ -10,7 +10,12 @@ on the sample grid, so a run is reproducible from (name, duration, T, seed, rpm)
   validation manoeuvre, Figs. 4-5).
 - `prbs`: multi-level pseudo-random steps on rudder, stern planes and both bow planes (seeded),
   rate-limited, for richer excitation.
-- `roll`: rudder square wave at the roll natural period, plus stern planes; excites K_v.
+- `roll`: rudder square wave at the roll natural period, plus stern planes.
+- `ident` (the identification default): the paper's style made richer. Rudder zig-zag at
+  +-20 deg with seeded half-periods of 20-40 s (long holds build the sway speed and yaw rate that
+  carry K_v and Y_v), stern planes and both bow planes stepping between seeded amplitudes of
+  10, 15 and 20 deg (either sign) every 5-6 s (heave/pitch excitation for Z_w, Z_q, Z_ds, M_ds).
+  All fins rate-limited to 10 deg/s.
 - a CSV file path: columns t, delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm (header row),
   zero-order hold between rows.
 """
@@ -22,7 +27,7 @@ import numpy as np
 from .errors import ConfigError
 
 DEG = np.pi / 180.0
-MANEUVERS = ('zigzag', 'steps', 'prbs', 'roll')
+MANEUVERS = ('ident', 'zigzag', 'steps', 'prbs', 'roll')
 FIN_RATE = 10.0 * DEG   # rad/s: rate limit of the fin actuators for prbs
 
 
@@ -59,6 +64,22 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
         # rudder reversals every 5 s keep roll rate high; planes keep heave/pitch excited
         u[:, 0] = _square(t, 10.0, np.array([20.0, 20.0, 15.0]) * DEG)
         u[:, 1] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
+    elif name == 'ident':
+        rng = np.random.default_rng(seed)
+        dt = t[1] - t[0] if len(t) > 1 else 0.05
+        n_total = len(t)
+        rud = np.empty(0)
+        sign = 1.0
+        while len(rud) < n_total:
+            hold = int(round(rng.uniform(20.0, 40.0) / dt))
+            rud = np.concatenate([rud, np.full(hold, sign * 20.0 * DEG)])
+            sign = -sign
+        u[:, 0] = _rate_limit(rud[:n_total], dt, FIN_RATE)
+        levels = np.array([-20.0, -15.0, -10.0, 10.0, 15.0, 20.0]) * DEG
+        for ch, hold in ((1, 5.0), (3, 6.0), (4, 6.0)):
+            n_hold = max(1, int(round(hold / dt)))
+            steps = rng.choice(levels, size=n_total // n_hold + 1)
+            u[:, ch] = _rate_limit(np.repeat(steps, n_hold)[:n_total], dt, FIN_RATE)
     elif name == 'prbs':
         rng = np.random.default_rng(seed)
         dt = t[1] - t[0] if len(t) > 1 else 0.05
