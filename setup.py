@@ -14,8 +14,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
-        (os.path.join('share', package_name, 'bags', 'nps_auv2_zigzag'),
-         glob('bags/nps_auv2_zigzag/*')),
+        (os.path.join('share', package_name, 'bags', 'nps_auv2_ident'),
+         glob('bags/nps_auv2_ident/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -28,6 +28,10 @@ setup(
     entry_points={
         'console_scripts': [
             'auv_ident = auv_ident.cli:main',
+            'simulator = auv_ident.nodes.simulator_node:main',
+            'identifier = auv_ident.nodes.identifier_node:main',
+            'record = auv_ident.nodes.record_node:main',
+            'play = auv_ident.nodes.play_node:main',
         ],
     },
 )

@@ -84,6 +84,20 @@ def cmd_derivatives(args):
     return 0 if bad == 0 else 1
 
 
+NODES = ('simulator', 'identifier', 'record', 'play')
+
+
+def run_node(argv):
+    """python -m auv_ident run NODE [--ros-args ...]: the same node as `ros2 run auv_ident NODE`."""
+    if not argv or argv[0] not in NODES:
+        print(f'usage: python -m auv_ident run {{{",".join(NODES)}}} [--ros-args ...]',
+              file=sys.stderr)
+        return 2
+    import importlib
+    mod = importlib.import_module(f'auv_ident.nodes.{argv[0]}_node')
+    return mod.main([f'auv_ident_{argv[0]}'] + list(argv[1:])) or 0
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog='python -m auv_ident', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
@@ -115,6 +129,9 @@ def build_parser():
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] == 'run':
+        return run_node(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

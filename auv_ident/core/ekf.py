@@ -1,0 +1,336 @@
+"""Augmented-state EKF (Zare Ernani et al. 2015, Eqs. 5-15) with adaptive Q and R (Eqs. 16-20).
+
+Augmented state x* = [u v w p q r x y z phi theta psi, theta_1 .. theta_p] (Eq. 22): the 12
+vehicle states (m/s, rad/s, m, rad) and the chosen coefficients in the vehicle file's units.
+
+Time update (Eqs. 9-10): x*_{k+1}^- = Phi(x*_k^+) with Phi one RK4 step of length T and the
+inputs u_k held (zero-order hold); P^- = F P^+ F^T + Q with F = dPhi/dx* the EXACT Jacobian of
+the RK4 map (chain rule through the four stages, using the model's analytic Jacobians).
+
+Measurement update (Eqs. 11-13): y = H x* + v, H selects the measured channels (all 12 by
+default, Eq. 23); a NaN in y marks a missing sample of that channel, which is skipped. Angle
+innovations are wrapped to (-pi, pi]. The covariance update uses the Joseph form
+P = (I-KH) P (I-KH)^T + K R K^T and is symmetrised, so P stays symmetric positive definite.
+
+Noise adaptation (`mode`), gamma = 1 - exp(-T/tau) (Eq. 20, "t" read as the sample time T):
+
+- MODE_FIXED: Q and R stay as given.
+- MODE_PAPER (Eqs. 16-19 as published): omega_k = (theta_{k+1} - theta_k)/T (Eq. 18) adapts the
+  PARAMETER block of Q, Q_th <- (1-gamma) Q_th + gamma lambda^2 omega omega^T (Eq. 16): omega is
+  built from theta only, so it can only speak for the parameters' random walk eta_k of Eq. 7;
+  v_k, the one-step prediction error y_k - h(x*_k^-) (Eq. 19, read as the innovation), adapts the
+  measured block of R, R <- (1-gamma) R + gamma lambda^2 v v^T (Eq. 17). Read literally this
+  drives R towards lambda^2 E[v v^T] (lambda = 2e-3: 4e-6 of the innovation power), far below
+  the real sensor noise: the filter becomes over-confident (see the README's figures).
+- MODE_PAPER_Q: Eq. 16 only (R fixed).
+- MODE_MATCHING (ours): innovation-based covariance matching (Mehra 1972; Mohamed & Schwarz
+  1999) on the diagonal of R, R_jj <- (1-gamma) R_jj + gamma (v_j^2 - (H P^- H^T)_jj), clipped to
+  [R0_jj / r_bound, R0_jj * r_bound] so a burst can neither silence nor swamp a sensor; and the
+  parameter block of Q annealed with the observed parameter motion,
+  Q_th,ii <- (1-gamma) Q_th,ii + gamma (theta_{k+1} - theta_k)_i^2, clipped to
+  [q_floor * Q0_th,ii, Q0_th,ii]: large while the estimates move, small once they settle.
+"""
+import math
+
+import numpy as np
+from numba import njit
+
+from .model import OK, state_derivative
+
+MODE_FIXED, MODE_PAPER, MODE_PAPER_Q, MODE_MATCHING = 0, 1, 2, 3
+MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
+         'matching': MODE_MATCHING}
+ERR_NOT_PD = 10
+ERR_NAN_STATE = 11
+
+
+@njit(cache=True)
+def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+                      recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
+    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p))."""
+    p = theta_idx.shape[0]
+    n = 12 + p
+    c = c0.copy()
+    for j in range(p):
+        c[theta_idx[j]] = xa[12 + j]
+    x = xa[:12]
+    acc = np.zeros(12)
+    dacc = np.zeros((12, n))
+    k = np.zeros(12)
+    dk = np.zeros((12, n))
+    A = np.zeros((12, 12))
+    Bt = np.zeros((12, p))
+    xs = np.empty(12)
+    D = np.zeros((12, n))
+    frac = (0.0, 0.5, 0.5, 1.0)
+    wts = (1.0, 2.0, 2.0, 1.0)
+    for s in range(4):
+        a = frac[s] * T
+        for i in range(12):
+            xs[i] = x[i] + a * k[i]
+        if want_jac:
+            for i in range(12):
+                for j in range(n):
+                    D[i, j] = a * dk[i, j]
+                D[i, i] += 1.0
+        st = state_derivative(xs, ui, c, par, terms_i, terms_s, am_i, am_s, Minv,
+                              recompute_minv, M_RB, theta_pos, p, want_jac, k, A, Bt)
+        if st != OK:
+            return st
+        for i in range(12):
+            acc[i] += wts[s] * k[i]
+        if want_jac:
+            dk[:, :] = A @ D
+            for i in range(12):
+                for j in range(p):
+                    dk[i, 12 + j] += Bt[i, j]
+                for j in range(n):
+                    dacc[i, j] += wts[s] * dk[i, j]
+    for i in range(12):
+        xa_next[i] = x[i] + T / 6.0 * acc[i]
+    for j in range(p):
+        xa_next[12 + j] = xa[12 + j]
+    if want_jac:
+        for i in range(n):
+            for j in range(n):
+                Fa[i, j] = 0.0
+            Fa[i, i] = 1.0
+        for i in range(12):
+            for j in range(n):
+                Fa[i, j] += T / 6.0 * dacc[i, j]
+    return OK
+
+
+@njit(cache=True)
+def wrap(a):
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+
+
+@njit(cache=True)
+def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+            recompute_minv, M_RB, theta_pos, T, xa_out, P_out):
+    """Time update (Eqs. 9-10). Returns a status code."""
+    n = xa.shape[0]
+    Fa = np.empty((n, n))
+    st = rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+                           recompute_minv, M_RB, theta_pos, T, True, xa_out, Fa)
+    if st != OK:
+        return st
+    Pn = Fa @ P @ Fa.T + Q
+    for i in range(n):
+        for j in range(n):
+            P_out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
+    return OK
+
+
+@njit(cache=True)
+def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
+    """Measurement update (Eqs. 11-13), Joseph form.
+
+    measured: bool (12,), channels the sensor suite provides; a NaN in y skips a channel.
+    innov (12,) gets the innovations (NaN where not used), S_diag (12,) their predicted
+    variances, white (12,) the innovations whitened with the Cholesky factor of S. Returns (status, NIS, number of channels used).
+    """
+    n = xa.shape[0]
+    idx = np.empty(12, dtype=np.int64)
+    m = 0
+    for j in range(12):
+        innov[j] = np.nan
+        S_diag[j] = np.nan
+        white[j] = np.nan
+        if measured[j] and math.isfinite(y[j]):
+            idx[m] = j
+            m += 1
+    for i in range(n):
+        xa_out[i] = xa[i]
+        for j in range(n):
+            P_out[i, j] = P[i, j]
+    if m == 0:
+        return OK, 0.0, 0
+    nu = np.empty(m)
+    S = np.empty((m, m))
+    PHt = np.empty((n, m))
+    for a in range(m):
+        ch = idx[a]
+        d = y[ch] - xa[ch]
+        if ch >= 9:
+            d = wrap(d)
+        nu[a] = d
+        innov[ch] = d
+        for b in range(m):
+            S[a, b] = P[ch, idx[b]] + R[ch, idx[b]]
+        for i in range(n):
+            PHt[i, a] = P[i, ch]
+    for a in range(m):
+        S_diag[idx[a]] = S[a, a]
+    # S is SPD when P and R are; Cholesky both checks it and solves
+    L = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            s = S[i, j]
+            for kk in range(j):
+                s -= L[i, kk] * L[j, kk]
+            if i == j:
+                if s <= 0.0 or not math.isfinite(s):
+                    return ERR_NOT_PD, np.nan, m
+                L[i, i] = math.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    # K = P H^T S^-1: solve S K^T = H P
+    Kt = np.empty((m, n))
+    for col in range(n):
+        zc = np.empty(m)
+        for i in range(m):
+            s = PHt[col, i]
+            for kk in range(i):
+                s -= L[i, kk] * zc[kk]
+            zc[i] = s / L[i, i]
+        for i in range(m - 1, -1, -1):
+            s = zc[i]
+            for kk in range(i + 1, m):
+                s -= L[kk, i] * Kt[kk, col]
+            Kt[i, col] = s / L[i, i]
+    # NIS = nu^T S^-1 nu via the Cholesky factor
+    zz = np.empty(m)
+    nis = 0.0
+    for i in range(m):
+        s = nu[i]
+        for kk in range(i):
+            s -= L[i, kk] * zz[kk]
+        zz[i] = s / L[i, i]
+        white[idx[i]] = zz[i]
+        nis += zz[i] * zz[i]
+    for i in range(n):
+        s = 0.0
+        for a in range(m):
+            s += Kt[a, i] * nu[a]
+        xa_out[i] = xa[i] + s
+    # Joseph form: (I - K H) P (I - K H)^T + K R K^T
+    IKH = np.eye(n)
+    for a in range(m):
+        for i in range(n):
+            IKH[i, idx[a]] -= Kt[a, i]
+    Rm = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            Rm[a, b] = R[idx[a], idx[b]]
+    K = Kt.T.copy()
+    Pn = IKH @ P @ IKH.T + K @ Rm @ Kt
+    for i in range(n):
+        for j in range(n):
+            P_out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
+    for i in range(n):
+        if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
+            return ERR_NOT_PD, nis, m
+    xa_out[11] = wrap(xa_out[11])
+    return OK, nis, m
+
+
+@njit(cache=True)
+def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_diag, P_prior,
+          Q, R, Q0, R0):
+    """Adapt Q and R in place after an update (see the module docstring for each mode)."""
+    if mode == MODE_FIXED:
+        return
+    n = xa_post.shape[0]
+    p = n - 12
+    if mode == MODE_PAPER or mode == MODE_PAPER_Q:
+        for i in range(p):
+            wi = (xa_post[12 + i] - theta_prev[i]) / T
+            for j in range(p):
+                wj = (xa_post[12 + j] - theta_prev[j]) / T
+                Q[12 + i, 12 + j] = (1.0 - gamma) * Q[12 + i, 12 + j] + gamma * lam * lam * wi * wj
+        if mode == MODE_PAPER:
+            for a in range(12):
+                if not math.isfinite(innov[a]):
+                    continue
+                for b in range(12):
+                    if not math.isfinite(innov[b]):
+                        continue
+                    R[a, b] = (1.0 - gamma) * R[a, b] + gamma * lam * lam * innov[a] * innov[b]
+    elif mode == MODE_MATCHING:
+        for a in range(12):
+            if not math.isfinite(innov[a]):
+                continue
+            est = innov[a] * innov[a] - P_prior[a, a]
+            r = (1.0 - gamma) * R[a, a] + gamma * est
+            R[a, a] = min(max(r, R0[a, a] / r_bound), R0[a, a] * r_bound)
+        for i in range(p):
+            d = xa_post[12 + i] - theta_prev[i]
+            q = (1.0 - gamma) * Q[12 + i, 12 + i] + gamma * d * d
+            q0 = Q0[12 + i, 12 + i]
+            Q[12 + i, 12 + i] = min(max(q, q_floor * q0), q0)
+
+
+@njit(cache=True)
+def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_floor, c0,
+               theta_idx, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv, M_RB,
+               theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, want_white, white_out,
+               out_xa, out_P, out_Q, out_R, stats):
+    """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
+    update with Y[k]). Histories every `hist_every` samples (0: none). stats gets
+    [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not grow with N unless a
+    history is asked for. With want_white, white_out (N, 12) gets the whitened innovations
+    (for the batch refinement)."""
+    n = xa0.shape[0]
+    p = n - 12
+    N = Y.shape[0]
+    xa = xa0.copy()
+    P = P0.copy()
+    Q = Q0.copy()
+    R = R0.copy()
+    xa_b = np.empty(n)
+    P_b = np.empty((n, n))
+    innov = np.empty(12)
+    S_diag = np.empty(12)
+    white = np.empty(12)
+    theta_prev = xa0[12:].copy()
+    sum_nis = 0.0
+    sum_dof = 0.0
+    cnt = 0
+    status = OK
+    h = 0
+    done = 0
+    for k in range(N):
+        if k > 0:
+            st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s,
+                         Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b)
+            if st != OK:
+                status = st
+                break
+            xa[:] = xa_b
+            P[:, :] = P_b
+        for i in range(p):
+            theta_prev[i] = xa[12 + i]
+        st, nis, m = update(xa, P, Y[k], measured, R, xa_b, P_b, innov, S_diag, white)
+        if want_white:
+            white_out[k, :] = white
+        if st != OK:
+            status = st
+            break
+        adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_b, innov, S_diag, P, Q, R,
+              Q0, R0)
+        xa[:] = xa_b
+        P[:, :] = P_b
+        if m > 0:
+            sum_nis += nis
+            sum_dof += m
+            cnt += 1
+        if hist_every > 0 and k % hist_every == 0 and h < th_hist.shape[0]:
+            for i in range(p):
+                th_hist[h, i] = xa[12 + i]
+                sd_hist[h, i] = math.sqrt(P[12 + i, 12 + i])
+            nis_hist[h, 0] = nis
+            nis_hist[h, 1] = m
+            h += 1
+        done += 1
+    out_xa[:] = xa
+    out_P[:, :] = P
+    out_Q[:, :] = Q
+    out_R[:, :] = R
+    stats[0] = status
+    stats[1] = done
+    stats[2] = sum_nis
+    stats[3] = sum_dof
+    stats[4] = cnt
+    return status

@@ -1,0 +1,358 @@
+"""Identification: the augmented EKF over a run (online or offline), then an optional batch
+refinement by the filter-error method.
+
+Pass 1, the paper's method: the augmented EKF (ekf.py) runs once over the data, as it would
+online; its final estimate and covariance are the online answer.
+
+Pass 2 (offline, on by default): maximum likelihood over the whole record by the filter-error
+method (Maine & Iliff 1981; Jategaonkar 2015, ch. 5): for a candidate theta, a 12-state EKF with
+theta FIXED produces innovations nu_k and their covariances S_k; theta minimises
+sum_k nu_k^T S_k^-1 nu_k (Gauss-Newton/Levenberg-Marquardt, scipy least_squares, started from
+pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that exceeds 1. Why:
+an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
+shared/method_notes.md); the batch pass uses every sample against one consistent theta.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from . import ekf as K
+from .errors import ConfigError, DimensionError, DivergenceError, DomainError
+from .model import STATUS_TEXT
+from .simulate import DEFAULT_NOISE_STD, trim_speed
+
+# Per-step process-noise 1-sigma of the 12 states in the EKF (small: the model structure is
+# right; a little keeps the filter from locking on the states). Units of the states.
+DEFAULT_Q_STATE = np.array([2e-4, 2e-4, 2e-4, 2e-5, 2e-5, 2e-5,
+                            1e-3, 1e-3, 1e-3, 2e-5, 2e-5, 2e-5])
+
+
+@dataclass
+class FilterConfig:
+    """What to identify and how. Units follow the vehicle file (coefficients) and SI.
+
+    coefficients : names (the vehicle's identify_default if empty)
+    initial : initial guesses (same order), or None for truth * (1 + initial_offset)
+    initial_offset : relative start offset when `initial` is None (paper's experiment: +-0.5)
+    p0_rel : initial 1-sigma of each coefficient as a fraction of |initial guess|
+    q_theta_rel : per-step random-walk 1-sigma of each coefficient, fraction of |initial guess|
+    q_state : (12,) per-step process noise 1-sigma of the states
+    noise_std : (12,) measurement noise 1-sigma (R = diag(noise_std^2))
+    measured : (12,) bool, channels the sensor suite provides
+    mode : 'fixed', 'paper', 'paper_q' or 'matching' (see ekf.py)
+    tau : s, time constant of the forgetting factor gamma = 1 - exp(-T/tau)
+    lam : the paper's lambda (2e-3)
+    """
+
+    coefficients: list = field(default_factory=list)
+    initial: object = None
+    initial_offset: float = 0.5
+    p0_rel: float = 1.0
+    q_theta_rel: float = 1e-5
+    q_state: np.ndarray = field(default_factory=lambda: DEFAULT_Q_STATE.copy())
+    noise_std: np.ndarray = field(default_factory=lambda: DEFAULT_NOISE_STD.copy())
+    measured: np.ndarray = field(default_factory=lambda: np.ones(12, dtype=bool))
+    mode: str = 'fixed'
+    tau: float = 10.0
+    lam: float = 2e-3
+    r_bound: float = 4.0
+    q_floor: float = 1e-4
+
+    def validate(self, p):
+        if self.mode not in K.MODES:
+            raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
+                              + ', '.join(K.MODES))
+        for name, arr, shape in (('q_state', self.q_state, (12,)),
+                                 ('noise_std', self.noise_std, (12,)),
+                                 ('measured', self.measured, (12,))):
+            a = np.asarray(arr)
+            if a.shape != shape:
+                raise DimensionError(f'{name} must have shape {shape}, got {a.shape}')
+        for name in ('q_state', 'noise_std'):
+            a = np.asarray(getattr(self, name), dtype=float)
+            if not np.all(np.isfinite(a)) or np.any(a < 0):
+                raise ConfigError(f'{name} must be finite and non-negative (a 1-sigma), got {a}')
+        m = np.asarray(self.measured, dtype=bool)
+        if np.any(np.asarray(self.noise_std)[m] <= 0):
+            raise ConfigError('noise_std must be positive on every measured channel')
+        for name in ('p0_rel', 'tau', 'lam', 'r_bound'):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ConfigError(f'{name} = {v!r} must be a positive number')
+        if not np.isfinite(self.q_theta_rel) or self.q_theta_rel < 0:
+            raise ConfigError(f'q_theta_rel = {self.q_theta_rel!r} must be >= 0')
+        if self.initial is not None and np.asarray(self.initial).shape != (p,):
+            raise DimensionError(f'initial guesses: expected {p} values, got '
+                                 f'{np.asarray(self.initial).shape}')
+
+
+class AugmentedEKF:
+    """The augmented EKF for streaming use (one predict+update per sample).
+
+    Parameters
+    ----------
+    model : core.model.Model built with the coefficients to identify (model.theta_names)
+    cfg : FilterConfig
+    T : float, sample time (s)
+    """
+
+    def __init__(self, model, cfg, T):
+        if not np.isfinite(T) or T <= 0:
+            raise ConfigError(f'sample time T = {T!r} s must be positive')
+        self.model = model
+        self.cfg = cfg
+        self.T = float(T)
+        p = model.p
+        cfg.validate(p)
+        self.names = list(model.theta_names)
+        th0 = (model.theta_true * (1.0 + cfg.initial_offset) if cfg.initial is None
+               else np.asarray(cfg.initial, dtype=float).copy())
+        if not np.all(np.isfinite(th0)):
+            raise ConfigError(f'initial guesses must be finite, got {th0}')
+        if np.any(th0 == 0):
+            raise ConfigError('an initial guess of exactly 0 gives no scale for its covariance: '
+                              f'{dict(zip(self.names, th0))}')
+        self.theta0 = th0
+        n = 12 + p
+        self.n = n
+        self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
+        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0)])
+        self.Q0 = np.diag(q ** 2)
+        self.measured = np.asarray(cfg.measured, dtype=bool).copy()
+        self.mode = K.MODES[cfg.mode]
+        self.gamma = 1.0 - np.exp(-self.T / cfg.tau)
+        self.reset()
+
+    def reset(self):
+        self.Q = self.Q0.copy()
+        self.R = self.R0.copy()
+        self.xa = None
+        self.P = None
+        self.steps = 0
+        self.nis = np.nan
+        self.dof = 0
+        self.innov = np.full(12, np.nan)
+        self.S_diag = np.full(12, np.nan)
+        self.white = np.full(12, np.nan)
+
+    def initial_state(self, y0, rpm):
+        """x0 from the first measurement; unmeasured channels from a straight, level trim."""
+        y0 = np.asarray(y0, dtype=float)
+        x0 = np.zeros(12)
+        sd0 = np.asarray(self.cfg.noise_std, dtype=float).copy()
+        ok = self.measured & np.isfinite(y0)
+        x0[ok] = y0[ok]
+        if not ok[0]:
+            x0[0] = trim_speed(self.model, rpm)
+        big = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
+        sd0[~ok] = big[~ok]
+        return x0, sd0
+
+    def start(self, y0, rpm):
+        x0, sd0 = self.initial_state(y0, rpm)
+        self.xa = np.concatenate([x0, self.theta0])
+        self.P = np.diag(np.concatenate([sd0, self.cfg.p0_rel * np.abs(self.theta0)]) ** 2)
+        self._update(y0)
+
+    def _check(self, st, what):
+        if st == K.OK:
+            return
+        if st in STATUS_TEXT:
+            raise DomainError(f'{what}: {STATUS_TEXT[st]} (estimate {self.xa})')
+        raise DivergenceError(f'{what}: covariance lost positive definiteness or the estimate '
+                              f'became non-finite at step {self.steps}')
+
+    def _update(self, y):
+        y = np.ascontiguousarray(y, dtype=float)
+        if y.shape != (12,):
+            raise DimensionError(f'measurement must have 12 entries, got {y.shape}')
+        xa_b = np.empty(self.n)
+        P_b = np.empty((self.n, self.n))
+        theta_prev = self.xa[12:].copy()
+        st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
+                              self.innov, self.S_diag, self.white)
+        self._check(st, 'measurement update')
+        K.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
+                theta_prev, xa_b, self.innov, self.S_diag, self.P, self.Q, self.R, self.Q0,
+                self.R0)
+        self.xa, self.P = xa_b, P_b
+        self.nis, self.dof = nis, m
+        self.steps += 1
+
+    def predict(self, u_prev, T=None):
+        """Time update over T (s; default the configured T) with the inputs u_prev held."""
+        m = self.model
+        T = self.T if T is None else float(T)
+        xa_b = np.empty(self.n)
+        P_b = np.empty((self.n, self.n))
+        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q, m.c,
+                       m.theta_idx, *m.args[:-1], T, xa_b, P_b)
+        self._check(st, 'time update')
+        self.xa, self.P = xa_b, P_b
+
+    def update(self, y):
+        """Measurement update with y (12,), NaN for channels missing in this sample."""
+        self._update(y)
+
+    def step(self, u_prev, y, T=None):
+        """Predict over T with the inputs u_prev held, then update with y."""
+        self.predict(u_prev, T)
+        self._update(y)
+
+    @property
+    def theta(self):
+        return self.xa[12:].copy()
+
+    @property
+    def theta_cov(self):
+        return self.P[12:, 12:].copy()
+
+    @property
+    def theta_std(self):
+        return np.sqrt(np.diag(self.P)[12:])
+
+
+@dataclass
+class Result:
+    """Outcome of identify(): final estimates with 1-sigma and covariance."""
+
+    names: list
+    estimate: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+    ekf_estimate: np.ndarray
+    ekf_std: np.ndarray
+    initial: np.ndarray
+    truth: object          # array or None
+    steps: int
+    wall_s: float
+    mean_nis_per_dof: float
+    refined: bool
+    history: dict = field(default_factory=dict)
+    R_final: object = None
+    Q_final: object = None
+
+    def error_pct(self, which='estimate'):
+        if self.truth is None:
+            return None
+        est = getattr(self, which)
+        return 100.0 * (est - self.truth) / np.abs(self.truth)
+
+
+def _filter_args(model, theta_idx=None, c0=None):
+    m = model
+    return (m.c if c0 is None else c0, m.theta_idx if theta_idx is None else theta_idx,
+            *m.args[:-1])
+
+
+def run_ekf(f, Y, U, hist_every=0, want_white=False):
+    """Run an AugmentedEKF `f` (already started? no: from Y[0]) over Y, U with the compiled loop.
+
+    Returns (stats, histories). Raises DomainError/DivergenceError naming the sample.
+    """
+    Y = np.ascontiguousarray(Y, dtype=float)
+    U = np.ascontiguousarray(U, dtype=float)
+    if Y.ndim != 2 or Y.shape[1] != 12 or U.shape != (Y.shape[0], 6):
+        raise DimensionError(f'Y must be (N, 12) and U (N, 6); got {Y.shape} and {U.shape}')
+    N = Y.shape[0]
+    m = f.model
+    x0, sd0 = f.initial_state(Y[0], U[0, 5])
+    xa0 = np.concatenate([x0, f.theta0])
+    P0 = np.diag(np.concatenate([sd0, f.cfg.p0_rel * np.abs(f.theta0)]) ** 2)
+    nh = (N + hist_every - 1) // hist_every if hist_every > 0 else 0
+    th_hist = np.full((nh, m.p), np.nan)
+    sd_hist = np.full((nh, m.p), np.nan)
+    nis_hist = np.full((nh, 2), np.nan)
+    white = np.full((N if want_white else 0, 12), np.nan)
+    out_xa = np.empty(f.n)
+    out_P = np.empty((f.n, f.n))
+    out_Q = np.empty((f.n, f.n))
+    out_R = np.empty((12, 12))
+    stats = np.zeros(5)
+    K.run_filter(xa0, P0, Y, U, f.measured, f.Q0, f.R0, f.mode, f.gamma, f.cfg.lam,
+                 f.cfg.r_bound, f.cfg.q_floor, *_filter_args(m), f.T, hist_every, th_hist,
+                 sd_hist, nis_hist, want_white, white, out_xa, out_P, out_Q, out_R, stats)
+    st = int(stats[0])
+    f.xa, f.P, f.Q, f.R, f.steps = out_xa, out_P, out_Q, out_R, int(stats[1])
+    if st != K.OK:
+        k = int(stats[1])
+        if st in STATUS_TEXT:
+            raise DomainError(f'EKF stopped at sample {k} (t = {k * f.T:.2f} s): '
+                              f'{STATUS_TEXT[st]}')
+        raise DivergenceError(f'EKF diverged at sample {k} (t = {k * f.T:.2f} s): the '
+                              'covariance lost positive definiteness (try --noise-mode fixed)')
+    hist = {'t': np.arange(nh) * hist_every * f.T, 'theta': th_hist, 'std': sd_hist,
+            'nis': nis_hist[:, 0], 'dof': nis_hist[:, 1]} if nh else {}
+    return stats, hist, white
+
+
+def refine(model, cfg, Y, U, T, theta_start, max_nfev=60):
+    """Pass 2: filter-error maximum likelihood for theta, started at theta_start.
+
+    Returns (theta, cov, cost per residual)."""
+    p = model.p
+    fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
+                             noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
+    from .model import Model
+    state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
+                        coefficient_values=model.c)
+    f = AugmentedEKF(state_model, fixed_cfg, T)
+    empty = np.zeros(0, dtype=np.int64)
+    # theta enters through c0; M^-1 is recomputed when theta holds added-mass coefficients
+    sa = state_model.args
+    margs = (sa[0], sa[1], sa[2], sa[3], sa[4], sa[5], model.recompute_minv, sa[7], sa[8])
+    Y = np.ascontiguousarray(Y, dtype=float)
+    U = np.ascontiguousarray(U, dtype=float)
+    N = Y.shape[0]
+    x0, sd0 = f.initial_state(Y[0], U[0, 5])
+    P0 = np.diag(sd0 ** 2)
+    white = np.empty((N, 12))
+    buf = (np.empty(12), np.empty((12, 12)), np.empty((12, 12)), np.empty((12, 12)),
+           np.zeros(5))
+    scale = np.abs(theta_start)
+
+    def residuals(z):
+        c0 = model.coefficients_with(z * scale)
+        white[:] = np.nan
+        K.run_filter(x0, P0, Y, U, f.measured, f.Q0, f.R0, K.MODE_FIXED, 0.0, 0.0, 1.0, 1.0,
+                     c0, empty, *margs, T, 0, np.zeros((0, 0)), np.zeros((0, 0)),
+                     np.zeros((0, 2)), True, white, *buf)
+        if buf[4][0] != K.OK:
+            return np.full(white.size, 1e3)
+        r = white.ravel()
+        return np.where(np.isfinite(r), r, 0.0)
+
+    z0 = theta_start / scale
+    sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p), max_nfev=max_nfev * p,
+                        diff_step=1e-5)
+    J = sol.jac / scale[None, :]
+    n_res = np.count_nonzero(sol.fun)
+    s2 = 2.0 * sol.cost / max(1, n_res - p)
+    try:
+        cov = np.linalg.inv(J.T @ J) * max(1.0, s2)
+    except np.linalg.LinAlgError:
+        raise DivergenceError('batch refinement: the coefficients are not identifiable from '
+                              'this run (singular information matrix)') from None
+    return sol.x * scale, cov, s2
+
+
+def identify(model, Y, U, T, cfg, refine_pass=True, hist_every=0, truth=None):
+    """Identify model.theta_names from measurements Y (N, 12) and inputs U (N, 6) at T.
+
+    U[k] is the command held over [t_k, t_k+1). Returns a Result."""
+    t0 = time.perf_counter()
+    f = AugmentedEKF(model, cfg, T)
+    stats, hist, _ = run_ekf(f, Y, U, hist_every=hist_every)
+    ekf_est, ekf_std = f.theta, f.theta_std
+    est, cov = ekf_est, f.theta_cov
+    if refine_pass and model.p > 0:
+        est, cov, _ = refine(model, cfg, Y, U, T, ekf_est)
+    wall = time.perf_counter() - t0
+    return Result(names=list(model.theta_names), estimate=est, std=np.sqrt(np.diag(cov)),
+                  cov=cov, ekf_estimate=ekf_est, ekf_std=ekf_std, initial=f.theta0.copy(),
+                  truth=None if truth is None else np.asarray(truth, float),
+                  steps=int(stats[1]), wall_s=wall,
+                  mean_nis_per_dof=float(stats[2] / max(1.0, stats[3])), refined=refine_pass,
+                  history=hist, R_final=f.R.copy(), Q_final=f.Q.copy())
