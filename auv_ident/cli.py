@@ -44,6 +44,75 @@ def cmd_simulate(args):
     return 0
 
 
+def _progress(label, total):
+    from .progress import Progress
+    pr = Progress(total, label)
+    return pr
+
+
+def cmd_identify(args):
+    from . import experiments as ex
+    from .core.vehicle import load_vehicle
+    if args.simulate and args.bag:
+        raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
+    mode = 'fixed' if args.fixed_noise else args.noise_mode
+    if args.bag:
+        from .replay import identify_bag
+        doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
+                                  noise_mode=mode, initial_offset=args.initial_offset,
+                                  refine_pass=not args.no_refine)
+        print(table)
+    else:
+        v = load_vehicle(args.vehicle or 'nps_auv2')
+        names = ex.coefficient_list(v, args.coefficients)
+        cfg = ex.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
+                             tau=args.tau)
+        pr = _progress('batch refinement', 40 * len(names))
+        res, run, _ = ex.identify_simulated(
+            v.name, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
+            duration=args.duration, rpm=args.rpm, refine_pass=not args.no_refine,
+            mass_inverse=args.mass_inverse, progress=pr.update)
+        pr.close()
+        print(f'{v.title}: identified {", ".join(names)} from a simulated '
+              f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
+              f'{run.u[0, 5]:.0f} rpm, sensor noise 1-sigma (u..psi) '
+              + ' '.join(f'{s:g}' for s in run.noise_std))
+        print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
+              f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
+                                         if not args.no_refine else 'EKF pass only'))
+        print(ex.result_table(v, res))
+        print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
+              f'wall {res.wall_s:.2f} s')
+        doc = ex.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
+                                      'duration_s': float(run.t[-1]), 'noise_mode': mode})
+    if args.json:
+        ex.write_json(args.json, doc)
+        print(f'wrote {args.json}')
+    return 0
+
+
+def cmd_montecarlo(args):
+    from . import experiments as ex
+    from .core.vehicle import load_vehicle
+    v = load_vehicle(args.vehicle)
+    names = ex.coefficient_list(v, args.coefficients)
+    offsets = [float(o) for o in args.offsets.split(',')]
+    pr = _progress('monte carlo', args.seeds * len(offsets))
+    st = ex.montecarlo(v.name, names, seeds=args.seeds, offsets=offsets,
+                       noise_mode='fixed' if args.fixed_noise else args.noise_mode,
+                       maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
+                       refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update)
+    pr.close()
+    print(f'{v.title}: {args.seeds} seeds x offsets {offsets}, manoeuvre {args.maneuver!r}, '
+          f'{args.duration:.0f} s, noise adaptation {st["noise_mode"]}, '
+          + ('refined' if st['refined'] else 'EKF only') + f', wall {st["wall_s"]:.0f} s')
+    print(ex.montecarlo_table(st))
+    if args.json:
+        ex.write_json(args.json, st)
+        print(f'wrote {args.json}')
+    return 0
+
+
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
@@ -119,6 +188,41 @@ def build_parser():
     sp.add_argument('--process-noise', action='store_true')
     sp.add_argument('--out', help='write the run: FILE.csv, or a bag directory')
     sp.set_defaults(func=cmd_simulate)
+
+    def ident_args(sp):
+        sp.add_argument('--coefficients', default='',
+                        help="comma-separated names (default: the paper's set for the vehicle)")
+        sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
+                        choices=('fixed', 'paper', 'paper_q', 'matching'),
+                        help='Q/R adaptation (see README); default fixed')
+        sp.add_argument('--fixed-noise', action='store_true', help='same as --noise-mode fixed')
+        sp.add_argument('--initial-offset', type=float, default=0.5,
+                        help='initial guesses = truth * (1 + offset); default 0.5')
+        sp.add_argument('--no-refine', action='store_true',
+                        help='EKF pass only (no batch refinement)')
+        sp.add_argument('--json', help='write the result as JSON')
+        sp.add_argument('--rpm', type=float, default=None)
+
+    sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag')
+    vehicle_arg(sp)
+    sp.set_defaults(vehicle=None)
+    sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
+    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
+    sp.add_argument('--seed', type=int, default=0)
+    sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
+    sp.add_argument('--tau', type=float, default=10.0, help='s, adaptation time constant')
+    ident_args(sp)
+    sp.set_defaults(func=cmd_identify)
+
+    sp = sub.add_parser('montecarlo', help='accuracy and consistency over seeds and starts')
+    vehicle_arg(sp)
+    sp.add_argument('--seeds', type=int, default=20)
+    sp.add_argument('--offsets', default='0.5,-0.5', help='initial offsets, comma-separated')
+    sp.add_argument('--maneuver', default='ident')
+    sp.add_argument('--duration', type=float, default=600.0)
+    sp.add_argument('--jobs', type=int, default=2)
+    ident_args(sp)
+    sp.set_defaults(func=cmd_montecarlo)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)

@@ -23,10 +23,13 @@ from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .simulate import DEFAULT_NOISE_STD, trim_speed
 
-# Per-step process-noise 1-sigma of the 12 states in the EKF (small: the model structure is
-# right; a little keeps the filter from locking on the states). Units of the states.
-DEFAULT_Q_STATE = np.array([2e-4, 2e-4, 2e-4, 2e-5, 2e-5, 2e-5,
-                            1e-3, 1e-3, 1e-3, 2e-5, 2e-5, 2e-5])
+# Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
+# coefficients are learnt from how well the model predicts the motion, and a large state Q lets
+# the filter explain the motion by state corrections instead (100x these values made the
+# coefficients' 1-sigma about 5x larger on NPS AUV II). Raise it for real vehicles with
+# unmodelled forces (waves, currents, tether).
+DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
+                            1e-5, 1e-5, 1e-5, 2e-7, 2e-7, 2e-7])
 
 
 @dataclass
@@ -288,7 +291,7 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
     return stats, hist, white
 
 
-def refine(model, cfg, Y, U, T, theta_start, max_nfev=60):
+def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
     """Pass 2: filter-error maximum likelihood for theta, started at theta_start.
 
     Returns (theta, cov, cost per residual)."""
@@ -314,6 +317,8 @@ def refine(model, cfg, Y, U, T, theta_start, max_nfev=60):
     scale = np.abs(theta_start)
 
     def residuals(z):
+        if progress is not None:
+            progress()
         c0 = model.coefficients_with(z * scale)
         white[:] = np.nan
         K.run_filter(x0, P0, Y, U, f.measured, f.Q0, f.R0, K.MODE_FIXED, 0.0, 0.0, 1.0, 1.0,
@@ -338,7 +343,7 @@ def refine(model, cfg, Y, U, T, theta_start, max_nfev=60):
     return sol.x * scale, cov, s2
 
 
-def identify(model, Y, U, T, cfg, refine_pass=True, hist_every=0, truth=None):
+def identify(model, Y, U, T, cfg, refine_pass=True, hist_every=0, truth=None, progress=None):
     """Identify model.theta_names from measurements Y (N, 12) and inputs U (N, 6) at T.
 
     U[k] is the command held over [t_k, t_k+1). Returns a Result."""
@@ -348,7 +353,7 @@ def identify(model, Y, U, T, cfg, refine_pass=True, hist_every=0, truth=None):
     ekf_est, ekf_std = f.theta, f.theta_std
     est, cov = ekf_est, f.theta_cov
     if refine_pass and model.p > 0:
-        est, cov, _ = refine(model, cfg, Y, U, T, ekf_est)
+        est, cov, _ = refine(model, cfg, Y, U, T, ekf_est, progress=progress)
     wall = time.perf_counter() - t0
     return Result(names=list(model.theta_names), estimate=est, std=np.sqrt(np.diag(cov)),
                   cov=cov, ekf_estimate=ekf_est, ekf_std=ekf_std, initial=f.theta0.copy(),

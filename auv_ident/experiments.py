@@ -1,0 +1,192 @@
+"""Experiments over the core: identify a simulated run, tables, JSON, Monte Carlo statistics.
+
+ROS-free (bags come in through replay.py). Every figure printed here can be reproduced with
+the command shown next to it in the README.
+"""
+import json
+import multiprocessing as mp
+import time
+
+import numpy as np
+
+from .core.errors import ConfigError
+from .core.identify import FilterConfig, identify
+from .core.model import Model
+from .core.simulate import DEFAULT_NOISE_STD, simulate
+from .core.vehicle import load_vehicle
+
+DEFAULT_DURATION = 600.0     # s of the identification run
+DEFAULT_MANEUVER = 'ident'
+DEFAULT_NOISE_MODE = 'fixed'  # see README "Noise adaptation": fixed Q/R wins on accuracy
+
+
+def coefficient_list(vehicle, text):
+    """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
+    names = [n.strip() for n in (text or '').split(',') if n.strip()]
+    names = names or list(vehicle.identify_default)
+    if not names:
+        raise ConfigError(f'no coefficients chosen and {vehicle.name} has no identify_default')
+    return [vehicle.names[vehicle.index(n)] for n in names]
+
+
+def make_config(names, noise_mode=DEFAULT_NOISE_MODE, initial_offset=0.5, initial=None,
+                noise_std=None, tau=10.0):
+    return FilterConfig(coefficients=list(names), initial=initial, initial_offset=initial_offset,
+                        mode=noise_mode, tau=tau,
+                        noise_std=DEFAULT_NOISE_STD.copy() if noise_std is None else noise_std)
+
+
+def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
+                       duration=DEFAULT_DURATION, rpm=None, refine_pass=True, hist_every=0,
+                       mass_inverse='default', progress=None, process_std=None):
+    """Simulate the truth (vehicle file values), then identify. Returns (Result, Run, Model)."""
+    v = load_vehicle(vehicle_name)
+    truth = Model(v, mass_inverse=mass_inverse)
+    run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
+                   noise_std=cfg.noise_std, process_std=process_std)
+    m = Model(v, names, mass_inverse=mass_inverse)
+    res = identify(m, run.y, run.u, run.T, cfg, refine_pass=refine_pass, hist_every=hist_every,
+                   truth=m.theta_true, progress=progress)
+    return res, run, m
+
+
+def paper_values(vehicle, name):
+    """(paper's estimate, paper's error % text) or (None, None)."""
+    p = vehicle.paper or {}
+    est = (p.get('estimated') or {}).get(name)
+    err = (p.get('error_pct') or {}).get(name)
+    return est, err
+
+
+def result_dict(vehicle, res, extra=None):
+    """The JSON document of `identify --json` (schema in the README)."""
+    err = res.error_pct()
+    ekf_err = res.error_pct('ekf_estimate')
+    coeffs = {}
+    for i, n in enumerate(res.names):
+        pe, perr = paper_values(vehicle, n)
+        coeffs[n] = {
+            'estimate': float(res.estimate[i]), 'std': float(res.std[i]),
+            'truth': None if res.truth is None else float(res.truth[i]),
+            'error_pct': None if err is None else float(err[i]),
+            'initial': float(res.initial[i]),
+            'ekf_estimate': float(res.ekf_estimate[i]), 'ekf_std': float(res.ekf_std[i]),
+            'ekf_error_pct': None if ekf_err is None else float(ekf_err[i]),
+            'paper_estimate': pe, 'paper_error_pct': perr,
+        }
+    d = {'vehicle': vehicle.name, 'coefficients': coeffs, 'steps': res.steps,
+         'wall_s': res.wall_s, 'refined': res.refined,
+         'mean_nis_per_dof': res.mean_nis_per_dof,
+         'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
+         + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
+            else 'dimensional SI') + ')'}
+    if extra:
+        d.update(extra)
+    return d
+
+
+def _fmt(v, width=12):
+    return f'{v:>{width}.6g}' if v is not None else f'{"-":>{width}}'
+
+
+def result_table(vehicle, res):
+    """The coefficient table: truth, estimate, 1-sigma, error %, and the paper's figures."""
+    err = res.error_pct()
+    lines = [f'{"coefficient":<12}{"truth":>12}{"estimate":>12}{"1-sigma":>12}{"error %":>10}'
+             f'{"paper est.":>12}{"paper err %":>12}']
+    for i, n in enumerate(res.names):
+        pe, perr = paper_values(vehicle, n)
+        lines.append(f'{n:<12}{_fmt(None if res.truth is None else res.truth[i])}'
+                     f'{_fmt(res.estimate[i])}{_fmt(res.std[i])}'
+                     + (f'{err[i]:>+10.3f}' if err is not None else f'{"-":>10}')
+                     + _fmt(pe) + f'{perr if perr is not None else "-":>12}')
+    return '\n'.join(lines)
+
+
+def _mc_case(args):
+    vehicle_name, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass = args
+    cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset)
+    try:
+        res, _, _ = identify_simulated(vehicle_name, names, cfg, maneuver=maneuver, seed=seed,
+                                       duration=duration, rpm=rpm, refine_pass=refine_pass)
+    except ArithmeticError as err:      # DomainError / DivergenceError: a diverged run
+        return {'seed': seed, 'offset': offset, 'diverged': str(err)}
+    e = res.estimate - res.truth
+    try:
+        nees = float(e @ np.linalg.solve(res.cov, e))
+    except np.linalg.LinAlgError:
+        nees = float('nan')
+    return {'seed': seed, 'offset': offset, 'error_pct': res.error_pct().tolist(),
+            'z': (e / res.std).tolist(), 'nees': nees,
+            'ekf_error_pct': res.error_pct('ekf_estimate').tolist(),
+            'ekf_z': ((res.ekf_estimate - res.truth) / res.ekf_std).tolist(),
+            'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s}
+
+
+def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
+               maneuver=DEFAULT_MANEUVER, duration=DEFAULT_DURATION, rpm=None, refine_pass=True,
+               jobs=2, progress=None):
+    """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS."""
+    cases = [(vehicle_name, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass)
+             for s in range(seeds) for off in offsets]
+    t0 = time.perf_counter()
+    out = []
+    if jobs > 1:
+        with mp.get_context('spawn').Pool(jobs) as pool:
+            for r in pool.imap_unordered(_mc_case, cases):
+                out.append(r)
+                if progress:
+                    progress()
+    else:
+        for c in cases:
+            out.append(_mc_case(c))
+            if progress:
+                progress()
+    ok = [r for r in out if 'diverged' not in r]
+    p = len(names)
+    stats = {'vehicle': vehicle_name, 'coefficients': names, 'maneuver': maneuver,
+             'duration_s': duration, 'seeds': seeds, 'offsets': list(offsets),
+             'noise_mode': noise_mode, 'refined': refine_pass, 'cases': len(out),
+             'diverged': len(out) - len(ok), 'wall_s': time.perf_counter() - t0,
+             'noise_std': DEFAULT_NOISE_STD.tolist(), 'per_coefficient': {}}
+    if ok:
+        E = np.abs(np.array([r['error_pct'] for r in ok]))
+        Z = np.abs(np.array([r['z'] for r in ok]))
+        EE = np.abs(np.array([r['ekf_error_pct'] for r in ok]))
+        EZ = np.abs(np.array([r['ekf_z'] for r in ok]))
+        for i, n in enumerate(names):
+            stats['per_coefficient'][n] = {
+                'median_abs_error_pct': float(np.median(E[:, i])),
+                'max_abs_error_pct': float(E[:, i].max()),
+                'within_3sigma': float(np.mean(Z[:, i] <= 3.0)),
+                'ekf_median_abs_error_pct': float(np.median(EE[:, i])),
+                'ekf_within_3sigma': float(np.mean(EZ[:, i] <= 3.0))}
+        stats['within_3sigma_all'] = float(np.mean(Z <= 3.0))
+        stats['ekf_within_3sigma_all'] = float(np.mean(EZ <= 3.0))
+        nees = np.array([r['nees'] for r in ok])
+        stats['mean_nees'] = float(np.nanmean(nees))
+        stats['nees_expected'] = p
+        stats['mean_nis_per_dof'] = float(np.mean([r['mean_nis_per_dof'] for r in ok]))
+    stats['runs'] = sorted(out, key=lambda r: (r['seed'], -r['offset']))
+    return stats
+
+
+def montecarlo_table(stats):
+    lines = [f'{"coefficient":<12}{"median|err|%":>14}{"max|err|%":>11}{"in 3-sigma":>12}'
+             f'{"EKF-only med%":>15}{"EKF in 3s":>11}']
+    for n, s in stats['per_coefficient'].items():
+        lines.append(f'{n:<12}{s["median_abs_error_pct"]:>14.3f}{s["max_abs_error_pct"]:>11.3f}'
+                     f'{100 * s["within_3sigma"]:>11.0f}%{s["ekf_median_abs_error_pct"]:>15.3f}'
+                     f'{100 * s["ekf_within_3sigma"]:>10.0f}%')
+    if 'mean_nees' in stats:
+        lines.append(f'cases {stats["cases"]} (diverged {stats["diverged"]}); truth within '
+                     f'3-sigma in {100 * stats["within_3sigma_all"]:.1f} % of seed x coefficient '
+                     f'cases; mean NEES {stats["mean_nees"]:.2f} (expected '
+                     f'{stats["nees_expected"]}); mean NIS/dof {stats["mean_nis_per_dof"]:.3f} '
+                     '(expected 1)')
+    return '\n'.join(lines)
+
+
+def write_json(path, doc):
+    with open(path, 'w', encoding='utf-8') as fh:
+        json.dump(doc, fh, indent=2)
