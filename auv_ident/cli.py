@@ -113,6 +113,17 @@ def cmd_montecarlo(args):
     return 0
 
 
+def cmd_bench(args):
+    from .bench import bench, format_bench
+    b = bench(duration=args.duration)
+    print(format_bench(b))
+    if args.json:
+        from .experiments import write_json
+        write_json(args.json, b)
+        print(f'wrote {args.json}')
+    return 0
+
+
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
@@ -223,6 +234,11 @@ def build_parser():
     sp.add_argument('--jobs', type=int, default=2)
     ident_args(sp)
     sp.set_defaults(func=cmd_montecarlo)
+
+    sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')
+    sp.add_argument('--duration', type=float, default=600.0)
+    sp.add_argument('--json')
+    sp.set_defaults(func=cmd_bench)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)
