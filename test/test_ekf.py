@@ -1,0 +1,240 @@
+"""Tier 1: the augmented EKF, noise adaptation, batch refinement and streaming pairing."""
+import numpy as np
+import pytest
+
+from auv_ident.core import ekf as K
+from auv_ident.core.errors import ConfigError, DimensionError
+from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.core.stream import StreamIdentifier
+from auv_ident.core.vehicle import load_vehicle
+
+NPS = load_vehicle('nps_auv2')
+NAMES = list(NPS.identify_default)
+
+
+@pytest.fixture(scope='module')
+def short_run():
+    return simulate(Model(NPS), 'ident', duration=120.0, seed=11)
+
+
+def _spd(n, rng):
+    a = rng.normal(size=(n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+def test_update_equals_closed_form_kalman_update_with_missing_channels():
+    rng = np.random.default_rng(0)
+    n = 15
+    P = _spd(n, rng) * 1e-2
+    R = np.diag(rng.uniform(0.01, 0.1, 12))
+    xa = rng.normal(size=n)
+    xa[9:12] = 0.1
+    y = xa[:12] + rng.normal(0, 0.1, 12)
+    y[4] = np.nan                      # a missing sample
+    measured = np.ones(12, dtype=bool)
+    measured[7] = False                # a channel the suite does not have
+    out_x, out_P = np.empty(n), np.empty((n, n))
+    innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
+    st, nis, m = K.update(xa, P, y, measured, R, out_x, out_P, innov, S_diag, white)
+    assert st == K.OK and m == 10
+    idx = [j for j in range(12) if j not in (4, 7)]
+    H = np.zeros((len(idx), n))
+    H[np.arange(len(idx)), idx] = 1.0
+    Rm = R[np.ix_(idx, idx)]
+    S = H @ P @ H.T + Rm
+    Kg = P @ H.T @ np.linalg.inv(S)
+    nu = y[idx] - xa[idx]
+    x_ref = xa + Kg @ nu
+    P_ref = (np.eye(n) - Kg @ H) @ P
+    assert np.allclose(out_x[:11], x_ref[:11], atol=1e-12)
+    assert np.allclose(out_P, P_ref, atol=1e-12)
+    assert nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-10)
+    assert np.isnan(innov[4]) and np.isnan(innov[7])
+
+
+def test_angle_innovation_is_wrapped():
+    n = 12
+    P = np.eye(n) * 0.01
+    R = np.eye(12) * 0.01
+    xa = np.zeros(n)
+    xa[11] = np.pi - 0.01
+    y = np.full(12, np.nan)
+    y[11] = -np.pi + 0.01              # 0.02 rad away across the +-pi cut
+    out_x, out_P = np.empty(n), np.empty((n, n))
+    innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
+    st, _, _ = K.update(xa, P, y, np.ones(12, bool), R, out_x, out_P, innov, S_diag, white)
+    assert st == K.OK and innov[11] == pytest.approx(0.02)
+    assert abs(abs(out_x[11]) - np.pi) < 0.02
+
+
+def test_rk4_transition_jacobian_matches_finite_differences():
+    m = Model(NPS, NAMES)
+    rng = np.random.default_rng(3)
+    xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
+                         m.theta_true * 1.2])
+    ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0])
+    args = (m.c, m.theta_idx, *m.args[:-1])
+    n = len(xa)
+    x1, Fa = np.empty(n), np.empty((n, n))
+    assert K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa) == K.OK
+    for j in range(n):
+        h = 1e-6 * max(1.0, abs(xa[j])) if j < 12 else 1e-4 * abs(xa[j])
+        e = np.zeros(n)
+        e[j] = h
+        a, b = np.empty(n), np.empty(n)
+        K.rk4_jacobian_step(xa + e, ui, *args, 0.05, False, a, Fa.copy())
+        K.rk4_jacobian_step(xa - e, ui, *args, 0.05, False, b, Fa.copy())
+        fd = (a - b) / (2 * h)
+        assert np.allclose(Fa[:, j], fd, rtol=1e-6, atol=1e-9 * max(1, np.abs(fd).max())), j
+    assert rng is not None
+
+
+def test_predict_is_F_P_Ft_plus_Q():
+    m = Model(NPS, NAMES)
+    rng = np.random.default_rng(4)
+    n = 17
+    xa = np.concatenate([[1.0, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0], m.theta_true])
+    P = _spd(n, rng) * 1e-4
+    Q = np.diag(rng.uniform(1e-8, 1e-6, n))
+    ui = np.array([0.1, 0.1, 0, 0, 0, 500.0])
+    args = (m.c, m.theta_idx, *m.args[:-1])
+    x1, Fa = np.empty(n), np.empty((n, n))
+    K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa)
+    xo, Po = np.empty(n), np.empty((n, n))
+    assert K.predict(xa, P, ui, Q, *args, 0.05, xo, Po) == K.OK
+    assert np.allclose(xo, x1) and np.allclose(Po, Fa @ P @ Fa.T + Q, rtol=1e-12, atol=1e-18)
+
+
+def test_paper_adaptation_formulas_by_hand():
+    n = 14                               # 12 states + 2 coefficients
+    Q = np.diag(np.arange(1.0, n + 1) * 1e-6)
+    R = np.eye(12) * 0.01
+    Q0, R0 = Q.copy(), R.copy()
+    theta_prev = np.array([1.0, 2.0])
+    xa_post = np.zeros(n)
+    xa_post[12:] = [1.1, 1.8]
+    innov = np.full(12, np.nan)
+    innov[0], innov[3] = 0.2, -0.1
+    gamma, lam, T = 0.1, 2e-3, 0.05
+    Qp, Rp = Q.copy(), R.copy()
+    K.adapt(K.MODE_PAPER, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov, np.ones(12),
+            np.eye(n), Qp, Rp, Q0, R0)
+    w = (xa_post[12:] - theta_prev) / T                        # Eq. 18
+    Qth = (1 - gamma) * Q[12:, 12:] + gamma * lam ** 2 * np.outer(w, w)   # Eq. 16
+    assert np.allclose(Qp[12:, 12:], Qth, rtol=1e-12)
+    assert np.array_equal(Qp[:12, :12], Q[:12, :12])
+    v = innov[[0, 3]]
+    Rref = R.copy()
+    Rref[np.ix_([0, 3], [0, 3])] = (1 - gamma) * R[np.ix_([0, 3], [0, 3])] \
+        + gamma * lam ** 2 * np.outer(v, v)                    # Eq. 17
+    assert np.allclose(Rp, Rref, rtol=1e-12)
+    # matching: R_jj moves towards nu^2 - (H P H^T)_jj and is clipped to [R0/4, 4 R0]
+    Qm, Rm = Q.copy(), R.copy()
+    P_prior = np.eye(n) * 1e-3
+    K.adapt(K.MODE_MATCHING, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov,
+            np.ones(12), P_prior, Qm, Rm, Q0, R0)
+    assert Rm[0, 0] == pytest.approx((1 - gamma) * 0.01 + gamma * (0.04 - 1e-3))
+    assert Rm[3, 3] == pytest.approx((1 - gamma) * 0.01 + gamma * (0.01 - 1e-3))
+    assert Rm[1, 1] == 0.01                                    # no innovation: unchanged
+    d2 = (xa_post[12:] - theta_prev) ** 2
+    q = np.minimum((1 - gamma) * np.diag(Q)[12:] + gamma * d2, np.diag(Q0)[12:])
+    assert np.allclose(np.diag(Qm)[12:], q)
+
+
+def test_covariance_stays_symmetric_positive_definite_over_a_long_run():
+    m = Model(NPS, NAMES)
+    run = simulate(Model(NPS), 'ident', duration=900.0, seed=2)
+    f = AugmentedEKF(m, FilterConfig(coefficients=NAMES), run.T)
+    _, hist, _ = run_ekf(f, run.y, run.u, hist_every=100)
+    assert np.array_equal(f.P, f.P.T)
+    assert np.linalg.eigvalsh(f.P).min() > 0
+    assert np.all(np.isfinite(hist['std'])) and np.all(hist['std'] > 0)
+
+
+def test_short_run_converges_within_a_few_percent(short_run):
+    m = Model(NPS, NAMES)
+    for offset in (0.5, -0.5):
+        cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
+        res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False,
+                       truth=m.theta_true)
+        err = np.abs(res.error_pct())
+        assert err.max() < 5.0, dict(zip(NAMES, err))
+
+
+def test_refinement_is_consistent_and_independent_of_the_start(short_run):
+    m = Model(NPS, NAMES)
+    ests = []
+    for offset in (0.5, -0.5):
+        res = identify(m, short_run.y, short_run.u, short_run.T,
+                       FilterConfig(coefficients=NAMES, initial_offset=offset),
+                       truth=m.theta_true)
+        assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
+        ests.append(res.estimate)
+    assert np.allclose(ests[0], ests[1], rtol=1e-4)
+
+
+def test_subset_of_channels_and_missing_samples_still_identify(short_run):
+    m = Model(NPS, NAMES)
+    y = short_run.y.copy()
+    y[::7, 0:3] = np.nan                       # DVL drop-outs
+    measured = np.ones(12, dtype=bool)
+    measured[6:8] = False                      # no USBL x, y
+    cfg = FilterConfig(coefficients=NAMES, measured=measured)
+    res = identify(m, y, short_run.u, short_run.T, cfg, refine_pass=False, truth=m.theta_true)
+    assert np.abs(res.error_pct()).max() < 5.0
+
+
+def test_stream_identifier_equals_the_compiled_loop(short_run):
+    m = Model(NPS, NAMES)
+    cfg = FilterConfig(coefficients=NAMES)
+    res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False)
+    s = StreamIdentifier(m, cfg, short_run.T)
+    # actuator commands arrive with the odometry of the same stamp; order must not matter
+    for k, t in enumerate(short_run.t):
+        if k % 2:
+            s.add_measurement(t, short_run.y[k])
+            s.add_command(t, short_run.u[k])
+        else:
+            s.add_command(t, short_run.u[k])
+            s.add_measurement(t, short_run.y[k])
+    assert s.accepted == len(short_run.t) and s.rejected == 0
+    assert np.allclose(s.ekf.theta, res.ekf_estimate, rtol=1e-9, atol=0)
+
+
+def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
+    m = Model(NPS, NAMES)
+    s = StreamIdentifier(m, FilterConfig(coefficients=NAMES), short_run.T, max_gap=5.0)
+    r = s.add_measurement(0.0, short_run.y[0])
+    assert not r.accepted and 'no actuator command' in r.reason
+    s.add_command(0.0, short_run.u[0])
+    assert s.add_measurement(0.0, short_run.y[0]).accepted
+    assert 'duplicate or out of order' in s.add_measurement(0.0, short_run.y[0]).reason
+    s.add_command(0.05, short_run.u[1])
+    assert s.add_measurement(0.05, short_run.y[1]).accepted
+    assert s.add_measurement(0.5, short_run.y[10]).accepted       # 9 samples missing: bridged
+    out = s.add_measurement(20.0, short_run.y[400])               # long gap: states restart
+    assert out.accepted and 'restarted' in out.reason
+    assert np.all(np.isfinite(s.ekf.theta))
+
+
+@pytest.mark.parametrize('kwargs,exc,needle', [
+    ({'noise_std': np.ones(11)}, DimensionError, 'noise_std must have shape'),
+    ({'noise_std': -np.ones(12)}, ConfigError, 'non-negative'),
+    ({'q_state': np.full(12, np.nan)}, ConfigError, 'q_state'),
+    ({'mode': 'arma'}, ConfigError, "mode 'arma'"),
+    ({'initial': [1.0, 2.0]}, DimensionError, 'expected 5 values'),
+    ({'p0_rel': -1.0}, ConfigError, 'p0_rel'),
+])
+def test_bad_configuration_is_a_clear_error(kwargs, exc, needle):
+    m = Model(NPS, NAMES)
+    with pytest.raises(exc, match=needle):
+        AugmentedEKF(m, FilterConfig(coefficients=NAMES, **kwargs), 0.05)
+
+
+def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
+    with pytest.raises(ConfigError, match='sample time'):
+        AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), 0.0)
+    with pytest.raises(ConfigError, match="unknown coefficient 'Z_wx'"):
+        Model(NPS, ['Z_wx'])
