@@ -6,6 +6,7 @@ the command shown next to it in the README.
 import json
 import multiprocessing as mp
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,6 +49,47 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     res = identify(m, run.y, run.u, run.T, cfg, refine_pass=refine_pass, hist_every=hist_every,
                    truth=m.theta_true, progress=progress)
     return res, run, m
+
+
+@dataclass
+class Source:
+    """Data to identify from: a simulated run or a bag, as arrays on the sample grid.
+
+    U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/stream.py);
+    X_true and truth are known only for simulated data."""
+
+    vehicle: object
+    names: list
+    t: np.ndarray
+    Y: np.ndarray
+    U: np.ndarray
+    T: float
+    noise_std: np.ndarray
+    description: str
+    X_true: object = None
+    truth: object = None
+    seed: object = None
+    maneuver: str = ''
+
+
+def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
+                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None):
+    """A Source from --simulate MANEUVER (in memory) or --bag PATH."""
+    if bool(simulate_maneuver) == bool(bag):
+        raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
+    if bag:
+        from .replay import bag_source
+        return bag_source(bag, vehicle=vehicle, coefficients=coefficients)
+    v = load_vehicle(vehicle or 'nps_auv2')
+    names = coefficient_list(v, coefficients)
+    run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,
+                   process_std=process_std)
+    m = Model(v, names)
+    return Source(vehicle=v, names=names, t=run.t, Y=run.y, U=run.u, T=run.T,
+                  noise_std=run.noise_std, X_true=run.x, truth=m.theta_true, seed=seed,
+                  maneuver=run.maneuver,
+                  description=f'simulated {run.maneuver!r} run of {run.t[-1]:.0f} s at '
+                              f'T = {run.T} s, seed {seed}, {run.u[0, 5]:.0f} rpm')
 
 
 def paper_values(vehicle, name):

@@ -265,10 +265,12 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
 @njit(cache=True)
 def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_floor, c0,
                theta_idx, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv, M_RB,
-               theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, want_white, white_out,
-               out_xa, out_P, out_Q, out_R, stats):
+               theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, rq_hist, want_white,
+               white_out, out_xa, out_P, out_Q, out_R, stats):
     """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
-    update with Y[k]). Histories every `hist_every` samples (0: none). stats gets
+    update with Y[k]). Histories every `hist_every` samples (0: none): coefficients, their
+    1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12) and diag(Q_theta) (p)
+    in rq_hist. stats gets
     [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not grow with N unless a
     history is asked for. With want_white, white_out (N, 12) gets the whitened innovations
     (for the batch refinement)."""
@@ -322,6 +324,10 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
                 sd_hist[h, i] = math.sqrt(P[12 + i, 12 + i])
             nis_hist[h, 0] = nis
             nis_hist[h, 1] = m
+            for i in range(12):
+                rq_hist[h, i] = R[i, i]
+            for i in range(p):
+                rq_hist[h, 12 + i] = Q[12 + i, 12 + i]
             h += 1
         done += 1
     out_xa[:] = xa

@@ -268,6 +268,7 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
     th_hist = np.full((nh, m.p), np.nan)
     sd_hist = np.full((nh, m.p), np.nan)
     nis_hist = np.full((nh, 2), np.nan)
+    rq_hist = np.full((nh, 12 + m.p), np.nan)
     white = np.full((N if want_white else 0, 12), np.nan)
     out_xa = np.empty(f.n)
     out_P = np.empty((f.n, f.n))
@@ -276,7 +277,8 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
     stats = np.zeros(5)
     K.run_filter(xa0, P0, Y, U, f.measured, f.Q0, f.R0, f.mode, f.gamma, f.cfg.lam,
                  f.cfg.r_bound, f.cfg.q_floor, *_filter_args(m), f.T, hist_every, th_hist,
-                 sd_hist, nis_hist, want_white, white, out_xa, out_P, out_Q, out_R, stats)
+                 sd_hist, nis_hist, rq_hist, want_white, white, out_xa, out_P, out_Q, out_R,
+                 stats)
     st = int(stats[0])
     f.xa, f.P, f.Q, f.R, f.steps = out_xa, out_P, out_Q, out_R, int(stats[1])
     if st != K.OK:
@@ -287,7 +289,8 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
         raise DivergenceError(f'EKF diverged at sample {k} (t = {k * f.T:.2f} s): the '
                               'covariance lost positive definiteness (try --noise-mode fixed)')
     hist = {'t': np.arange(nh) * hist_every * f.T, 'theta': th_hist, 'std': sd_hist,
-            'nis': nis_hist[:, 0], 'dof': nis_hist[:, 1]} if nh else {}
+            'nis': nis_hist[:, 0], 'dof': nis_hist[:, 1], 'R_diag': rq_hist[:, :12],
+            'Q_theta_diag': rq_hist[:, 12:]} if nh else {}
     return stats, hist, white
 
 
@@ -323,7 +326,7 @@ def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
         white[:] = np.nan
         K.run_filter(x0, P0, Y, U, f.measured, f.Q0, f.R0, K.MODE_FIXED, 0.0, 0.0, 1.0, 1.0,
                      c0, empty, *margs, T, 0, np.zeros((0, 0)), np.zeros((0, 0)),
-                     np.zeros((0, 2)), True, white, *buf)
+                     np.zeros((0, 2)), np.zeros((0, 12)), True, white, *buf)
         if buf[4][0] != K.OK:
             return np.full(white.size, 1e3)
         r = white.ravel()
