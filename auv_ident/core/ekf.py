@@ -205,20 +205,32 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
         for a in range(m):
             s += Kt[a, i] * nu[a]
         xa_out[i] = xa[i] + s
-    # Joseph form: (I - K H) P (I - K H)^T + K R K^T
-    IKH = np.eye(n)
-    for a in range(m):
-        for i in range(n):
-            IKH[i, idx[a]] -= Kt[a, i]
-    Rm = np.empty((m, m))
-    for a in range(m):
-        for b in range(m):
-            Rm[a, b] = R[idx[a], idx[b]]
-    K = Kt.T.copy()
-    Pn = IKH @ P @ IKH.T + K @ Rm @ Kt
+    # Joseph form (I - K H) P (I - K H)^T + K R K^T. H selects channels idx, so
+    # (I - K H) P = P - K P[idx, :] and M (I - K H)^T = M - M[:, idx] K^T: explicit loops,
+    # no n x n identity or matrix products with it.
+    A1 = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            P_out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
+            s = P[i, j]
+            for a in range(m):
+                s -= Kt[a, i] * P[idx[a], j]
+            A1[i, j] = s
+    KR = np.empty((n, m))
+    for i in range(n):
+        for b in range(m):
+            s = 0.0
+            for a in range(m):
+                s += Kt[a, i] * R[idx[a], idx[b]]
+            KR[i, b] = s
+    for i in range(n):
+        for j in range(i + 1):
+            s = A1[i, j]
+            for a in range(m):
+                s -= A1[i, idx[a]] * Kt[a, j]
+                s += KR[i, a] * Kt[a, j]
+            # A1 (I-KH)^T is symmetric in exact arithmetic: mirror the lower triangle
+            P_out[i, j] = s
+            P_out[j, i] = s
     for i in range(n):
         if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
             return ERR_NOT_PD, nis, m
