@@ -138,3 +138,12 @@ def test_derivatives_cli_matches_reference_and_reports_bad_rows(tmp_path):
     assert float(rows[1][0]) == pytest.approx(-0.021756235860269393, rel=1e-12)
     assert rows[2] == [''] * 12 and rows[3] == [''] * 12
     assert float(rows[4][2]) == pytest.approx(-0.019599861875375876, rel=1e-12)
+
+
+@pytest.mark.parametrize('name,rpm,lo,hi', [
+    ('nps_auv2', 500.0, 0.62, 0.64),     # eta = 1: u = 0.012 n[rad/s] = 0.628 m/s
+    ('remus100', 1500.0, 1.50, 1.58),    # Prestero's sea trials: 1.51-1.54 m/s at 1500 rpm
+    ('isimi', 1500.0, 1.03, 1.6),        # ISIMI's design goal: > 2 kn = 1.03 m/s
+])
+def test_vehicles_trim_to_a_sensible_cruise_speed(name, rpm, lo, hi):
+    assert lo < trim_speed(Model(load_vehicle(name)), rpm) < hi
