@@ -101,7 +101,8 @@ def cmd_montecarlo(args):
     st = ex.montecarlo(v.name, names, seeds=args.seeds, offsets=offsets,
                        noise_mode='fixed' if args.fixed_noise else args.noise_mode,
                        maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
-                       refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update)
+                       refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update,
+                       tau=args.tau)
     pr.close()
     print(f'{v.title}: {args.seeds} seeds x offsets {offsets}, manoeuvre {args.maneuver!r}, '
           f'{args.duration:.0f} s, noise adaptation {st["noise_mode"]}, '
@@ -213,6 +214,8 @@ def build_parser():
                         help='EKF pass only (no batch refinement)')
         sp.add_argument('--json', help='write the result as JSON')
         sp.add_argument('--rpm', type=float, default=None)
+        sp.add_argument('--tau', type=float, default=10.0,
+                        help='s, time constant of the adaptation forgetting factor')
 
     sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag')
     vehicle_arg(sp)
@@ -221,7 +224,6 @@ def build_parser():
     sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
-    sp.add_argument('--tau', type=float, default=10.0, help='s, adaptation time constant')
     ident_args(sp)
     sp.set_defaults(func=cmd_identify)
 

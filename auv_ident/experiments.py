@@ -146,8 +146,9 @@ def result_table(vehicle, res):
 
 
 def _mc_case(args):
-    vehicle_name, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass = args
-    cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset)
+    (vehicle_name, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass,
+     tau) = args
+    cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset, tau=tau)
     try:
         res, _, _ = identify_simulated(vehicle_name, names, cfg, maneuver=maneuver, seed=seed,
                                        duration=duration, rpm=rpm, refine_pass=refine_pass)
@@ -167,10 +168,10 @@ def _mc_case(args):
 
 def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
                maneuver=DEFAULT_MANEUVER, duration=DEFAULT_DURATION, rpm=None, refine_pass=True,
-               jobs=2, progress=None):
+               jobs=2, progress=None, tau=10.0):
     """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS."""
-    cases = [(vehicle_name, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass)
-             for s in range(seeds) for off in offsets]
+    cases = [(vehicle_name, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
+              tau) for s in range(seeds) for off in offsets]
     t0 = time.perf_counter()
     out = []
     if jobs > 1:
@@ -188,7 +189,8 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     p = len(names)
     stats = {'vehicle': vehicle_name, 'coefficients': names, 'maneuver': maneuver,
              'duration_s': duration, 'seeds': seeds, 'offsets': list(offsets),
-             'noise_mode': noise_mode, 'refined': refine_pass, 'cases': len(out),
+             'noise_mode': noise_mode, 'tau_s': tau, 'refined': refine_pass,
+             'cases': len(out),
              'diverged': len(out) - len(ok), 'wall_s': time.perf_counter() - t0,
              'noise_std': DEFAULT_NOISE_STD.tolist(), 'per_coefficient': {}}
     if ok:
@@ -220,6 +222,9 @@ def montecarlo_table(stats):
         lines.append(f'{n:<12}{s["median_abs_error_pct"]:>14.3f}{s["max_abs_error_pct"]:>11.3f}'
                      f'{100 * s["within_3sigma"]:>11.0f}%{s["ekf_median_abs_error_pct"]:>15.3f}'
                      f'{100 * s["ekf_within_3sigma"]:>10.0f}%')
+    if stats['diverged']:
+        first = next(r['diverged'] for r in stats['runs'] if 'diverged' in r)
+        lines.append(f'{stats["diverged"]} of {stats["cases"]} runs diverged (first: {first})')
     if 'mean_nees' in stats:
         lines.append(f'cases {stats["cases"]} (diverged {stats["diverged"]}); truth within '
                      f'3-sigma in {100 * stats["within_3sigma_all"]:.1f} % of seed x coefficient '
