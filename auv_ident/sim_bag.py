@@ -29,9 +29,10 @@ def sample_messages(run, k, frame='ned', with_truth=True):
     """The messages of sample k: list of (topic, t_ns, msg)."""
     t = float(run.t[k])
     pose_cov, twist_cov = noise_covariances(run.noise_std)
-    out = [(ODOM_TOPIC, sec_to_ns(t), state_to_odometry(t, run.y[k], frame, pose_cov,
-                                                        twist_cov)),
-           (ACTUATOR_TOPIC, sec_to_ns(t), actuators_to_joint_state(t, run.u[k]))]
+    # the command first: a replay in log-time order then pairs the first odometry with it
+    out = [(ACTUATOR_TOPIC, sec_to_ns(t), actuators_to_joint_state(t, run.u[k])),
+           (ODOM_TOPIC, sec_to_ns(t), state_to_odometry(t, run.y[k], frame, pose_cov,
+                                                        twist_cov))]
     if with_truth:
         out.append((TRUTH_TOPIC, sec_to_ns(t), state_to_odometry(t, run.x[k], frame)))
     return out

@@ -2,7 +2,10 @@
 the augmented EKF. The live identifier node and the offline bag replay both use this class,
 so the same message sequence always gives the same estimates.
 
-Pairing rule (deterministic, independent of arrival order between the two topics):
+Pairing rule (deterministic: the same message sequence always gives the same result, and the
+arrival order between the two topics does not matter as long as the command stamped t_{k-1}
+arrives before the odometry stamped t_k, which a simulator or vehicle publishing both at each
+sample guarantees):
 the measurement stamped t_k is fused after a time update from t_{k-1} to t_k with the latest
 actuator command whose stamp is <= t_{k-1} (zero-order hold: the command in force over the
 interval). A gap longer than `max_substep` is bridged by several time updates of at most

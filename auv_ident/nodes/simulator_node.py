@@ -1,0 +1,357 @@
+"""Simulated AUV: ``ros2 run auv_ident simulator`` (or ``python -m auv_ident run simulator``).
+
+The whole run is computed at start-up with :func:`auv_ident.core.simulate.simulate`
+(deterministic: same parameters, same messages), then a timer publishes sample k's messages,
+built by :func:`auv_ident.sim_bag.sample_messages` (the same messages a simulated bag holds).
+When the run is over the node logs a summary and exits with status 0.
+
+Publications (relative names: ``-r __ns:=/auv1`` moves them)
+    ``actuators`` sensor_msgs/JointState: command u_k held over [t_k, t_k+1), stamped t_k
+        (layout in conversions.py). Published first in each sample, so a subscriber has the
+        command before the odometry of the same stamp.
+    ``odom`` nav_msgs/Odometry: MEASURED state y_k (sensor noise added), stamped t_k; the
+        covariances carry the noise model.
+    ``~/truth`` nav_msgs/Odometry: the true state x_k (``/simulator/truth`` in the root
+        namespace), for evaluation.
+    ``/clock`` rosgraph_msgs/Clock: t_k, published before sample k's messages, when
+        ``publish_clock`` is true.
+
+Stamps are simulation time t_k = k / rate_hz from 0 (not wall time). Run consumers with
+``use_sim_time:=true`` when ``/clock`` is published.
+
+QoS
+    actuators/odom/truth: RELIABLE, KEEP_LAST depth 1000, VOLATILE. KEEP_LAST with RELIABLE
+    gives no back-pressure: a reader that falls behind loses the oldest samples once its queue
+    is full. Measured on this stack (shared/ros_stack.md section 2): depth 1 lost 1-3 % at
+    200 Hz and depth 10 lost the first samples after matching, depth 100+ lost nothing. Depth
+    1000 absorbs 5 s of a 200 Hz stream (10x real time at 20 Hz) while a subscriber is busy,
+    e.g. loading its compiled EKF. /clock: RELIABLE depth 10 (rclpy's time source subscribes
+    BEST_EFFORT depth 1, which a RELIABLE writer serves).
+
+Parameters (``config/simulator.yaml``; read once at start-up, declared read-only)
+    ``vehicle`` (str, 'nps_auv2')  vehicle name or YAML path.
+    ``maneuver`` (str, 'ident')  ident, zigzag, steps, prbs, roll, or a CSV path.
+    ``duration`` (float, 600.0 s)  length of the run.
+    ``rate_hz`` (float, 20.0 Hz)  sample rate (sample time 1/rate_hz).
+    ``seed`` (int, 0)  seed of the manoeuvre and of the noise.
+    ``rpm`` (float, 0.0 rpm)  shaft speed; 0 = the vehicle's cruise rpm.
+    ``frame`` ('ned' | 'enu', 'ned')  convention of the published Odometry.
+    ``noise_std`` (12 floats)  measurement 1-sigma of u v w (m/s), p q r (rad/s), x y z (m),
+        phi theta psi (rad); default core.simulate.DEFAULT_NOISE_STD.
+    ``process_noise`` (bool, false)  add white accelerations (core.simulate.DEFAULT_PROCESS_STD).
+    ``real_time_factor`` (float, 1.0)  >1 publishes faster than real time; 0 = as fast as
+        possible (may outrun a subscriber, see QoS).
+    ``publish_clock`` (bool, unset)  publish /clock; unset = true when real_time_factor != 1.
+    ``wait_for_subscribers`` (string array, empty)  node names (``identifier``, or fully
+        qualified ``/auv1/identifier``) to wait for before sample 0: each must subscribe to at
+        least one of the topics above (/clock included) and every subscription the graph
+        shows on them must be matched by our publishers; then 0.25 s more for the readers to
+        match us.
+    ``wait_timeout`` (float, 5.0 s)  give up waiting after this long (a warning) and start.
+
+Bad parameter values print one line naming the parameter and exit with status 2.
+"""
+import math
+import os
+import sys
+import time
+
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.exceptions import (InvalidParameterTypeException, ParameterException,
+                               ParameterUninitializedException)
+from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+
+from auv_ident.conversions import clock_msg, FRAMES
+from auv_ident.core.errors import AuvIdentError, ConfigError
+from auv_ident.core.maneuvers import MANEUVERS
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD, simulate
+from auv_ident.core.vehicle import load_vehicle
+from auv_ident.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
+
+RCLError = _rclpy.RCLError
+NODE_NAME = 'simulator'
+STREAM_DEPTH = 1000
+MIN_PERIOD_S = 1e-3       # timer period floor; faster rates publish several samples per tick
+BURST = 10                # samples per tick when real_time_factor = 0
+SETTLE_S = 0.25           # after the wait: time for the readers to match our writers
+GRAPH_POLL_S = 0.05       # how often the wait re-reads the graph
+ACK_TIMEOUT_S = 2.0       # at the end: wait this long for reliable readers to acknowledge
+MAX_SAMPLES = 10_000_000
+
+STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE)
+
+_PARAMETERS = (
+    # name, default (or type when unset by default), description
+    ('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path'),
+    ('maneuver', 'ident', 'manoeuvre: ' + ', '.join(MANEUVERS) + ', or a CSV path'),
+    ('duration', 600.0, 'length of the run [s]'),
+    ('rate_hz', 20.0, 'sample rate [Hz]; sample time = 1/rate_hz'),
+    ('seed', 0, 'seed of the manoeuvre and the noise [-]'),
+    ('rpm', 0.0, "shaft speed [rpm]; 0 = the vehicle's cruise rpm"),
+    ('frame', 'ned', "convention of the published Odometry: 'ned' (NED/FRD) or 'enu' (REP-103)"),
+    ('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
+     'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi [rad]'),
+    ('process_noise', False, 'add white acceleration noise (unmodelled forces) [-]'),
+    ('real_time_factor', 1.0, 'simulated s per wall s; >1 faster than real time, '
+                              '0 = as fast as possible [-]'),
+    ('publish_clock', Parameter.Type.BOOL,
+     'publish /clock; unset = true when real_time_factor != 1 [-]'),
+    ('wait_for_subscribers', Parameter.Type.STRING_ARRAY,
+     'node names to wait for (subscribed and matched) before sample 0; empty = none'),
+    ('wait_timeout', 5.0, 'longest wait for wait_for_subscribers [s]'),
+)
+
+
+def _bad(name, message):
+    return ConfigError(f'parameter {name!r}: {message}')
+
+
+class SimulatorNode(Node):
+    """Publish a precomputed simulated run (see the module docstring)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self._read_parameters()
+        model = Model(self.vehicle)
+        try:
+            self.run = simulate(model, self.maneuver, duration=self.duration, T=self.T,
+                                seed=self.seed, rpm=self.rpm, noise_std=self.noise_std,
+                                process_std=DEFAULT_PROCESS_STD if self.process_noise else None)
+        except AuvIdentError as err:
+            name = 'rpm' if 'surge' in str(err) else 'maneuver'
+            raise _bad(name, str(err)) from None
+        self.n = len(self.run.t)
+        self.k = 0
+        self.finished = Future()
+        self.exit_code = None
+        self.pub_actuators = self.create_publisher(JointState, 'actuators', STREAM_QOS)
+        self.pub_odom = self.create_publisher(Odometry, 'odom', STREAM_QOS)
+        self.pub_truth = self.create_publisher(Odometry, '~/truth', STREAM_QOS)
+        self.pub_clock = (self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+                          if self.publish_clock else None)
+        self._routes = {ACTUATOR_TOPIC: self.pub_actuators, ODOM_TOPIC: self.pub_odom,
+                        TRUTH_TOPIC: self.pub_truth}
+        self._stream_pubs = (self.pub_actuators, self.pub_odom, self.pub_truth)
+        self._waiting = bool(self.wait_for)
+        self._wait_t0 = time.monotonic()
+        self._wait_ready_at = None
+        self._next_graph_poll = 0.0
+        self._t0 = None if self._waiting else time.monotonic()
+        rtf = self.real_time_factor
+        period = MIN_PERIOD_S if rtf == 0 else max(MIN_PERIOD_S, self.T / rtf)
+        # Steady clock: the publishing pace is wall time even if use_sim_time is set.
+        self.timer = self.create_timer(period, self.step,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(
+            f'{self.vehicle.title}: manoeuvre {self.maneuver}, {self.run.t[-1]:.1f} s at '
+            f'{self.rate_hz:g} Hz ({self.n} samples), seed {self.seed}, frame {self.frame}, '
+            f'real-time factor {rtf:g}' + (', publishing /clock' if self.pub_clock else '')
+            + (f'; waiting for {", ".join(self.wait_for)}' if self._waiting else ''))
+
+    # -- parameters --
+
+    def _declare_parameters(self):
+        # read_only: they are read once at start-up; `ros2 param set` is refused, not ignored
+        for name, default, text in _PARAMETERS:
+            self.declare_parameter(name, default,
+                                   ParameterDescriptor(description=text, read_only=True))
+
+    def _param(self, name):
+        """A parameter's value, or None if it is not set (ROS maps '[]' to not set)."""
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None
+
+    def _read_parameters(self):
+        """Validate every parameter once; ConfigError naming the parameter if one is bad."""
+        p = self._param
+        try:
+            self.vehicle = load_vehicle(p('vehicle'))
+        except ConfigError as err:
+            raise _bad('vehicle', str(err)) from None
+        self.maneuver = p('maneuver')
+        if self.maneuver not in MANEUVERS and not os.path.isfile(self.maneuver):
+            raise _bad('maneuver', f'{self.maneuver!r} is neither one of '
+                                   f'{", ".join(MANEUVERS)} nor an existing CSV file')
+        for name in ('duration', 'rate_hz'):
+            v = p(name)
+            if not math.isfinite(v) or v <= 0:
+                raise _bad(name, f'{v!r} must be a positive number')
+        self.duration, self.rate_hz = p('duration'), p('rate_hz')
+        self.T = 1.0 / self.rate_hz
+        if self.duration * self.rate_hz > MAX_SAMPLES:
+            raise _bad('duration', f'{self.duration} s at {self.rate_hz} Hz is more than '
+                                   f'{MAX_SAMPLES} samples')
+        self.seed = p('seed')
+        if self.seed < 0:
+            raise _bad('seed', f'{self.seed} must be >= 0')
+        rpm = p('rpm')
+        if not math.isfinite(rpm) or rpm < 0:
+            raise _bad('rpm', f'{rpm!r} must be >= 0 (0 = cruise rpm)')
+        self.rpm = None if rpm == 0 else rpm
+        self.frame = p('frame')
+        if self.frame not in FRAMES:
+            raise _bad('frame', f'{self.frame!r}; use one of {", ".join(FRAMES)}')
+        noise = p('noise_std')
+        noise = DEFAULT_NOISE_STD.copy() if noise is None or len(noise) == 0 else noise
+        noise = [float(v) for v in noise]
+        if len(noise) != 12 or not all(math.isfinite(v) and v >= 0 for v in noise):
+            raise _bad('noise_std', f'expected 12 finite non-negative 1-sigmas, got {noise}')
+        self.noise_std = noise
+        self.process_noise = p('process_noise')
+        rtf = p('real_time_factor')
+        if not math.isfinite(rtf) or rtf < 0:
+            raise _bad('real_time_factor', f'{rtf!r} must be >= 0 (0 = as fast as possible)')
+        self.real_time_factor = rtf
+        clk = p('publish_clock')
+        self.publish_clock = (rtf != 1.0) if clk is None else clk
+        self.wait_for = [w for w in (p('wait_for_subscribers') or []) if w]
+        wt = p('wait_timeout')
+        if not math.isfinite(wt) or wt < 0:
+            raise _bad('wait_timeout', f'{wt!r} must be >= 0')
+        self.wait_timeout = wt
+
+    # -- publishing --
+
+    def publish_sample(self, k):
+        """Publish sample k: /clock (if enabled), then actuators, odom, truth."""
+        if not self.context.ok():   # shutting down (SIGINT during the timer callback)
+            return
+        if self.pub_clock is not None:
+            self.pub_clock.publish(clock_msg(float(self.run.t[k])))
+        msgs = sample_messages(self.run, k, self.frame)
+        # the command first: a subscriber then has u_k before y_k of the same stamp
+        msgs.sort(key=lambda m: m[0] != ACTUATOR_TOPIC)
+        for topic, _, msg in msgs:
+            self._routes[topic].publish(msg)
+
+    def _subscribers_ready(self):
+        """True when every node in wait_for_subscribers is subscribed and matched."""
+        missing = set(self.wait_for)
+        pubs = self._stream_pubs + ((self.pub_clock,) if self.pub_clock else ())
+        for pub in pubs:
+            infos = self.get_subscriptions_info_by_topic(pub.topic_name)
+            for info in infos:
+                fq = info.node_namespace.rstrip('/') + '/' + info.node_name
+                missing.discard(info.node_name)
+                missing.discard(fq)
+            if pub.get_subscription_count() < len(infos):
+                return False, missing or {'(writer matching)'}
+        return not missing, missing
+
+    def _wait_step(self):
+        now = time.monotonic()
+        if self._wait_ready_at is not None:
+            if now - self._wait_ready_at >= SETTLE_S:
+                self._start(now)
+            return
+        if now < self._next_graph_poll:
+            return
+        self._next_graph_poll = now + GRAPH_POLL_S
+        ready, missing = self._subscribers_ready()
+        if ready:
+            self._wait_ready_at = now
+        elif now - self._wait_t0 > self.wait_timeout:
+            self.get_logger().warning(
+                f'still no subscription from {", ".join(sorted(missing))} after '
+                f'{self.wait_timeout:g} s: starting anyway')
+            self._start(now)
+
+    def _start(self, now):
+        self._waiting = False
+        self._t0 = now
+        self.get_logger().info(f'publishing {self.n} samples')
+
+    def step(self):
+        """Timer callback: wait for subscribers, then publish the samples that are due."""
+        if self.finished.done():
+            return
+        if self._waiting:
+            self._wait_step()
+            if self._waiting:
+                return
+        if self.real_time_factor == 0:
+            due = min(self.n, self.k + BURST)
+        else:
+            elapsed = (time.monotonic() - self._t0) * self.real_time_factor
+            due = min(self.n, int(math.floor(elapsed / self.T + 1e-9)) + 1)
+        while self.k < due:
+            self.publish_sample(self.k)
+            self.k += 1
+        if self.k >= self.n:
+            self._finish()
+
+    def _finish(self):
+        self.timer.cancel()
+        wall = time.monotonic() - self._t0
+        acked = all(p.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+                    for p in self._stream_pubs)
+        s = self.run.summary()
+        fs = s['final_state']
+        self.get_logger().info(
+            f'run over: {self.n} samples ({s["duration_s"]:.1f} s simulated) in {wall:.2f} s '
+            f'wall ({s["duration_s"] / max(wall, 1e-9):.1f}x real time)'
+            + ('' if acked else '; some subscribers did not acknowledge every sample')
+            + f'. Speed mean {s["speed_m_s"]["mean"]:.3f} m/s (min {s["speed_m_s"]["min"]:.3f},'
+            f' max {s["speed_m_s"]["max"]:.3f}); depth {s["depth_m"]["min"]:.2f} .. '
+            f'{s["depth_m"]["max"]:.2f} m; max |roll| {s["roll_deg_max"]:.2f} deg; final '
+            f'x {fs["x"]:.1f} m, y {fs["y"]:.1f} m, psi {fs["psi"]:.3f} rad')
+        self.exit_code = 0
+        self.finished.set_result(0)
+
+
+def _type_hint(err):
+    if isinstance(err, InvalidParameterTypeException) and "'DOUBLE'" in str(err):
+        return ' (write floats with a decimal point, e.g. 5.0)'
+    return ''
+
+
+def main(args=None):
+    """Entry point: run the simulation, exit 0 when it is over (2 on a bad parameter)."""
+    try:
+        rclpy.init(args=args)
+    except RCLError as err:     # unparsable --ros-args (rcl has logged the details)
+        print(f'simulator: error: {err}', file=sys.stderr)
+        return 2
+    try:
+        node = SimulatorNode()
+    except (AuvIdentError, ParameterException) as err:
+        print(f'simulator: error: {err}' + _type_hint(err), file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    except KeyboardInterrupt:
+        rclpy.try_shutdown()
+        return 0
+    try:
+        rclpy.spin_until_future_complete(node, node.finished)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RCLError:
+        if rclpy.ok():      # a real error, not a signal that invalidated the context
+            raise
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,430 @@
+"""Nodes in-process (no launch, no spawned processes): each test has its own rclpy Context and a
+SingleThreadedExecutor; messages are fed straight into the nodes' callback methods.
+
+Checks: parameter overrides and validation (a bad value raises naming the parameter), the
+simulator's messages, the identifier's published estimate/covariance layout and stamps,
+rejection and recovery, services, the estimate file, and that offline replay of the same
+message sequence gives the same estimates as the node.
+"""
+import json
+import math
+import os
+import time
+
+from conftest import require_loopback_dds
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from auv_ident.bag_io import BagError, BagWriter
+from auv_ident.conversions import actuators_to_joint_state, stamp_to_ns, state_to_odometry
+from auv_ident.core.errors import ConfigError, DivergenceError
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import DEFAULT_NOISE_STD, simulate
+from auv_ident.core.vehicle import load_vehicle
+from auv_ident.nodes.identifier_node import IdentifierNode
+from auv_ident.nodes.simulator_node import SimulatorNode
+from auv_ident.replay import IdentSession, replay_bag, replay_messages
+from auv_ident.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
+                               write_run_bag)
+
+CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
+LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STREAM = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture
+def ctx():
+    require_loopback_dds()
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def nodes(ctx):
+    """Nodes created through this list are destroyed before the context shuts down."""
+    made = []
+    yield made
+    for n in made:
+        n.destroy_node()
+
+
+def _params(**kw):
+    return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+def _spin_until(ex, cond, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while not cond() and time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.02)
+    return cond()
+
+
+@pytest.fixture(scope='module')
+def run():
+    """A short simulated run (the messages the simulator would publish)."""
+    return simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=20.0, T=0.05, seed=3)
+
+
+def _ordered_messages(run, frame='ned'):
+    """(topic, t_ns, msg) as the simulator publishes them: actuators, odom, truth per sample."""
+    out = []
+    for k in range(len(run.t)):
+        msgs = sample_messages(run, k, frame)
+        msgs.sort(key=lambda m: m[0] != ACTUATOR_TOPIC)
+        out += msgs
+    return out
+
+
+def _feed(node, messages):
+    events = []
+    for topic, _, msg in messages:
+        if topic == ACTUATOR_TOPIC:
+            node.on_actuators(msg)
+        elif topic == ODOM_TOPIC:
+            events.append(node.on_odom(msg))
+    return events
+
+
+# --- parameters ------------------------------------------------------------------------------
+
+
+def test_simulator_parameter_overrides(ctx, nodes):
+    sim = SimulatorNode(context=ctx, parameter_overrides=_params(
+        duration=2.0, rate_hz=10.0, real_time_factor=0.0, seed=4, frame='enu'))
+    nodes.append(sim)
+    assert sim.n == 21 and sim.T == pytest.approx(0.1)
+    assert sim.publish_clock is True          # unset: true when real_time_factor != 1
+    assert sim.run.seed == 4 and sim.frame == 'enu'
+    assert sim.pub_truth.topic_name == '/simulator/truth'
+    assert sim.pub_odom.topic_name == '/odom'
+    sim2 = SimulatorNode(context=ctx, parameter_overrides=_params(duration=1.0))
+    nodes.append(sim2)
+    assert sim2.publish_clock is False and sim2.pub_clock is None
+    assert np.allclose(sim2.run.noise_std, DEFAULT_NOISE_STD)
+
+
+def test_identifier_parameter_overrides(ctx, nodes):
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(
+        coefficients=['Z_w', 'M_ds'], initial=[-0.2, -0.05], measured=['u', 'w', 'q', 'z'],
+        noise_mode='matching', sample_time=0.1, frame='enu'))
+    nodes.append(ident)
+    s = ident.session
+    assert ident.names == ['Z_w', 'M_ds']
+    assert np.allclose(s.theta0, [-0.2, -0.05])
+    assert s.measured.tolist() == [c in ('u', 'w', 'q', 'z') for c in
+                                   ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi',
+                                    'theta', 'psi')]
+    assert s.cfg.mode == 'matching' and s.T == 0.1 and s.frame == 'enu'
+    default = IdentifierNode(context=ctx)
+    nodes.append(default)
+    v = load_vehicle('nps_auv2')
+    assert default.names == list(v.identify_default)
+    assert np.allclose(default.session.theta0,
+                       Model(v, v.identify_default).theta_true * 1.5)
+
+
+@pytest.mark.parametrize('cls, name, value', [
+    (SimulatorNode, 'vehicle', 'nope'),
+    (SimulatorNode, 'noise_std', [-0.1] * 12),
+    (SimulatorNode, 'maneuver', 'loop_the_loop'),
+    (SimulatorNode, 'rate_hz', 0.0),
+    (IdentifierNode, 'vehicle', 'nope'),
+    (IdentifierNode, 'noise_std', [0.01] * 11 + [-0.01]),
+    (IdentifierNode, 'coefficients', ['Z_w', 'Z_nonsense']),
+    (IdentifierNode, 'sample_time', 0.0),
+    (IdentifierNode, 'measured', ['u', 'speed']),
+    (IdentifierNode, 'frame', 'nwu'),
+    (IdentifierNode, 'noise_mode', 'magic'),
+    (IdentifierNode, 'initial', [1.0, 2.0]),
+])
+def test_bad_parameter_raises_naming_it(ctx, cls, name, value):
+    with pytest.raises(ConfigError) as info:
+        cls(context=ctx, parameter_overrides=_params(**{name: value}))
+    assert f"parameter '{name}'" in str(info.value)
+
+
+def test_config_files_hold_the_defaults(ctx, nodes):
+    """config/*.yaml load without type errors and state exactly the declared defaults."""
+    for cls, fname in ((SimulatorNode, 'simulator.yaml'), (IdentifierNode, 'identifier.yaml')):
+        plain = cls(context=ctx)
+        nodes.append(plain)
+        filed = cls(context=ctx, cli_args=['--ros-args', '--params-file',
+                                           os.path.join(CONFIG, fname)])
+        nodes.append(filed)
+        for name, param in plain._parameters.items():
+            if filed._parameters[name].value is None:   # '[]' in the file: the core default
+                continue
+            assert filed._parameters[name].value == param.value, (fname, name)
+        if cls is IdentifierNode:
+            for field in ('q_state', 'noise_std', 'measured'):
+                assert np.array_equal(getattr(filed.session.cfg, field),
+                                      getattr(plain.session.cfg, field)), field
+
+
+# --- simulator -------------------------------------------------------------------------------
+
+
+def test_simulator_publishes_the_run(ctx, nodes):
+    probe = rclpy.create_node('probe', context=ctx)
+    nodes.append(probe)
+    got = {'odom': [], 'actuators': [], 'truth': [], 'clock': []}
+    probe.create_subscription(Odometry, '/odom', got['odom'].append, STREAM)
+    probe.create_subscription(JointState, '/actuators', got['actuators'].append, STREAM)
+    probe.create_subscription(Odometry, '/simulator/truth', got['truth'].append, STREAM)
+    probe.create_subscription(Clock, '/clock', got['clock'].append, STREAM)
+    sim = SimulatorNode(context=ctx, parameter_overrides=_params(
+        duration=3.0, real_time_factor=20.0, wait_for_subscribers=['probe']))
+    nodes.append(sim)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(sim)
+    ex.add_node(probe)
+    assert _spin_until(ex, sim.finished.done, timeout=15.0)
+    assert _spin_until(ex, lambda: all(len(v) == sim.n for v in got.values()))
+    assert sim.finished.result() == 0
+    assert len(got['actuators']) == len(got['clock']) == sim.n == 61
+    stamps = [stamp_to_ns(m.header.stamp) for m in got['odom']]
+    assert stamps == [round(t * 1e9) for t in sim.run.t]
+    assert [stamp_to_ns(m.clock) for m in got['clock']] == stamps
+    # exactly the messages of sim_bag.sample_messages (the simulated bag's content)
+    k = 17
+    ref = {t: m for t, _, m in sample_messages(sim.run, k, 'ned')}
+    assert got['odom'][k] == ref[ODOM_TOPIC]
+    assert got['actuators'][k] == ref[ACTUATOR_TOPIC]
+
+
+# --- identifier ------------------------------------------------------------------------------
+
+
+def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_path):
+    ident = IdentifierNode(context=ctx)
+    probe = rclpy.create_node('probe', context=ctx)
+    nodes += [ident, probe]
+    estimates, covariances = [], []
+    probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+    probe.create_subscription(Float64MultiArray, '/identifier/covariance', covariances.append,
+                              LATCHED)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ident)
+    ex.add_node(probe)
+    assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0
+                       and ident.pub_covariance.get_subscription_count() > 0)
+    messages = _ordered_messages(run)
+    events = []
+    for topic, _, msg in messages:
+        if topic == ACTUATOR_TOPIC:
+            ident.on_actuators(msg)
+        elif topic == ODOM_TOPIC:
+            events.append(ident.on_odom(msg))
+            ex.spin_once(timeout_sec=0.0)
+    updates = [e for e in events if e.kind == 'update']
+    assert len(updates) == len(run.t)         # the command comes first: nothing rejected
+    last = updates[-1]
+    last_stamp = messages[-2][2].header.stamp  # the last odometry message
+    assert last.stamp_ns == stamp_to_ns(last_stamp)
+    last_cov = [float(v) for v in last.cov.ravel()]
+    assert _spin_until(ex, lambda: estimates and covariances
+                       and stamp_to_ns(estimates[-1].header.stamp) == last.stamp_ns
+                       and list(covariances[-1].data) == last_cov)
+    assert len(estimates) >= 2
+    est = estimates[-1]
+    names = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
+    p = len(names)
+    assert list(est.name) == names
+    assert list(est.position) == list(last.estimate)
+    assert np.allclose(est.velocity, np.sqrt(np.diag(last.cov)), rtol=0, atol=0)
+    assert len(est.effort) == 0
+    cov = covariances[-1]
+    dims = cov.layout.dim
+    assert [d.label for d in dims] == ['row:' + ','.join(names), 'col:' + ','.join(names)]
+    assert [(d.size, d.stride) for d in dims] == [(p, p * p), (p, p)]
+    assert cov.layout.data_offset == 0
+    C = np.array(cov.data).reshape(p, p)
+    assert np.array_equal(C, last.cov) and np.allclose(C, C.T)
+    assert all(np.all(np.isfinite(m.position)) for m in estimates)
+    # a late subscriber gets the latest estimate (TRANSIENT_LOCAL depth 1)
+    late = []
+    probe.create_subscription(JointState, '/identifier/estimate', late.append, LATCHED)
+    assert _spin_until(ex, lambda: late)
+    assert stamp_to_ns(late[-1].header.stamp) == last.stamp_ns
+    # converging from the 50 % offset in 20 s
+    truth = ident.session.model.theta_true
+    assert np.all(np.abs(last.estimate - truth) < 0.25 * np.abs(truth))
+
+    # offline: the same message sequence, written to a bag and replayed, gives the same
+    # estimates (same IdentSession code path, same order)
+    bag = tmp_path / 'run'
+    with BagWriter(bag) as w:
+        for topic, typ in TOPIC_TYPES.items():
+            w.add_topic(topic, typ)
+        for topic, t_ns, msg in messages:
+            w.write_msg(topic, t_ns, msg)
+    res = replay_bag(bag)
+    assert res.accepted == len(updates) and res.rejected == 0 and res.errors == 0
+    assert [u[0] for u in res.updates] == [e.stamp_ns for e in updates]
+    diff = max(np.max(np.abs(u[1] - e.estimate)) for u, e in zip(res.updates, updates))
+    dstd = max(np.max(np.abs(u[2] - e.std)) for u, e in zip(res.updates, updates))
+    assert diff <= 1e-9 and dstd <= 1e-9
+    assert np.allclose(res.cov, last.cov, rtol=0, atol=1e-12)
+    # arrays for the batch pass: U[k] is the command in force at t[k]
+    assert res.Y.shape == (len(run.t), 12) and res.U.shape == (len(run.t), 6)
+    assert np.allclose(res.t, run.t, atol=1e-9)
+    assert np.allclose(res.U, run.u) and np.allclose(res.Y, run.y)
+    # and without a bag
+    s = IdentSession()
+    ups = replay_messages(messages, s)
+    assert max(np.max(np.abs(u[1] - e.estimate)) for u, e in zip(ups, updates)) <= 1e-9
+
+
+def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypatch):
+    ident = IdentifierNode(context=ctx)
+    nodes.append(ident)
+    messages = _ordered_messages(run)
+    # odometry before any command: rejected
+    first_odom = messages[1][2]
+    ev = ident.on_odom(first_odom)
+    assert ev.kind == 'rejected' and 'no actuator command' in ev.reason
+    events = _feed(ident, messages[:3 * 40])
+    assert [e.kind for e in events] == ['update'] * 40
+    good = ident.session.last_good
+    t = float(run.t[40])
+    # non-finite measured field
+    x = run.y[40].copy()
+    x[2] = math.nan
+    ev = ident.on_odom(state_to_odometry(t, x))
+    assert ev.kind == 'rejected' and 'non-finite' in ev.reason and ' w' in ev.reason
+    # duplicate stamp
+    ev = ident.on_odom(state_to_odometry(float(run.t[39]), run.y[39]))
+    assert ev.kind == 'rejected' and 'not after the previous' in ev.reason
+    # a JointState without the expected joints / with a non-finite command
+    bad = JointState(name=['a'], position=[0.0], velocity=[0.0])
+    ev = ident.on_actuators(bad)
+    assert ev.kind == 'rejected' and 'lacks joint' in ev.reason
+    u = run.u[40].copy()
+    u[0] = math.inf
+    ev = ident.on_actuators(actuators_to_joint_state(t, u))
+    assert ev.kind == 'rejected' and 'non-finite command' in ev.reason
+    # a wrong message type on the odometry callback
+    ev = ident.on_odom(JointState())
+    assert ev.kind == 'rejected'
+    assert ident.session.odom_rejected == 4 and ident.session.cmd_rejected == 2
+    assert ident.session.last_good is good
+
+    # a core error: logged, ERROR on /diagnostics, filter restarted, last good kept
+    def boom(t, y):
+        raise DivergenceError('covariance lost positive definiteness (test)')
+    monkeypatch.setattr(ident.session.stream, 'add_measurement', boom)
+    ev = ident.on_odom(messages[3 * 40 + 1][2])
+    assert ev.kind == 'error' and 'DivergenceError' in ev.reason
+    st = ident.diagnostic_status()
+    assert st.level == DiagnosticStatus.ERROR and st.message == 'diverging'
+    assert ident.session.last_good is good and not ident.session.started
+    est, _ = ident.session.current()
+    assert np.array_equal(est, good.estimate)
+    # the restarted filter takes data again (buffered commands kept)
+    events = _feed(ident, messages[3 * 41:3 * 60])
+    assert events and all(e.kind == 'update' for e in events)
+    assert ident.session.errors == 1
+    assert ident.diagnostic_status().level == DiagnosticStatus.ERROR   # until 200 updates
+
+
+def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
+    save = tmp_path / 'est.json'
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(save_path=str(save)))
+    probe = rclpy.create_node('probe', context=ctx)
+    nodes += [ident, probe]
+    diags = []
+    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ident)
+    ex.add_node(probe)
+    assert ident.diagnostic_status().message == 'waiting for data'
+    _feed(ident, _ordered_messages(run))
+    assert _spin_until(ex, lambda: diags, timeout=5.0)   # the 1 Hz timer
+    st = diags[-1].status[0]
+    assert st.name == 'auv_ident identifier' and st.hardware_id == 'nps_auv2'
+    assert st.level in (DiagnosticStatus.OK, DiagnosticStatus.WARN)
+    assert st.message in ('converging', 'converged', 'diverging')
+    kv = {v.key: v.value for v in st.values}
+    assert int(kv['accepted']) == len(run.t) and int(kv['rejected']) == 0
+    assert 0.5 < float(kv['mean_nis_per_dof']) < 2.0
+    for name in ident.names:
+        assert float(kv[name]) == float(repr(float(kv[name])))
+        assert float(kv[name + '_std']) > 0
+        assert float(kv['Q_' + name]) > 0
+    assert float(kv['R_u']) == pytest.approx(0.01 ** 2)
+
+    client_save = probe.create_client(Trigger, '/identifier/save')
+    client_reset = probe.create_client(Trigger, '/identifier/reset')
+    assert client_save.wait_for_service(timeout_sec=5.0)
+    assert client_reset.wait_for_service(timeout_sec=5.0)
+    fut = client_save.call_async(Trigger.Request())
+    assert _spin_until(ex, fut.done)
+    assert fut.result().success, fut.result().message
+    doc = json.loads(save.read_text())
+    assert set(doc) == {'vehicle', 'coefficients', 'estimate', 'std', 'covariance', 'stamp',
+                        'stamp_ns', 'steps'}
+    s = ident.session
+    assert doc['vehicle'] == 'nps_auv2' and doc['coefficients'] == ident.names
+    assert doc['estimate'] == list(s.last_good.estimate)
+    assert np.allclose(doc['covariance'], s.last_good.cov, rtol=0, atol=0)
+    assert doc['std'] == pytest.approx(list(s.last_good.std))
+    assert doc['stamp_ns'] == s.last_good.stamp_ns and doc['steps'] == len(run.t)
+    assert doc['stamp'] == pytest.approx(run.t[-1])
+
+    fut = client_reset.call_async(Trigger.Request())
+    assert _spin_until(ex, fut.done)
+    assert fut.result().success and not ident.session.started
+    assert ident.diagnostic_status().message == 'waiting for data'
+
+    # warm start from the file: starts at its estimate, with its covariance
+    warm = IdentifierNode(context=ctx, parameter_overrides=_params(warm_start=str(save)))
+    nodes.append(warm)
+    assert np.array_equal(warm.session.theta0, doc['estimate'])
+    est, cov = warm.session.current()
+    assert np.allclose(cov, doc['covariance'])
+    ev = _feed(warm, _ordered_messages(run)[:6])[-1]
+    assert ev.kind == 'update'
+    assert np.all(ev.std < 2.0 * np.array(doc['std']))   # not the p0_rel = 100 % prior
+    # no save_path: the service says so
+    plain = IdentifierNode(context=ctx)
+    nodes.append(plain)
+    ok, message = plain.save()
+    assert not ok and 'save_path' in message
+
+
+def test_replay_bag_reads_metadata_and_names_a_missing_topic(run, tmp_path):
+    """A simulated bag's custom_data gives vehicle and frame; a missing topic is a BagError."""
+    bag = tmp_path / 'enu'
+    write_run_bag(run, bag, frame='enu')
+    res = replay_bag(bag)
+    assert res.frame == 'enu' and res.vehicle == 'nps_auv2'
+    # the same run in NED, fed in the bag's order (odom before actuators at each stamp, so
+    # the very first odometry has no command yet and is rejected, in both)
+    s = IdentSession(frame='ned')
+    ups = replay_messages([m for k in range(len(run.t)) for m in sample_messages(run, k)], s)
+    assert res.accepted == len(ups) == len(run.t) and res.rejected == 0
+    assert np.allclose(res.estimate, ups[-1][1], rtol=1e-9, atol=0)
+
+    only_odom = tmp_path / 'only_odom'
+    with BagWriter(only_odom) as w:
+        w.add_topic(ODOM_TOPIC, TOPIC_TYPES[ODOM_TOPIC])
+        for topic, t_ns, msg in sample_messages(run, 0):
+            if topic == ODOM_TOPIC:
+                w.write_msg(topic, t_ns, msg)
+    with pytest.raises(BagError) as info:
+        replay_bag(only_odom)
+    assert "'/actuators'" in str(info.value) and '/odom (nav_msgs/msg/Odometry)' in str(
+        info.value)
