@@ -39,7 +39,7 @@ def cmd_simulate(args):
             save_run_csv(run, args.out)
         else:
             from .sim_bag import write_run_bag
-            write_run_bag(run, args.out)
+            write_run_bag(run, args.out, command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
         print(f'wrote {args.out}')
     return 0
 

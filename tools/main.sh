@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# README command 1: set up .venv, then run the main job on the shipped default.
+# README command 1: set up .venv, then run the main job on the shipped default bag:
+# replay it through the identifier (the live node's EKF, then the batch refinement) and print
+# the coefficient table against the truth and the paper.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-exec .venv/bin/python -m auv_ident simulate --vehicle nps_auv2 --maneuver zigzag --duration 200 --seed 1 "$@"
+exec .venv/bin/python -m auv_ident identify --bag bags/nps_auv2_ident "$@"
