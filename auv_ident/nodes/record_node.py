@@ -1,0 +1,429 @@
+"""Record topics into a rosbag2 (Jazzy, MCAP) bag: ``ros2 run auv_ident record``.
+
+rosbag2 is not on PyPI, so this node stands in for ``ros2 bag record`` in the wheel-based stack;
+the bag it writes is the rosbag2 MCAP layout of :mod:`auv_ident.bag_io`. Messages are recorded
+as the serialized CDR bytes DDS delivers (``raw=True``): no decode/encode on the way.
+
+Run::
+
+    ros2 run auv_ident record --ros-args -p topics:=[/odom,/actuators] -p output:=bags/run1
+    python -m auv_ident run record --ros-args -p topics:=[/odom] -p output:=run1
+
+Subscriptions
+    every topic in ``topics``, with the type discovered from the graph (or given in ``types``).
+
+Parameters
+    ``topics`` (string array, required)  topics to record; relative names are resolved
+        against the node namespace (remappings apply).
+    ``output`` (string, required)  bag directory to create; must not exist.
+    ``compression`` ('zstd' | 'none', default 'zstd')  MCAP chunk compression.
+    ``wait_for_topics_s`` (float >= 0, default 5.0)  how long to wait (one deadline for all)
+        for the types of the topics not in ``types`` to appear in the graph; a topic still
+        unknown then is an error, exit 2 (start its publisher first, or give its type).
+    ``types`` (string array, default empty)  ``'topic=pkg/msg/Type'`` entries that skip
+        discovery for those topics (record before the publisher exists).
+    ``flush_period_s`` (float > 0, default 0.5)  period of the wall-clock (steady) timer that
+        closes the MCAP chunk in progress: a SIGKILL loses at most about this much data.
+    ``use_sim_time`` (bool, rclpy's)  see "Log time".
+
+Log time
+    As in Jazzy's rosbag2 recorder: the MCAP log time (and publish time) of a message is its
+    *receive* time, not its ``header.stamp``: the rmw ``received_timestamp`` (system clock,
+    taken when DDS received the sample, so executor delays do not skew it), or the node clock
+    (``/clock``) at the callback when ``use_sim_time`` is true. Header stamps stay inside the
+    payloads, untouched.
+
+QoS
+    Subscriptions are KEEP_LAST depth 1000 (a recorder must not drop while the executor is
+    busy writing; ros_stack.md section 2 measured losses with depth 1-10). Reliability is
+    RELIABLE unless a discovered publisher offers BEST_EFFORT (a RELIABLE reader gets nothing
+    from a BEST_EFFORT writer); durability is TRANSIENT_LOCAL only if every discovered
+    publisher offers it (to catch latched samples), else VOLATILE: rosbag2's adaptation rule.
+    The bag stores the publishers' offered profiles (``get_publishers_info_by_topic``) in
+    ``offered_qos_profiles``, as rosbag2 does; for a topic without a discovered publisher
+    (given in ``types``) it stores bag_io.DEFAULT_QOS (RELIABLE, VOLATILE, KEEP_LAST 10).
+
+Stopping
+    SIGINT and SIGTERM both stop recording: the samples DDS has already received are drained
+    from the reader queues, then the bag is closed (MCAP summary + metadata.yaml), exit status
+    0. A second signal skips the drain. SIGKILL leaves a bag without metadata.yaml whose
+    complete chunks ``read_bag(..., allow_truncated=True)`` recovers (flushed every
+    ``flush_period_s``). Bad parameters print one line naming the parameter and exit with 2.
+"""
+import importlib
+import os
+import signal
+import sys
+import threading
+import time
+
+from rcl_interfaces.msg import ParameterDescriptor
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+
+from auv_ident.bag_io import BagError, BagWriter, normalize_msgtype
+from auv_ident.core.errors import ConfigError
+
+NODE_NAME = 'recorder'
+SUBSCRIPTION_DEPTH = 1000
+DRAIN_IDLE_S = 0.1   # stop draining after this long without a new message
+DRAIN_MAX_S = 2.0    # and never drain for longer than this
+POLL_S = 0.1         # discovery polling / spin_once timeout (signal latency)
+
+_PARAMETERS = (
+    # name, default, description
+    ('topics', None, 'topics to record (string array, required)'),
+    ('output', None, 'bag directory to create; must not exist (required)'),
+    ('compression', 'zstd', "MCAP chunk compression: 'zstd' or 'none'"),
+    ('wait_for_topics_s', 5.0, 'time to wait for the topic types to be discovered [s]'),
+    ('types', None, "'topic=pkg/msg/Type' entries that skip discovery (string array)"),
+    ('flush_period_s', 0.5, 'wall-clock period of closing the MCAP chunk in progress [s]'),
+)
+
+
+def param_error(name, text):
+    return ConfigError(f"parameter '{name}': {text}")
+
+
+def string_list_param(name, value, required):
+    """Return a list of non-empty strings from a string or string-array parameter value."""
+    if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
+        if required:
+            raise param_error(name, 'required, e.g. -p ' + name + ':=[/odom,/actuators]')
+        return []
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v.strip()
+                                                       for v in value):
+        raise param_error(name, f'must be an array of non-empty strings, got {value!r}')
+    return [v.strip() for v in value]
+
+
+def number_param(name, value, minimum, strict):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise param_error(name, f'must be a number, got {value!r}')
+    value = float(value)
+    if not value == value or value == float('inf') or value < minimum or (
+            strict and value == minimum):
+        relation = '>' if strict else '>='
+        raise param_error(name, f'must be finite and {relation} {minimum:g}, got {value!r}')
+    return value
+
+
+def message_class(msgtype, topic):
+    """Import the rclpy class of 'pkg/msg/Type'; ConfigError naming the topic if impossible."""
+    try:
+        pkg, ns, name = normalize_msgtype(msgtype).split('/')
+        return getattr(importlib.import_module(f'{pkg}.{ns}'), name)
+    except (BagError, ImportError, AttributeError):
+        raise ConfigError(f'topic {topic}: message type {msgtype!r} is not installed '
+                          '(no importable rclpy class)') from None
+
+
+class StopFlag:
+    """SIGINT/SIGTERM handlers that request a clean stop; a second signal interrupts.
+
+    rclpy's own handlers shut the context down at once, which would drop the samples already
+    received but not yet taken from the DDS reader queues; with this flag the node drains
+    them before closing the bag.
+    """
+
+    def __init__(self):
+        self.event = threading.Event()
+        self.signum = None
+        self.holding = False
+        self._previous = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handle)
+
+    def _handle(self, signum, frame):
+        if self.holding:
+            return  # closing the bag: let it finish
+        if self.event.is_set():
+            raise KeyboardInterrupt  # second signal: stop now (finally blocks still run)
+        self.signum = signum
+        self.event.set()
+
+    def is_set(self):
+        return self.event.is_set()
+
+    def hold(self):
+        """Ignore further signals (while the bag is being closed)."""
+        self.holding = True
+
+    def restore(self):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
+class RecordNode(Node):
+    """Record topics as raw CDR into a rosbag2 MCAP bag (see the module docstring)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self._read_parameters()
+        self.writer = None
+        self.counts = {}
+        self.received = 0
+        self.write_errors = 0
+        self._subscriptions = []
+        self._flush_timer = None
+
+    # --- parameters ---
+
+    def _declare_parameters(self):
+        for name, default, description in _PARAMETERS:
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=description, dynamic_typing=True))
+
+    def _read_parameters(self):
+        value = {name: self.get_parameter(name).value for name, _, _ in _PARAMETERS}
+        topics = []
+        for t in string_list_param('topics', value['topics'], required=True):
+            try:
+                resolved = self.resolve_topic_name(t)
+            except Exception:  # rclpy raises several types for invalid names
+                raise param_error('topics', f'invalid topic name {t!r}') from None
+            if resolved not in topics:
+                topics.append(resolved)
+        self.topics = topics
+
+        output = value['output']
+        if not isinstance(output, str) or not output.strip():
+            raise param_error('output', 'required: the bag directory to create, e.g. '
+                               '-p output:=bags/run1')
+        output = os.path.abspath(os.path.expanduser(output.strip()))
+        if os.path.lexists(output):
+            raise param_error('output', f'{output} exists already (not overwriting a bag)')
+        self.output = output
+
+        compression = value['compression']
+        if compression not in ('zstd', 'none'):
+            raise param_error('compression', f"must be 'zstd' or 'none', got {compression!r}")
+        self.compression = None if compression == 'none' else 'zstd'
+
+        self.wait_for_topics_s = number_param('wait_for_topics_s', value['wait_for_topics_s'],
+                                         0.0, strict=False)
+        self.flush_period_s = number_param('flush_period_s', value['flush_period_s'], 0.0,
+                                      strict=True)
+
+        self.given_types = {}
+        for entry in string_list_param('types', value['types'], required=False):
+            topic, sep, msgtype = entry.partition('=')
+            if not sep or not topic.strip() or not msgtype.strip():
+                raise param_error('types', f"entry {entry!r} is not 'topic=pkg/msg/Type'")
+            try:
+                topic = self.resolve_topic_name(topic.strip())
+                msgtype = normalize_msgtype(msgtype.strip())
+            except BagError as exc:
+                raise param_error('types', f'entry {entry!r}: {exc}') from None
+            except Exception:
+                raise param_error('types', f'entry {entry!r}: invalid topic name') from None
+            if topic not in self.topics:
+                raise param_error('types', f'topic {topic} is not in topics {self.topics}')
+            self.given_types[topic] = msgtype
+        self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
+
+    # --- start: discovery, bag, subscriptions ---
+
+    def discover_types(self, stop=None):
+        """Return {topic: 'pkg/msg/Type'} for every topic, waiting for discovery if needed.
+
+        Returns None if ``stop`` was set while waiting; raises ConfigError on a timeout or on
+        a topic with several types.
+        """
+        types = dict(self.given_types)
+        deadline = time.monotonic() + self.wait_for_topics_s
+        while True:
+            graph = dict(self.get_topic_names_and_types())
+            for topic in self.topics:
+                if topic in types or topic not in graph:
+                    continue
+                found = sorted(set(graph[topic]))
+                if len(found) > 1:
+                    raise ConfigError(f'topic {topic}: publishers disagree on the type '
+                                      f'({", ".join(found)}); give it with -p types:=')
+                if found:
+                    types[topic] = normalize_msgtype(found[0])
+            missing = [t for t in self.topics if t not in types]
+            if not missing:
+                return types
+            if stop is not None and stop.is_set():
+                return None
+            if time.monotonic() >= deadline:
+                raise param_error('topics', f'type of {", ".join(missing)} not discovered '
+                                   f'within {self.wait_for_topics_s:g} s (no publisher?); '
+                                   'start the publisher first, raise wait_for_topics_s, or '
+                                   'give it with -p types:=[topic=pkg/msg/Type]')
+            time.sleep(POLL_S)
+
+    def _qos(self, topic):
+        """Return (subscription QoSProfile, offered profiles for the bag or None)."""
+        publishers = self.get_publishers_info_by_topic(topic)
+        offered = [p.qos_profile for p in publishers]
+        best_effort = any(q.reliability == ReliabilityPolicy.BEST_EFFORT for q in offered)
+        latched = bool(offered) and all(
+            q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=SUBSCRIPTION_DEPTH,
+            reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
+                         else ReliabilityPolicy.RELIABLE),
+            durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
+                        else DurabilityPolicy.VOLATILE))
+        return qos, (offered or None)
+
+    def start(self, stop=None):
+        """Discover types, create the bag and subscribe; False if stopped while waiting."""
+        types = self.discover_types(stop)
+        if types is None:
+            return False
+        classes = {topic: message_class(types[topic], topic) for topic in self.topics}
+        self.writer = BagWriter(self.output, compression=self.compression)
+        self.writer.set_custom_data('auv_ident.recorded_by', 'auv_ident record')
+        for topic in self.topics:
+            qos, offered = self._qos(topic)
+            self.writer.add_topic(topic, types[topic], qos=offered)
+            self.counts[topic] = 0
+            self._subscriptions.append(self.create_subscription(
+                classes[topic], topic, self._make_callback(topic), qos, raw=True))
+            self.get_logger().info(
+                f'recording {topic} ({types[topic]}, {qos.reliability.name.lower()}, '
+                f'{qos.durability.name.lower()}, {len(offered or [])} publisher(s))')
+        # Steady (wall) clock: with use_sim_time a node-clock timer would follow /clock.
+        self._flush_timer = self.create_timer(
+            self.flush_period_s, self.flush, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f'writing {self.output}')
+        return True
+
+    def _make_callback(self, topic):
+        def callback(payload, info):
+            self.on_message(topic, payload, info)
+        return callback
+
+    def on_message(self, topic, payload, info):
+        """Write one serialized message with its receive time (see "Log time")."""
+        self.received += 1
+        if self.use_sim_time:
+            t_ns = self.get_clock().now().nanoseconds
+        else:
+            t_ns = (info or {}).get('received_timestamp') or time.time_ns()
+        try:
+            self.writer.write(topic, int(t_ns), payload)
+        except (BagError, OSError) as exc:
+            self.write_errors += 1
+            if self.write_errors <= 3:
+                self.get_logger().error(f'{topic}: message not recorded: {exc}')
+            return
+        self.counts[topic] += 1
+
+    def flush(self):
+        """Close the MCAP chunk in progress (the flush timer's callback)."""
+        if self.writer is not None:
+            try:
+                self.writer.flush()
+            except (BagError, OSError) as exc:
+                self.get_logger().error(f'flush failed: {exc}')
+
+    def drain(self, executor):
+        """Take the samples DDS already holds (after a stop request) before closing."""
+        if self.writer is None:
+            return
+        start = idle_since = time.monotonic()
+        last = self.received
+        while True:
+            executor.spin_once(timeout_sec=0.02)
+            now = time.monotonic()
+            if self.received != last:
+                last, idle_since = self.received, now
+            elif now - idle_since >= DRAIN_IDLE_S or now - start >= DRAIN_MAX_S:
+                return
+
+    def close(self):
+        """Finish the bag (summary + metadata.yaml); idempotent, safe in ``finally``."""
+        if self._flush_timer is not None:
+            self.destroy_timer(self._flush_timer)
+            self._flush_timer = None
+        for sub in self._subscriptions:
+            self.destroy_subscription(sub)
+        self._subscriptions = []
+        if self.writer is not None and not self.writer.closed:
+            self.writer.close()
+            per_topic = ', '.join(f'{t}: {n}' for t, n in self.counts.items())
+            self.get_logger().info(f'closed {self.output}: {self.writer.message_count} '
+                                   f'messages ({per_topic})')
+
+
+def check_command_line(args, prog, doc, example):
+    """Handle the non-ROS command line of a node executable before rclpy.init.
+
+    Returns None to go on, or an exit status: 0 after printing ``doc`` for -h/--help, 2 after
+    one error line for malformed --ros-args or stray arguments.
+    """
+    argv = sys.argv if args is None else list(args)
+    try:
+        extra = remove_ros_args(argv)[1:]
+    except _rclpy.RCLError as exc:
+        print(f'[{prog}] error: bad --ros-args: {str(exc).splitlines()[0]}', file=sys.stderr)
+        return 2
+    if not extra:
+        return None
+    if extra[0] in ('-h', '--help'):
+        print(doc)
+        return 0
+    print(f'[{prog}] error: unexpected argument(s) {extra}; parameters go after --ros-args, '
+          f'e.g. --ros-args {example}', file=sys.stderr)
+    return 2
+
+
+def main(args=None):
+    """Entry point of ``record``; returns the exit status (0, or 2 on bad parameters)."""
+    status = check_command_line(args, 'record', __doc__, '-p topics:=[/odom] -p output:=run1')
+    if status is not None:
+        return status
+    stop = StopFlag()
+    rc = 0
+    node = None
+    try:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except _rclpy.RCLError as exc:
+            print(f'[record] error: bad --ros-args: {str(exc).splitlines()[0]}',
+                  file=sys.stderr)
+            return 2
+        try:
+            node = RecordNode()
+            if node.start(stop):
+                executor = SingleThreadedExecutor()
+                executor.add_node(node)
+                while not stop.is_set() and rclpy.ok():
+                    executor.spin_once(timeout_sec=POLL_S)
+                node.drain(executor)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except (ConfigError, BagError) as exc:
+            print(f'[record] error: {exc}', file=sys.stderr)
+            rc = 2
+        finally:
+            stop.hold()
+            if node is not None:
+                try:
+                    node.close()
+                except (BagError, OSError) as exc:
+                    print(f'[record] error: {exc}', file=sys.stderr)
+                    rc = 2
+                node.destroy_node()
+            rclpy.try_shutdown()
+    finally:
+        stop.restore()
+    return rc
+
+
+if __name__ == '__main__':
+    sys.exit(main())
