@@ -24,11 +24,13 @@ def _spd(n, rng):
     return a @ a.T + n * np.eye(n)
 
 
-def test_update_equals_closed_form_kalman_update_with_missing_channels():
+@pytest.mark.parametrize('full_R', [False, True])
+def test_update_equals_closed_form_kalman_update_with_missing_channels(full_R):
     rng = np.random.default_rng(0)
     n = 15
     P = _spd(n, rng) * 1e-2
-    R = np.diag(rng.uniform(0.01, 0.1, 12))
+    # diagonal R: sequential scalar Joseph updates; full R: the batch path
+    R = _spd(12, rng) * 1e-3 if full_R else np.diag(rng.uniform(0.01, 0.1, 12))
     xa = rng.normal(size=n)
     xa[9:12] = 0.1
     y = xa[:12] + rng.normal(0, 0.1, 12)
@@ -51,6 +53,8 @@ def test_update_equals_closed_form_kalman_update_with_missing_channels():
     assert np.allclose(out_x[:11], x_ref[:11], atol=1e-12)
     assert np.allclose(out_P, P_ref, atol=1e-12)
     assert nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-10)
+    w = white[idx]
+    assert w @ w == pytest.approx(nis, rel=1e-10)
     assert np.isnan(innov[4]) and np.isnan(innov[7])
 
 

@@ -124,12 +124,60 @@ def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
 
 
 @njit(cache=True)
+def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white):
+    """Scalar Joseph updates channel by channel (R diagonal); see update()."""
+    n = xa.shape[0]
+    for a in range(m):                   # prior innovations and variances, for adaptation
+        ch = idx[a]
+        d = y[ch] - xa[ch]
+        innov[ch] = wrap(d) if ch >= 9 else d
+        S_diag[ch] = P[ch, ch] + R[ch, ch]
+    k = np.empty(n)
+    pj = np.empty(n)
+    nis = 0.0
+    for a in range(m):
+        ch = idx[a]
+        r = R[ch, ch]
+        s = P_out[ch, ch] + r
+        if not (s > 0.0) or not math.isfinite(s):
+            return ERR_NOT_PD, np.nan, m
+        d = y[ch] - xa_out[ch]
+        if ch >= 9:
+            d = wrap(d)
+        for i in range(n):
+            pj[i] = P_out[i, ch]
+            k[i] = pj[i] / s
+            xa_out[i] += k[i] * d
+        white[ch] = d / math.sqrt(s)
+        nis += d * d / s
+        pjj = pj[ch]
+        for i in range(n):
+            for j in range(i + 1):
+                v = (P_out[i, j] - k[i] * pj[j] - pj[i] * k[j] + (pjj + r) * k[i] * k[j])
+                P_out[i, j] = v
+                P_out[j, i] = v
+    for i in range(n):
+        if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
+            return ERR_NOT_PD, nis, m
+    xa_out[11] = wrap(xa_out[11])
+    return OK, nis, m
+
+
+@njit(cache=True)
 def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
     """Measurement update (Eqs. 11-13), Joseph form.
 
     measured: bool (12,), channels the sensor suite provides; a NaN in y skips a channel.
     innov (12,) gets the innovations (NaN where not used), S_diag (12,) their predicted
-    variances, white (12,) the innovations whitened with the Cholesky factor of S. Returns (status, NIS, number of channels used).
+    variances, white (12,) the innovations whitened with the Cholesky factor of S.
+    Returns (status, NIS, number of channels used).
+
+    With R diagonal on the used channels (the usual case) the channels are fused one at a
+    time: for uncorrelated measurement noise this is algebraically the batch update, each
+    scalar step applies the Joseph form exactly, P+ = (I - k e_j^T) P (I - k e_j^T)^T + r k k^T,
+    in O(n^2), and the sequence of scalar innovations nu_j / sqrt(s_j) is the innovation
+    whitened by the Cholesky factor of S (so NIS and `white` are those of the batch update).
+    A full R (the paper's Eq. 17 makes one) takes the batch path.
     """
     n = xa.shape[0]
     idx = np.empty(12, dtype=np.int64)
@@ -147,6 +195,13 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
             P_out[i, j] = P[i, j]
     if m == 0:
         return OK, 0.0, 0
+    diag_R = True
+    for a in range(m):
+        for b in range(m):
+            if a != b and R[idx[a], idx[b]] != 0.0:
+                diag_R = False
+    if diag_R:
+        return _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
     nu = np.empty(m)
     S = np.empty((m, m))
     PHt = np.empty((n, m))
