@@ -114,6 +114,26 @@ def cmd_montecarlo(args):
     return 0
 
 
+def cmd_report(args):
+    from .experiments import doc_table
+    from .report import make_report
+    out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
+                      bag=args.bag, seed=args.seed, duration=args.duration,
+                      coefficients=args.coefficients, noise_mode=args.noise_mode,
+                      command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    doc = out['result']
+    print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
+          f"{args.noise_mode}")
+    print(doc_table(doc))
+    val = doc.get('validation') or {}
+    if val.get('rms'):
+        print(f"validation on the held-out {val['maneuver']!r} manoeuvre (seed {val['seed']}, "
+              'process noise on), RMS error of the identified model: '
+              + ', '.join(f"{k} {v:.3g} {val['rms_units'][k]}" for k, v in val['rms'].items()))
+    print(f"report: {out['report']}")
+    return 0
+
+
 def cmd_bench(args):
     from .bench import bench, format_bench
     b = bench(duration=args.duration)
@@ -236,6 +256,19 @@ def build_parser():
     sp.add_argument('--jobs', type=int, default=2)
     ident_args(sp)
     sp.set_defaults(func=cmd_montecarlo)
+
+    sp = sub.add_parser('report', help='identification + held-out validation report (md + PNG)')
+    vehicle_arg(sp)
+    sp.set_defaults(vehicle=None)
+    sp.add_argument('--simulate', metavar='MANEUVER')
+    sp.add_argument('--bag')
+    sp.add_argument('--seed', type=int, default=0)
+    sp.add_argument('--duration', type=float, default=600.0)
+    sp.add_argument('--coefficients', default='')
+    sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
+                    choices=('fixed', 'paper', 'paper_q', 'matching'))
+    sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')
     sp.add_argument('--duration', type=float, default=600.0)

@@ -133,15 +133,19 @@ def _fmt(v, width=12):
 
 def result_table(vehicle, res):
     """The coefficient table: truth, estimate, 1-sigma, error %, and the paper's figures."""
-    err = res.error_pct()
+    return doc_table(result_dict(vehicle, res))
+
+
+def doc_table(doc):
+    """The coefficient table of a result document (result_dict / identify --json)."""
     lines = [f'{"coefficient":<12}{"truth":>12}{"estimate":>12}{"1-sigma":>12}{"error %":>10}'
              f'{"paper est.":>12}{"paper err %":>12}']
-    for i, n in enumerate(res.names):
-        pe, perr = paper_values(vehicle, n)
-        lines.append(f'{n:<12}{_fmt(None if res.truth is None else res.truth[i])}'
-                     f'{_fmt(res.estimate[i])}{_fmt(res.std[i])}'
-                     + (f'{err[i]:>+10.3f}' if err is not None else f'{"-":>10}')
-                     + _fmt(pe) + f'{perr if perr is not None else "-":>12}')
+    for n, c in doc['coefficients'].items():
+        err = c['error_pct']
+        perr = c['paper_error_pct']
+        lines.append(f'{n:<12}{_fmt(c["truth"])}{_fmt(c["estimate"])}{_fmt(c["std"])}'
+                     + (f'{err:>+10.3f}' if err is not None else f'{"-":>10}')
+                     + _fmt(c['paper_estimate']) + f'{perr if perr is not None else "-":>12}')
     return '\n'.join(lines)
 
 

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # README command 1: set up .venv, then run the main job on the shipped default bag:
 # replay it through the identifier (the live node's EKF, then the batch refinement) and print
-# the coefficient table against the truth and the paper.
+# the coefficient table against the truth and the paper, then write the validation report
+# (report/report.md + PNG figures: convergence, held-out validation, NIS, adapted noise).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-exec .venv/bin/python -m auv_ident identify --bag bags/nps_auv2_ident "$@"
+exec .venv/bin/python -m auv_ident report --bag bags/nps_auv2_ident --out report "$@"

@@ -1,0 +1,433 @@
+"""Report of one identification: figures, a Markdown summary and the result JSON.
+
+The evidence of the paper's Section 4 for one run: convergence of the coefficients (Figs. 2-3),
+the coefficient table (Tables 1-2) and the identified model against the true one on a manoeuvre
+held out from identification (Figs. 4-5), plus the filter's consistency (NIS) and its adapted
+noise covariances. ROS-free; matplotlib is imported inside the plotting code (Agg backend), so
+importing this module never touches a display.
+"""
+import os
+import platform
+
+import numpy as np
+
+from . import __version__
+from . import experiments as ex
+from .core.errors import ConfigError
+from .core.identify import identify
+from .core.model import Model
+from .core.simulate import DEFAULT_PROCESS_STD, DEFAULT_T, initial_state, simulate, wrap_angle
+from .core.vehicle import STATE_NAMES, load_vehicle
+
+HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)
+NIS_WINDOW_S = 10.0      # s, moving-average window of the NIS plot
+DEG = 180.0 / np.pi
+
+# Display scale and unit of each state channel (angles and rates in degrees: readable numbers)
+SCALE = np.array([1, 1, 1, DEG, DEG, DEG, 1, 1, 1, DEG, DEG, DEG], dtype=float)
+UNITS = ('m/s',) * 3 + ('deg/s',) * 3 + ('m',) * 3 + ('deg',) * 3
+GROUPS = (('linear speeds', (0, 1, 2)), ('angular rates', (3, 4, 5)),
+          ('positions', (6, 7, 8)), ('attitudes', (9, 10, 11)))
+LABELS = {'u': 'u (surge)', 'v': 'v (sway)', 'w': 'w (heave)', 'p': 'p (roll rate)',
+          'q': 'q (pitch rate)', 'r': 'r (yaw rate)', 'x': 'x (north)', 'y': 'y (east)',
+          'z': 'z (depth)', 'phi': 'phi (roll)', 'theta': 'theta (pitch)', 'psi': 'psi (yaw)'}
+
+
+class Validation(tuple):
+    """(t, X_true, X_ident, rms), plus the held-out manoeuvre's name, seed, rpm and inputs U.
+
+    X_* are (N, 12) states in SI units (rad); rms maps each state name to the RMS difference
+    X_ident - X_true in UNITS (angles wrapped before squaring)."""
+
+    def __new__(cls, t, X_true, X_ident, rms, maneuver, seed, rpm, U):
+        self = super().__new__(cls, (t, X_true, X_ident, rms))
+        self.maneuver, self.seed, self.rpm, self.U = maneuver, seed, rpm, U
+        return self
+
+    t = property(lambda self: self[0])
+    X_true = property(lambda self: self[1])
+    X_ident = property(lambda self: self[2])
+    rms = property(lambda self: self[3])
+
+
+def _same_maneuver(a, b):
+    if not a or not b:
+        return False
+    if os.path.isfile(a) and os.path.isfile(b):
+        return os.path.samefile(a, b)
+    return str(a) == str(b)
+
+
+def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=1000, T=DEFAULT_T,
+             rpm=None, identification_maneuver=None, process_std=DEFAULT_PROCESS_STD):
+    """Simulate the true and the identified model on a held-out manoeuvre, same everything else.
+
+    Both runs share the inputs, the initial state (the TRUE model's trim) and the process-noise
+    realisation (same seed), so any difference comes from the coefficients alone.
+
+    Parameters
+    ----------
+    vehicle : Vehicle or str
+        Its file's values are the "true" model.
+    names, estimate : identified coefficients and their values (vehicle-file units)
+    maneuver : str, the validation manoeuvre (name or CSV)
+    duration, T : s
+    seed : int, seed of the process noise (and of seeded manoeuvres)
+    rpm : shaft speed (the vehicle's cruise rpm if None)
+    identification_maneuver : str, optional
+        The manoeuvre identified on; validating on it raises ConfigError (not held out).
+    process_std : (6,) white acceleration 1-sigma on nu_dot, None for none
+
+    Returns
+    -------
+    Validation, a tuple (t, X_true, X_ident, rms) with .maneuver, .seed, .rpm, .U
+    """
+    if _same_maneuver(maneuver, identification_maneuver):
+        raise ConfigError(f'validation manoeuvre {maneuver!r} is the identification manoeuvre: '
+                          'validation must use a held-out manoeuvre (e.g. steps)')
+    v = load_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
+    truth = Model(v)
+    ident = Model(v, coefficient_values=Model(v, names).coefficients_with(estimate))
+    rpm = v.cruise_rpm if rpm is None else float(rpm)
+    x0 = initial_state(truth, rpm)
+    runs = [simulate(m, maneuver, duration=duration, T=T, seed=seed, rpm=rpm,
+                     noise_std=np.zeros(12), process_std=process_std, x0=x0)
+            for m in (truth, ident)]
+    err = runs[1].x - runs[0].x
+    err[:, 9:] = wrap_angle(err[:, 9:])
+    rms = {n: float(np.sqrt(np.mean((SCALE[i] * err[:, i]) ** 2)))
+           for i, n in enumerate(STATE_NAMES)}
+    return Validation(runs[0].t, runs[0].x, runs[1].x, rms, runs[0].maneuver, seed, rpm,
+                      runs[0].u)
+
+
+# ----------------------------------------------------------------------------------- figures
+
+def _plt():
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, path):
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    return path
+
+
+def _coef_unit(vehicle):
+    return ('prime, nondim.' if vehicle.raw.get('scaling') != 'dimensional'
+            else 'SI, vehicle-file units')
+
+
+def fig_convergence(path, vehicle, res, noise_mode):
+    """EKF estimate with its +-3-sigma band per coefficient, truth, initial and refined."""
+    plt = _plt()
+    h = res.history
+    p = len(res.names)
+    ncol = 1 if p <= 3 else 2
+    nrow = -(-p // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(6.5 * ncol, 2.6 * nrow + 0.8), sharex=True,
+                             squeeze=False, layout='constrained')
+    t = h['t']
+    for i, n in enumerate(res.names):
+        ax = axes.flat[i]
+        th, sd = h['theta'][:, i], h['std'][:, i]
+        ax.fill_between(t, th - 3 * sd, th + 3 * sd, color='C0', alpha=0.2, lw=0,
+                        label='EKF $\\pm3\\sigma$')
+        ax.plot(t, th, color='C0', lw=1.2, label='EKF estimate')
+        ax.axhline(res.initial[i], color='0.5', ls=':', lw=1.2, label='initial guess')
+        ref = [res.initial[i], res.estimate[i], res.ekf_estimate[i]]
+        if res.truth is not None:
+            ax.axhline(res.truth[i], color='k', ls='--', lw=1.2, label='true value')
+            ref.append(res.truth[i])
+        if res.refined:
+            ax.errorbar([t[-1]], [res.estimate[i]], yerr=[3 * res.std[i]], fmt='o', color='C3',
+                        ms=5, capsize=3, zorder=5, label='refined $\\pm3\\sigma$')
+        # limits from the values that matter: the initial 3-sigma band would flatten the plot
+        lo, hi = min(ref), max(ref)
+        pad = max(0.3 * (hi - lo), 0.05 * max(abs(lo), abs(hi)), 1e-12)
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.set_title(n, fontsize=10)
+        ax.set_ylabel(f'{n} ({_coef_unit(vehicle)})', fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[p:]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel('time (s)')
+    axes.flat[0].legend(fontsize=7, loc='best')
+    fig.suptitle(f'{vehicle.title}: coefficient convergence (noise mode {noise_mode!r})')
+    return _save(fig, path)
+
+
+def _overlay(path, val, rows, title, reference):
+    """Grid of true-vs-identified channels; rows is a list of rows of state indices."""
+    plt = _plt()
+    ncol = len(rows[0])
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(6.0 * ncol, 2.2 * len(rows) + 0.9),
+                             sharex=True, squeeze=False, layout='constrained')
+    t, Xt, Xi, rms = val
+    for r, row in enumerate(rows):
+        for c, i in enumerate(row):
+            ax = axes[r, c]
+            a, b = Xt[:, i], Xi[:, i]
+            if i == 11:      # heading: unwrap, or a +-180 deg jump hides the comparison
+                a, b = np.unwrap(a), np.unwrap(b)
+            n = STATE_NAMES[i]
+            ax.plot(t, SCALE[i] * a, color='k', lw=1.4, label=reference)
+            ax.plot(t, SCALE[i] * b, color='C3', lw=1.2, ls='--', label='identified model')
+            ax.set_ylabel(f'{n} ({UNITS[i]})')
+            ax.set_title(f'{LABELS[n]}: RMS difference {rms[n]:.3g} {UNITS[i]}', fontsize=9)
+            ax.grid(alpha=0.3)
+            if i == 8:
+                ax.invert_yaxis()    # depth grows downwards
+    for ax in axes[-1]:
+        ax.set_xlabel('time (s)')
+    axes[0, 0].legend(fontsize=8, loc='best')
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def fig_nis(path, res, T, hist_every):
+    """Per-step NIS and its moving average against their chi-square 95 % bands."""
+    from scipy.stats import chi2
+    plt = _plt()
+    h = res.history
+    t, nis, dof = h['t'], h['nis'], h['dof']
+    ok = np.isfinite(nis) & (dof > 0)
+    dofs = np.where(ok, dof, np.nan)
+    w = max(1, int(round(NIS_WINDOW_S / (hist_every * T))))
+    num = np.convolve(np.where(ok, nis, 0.0), np.ones(w))[:len(nis)]
+    cnt = np.convolve(ok.astype(float), np.ones(w))[:len(nis)]
+    dsum = np.convolve(np.where(ok, dof, 0.0), np.ones(w))[:len(nis)]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ma = num / cnt
+        # the mean of n independent chi2(d) NIS is chi2(sum d) / n
+        ma_lo = chi2.ppf(0.025, dsum) / cnt
+        ma_hi = chi2.ppf(0.975, dsum) / cnt
+    fig, ax = plt.subplots(figsize=(10, 4.6), layout='constrained')
+    ax.plot(t[ok], nis[ok], '.', color='0.55', ms=2, label='NIS per step')
+    ax.plot(t, chi2.ppf(0.025, dofs), color='C2', ls='--', lw=1,
+            label='95 % band per step')
+    ax.plot(t, chi2.ppf(0.975, dofs), color='C2', ls='--', lw=1)
+    ax.fill_between(t, ma_lo, ma_hi, color='C0', alpha=0.2, lw=0,
+                    label=f'95 % band of the {NIS_WINDOW_S:.0f} s mean')
+    ax.plot(t, ma, color='C0', lw=1.6, label=f'{NIS_WINDOW_S:.0f} s moving mean')
+    ax.set_yscale('log')
+    d = int(np.nanmedian(dofs)) if ok.any() else 0
+    ax.set_xlabel('time (s)')
+    ax.set_ylabel('NIS $\\nu^T S^{-1} \\nu$ (dimensionless)')
+    ax.set_title(f'Normalised innovation squared ({d} degrees of freedom; mean NIS/dof '
+                 f'{res.mean_nis_per_dof:.3f}, expected 1)', fontsize=10)
+    ax.grid(alpha=0.3, which='both')
+    ax.legend(fontsize=8, loc='upper right', ncol=2)
+    return _save(fig, path)
+
+
+def fig_noise(path, res, noise_mode):
+    """Adapted R diagonal as 1-sigma per channel group, and Q_theta diagonal per coefficient."""
+    plt = _plt()
+    h = res.history
+    t = h['t']
+    fig, axes = plt.subplots(5, 1, figsize=(9, 12.5), sharex=True, layout='constrained')
+    sd = np.sqrt(h['R_diag'])
+    for ax, (group, idx) in zip(axes, GROUPS):
+        for i in idx:
+            ax.plot(t, SCALE[i] * sd[:, i], lw=1.2, label=STATE_NAMES[i])
+        ax.set_ylabel(f'R 1-sigma ({UNITS[idx[0]]})')
+        ax.set_title(f'measurement noise, {group}', fontsize=9)
+    qrel = np.sqrt(h['Q_theta_diag']) / np.abs(res.initial)[None, :]
+    for i, n in enumerate(res.names):
+        axes[4].plot(t, qrel[:, i], lw=1.2, label=n)
+    axes[4].set_ylabel('Q 1-sigma / |initial|')
+    axes[4].set_title('coefficient random walk per step, relative to the initial guess',
+                      fontsize=9)
+    axes[4].set_xlabel('time (s)')
+    for ax in axes:
+        ax.set_yscale('log')
+        ax.grid(alpha=0.3, which='both')
+        ax.legend(fontsize=8, loc='upper right', ncol=len(res.names) if ax is axes[4] else 3)
+    note = (' (mode fixed: not adapted, constant at the configured values)'
+            if noise_mode == 'fixed' else '')
+    fig.suptitle(f'Adapted noise covariances, mode {noise_mode!r}{note}', fontsize=11)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------- markdown
+
+def _num(v):
+    """A table cell: 6 significant digits (the test parses these back), '-' when unknown."""
+    if v is None:
+        return '-'
+    return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
+
+
+def _table(header, rows):
+    out = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    out += ['| ' + ' | '.join(r) + ' |' for r in rows]
+    return '\n'.join(out)
+
+
+def _versions():
+    import matplotlib
+    import numba
+    import scipy
+    return {'auv_ident': __version__, 'numpy': np.__version__, 'scipy': scipy.__version__,
+            'numba': numba.__version__, 'matplotlib': matplotlib.__version__,
+            'python': platform.python_version()}
+
+
+def _markdown(doc, src, cfg, val, val_error, figures, command):
+    v = src.vehicle
+    co = doc['coefficients']
+    known = src.truth is not None
+    L = [f'# Identification report: {v.title}', '',
+         f'Command: `{command or "(not given)"}`', '',
+         'Versions: ' + ', '.join(f'{k} {s}' for k, s in doc['versions'].items()), '',
+         f'- source: {src.description}',
+         f'- seed: {doc["seed"]}',
+         f'- coefficients ({doc["units"]}): {", ".join(co)}',
+         f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
+         '(filter-error maximum likelihood)',
+         '- sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi rad): '
+         + ' '.join(f'{s:g}' for s in doc['noise_std']),
+         '- EKF state process noise 1-sigma per step (same units): '
+         + ' '.join(f'{s:g}' for s in cfg.q_state),
+         f'- coefficient random walk 1-sigma per step: {cfg.q_theta_rel:g} x |initial guess|; '
+         f'initial 1-sigma {cfg.p0_rel:g} x |initial guess|',
+         f'- {doc["steps"]} EKF steps, mean NIS/dof {doc["mean_nis_per_dof"]:.3f} '
+         f'(expected 1), wall {doc["wall_s"]:.1f} s', '',
+         '## Coefficients', '',
+         'Refined (batch filter-error) estimates; the same numbers are in `result.json`.'
+         + ('' if known else ' Truth unknown for this source: no errors are given.'), '']
+    L.append(_table(['coefficient', 'truth', 'estimate', '1-sigma', 'error %', 'paper estimate',
+                     'paper error %'],
+                    [[n, _num(c['truth']), _num(c['estimate']), _num(c['std']),
+                      _num(c['error_pct']), _num(c['paper_estimate']),
+                      _num(c['paper_error_pct'])] for n, c in co.items()]))
+    L += ['', '### EKF pass alone vs refined', '']
+    L.append(_table(['coefficient', 'initial', 'EKF estimate', 'EKF 1-sigma', 'EKF error %',
+                     'refined estimate', 'refined error %'],
+                    [[n, _num(c['initial']), _num(c['ekf_estimate']), _num(c['ekf_std']),
+                      _num(c['ekf_error_pct']), _num(c['estimate']), _num(c['error_pct'])]
+                     for n, c in co.items()]))
+    vd = doc['validation']
+    L += ['', '## Validation on a held-out manoeuvre', '',
+          f'Manoeuvre {vd["maneuver"]!r} (not used for identification, which used '
+          f'{src.maneuver or "the bag"!r}), {vd["duration_s"]:g} s at {vd["rpm"]:g} rpm, '
+          f'process noise 1-sigma {" ".join(f"{s:g}" for s in vd["process_std"])} '
+          f'(m/s^2, rad/s^2) with seed {vd["seed"]}. The reference and the identified model '
+          'share the inputs, the initial state and the process-noise realisation, so the '
+          'differences come from the coefficients alone.']
+    if not known:
+        L += ['', "Truth is unknown for this source: the 'true' model below is the vehicle "
+              "file's prior model, not the real vehicle."]
+    L.append('')
+    if val_error:
+        L += [f'The identified model could not be simulated: {val_error}', '']
+    else:
+        L.append(_table(['channel', 'RMS difference', 'unit'],
+                        [[n, _num(vd['rms'][n]), vd['rms_units'][n]] for n in STATE_NAMES]))
+        L.append('')
+    L += ['## Figures', '']
+    captions = {
+        'convergence': 'EKF estimates with their 3-sigma bands, the true values, the initial '
+                       'guesses and the refined estimates (cf. the paper, Figs. 2-3)',
+        'validation_positions': 'positions, true vs identified model (cf. Fig. 4)',
+        'validation_attitudes': 'attitudes, true vs identified model (cf. Fig. 4)',
+        'validation_speeds': 'linear and angular speeds, true vs identified model (cf. Fig. 5)',
+        'nis': 'normalised innovation squared against its chi-square 95 % bands',
+        'adapted_noise': 'measurement and coefficient noise covariances over time'}
+    for key, p in figures.items():
+        L += [f'![{captions[key]}]({os.path.basename(p)})', '', f'*{captions[key]}*', '']
+    return '\n'.join(L)
+
+
+# ------------------------------------------------------------------------------------ driver
+
+def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
+                coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
+                validation_duration=200.0, progress=True):
+    """Identify (EKF + batch refinement), validate on a held-out manoeuvre, write the report.
+
+    Parameters
+    ----------
+    out_dir : str, created if missing
+    vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source
+    noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
+    command : the command line that produced the report (quoted in report.md)
+    validation_maneuver, validation_duration : held-out manoeuvre and its length (s); its
+        seed is seed + 1000 and process noise is DEFAULT_PROCESS_STD
+    progress : show progress bars (only when stderr is a terminal)
+
+    Returns
+    -------
+    dict with 'report', 'json' and 'figures' (name -> path) paths and 'result' (the JSON doc)
+    """
+    from .progress import Progress
+    os.makedirs(out_dir, exist_ok=True)
+    src = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
+                         seed=seed, duration=duration, coefficients=coefficients)
+    # fail before the long identification if the validation would not be held out
+    if _same_maneuver(validation_maneuver, src.maneuver):
+        raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
+                          'manoeuvre: validation must use a held-out manoeuvre')
+    v = src.vehicle
+    cfg = ex.make_config(src.names, noise_mode=noise_mode,
+                         noise_std=np.asarray(src.noise_std, dtype=float).copy())
+    # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
+    cfg.measured = np.any(np.isfinite(src.Y), axis=0)
+    hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
+    bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
+    res = identify(Model(v, src.names), src.Y, src.U, src.T, cfg, refine_pass=True,
+                   hist_every=hist_every, truth=src.truth,
+                   progress=bar.update if bar else None)
+    if bar:
+        bar.close()
+
+    val_seed = seed + 1000
+    rpm = float(np.median(src.U[:, 5]))
+    val, val_error = None, None
+    try:
+        val = validate(v, src.names, res.estimate, validation_maneuver, validation_duration,
+                       val_seed, src.T, rpm=rpm, identification_maneuver=src.maneuver)
+    except ArithmeticError as err:    # the identified model leaves the model's domain
+        val_error = str(err)
+    extra = {'maneuver': src.maneuver, 'seed': src.seed,
+             'duration_s': float(src.t[-1] - src.t[0]),
+             'noise_mode': noise_mode, 'source': src.description,
+             'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
+             'versions': _versions(), 'command': command,
+             'validation': {'maneuver': validation_maneuver, 'seed': val_seed,
+                            'duration_s': validation_duration, 'rpm': rpm,
+                            'process_std': DEFAULT_PROCESS_STD.tolist(),
+                            'reference': ('truth (vehicle file)' if src.truth is not None
+                                          else "vehicle file's prior model (truth unknown)"),
+                            'rms': None if val is None else val.rms,
+                            'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}}
+    doc = ex.result_dict(v, res, extra)
+    json_path = os.path.join(out_dir, 'result.json')
+    ex.write_json(json_path, doc)
+
+    def j(name):
+        return os.path.join(out_dir, name + '.png')
+
+    figures = {'convergence': fig_convergence(j('convergence'), v, res, noise_mode)}
+    if val is not None:
+        ref = 'true model' if src.truth is not None else 'vehicle-file model (prior)'
+        what = (f'{v.title}: held-out {val.maneuver!r} manoeuvre, seed {val_seed}, '
+                'process noise on')
+        figures['validation_positions'] = _overlay(
+            j('validation_positions'), val, [[6], [7], [8]], f'{what}: positions', ref)
+        figures['validation_attitudes'] = _overlay(
+            j('validation_attitudes'), val, [[9], [10], [11]], f'{what}: attitudes', ref)
+        figures['validation_speeds'] = _overlay(
+            j('validation_speeds'), val, [[0, 3], [1, 4], [2, 5]], f'{what}: speeds', ref)
+    figures['nis'] = fig_nis(j('nis'), res, src.T, hist_every)
+    figures['adapted_noise'] = fig_noise(j('adapted_noise'), res, noise_mode)
+
+    md_path = os.path.join(out_dir, 'report.md')
+    with open(md_path, 'w', encoding='utf-8') as fh:
+        fh.write(_markdown(doc, src, cfg, val, val_error, figures, command) + '\n')
+    return {'report': md_path, 'json': json_path, 'figures': figures, 'result': doc}
