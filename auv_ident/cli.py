@@ -287,6 +287,9 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] == 'run':
         return run_node(argv[1:])
+    if argv and argv[0] == 'loadtest':
+        from .loadtest import main as loadtest_main
+        return loadtest_main(argv[1:]) or 0
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

@@ -3,25 +3,86 @@
 :class:`IdentSession` is everything the identifier node does per message, minus ROS: it turns
 nav_msgs/Odometry and sensor_msgs/JointState (rclpy or rosbags objects) into arrays with
 :mod:`auv_ident.conversions`, applies the rejection policy, feeds
-:class:`auv_ident.core.stream.StreamIdentifier`, recovers from core errors and judges the
+:class:`auv_ident.core.stream.StreamIdentifier`, guards against divergence and judges the
 filter's health. The identifier node (``nodes/identifier_node.py``) and :func:`replay_bag` both
 drive one IdentSession with the messages in arrival (log-time) order, so the same message
 sequence gives identical estimates online and offline.
 
-Rejection policy (the message is dropped, counted and reported; the filter is untouched):
+Rejection policy (the message is dropped, counted under ``'<topic>: <code>'`` in
+``IdentSession.reasons`` and reported with a reason naming the problem; the filter is
+untouched). Codes, in the order they are checked:
 
-- a ConversionError (wrong type, missing joint, zero quaternion, ...);
-- an actuator command with a non-finite entry;
-- odometry with a non-finite value in a *measured* channel (unmeasured channels are set to NaN
-  and ignored);
-- whatever StreamIdentifier rejects (stamp not after the previous one, no command yet).
+- ``conversion``: a ConversionError (wrong message type, missing or duplicated joint, zero
+  quaternion, array lengths that do not match the joint names, ...);
+- ``wrong frame`` (odometry): header.frame_id / child_frame_id name the other convention
+  (a token ``ned`` or ``frd`` with frame 'enu', ``enu`` or ``flu`` with frame 'ned'; ids
+  without such a token, e.g. 'odom'/'base_link', are not judged);
+- ``frame changed`` (odometry): frame ids that differ from those of the first accepted
+  odometry (the ~/reset service forgets them);
+- ``non-finite``: NaN or Inf in a command, or in a *measured* odometry channel (unmeasured
+  channels are set to NaN and ignored; the message covariances are not used);
+- ``implausible``: a value no vehicle produces, i.e. wrong units or a wrong frame (the
+  plausibility rule below);
+- from StreamIdentifier (core/stream.py, its docstring has the time rules): ``no command``,
+  ``stale command`` (the command in force is older than 1 s), ``command unknown`` (a
+  newer command in the interval was rejected: the input is unknown), ``zero stamp``,
+  ``duplicate stamp``, ``out of order``, ``time jump backwards`` (until five consistent
+  messages confirm it), ``outlier`` (innovation gate, below). Accepted with a note: ``gap``
+  (more than max_bridge, 0.25 s, without odometry: vehicle states restarted), ``time jump``,
+  ``repaired``.
 
-Core errors (DomainError, DivergenceError, or a non-finite estimate after an update): the filter
-restarts from its start-up configuration (initial guesses or warm start; the buffered commands
-are kept), and the last good estimate stays available (:attr:`IdentSession.last_good`).
+Plausibility rule (wrong units or frames detectable by range; only measured channels):
+|u|, |v|, |w| <= MAX_BODY_SPEED (10 m/s: cm/s or mm/s are caught); |p|, |q|, |r| <=
+MAX_BODY_RATE (5 rad/s: deg/s are caught once a rate exceeds 5 deg/s); |phi|, |theta| <=
+MAX_TILT (1.2 rad = 69 deg: a sensor frame mounted 90 deg off, e.g. an optical frame);
+|z| <= MAX_DEPTH (11000 m: depth in cm/mm); |x|, |y| <= MAX_HORIZONTAL (2e7 m: position in
+mm); commands: |fin| <= FIN_LIMIT_FACTOR (2) x the vehicle's fin limit (degrees given as
+radians: caught once a deflection exceeds 2x the limit *in degrees*, i.e. 0.7 deg for +-20 deg
+fins), |n| <= SHAFT_LIMIT_FACTOR (2) x the vehicle's shaft limit (rpm written into the rad/s
+velocity field is caught above 2 x 1500 / 9.55 = 314 rpm). NOT detectable by range: rates in
+deg/s below 5 deg/s, speeds in knots, shaft speed in rev/s, positions in km, an ENU/FLU stream
+read as NED/FRD (every value stays in range: (phi, -theta, pi/2 - psi), flipped v, w, q, r);
+these make the innovations inconsistent with the model instead, which the divergence guard
+below catches (outliers, then a reset, ERROR 'diverging' on /diagnostics). Simulated runs of
+every vehicle and manoeuvre and the shipped bag are far inside the bounds (|u| < 0.7 m/s,
+rates < 0.16 rad/s, tilt < 0.4 rad).
 
-Estimate file (JSON, written by the node's ``~/save`` service and on shutdown, read by
-``warm_start``)::
+Divergence guard (not in noise mode 'paper', whose adapted R makes the NIS meaningless):
+
+- innovation gate: an update whose NIS exceeds OUTLIER_GATE_FACTOR (100) x the chi-square
+  quantile 1 - 1e-9 for its m channels (6735 for m = 12, i.e. NIS/dof 561) is not fused; the
+  message is rejected as ``outlier``. Legitimate data stay far below: NIS/dof <= 4 on
+  simulated runs, <= 56 with unmodelled process noise and the default (small) q_state, where
+  a tighter gate was measured to reject good data and wreck the estimate;
+- covariance: an update that finds or leaves the covariance non-positive-definite is repaired
+  by symmetrising and flooring the eigenvalues (core.identify.repair_covariance) and counted
+  in ``repairs``; the update stands;
+- reset rule: a core error that the repair cannot fix (DomainError; DivergenceError:
+  non-finite state or covariance, a second failure after the repair, a coefficient 1-sigma
+  above COV_BLOWUP_FACTOR (100) x its prior p0_rel |initial guess|), or innovations
+  inconsistent for GUARD_SECONDS (1 s of stamps: the median NIS/dof over the last
+  GUARD_WINDOW (20) updates, outliers included, above GUARD_FACTOR (100); the median, so a
+  burst shorter than half the window does not count; legitimate data with process noise
+  reached 26), RESETS THE FILTER: the vehicle states restart from the next measurement,
+  the coefficients from the last good estimate with its covariance times RESET_COV_INFLATION
+  (4, i.e. 2x the 1-sigma). The start-up configuration (initial guesses or warm start) is
+  used instead if there is no good estimate yet, if the inflated covariance is unusable, or
+  for a core error when the previous reset also started from the last good estimate and no
+  update since was good (the last good estimate itself may be the problem). Buffered
+  commands are kept. /diagnostics reports ERROR 'diverging' until NIS_WINDOW (200) updates
+  have passed; the reason is logged and in ``last_error``;
+- last good estimate (:attr:`IdentSession.last_good`): updated only by an update that was
+  fused (not an outlier), has a finite estimate and a positive definite covariance, while the
+  guard window is consistent and, after a reset, once GUARD_WINDOW updates have refilled it
+  with a median NIS/dof <= GUARD_PROBATION (10), and while the health window (last 200
+  updates) is not grossly inconsistent (mean NIS/dof above 10x its chi-square band: what
+  /diagnostics reports as ERROR 'diverging'; model mismatch of simulated runs with process
+  noise stays at WARN) (Event.good). Only such updates are published by the node; the
+  estimate file (~/save, shutdown, autosave) and :meth:`IdentSession.best` give the last
+  good estimate.
+
+Estimate file (JSON, written by the node's ``~/save`` service, on shutdown and every 10 s
+while updates arrive; read by ``warm_start``; always the last good estimate)::
 
     {"vehicle": "nps_auv2",                 # vehicle name
      "coefficients": ["Z_ds", ...],         # p names, order of everything below
@@ -36,25 +97,57 @@ import bisect
 from collections import Counter, deque
 from dataclasses import dataclass, field
 import json
+import logging
 import math
 import os
 from pathlib import Path
+import re
 
 import numpy as np
 import yaml
 
 from .bag_io import bag_topics, BagError, read_bag
-from .conversions import (ConversionError, FRAMES, joint_state_to_actuators, NS_PER_S,
-                          odometry_to_state, stamp_to_ns)
+from .conversions import (ConversionError, FRAMES, JOINT_NAMES, joint_state_to_actuators,
+                          NS_PER_S, odometry_to_state, stamp_to_ns)
 from .core.ekf import MODES
 from .core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from .core.identify import DEFAULT_Q_STATE, FilterConfig
+from .core.identify import DEFAULT_Q_STATE, FilterConfig, is_positive_definite
 from .core.model import Model
 from .core.simulate import DEFAULT_NOISE_STD
 from .core.stream import StreamIdentifier
-from .core.vehicle import load_vehicle, STATE_NAMES
+from .core.vehicle import load_vehicle, P_FIN, P_NMAX, STATE_NAMES
+
+log = logging.getLogger('auv_ident.replay')
 
 MASS_INVERSES = ('default', 'exact', 'mss_literal')
+
+# Plausibility rule (module docstring)
+MAX_BODY_SPEED = 10.0       # m/s, |u| |v| |w|
+MAX_BODY_RATE = 5.0         # rad/s, |p| |q| |r|
+MAX_TILT = 1.2              # rad, |phi| |theta|
+MAX_DEPTH = 11000.0         # m, |z|
+MAX_HORIZONTAL = 2.0e7      # m, |x| |y|
+FIN_LIMIT_FACTOR = 2.0      # x the vehicle's fin limit
+SHAFT_LIMIT_FACTOR = 2.0    # x the vehicle's shaft-speed limit
+_STATE_BOUNDS = np.array([MAX_BODY_SPEED] * 3 + [MAX_BODY_RATE] * 3
+                         + [MAX_HORIZONTAL, MAX_HORIZONTAL, MAX_DEPTH]
+                         + [MAX_TILT, MAX_TILT, np.inf])
+_STATE_UNITS = ['m/s'] * 3 + ['rad/s'] * 3 + ['m'] * 3 + ['rad'] * 3
+
+# Divergence guard (module docstring)
+OUTLIER_P = 1e-9            # chi-square tail of the innovation gate ...
+OUTLIER_GATE_FACTOR = 100.0  # ... times this
+GUARD_WINDOW = 20           # updates in the guard's NIS window
+GUARD_FACTOR = 100.0        # inconsistent: window median NIS/dof above this
+GUARD_SECONDS = 1.0         # s of stamps the inconsistency must last before a reset
+GUARD_PROBATION = 10.0      # after a reset: good only once the window median NIS/dof <= this
+RESET_COV_INFLATION = 4.0   # coefficient covariance factor when a reset restarts from last good
+COV_BLOWUP_FACTOR = 100.0   # a coefficient 1-sigma above this x p0_rel |theta0|: divergence
+MAX_SUBSTEPS = 20000        # max_gap / sample_time: the longest bridge of one gap
+MAX_BRIDGE_S = 0.25         # default max_bridge: longest gap bridged by time updates (s)
+
+# frame-id tokens that name a convention
+_FRAME_TOKENS = {'ned': 'ned', 'frd': 'ned', 'enu': 'enu', 'flu': 'enu'}
 
 # Health rule (see IdentSession.health)
 NIS_WINDOW = 200          # updates in the running NIS window (10 s at 20 Hz)
@@ -183,10 +276,15 @@ class Event:
     """What one message did.
 
     kind : 'update' (odometry fused), 'command' (actuators buffered), 'rejected' (dropped, see
-        reason) or 'error' (a core error; the filter restarted, see reason)
-    reason : why rejected / the error text / a note on an accepted update ('' if none)
+        reason) or 'error' (a core error or a divergence-guard reset; the filter was reset by
+        the rule of the module docstring, see reason)
+    reason : why rejected / the error text / a note on an accepted update ('' if none),
+        prefixed with the topic ('odom: ', 'actuators: ')
     stamp_ns : header stamp of the message (None if it could not be read)
     estimate, std : (p,) after an update; cov : (p, p); nis, dof : of this update
+    code : short category of a rejection, error or note ('non-finite', 'outlier', 'gap',
+        'repaired', 'guard', ...; '' for a plain update or command)
+    good : an update that became the last good estimate (the node publishes only these)
     """
 
     kind: str
@@ -197,6 +295,8 @@ class Event:
     cov: object = None
     nis: float = math.nan
     dof: int = 0
+    code: str = ''
+    good: bool = False
 
     @property
     def accepted(self):
@@ -244,7 +344,11 @@ class IdentSession:
     measured : channel names (empty: all 12)
     frame : 'ned' or 'enu', convention of the incoming Odometry
     sample_time : s, nominal sample time and longest single prediction step
-    max_gap : s, a longer gap restarts the vehicle states (coefficients kept)
+    max_gap : s, a longer gap restarts the vehicle states (coefficients kept); also the
+        horizon of backward time jumps and stale commands (core/stream.py)
+    max_bridge : s, longest gap between odometry stamps bridged by time updates; a longer one
+        restarts the vehicle states too (0 or None: MAX_BRIDGE_S = 0.25 s, at least one
+        sample time, at most max_gap; see core/stream.py for why)
     mass_inverse : 'default', 'exact' or 'mss_literal'
     warm_start : '' or an estimate JSON path (start from its estimate and covariance)
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
@@ -253,7 +357,8 @@ class IdentSession:
     def __init__(self, vehicle='nps_auv2', coefficients=(), initial=(), initial_offset=0.5,
                  noise_mode='fixed', tau=10.0, lam=2e-3, noise_std=None, q_state=None,
                  p0_rel=1.0, q_theta_rel=1e-5, measured=(), frame='ned', sample_time=0.05,
-                 max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False):
+                 max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
+                 max_bridge=None):
         try:
             self.vehicle = load_vehicle(vehicle)
         except ConfigError as err:
@@ -267,7 +372,22 @@ class IdentSession:
         if noise_mode not in MODES:
             raise ParameterError('noise_mode', f'{noise_mode!r}; use one of ' + ', '.join(MODES))
         T = _positive('sample_time', sample_time)
+        if T > 1.0:
+            raise ParameterError('sample_time', f'{sample_time!r} s is longer than 1 s: one RK4 '
+                                                'step of the model over it is not a faithful '
+                                                'integration (use the sensor sample time)')
         max_gap = _positive('max_gap', max_gap)
+        if max_gap < T:
+            raise ParameterError('max_gap', f'{max_gap!r} s is shorter than sample_time '
+                                            f'({T!r} s): every sample would restart the states')
+        if max_bridge is None or max_bridge == 0:
+            max_bridge = MAX_BRIDGE_S
+        max_bridge = _positive('max_bridge', max_bridge)
+        self.max_bridge = min(max(max_bridge, T), max_gap)
+        if max_gap / T > MAX_SUBSTEPS:
+            raise ParameterError('max_gap', f'{max_gap!r} s is more than {MAX_SUBSTEPS} '
+                                            f'sample times ({T!r} s): one gap would take '
+                                            'that many time updates')
         for name, v in (('tau', tau), ('lam', lam), ('p0_rel', p0_rel)):
             _positive(name, v)
         _positive('q_theta_rel', q_theta_rel, allow_zero=True)
@@ -345,11 +465,18 @@ class IdentSession:
         self.keep_arrays = keep_arrays
         self.commands = []          # (t, u6) in arrival order, if keep_arrays
         self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
+        self.gate = None
+        if noise_mode != 'paper':
+            from scipy.stats import chi2
+            self.gate = np.array([math.inf] + [OUTLIER_GATE_FACTOR
+                                               * chi2.ppf(1.0 - OUTLIER_P, m)
+                                               for m in range(1, 13)])
         try:
             self.stream = self._new_stream()
         except ConfigError as err:  # what the checks above did not catch
             raise ParameterError('initial', str(err)) from None
         self.theta0 = self.stream.ekf.theta0.copy()
+        self.blowup_std = COV_BLOWUP_FACTOR * self.cfg.p0_rel * np.abs(self.theta0)
         self.odom_accepted = 0
         self.odom_rejected = 0
         self.cmd_accepted = 0
@@ -360,25 +487,80 @@ class IdentSession:
         self.last_good = None
         self.last_nis = math.nan
         self.last_dof = 0
-        self._since_error = None    # updates since the last core error (None: no error yet)
+        self._since_error = None    # updates since the last reset (None: no reset yet)
         self._nis = deque(maxlen=NIS_WINDOW)
+        self._nis_sum = None        # cached (sum NIS, sum dof) of _nis
+        # divergence guard
+        self.guard = noise_mode != 'paper'
+        self.outliers = 0
+        self.repairs = 0
+        self.guard_resets = 0
+        self.time_jumps = 0
+        self._guard = deque(maxlen=GUARD_WINDOW)
+        self._guard_since = None    # stamp (s) since which the guard window is inconsistent
+        self._after_reset = False   # a fault reset, and the guard window not yet full since
+        self._reset_from_good = False   # the last reset started from last_good, none good since
+        self._band_cache = {}
+        self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
+        v = self.vehicle.par
+        self.fin_bound = FIN_LIMIT_FACTOR * float(v[P_FIN])
+        self.shaft_bound = SHAFT_LIMIT_FACTOR * float(v[P_NMAX])
 
     # -- filter lifecycle --
 
-    def _new_stream(self, keep_commands_from=None):
-        s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap)
-        if self.warm_cov is not None:
+    def _new_stream(self, keep_commands_from=None, start_from=None):
+        """A fresh StreamIdentifier: from the start-up configuration, or (start_from, a
+        LastGood) from that estimate with its covariance times RESET_COV_INFLATION."""
+        s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap, gate=self.gate,
+                             max_bridge=self.max_bridge)
+        if start_from is not None:
+            s.ekf.theta0 = np.array(start_from.estimate, dtype=float)
+            _warm_start_ekf(s.ekf, RESET_COV_INFLATION * np.asarray(start_from.cov, float))
+        elif self.warm_cov is not None:
             _warm_start_ekf(s.ekf, self.warm_cov)
         if keep_commands_from is not None:
-            s.cmd_t = list(keep_commands_from.cmd_t)
-            s.cmd_u = list(keep_commands_from.cmd_u)
+            s.copy_commands_from(keep_commands_from)
         return s
 
-    def reset(self):
-        """Restart the filter from the start-up configuration (buffered commands are kept;
-        counters and the last good estimate too)."""
-        self.stream = self._new_stream(keep_commands_from=self.stream)
+    def _clear_windows(self):
         self._nis.clear()
+        self._nis_sum = None
+        self._guard.clear()
+        self._guard_since = None
+
+    def reset(self):
+        """Restart the filter from the start-up configuration (the ~/reset service): buffered
+        commands, counters and the last good estimate are kept; the frame ids are forgotten."""
+        self.stream = self._new_stream(keep_commands_from=self.stream)
+        self._frame_ids = None
+        self._clear_windows()
+
+    def recover(self, reason, stamp_ns=None):
+        """Apply the reset rule after an unexpected error outside the core (the node's last
+        resort); returns the 'error' Event."""
+        return self._fault_reset('internal error', reason, stamp_ns)
+
+    def _fault_reset(self, code, reason, stamp_ns):
+        """The reset rule (module docstring): vehicle states from the next measurement,
+        coefficients from the last good estimate with inflated covariance."""
+        self.errors += 1
+        self.last_error = reason
+        self._since_error = 0
+        start_from = self.last_good
+        if start_from is not None:
+            with np.errstate(all='ignore'):
+                usable = is_positive_definite(RESET_COV_INFLATION * start_from.cov)
+            if not usable or (code == 'core error' and self._reset_from_good):
+                start_from = None       # the last good estimate may be the problem
+        self._reset_from_good = start_from is not None
+        self.stream = self._new_stream(keep_commands_from=self.stream, start_from=start_from)
+        self._clear_windows()
+        self._after_reset = self.guard
+        start = ('the last good estimate (covariance x '
+                 f'{RESET_COV_INFLATION:g})' if start_from is not None
+                 else 'the start-up configuration')
+        return Event('error', f'odom: {reason} (filter reset: vehicle states from the next '
+                              f'measurement, coefficients from {start})', stamp_ns, code=code)
 
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
@@ -399,6 +581,12 @@ class IdentSession:
         """True once the current filter has fused a measurement."""
         return self.stream.ekf.xa is not None
 
+    def best(self):
+        """(estimate, covariance) to report: the last good one, else current()."""
+        if self.last_good is not None:
+            return self.last_good.estimate.copy(), self.last_good.cov.copy()
+        return self.current()
+
     def current(self):
         """(estimate, covariance) now: the filter's, the last good one, or the prior."""
         f = self.stream.ekf
@@ -411,21 +599,23 @@ class IdentSession:
         return self.theta0.copy(), np.diag((self.cfg.p0_rel * np.abs(self.theta0)) ** 2)
 
     def document(self):
-        """The estimate file's dict for the best estimate available now."""
-        est, cov = self.current()
+        """The estimate file's dict of the best estimate (the last good one, else the prior)."""
+        est, cov = self.best()
         stamp = self.last_good.stamp_ns if self.last_good is not None else None
         return estimate_document(self.vehicle.name, self.names, est, cov, stamp,
                                  self.odom_accepted)
 
     # -- messages --
 
-    def _reject(self, what, reason, stamp_ns=None):
+    def _reject(self, what, code, reason, stamp_ns=None):
         if what == 'odom':
             self.odom_rejected += 1
         else:
             self.cmd_rejected += 1
-        self.reasons[f'{what}: {reason.split(":")[0]}'] += 1
-        return Event('rejected', f'{what}: {reason}', stamp_ns)
+            if stamp_ns is not None and code != 'zero stamp':
+                self.stream.command_rejected(stamp_ns / NS_PER_S)
+        self.reasons[f'{what}: {code}'] += 1
+        return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
     def on_actuators(self, msg):
         """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
@@ -433,15 +623,94 @@ class IdentSession:
         try:
             t, u6 = joint_state_to_actuators(msg)
         except ConversionError as err:
-            return self._reject('actuators', str(err), stamp_ns)
+            return self._reject('actuators', 'conversion', str(err), stamp_ns)
         if not np.all(np.isfinite(u6)):
-            return self._reject('actuators', f'non-finite command {u6.tolist()} at {t:.9f} s',
-                                stamp_ns)
-        self.stream.add_command(t, u6)
+            return self._reject('actuators', 'non-finite',
+                                f'non-finite command {u6.tolist()} at {t:.9f} s', stamp_ns)
+        fins = np.abs(u6[:5]) > self.fin_bound
+        if np.any(fins):
+            bad = ', '.join(f'{n} = {u6[i]:.6g} rad' for i, n in enumerate(JOINT_NAMES[:5])
+                            if fins[i])
+            return self._reject('actuators', 'implausible',
+                                f'implausible fin angle(s) {bad} at {t:.9f} s: beyond '
+                                f'{FIN_LIMIT_FACTOR:g}x the '
+                                f'{self.fin_bound / FIN_LIMIT_FACTOR:.4g} rad limit (degrees '
+                                'given as radians?)', stamp_ns)
+        if abs(u6[5]) > self.shaft_bound:
+            return self._reject('actuators', 'implausible',
+                                f'implausible shaft speed {u6[5]:.6g} rpm at {t:.9f} s: beyond '
+                                f'{SHAFT_LIMIT_FACTOR:g}x the '
+                                f'{self.shaft_bound / SHAFT_LIMIT_FACTOR:.6g} rpm limit (rpm '
+                                'written into the rad/s velocity field?)', stamp_ns)
+        out = self.stream.add_command(t, u6)
+        if not out.accepted:
+            return self._reject('actuators', out.code, out.reason, stamp_ns)
         if self.keep_arrays:
             self.commands.append((t, u6))
         self.cmd_accepted += 1
         return Event('command', '', stamp_ns)
+
+    def _frame_problem(self, msg):
+        """(code, text) if the odometry's frame ids contradict the frame parameter or the
+        stream's first frame ids, else None."""
+        fid = str(getattr(msg.header, 'frame_id', ''))
+        cid = str(getattr(msg, 'child_frame_id', ''))
+        named = set()
+        for text in (fid, cid):
+            for token in re.split(r'[^a-z0-9]+', text.lower()):
+                if token in _FRAME_TOKENS:
+                    named.add(_FRAME_TOKENS[token])
+        if named and named != {self.frame}:
+            return 'wrong frame', (f'frame ids {fid!r} / {cid!r} name the '
+                                   f'{"/".join(sorted(n.upper() for n in named))} convention, '
+                                   f'but the frame parameter is {self.frame!r}')
+        if self._frame_ids is not None and (fid, cid) != self._frame_ids:
+            return 'frame changed', (f'frame ids {fid!r} / {cid!r} differ from '
+                                     f'{self._frame_ids[0]!r} / {self._frame_ids[1]!r} of the '
+                                     'first accepted odometry')
+        return None
+
+    def _implausible(self, y):
+        """Text naming the measured channels beyond the plausibility bounds, or ''."""
+        bad = np.abs(np.nan_to_num(y, nan=0.0)) > _STATE_BOUNDS
+        if not np.any(bad):
+            return ''
+        return 'implausible ' + ', '.join(
+            f'{STATE_NAMES[i]} = {y[i]:.6g} {_STATE_UNITS[i]} (|{STATE_NAMES[i]}| <= '
+            f'{_STATE_BOUNDS[i]:g})' for i in np.flatnonzero(bad)) + ' (wrong units or frame?)'
+
+    def _band_hi(self, D):
+        hi = self._band_cache.get(D)
+        if hi is None:
+            from scipy.stats import chi2
+            hi = float(chi2.ppf(0.5 * (1.0 + NIS_BAND_PROB), D) / D)
+            self._band_cache[D] = hi
+        return hi
+
+    def guard_median(self):
+        """Median NIS/dof over the guard window (outliers included); NaN if empty. The median:
+        a burst of outliers shorter than half the window does not move it."""
+        if not self._guard:
+            return math.nan
+        return float(np.median([n / d for n, d in self._guard]))
+
+    def guard_inconsistent(self):
+        """True if the guard window is full and its median NIS/dof is above GUARD_FACTOR."""
+        if not self.guard or len(self._guard) < GUARD_WINDOW:
+            return False
+        return self.guard_median() > GUARD_FACTOR
+
+    def _guard_step(self, t, nis, dof):
+        """Feed the guard; returns True when the inconsistency has lasted GUARD_SECONDS."""
+        if not self.guard or dof <= 0:
+            return False
+        self._guard.append((float(nis) if math.isfinite(nis) else 1e300, int(dof)))
+        if not self.guard_inconsistent():
+            self._guard_since = None
+            return False
+        if self._guard_since is None or t < self._guard_since:
+            self._guard_since = t
+        return t - self._guard_since >= GUARD_SECONDS
 
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement. Returns an Event."""
@@ -449,50 +718,121 @@ class IdentSession:
         try:
             t, x12, _, _ = odometry_to_state(msg, self.frame)
         except ConversionError as err:
-            return self._reject('odom', str(err), stamp_ns)
+            return self._reject('odom', 'conversion', str(err), stamp_ns)
+        problem = self._frame_problem(msg)
+        if problem is not None:
+            return self._reject('odom', problem[0], f'{problem[1]} at {t:.9f} s', stamp_ns)
         y = np.where(self.measured, x12, np.nan)
         bad = self.measured & ~np.isfinite(x12)
         if np.any(bad):
-            return self._reject('odom', 'non-finite field(s) '
+            return self._reject('odom', 'non-finite', 'non-finite field(s) '
                                 + ', '.join(STATE_NAMES[i] for i in np.flatnonzero(bad))
                                 + f' at {t:.9f} s', stamp_ns)
+        text = self._implausible(y)
+        if text:
+            return self._reject('odom', 'implausible', f'{text} at {t:.9f} s', stamp_ns)
         f = self.stream.ekf
         try:
             out = self.stream.add_measurement(t, y)
             if out.accepted:
-                est, cov = self.stream.ekf.theta, self.stream.ekf.theta_cov
+                f = self.stream.ekf
+                est, cov = f.theta, f.theta_cov
                 d = np.diag(cov)
-                if not (np.all(np.isfinite(est)) and np.all(np.isfinite(cov))
+                if not (np.all(np.isfinite(est)) and is_positive_definite(cov)
                         and np.all(d > 0)):
-                    raise DivergenceError(f'non-finite or non-positive coefficient covariance '
-                                          f'after the update at {t:.9f} s')
+                    raise DivergenceError(f'non-finite or non-positive-definite coefficient '
+                                          f'covariance after the update at {t:.9f} s')
+                blown = np.sqrt(d) > self.blowup_std
+                if np.any(blown):
+                    raise DivergenceError(
+                        'coefficient covariance blew up: 1-sigma of ' + ', '.join(
+                            f'{self.names[i]} = {math.sqrt(d[i]):.3g}'
+                            for i in np.flatnonzero(blown)) + f' above {COV_BLOWUP_FACTOR:g}x '
+                        f'its prior (p0_rel |initial guess|) at {t:.9f} s')
         except (DomainError, DivergenceError) as err:
-            self.errors += 1
-            self.last_error = f'{type(err).__name__}: {err}'
-            self._since_error = 0
-            self.reset()
-            return Event('error', self.last_error + ' (filter restarted)', stamp_ns)
+            return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
+        fused = out.code in ('', 'repaired', 'outlier')     # an update was computed
+        if out.code == 'repaired':
+            self.repairs += 1
+        elif out.code == 'time jump':
+            self.time_jumps += 1
+        sustained = fused and self._guard_step(t, f.nis, f.dof)
         if not out.accepted:
-            return self._reject('odom', out.reason, stamp_ns)
-        std = np.sqrt(d)
+            if out.code == 'outlier':
+                self.outliers += 1
+            ev = self._reject('odom', out.code, out.reason, stamp_ns)
+            if sustained:
+                return self._guard_reset(t, stamp_ns)
+            return ev
         self.odom_accepted += 1
-        self.last_good = LastGood(stamp_ns, est, std, cov)
         self.last_nis, self.last_dof = float(f.nis), int(f.dof)
-        if f.dof > 0 and math.isfinite(f.nis):
+        if fused and f.dof > 0 and math.isfinite(f.nis):
             self._nis.append((float(f.nis), int(f.dof)))
+            self._nis_sum = None
         if self._since_error is not None:
             self._since_error += 1
         if self.keep_arrays:
             self.measurements.append((t, y))
-        return Event('update', out.reason, stamp_ns, est, std, cov, float(f.nis), int(f.dof))
+        if sustained:
+            return self._guard_reset(t, stamp_ns)
+        std = np.sqrt(d)
+        if (self._after_reset and len(self._guard) >= GUARD_WINDOW
+                and self.guard_median() <= GUARD_PROBATION):
+            self._after_reset = False
+        gross = self.gross_inconsistency()
+        good = self._guard_since is None and not self._after_reset and not gross
+        if good:
+            self._reset_from_good = False
+            self.last_good = LastGood(stamp_ns, est, std, cov)
+            if self._frame_ids is None:
+                self._frame_ids = (str(getattr(msg.header, 'frame_id', '')),
+                                   str(getattr(msg, 'child_frame_id', '')))
+        reason = f'odom: {out.reason}' if out.reason else ''
+        if not good:
+            if self._guard_since is not None:
+                why = (f'innovations inconsistent since {self._guard_since:.3f} s (guard '
+                       f'median NIS/dof {self.guard_median():.4g})')
+            elif self._after_reset:
+                why = (f'probation after the filter reset ({len(self._guard)} of '
+                       f'{GUARD_WINDOW} updates, median NIS/dof {self.guard_median():.4g}, '
+                       f'needs <= {GUARD_PROBATION:g})')
+            else:
+                why = (f'mean NIS/dof {self.mean_nis_per_dof():.4g} over the last '
+                       f'{len(self._nis)} updates is more than {GROSS_NIS_FACTOR:g}x its '
+                       'chi-square band')
+            reason = ('odom: ' + (out.reason + '; ' if out.reason else '') + why
+                      + ': not taken as good')
+        return Event('update', reason, stamp_ns, est, std, cov, float(f.nis), int(f.dof),
+                     code='guard' if not good else out.code, good=good)
+
+    def _guard_reset(self, t, stamp_ns):
+        self.guard_resets += 1
+        m = self.guard_median()
+        return self._fault_reset('guard', f'innovations inconsistent for '
+                                          f'{t - self._guard_since:.3f} s (median NIS/dof '
+                                          f'{m:.4g} over the last {len(self._guard)} updates, '
+                                          f'above {GUARD_FACTOR:g})', stamp_ns)
 
     # -- health --
+
+    def _nis_sums(self):
+        if self._nis_sum is None:
+            self._nis_sum = (math.fsum(n for n, _ in self._nis), sum(d for _, d in self._nis))
+        return self._nis_sum
 
     def mean_nis_per_dof(self):
         if not self._nis:
             return math.nan
-        a = np.array(self._nis)
-        return float(a[:, 0].sum() / a[:, 1].sum())
+        total, dof = self._nis_sums()
+        return float(total / dof)
+
+    def gross_inconsistency(self):
+        """True if the health window's mean NIS/dof is above GROSS_NIS_FACTOR x the upper edge
+        of its band (what health() reports as ERROR 'diverging'); such updates are not good."""
+        if not self.guard or len(self._nis) < GUARD_WINDOW:
+            return False
+        total, dof = self._nis_sums()
+        return total / dof > GROSS_NIS_FACTOR * self._band_hi(int(dof))
 
     def health(self):
         """Judge the filter (the rule the /diagnostics status reports).
@@ -501,8 +841,11 @@ class IdentSession:
         chi-square band [lo, hi] of m for D = sum(dof) degrees of freedom (two-sided 99.9 %:
         windows overlap, so a 99 % band would blip WARN now and then on a healthy filter):
 
+        - a filter reset (core error or divergence guard) and fewer than NIS_WINDOW updates
+          since: ERROR 'diverging';
         - no update since start or restart: WARN 'waiting for data';
-        - a core error and fewer than NIS_WINDOW updates since, or m > 10 hi: ERROR 'diverging';
+        - the divergence guard's window inconsistent now (see the module docstring), or
+          m > 10 hi: ERROR 'diverging';
         - window full and m > hi (innovations larger than the filter expects): WARN 'diverging';
         - window full, m <= hi and every coefficient's 1-sigma < 5 % of |estimate|:
           OK 'converged';
@@ -520,13 +863,14 @@ class IdentSession:
             return Health('ERROR', 'diverging', m, band, n)
         if not self.started:
             return Health('WARN', 'waiting for data', m, band, n)
-        if n and m > GROSS_NIS_FACTOR * band[1]:
+        if self.guard_inconsistent() or (n and m > GROSS_NIS_FACTOR * band[1]):
             return Health('ERROR', 'diverging', m, band, n)
         full = n >= NIS_WINDOW
         if full and m > band[1]:
             return Health('WARN', 'diverging', m, band, n)
         est, cov = self.current()
-        rel = np.sqrt(np.diag(cov)) / np.abs(est)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            rel = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / np.abs(est)
         if full and np.all(rel < CONVERGED_REL_STD):
             return Health('OK', 'converged', m, band, n)
         return Health('OK', 'converging', m, band, n)
@@ -619,18 +963,77 @@ def bag_custom_data(path):
     return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
 
-def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actuators'):
+class WarningLimiter:
+    """Rate limit for the warnings of rejected messages: at most one line per key (topic and
+    rejection code) per `period` of `clock` (seconds), and that line says how many like it
+    were suppressed since the previous one. The identifier node uses it with the steady clock,
+    so every distinct problem is named within `period` even while another one floods."""
+
+    def __init__(self, period, clock):
+        self.period = float(period)
+        self.clock = clock
+        self._last = {}
+        self.suppressed = Counter()
+
+    def __call__(self, key, text):
+        """The line to log now for this occurrence, or None if it is suppressed."""
+        now = self.clock()
+        last = self._last.get(key)
+        if last is not None and now - last < self.period:
+            self.suppressed[key] += 1
+            return None
+        self._last[key] = now
+        n = self.suppressed.pop(key, 0)
+        if n:
+            text += f' ({n} more like it in the last {now - last:.1f} s)'
+        return text
+
+
+class ReplayWarnings:
+    """Offline counterpart of WarningLimiter: logs (logger 'auv_ident.replay', WARNING) the
+    first `first` rejections/errors of each key (topic, code), then only counts them;
+    :meth:`summary` logs one line per key with more."""
+
+    def __init__(self, first=3, logger=None):
+        self.first = first
+        self.log = logger or log
+        self.counts = Counter()
+
+    def __call__(self, ev):
+        key = (ev.reason.split(':', 1)[0], ev.code)
+        self.counts[key] += 1
+        n = self.counts[key]
+        if n <= self.first:
+            self.log.warning('%s %s' % ('rejected' if ev.kind == 'rejected' else 'filter reset:',
+                                        ev.reason)
+                             + (f' [first {self.first} of this kind logged]'
+                                if n == self.first else ''))
+
+    def summary(self):
+        for (topic, code), n in sorted(self.counts.items()):
+            if n > self.first:
+                self.log.warning(f'{topic}: {n} messages in all with problem {code!r} '
+                                 f'({n - self.first} not logged)')
+
+
+def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actuators',
+                    warn=None):
     """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
 
+    warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
     Returns the list of (stamp_ns, estimate, std) of the accepted updates."""
     updates = []
     for topic, _, msg in messages:
         if topic == actuator_topic:
-            session.on_actuators(msg)
+            ev = session.on_actuators(msg)
         elif topic == odom_topic:
             ev = session.on_odom(msg)
             if ev.kind == 'update':
                 updates.append((ev.stamp_ns, ev.estimate, ev.std))
+        else:
+            continue
+        if warn is not None and ev.kind in ('rejected', 'error'):
+            warn(ev)
     return updates
 
 
@@ -660,7 +1063,7 @@ def session_result(session, updates, settings=None):
 
 
 def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
-               actuator_topic='/actuators', **settings):
+               actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
     """Identify from a bag exactly as the identifier node would have live.
 
     Odometry and actuator messages are read in log-time order (as recorded) and fed to an
@@ -673,14 +1076,19 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
         'auv_ident.frame', written for simulated runs), else 'nps_auv2' and 'ned'
     coefficients : names (empty: the vehicle's identify_default)
     odom_topic, actuator_topic : topics to read
+    allow_truncated : read the complete chunks of a bag whose writer died (bag_io.read_bag);
+        default: such a bag is a BagError naming the option
+    warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
+        then a count), or False
     **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
         noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
         warm_start); defaults are the node's parameter defaults
 
-    Returns a ReplayResult. Raises BagError for an unreadable bag or a missing topic,
-    ParameterError for a bad setting.
+    Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
+    not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad
+    setting; nothing else for bad input.
     """
-    present = bag_topics(path)
+    present = bag_topics(path, allow_truncated=allow_truncated)
     for what, topic in (('odometry', odom_topic), ('actuator', actuator_topic)):
         if topic not in present:
             listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
@@ -693,8 +1101,14 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
     session = IdentSession(vehicle=vehicle, coefficients=coefficients, frame=frame,
                            keep_arrays=True, **settings)
     msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
-                           actuator_topic: 'sensor_msgs/msg/JointState'})
-    updates = replay_messages(msgs, session, odom_topic, actuator_topic)
+                           actuator_topic: 'sensor_msgs/msg/JointState'},
+                    allow_truncated=allow_truncated)
+    warner = ReplayWarnings() if warn else None
+    try:
+        updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
+    finally:
+        if warner is not None:
+            warner.summary()
     return session_result(session, updates, dict(settings, vehicle=vehicle, frame=frame,
                                                  coefficients=list(coefficients)))
 

@@ -30,6 +30,8 @@ from .simulate import DEFAULT_NOISE_STD, trim_speed
 # unmodelled forces (waves, currents, tether).
 DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
                             1e-5, 1e-5, 1e-5, 2e-7, 2e-7, 2e-7])
+# start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state)
+UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
 
 
 @dataclass
@@ -126,9 +128,13 @@ class AugmentedEKF:
         self.measured = np.asarray(cfg.measured, dtype=bool).copy()
         self.mode = K.MODES[cfg.mode]
         self.gamma = 1.0 - np.exp(-self.T / cfg.tau)
+        # Innovation gate (None: off): gate[m] is the largest NIS accepted from an update with
+        # m channels; a larger one is not fused (self.gated), see update().
+        self.gate = None
         self.reset()
 
     def reset(self):
+        self.gated = False
         self.Q = self.Q0.copy()
         self.R = self.R0.copy()
         self.xa = None
@@ -149,9 +155,18 @@ class AugmentedEKF:
         x0[ok] = y0[ok]
         if not ok[0]:
             x0[0] = trim_speed(self.model, rpm)
-        big = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
-        sd0[~ok] = big[~ok]
+        sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
+
+    def reference_std(self):
+        """(n,) 1-sigma scale of each augmented state: noise_std on measured channels, the
+        start-up 1-sigma of unmeasured ones, p0_rel |theta0| for the coefficients. The unit in
+        which :func:`repair_covariance` floors eigenvalues."""
+        sd = np.asarray(self.cfg.noise_std, dtype=float).copy()
+        use = ~self.measured | ~(sd > 0)
+        sd[use] = UNMEASURED_SD0[use]
+        th = self.cfg.p0_rel * np.abs(self.theta0)
+        return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
     def start(self, y0, rpm):
         x0, sd0 = self.initial_state(y0, rpm)
@@ -177,6 +192,11 @@ class AugmentedEKF:
         st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
                               self.innov, self.S_diag, self.white)
         self._check(st, 'measurement update')
+        self.gated = False
+        if self.gate is not None and m > 0 and not nis <= self.gate[m]:
+            # an outlier: keep the prior (as for a missing sample), adapt nothing
+            self.nis, self.dof, self.gated = nis, m, True
+            return
         K.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
                 theta_prev, xa_b, self.innov, self.S_diag, self.P, self.Q, self.R, self.Q0,
                 self.R0)
@@ -196,7 +216,11 @@ class AugmentedEKF:
         self.xa, self.P = xa_b, P_b
 
     def update(self, y):
-        """Measurement update with y (12,), NaN for channels missing in this sample."""
+        """Measurement update with y (12,), NaN for channels missing in this sample.
+
+        With an innovation gate set (``self.gate``) and an NIS above ``gate[m]``, nothing is
+        fused: the state and covariance stay the prior, Q and R are not adapted,
+        ``self.gated`` is True and ``self.nis``/``self.dof`` hold the rejected update's."""
         self._update(y)
 
     def step(self, u_prev, y, T=None):
@@ -215,6 +239,50 @@ class AugmentedEKF:
     @property
     def theta_std(self):
         return np.sqrt(np.diag(self.P)[12:])
+
+
+# eigenvalue floor of repair_covariance, in units of the reference variances
+COV_REPAIR_FLOOR = 1e-10
+
+
+def repair_covariance(P, ref_std, floor=COV_REPAIR_FLOOR):
+    """Nearest usable covariance to P: symmetrise, then floor the eigenvalues.
+
+    The eigenvalues are those of C = D^-1 sym(P) D^-1 with D = diag(ref_std) (the states'
+    reference 1-sigmas, so that m/s, rad and coefficients of any scale are comparable); every
+    eigenvalue below `floor` is raised to it and P = D V diag(max(lambda, floor)) V^T D is
+    rebuilt (symmetric by construction). Returns (P_repaired, smallest eigenvalue of C before
+    the repair). Raises DivergenceError if P has a non-finite entry (nothing to repair).
+    """
+    P = np.asarray(P, dtype=float)
+    d = np.asarray(ref_std, dtype=float)
+    if not np.all(np.isfinite(P)):
+        raise DivergenceError('covariance has non-finite entries: cannot be repaired')
+    with np.errstate(all='ignore'):
+        C = 0.5 * (P + P.T) / np.outer(d, d)
+        if not np.all(np.isfinite(C)):
+            raise DivergenceError('covariance overflows its reference scale: cannot be repaired')
+        try:
+            lam, V = np.linalg.eigh(C)
+        except np.linalg.LinAlgError:
+            raise DivergenceError('covariance eigen-decomposition failed: cannot be '
+                                  'repaired') from None
+        fixed = (V * np.maximum(lam, floor)) @ V.T
+        fixed = 0.5 * (fixed + fixed.T) * np.outer(d, d)
+    if not np.all(np.isfinite(fixed)):
+        raise DivergenceError('repaired covariance is not finite')
+    return fixed, float(lam[0])
+
+
+def is_positive_definite(P):
+    """True if P is finite, symmetric to rounding and has a Cholesky factor."""
+    if not np.all(np.isfinite(P)):
+        return False
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 @dataclass

@@ -13,9 +13,11 @@ is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed 
         covariances are ignored (``noise_std`` is the noise model).
 
 Publications
-    ``~/estimate`` sensor_msgs/JointState, one per accepted odometry update: header.stamp = the
-        odometry stamp; name = coefficient names; position = estimates (vehicle file's units);
-        velocity = 1-sigma; effort empty.
+    ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good in
+        auv_ident/replay.py: fused, finite, positive definite, innovations consistent; during a
+        divergence nothing is published, so the latched value stays the last good estimate):
+        header.stamp = the odometry stamp; name = coefficient names; position = estimates
+        (vehicle file's units); velocity = 1-sigma; effort empty.
     ``~/covariance`` std_msgs/Float64MultiArray, with each estimate: layout.dim[0] = label
         'row:' + comma-joined names, size p, stride p*p; dim[1] = 'col:' + names, size p,
         stride p; data = the p x p covariance, row-major.
@@ -25,34 +27,50 @@ Publications
     ``/diagnostics`` diagnostic_msgs/DiagnosticArray, every 1 s (steady clock) and at once on a
     filter error: one DiagnosticStatus, name 'auv_ident identifier', hardware_id = vehicle,
     level and message from IdentSession.health:
+        ERROR 'diverging': a filter reset (a core error the covariance repair could not fix,
+            or the divergence guard: innovations inconsistent for 1 s) within the last 200
+            updates; the guard's window inconsistent now (median NIS/dof of the last 20
+            updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
+            (rules and reset in auv_ident/replay.py);
         WARN 'waiting for data': no update since start-up or the last restart;
-        ERROR 'diverging': a core error (DomainError/DivergenceError) within the last 200
-            updates, or the mean NIS/dof over the last 200 updates > 10x its band;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
         OK 'converged': window full, mean NIS/dof not above the band, and every coefficient's
             1-sigma < 5 % of |estimate|;
         OK 'converging': otherwise.
-    values: accepted, rejected (odometry), commands, commands_rejected, errors, last_error,
-    mean_nis_per_dof, nis_band, nis_window, last_nis, last_dof, last_stamp, then per
-    coefficient <name> and <name>_std (repr floats), R_<channel> (adapted measurement variance
-    of u ... psi) and Q_<name> (coefficient random-walk variance).
+    values: accepted, rejected (odometry), commands, commands_rejected, errors (filter resets
+    by the reset rule: core errors and divergence-guard resets), guard_resets, outliers
+    (innovation gate), repairs (covariance repairs), time_jumps (confirmed backward jumps),
+    internal_errors (unexpected exceptions caught in a callback; 0 unless there is a bug),
+    last_error, mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis,
+    last_dof, last_stamp (of the last good estimate), then per coefficient <name> and
+    <name>_std of the last good estimate (repr floats), R_<channel> (adapted measurement
+    variance of u ... psi) and Q_<name> (coefficient random-walk variance).
 
 Services (std_srvs/srv/Trigger)
     ``~/reset``: restart the filter from the start-up configuration (initial guesses or warm
         start); buffered commands, counters and the last good estimate are kept.
     ``~/save``: write the estimate file to ``save_path`` (fails if save_path is empty).
 
-Errors never stop the node: rejected messages (conversion errors, non-finite fields, stamps not
-after the previous one, no command yet) are rate-limited warnings naming the problem. A core
-error is logged as an error and reported as ERROR on /diagnostics; the filter restarts from its
-start-up configuration and the last good estimate stays available (it is what ~/save writes
-until the restarted filter has an estimate). Nothing non-finite is published.
+Errors never stop the node: rejected messages (the rejection policy and plausibility rule of
+auv_ident/replay.py: conversion errors, wrong frame, non-finite or implausible values, zero,
+duplicate, out-of-order stamps, backward time jumps, no command yet, outliers) are warnings
+naming the problem, rate-limited per topic and problem (WarningLimiter: at most one line per
+kind every 5 s, with the count of those suppressed), so a flood of one problem never hides
+another. A filter fault (core error or divergence guard) is logged as an error (at most one
+per second), reported as ERROR on /diagnostics at once, and handled by the reset rule of
+auv_ident/replay.py (vehicle states restart, coefficients from the last good estimate with
+inflated covariance); the last good estimate stays available (latched ~/estimate, ~/save).
+Nothing non-finite is published. An unexpected exception inside a callback (a bug) is caught,
+logged as one line, counted in internal_errors and handled by the same reset rule, so the
+node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/replay.py). Written on ``~/save`` and on shutdown
-(SIGINT/SIGTERM), atomically.
+null, "steps": accepted updates}`` (auv_ident/replay.py) of the last good estimate. Written on
+``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady clock)
+while new updates arrive, always atomically (temp file + rename: a kill leaves the previous
+complete file). ``warm_start`` starts a later run from it.
 
 Parameters (``config/identifier.yaml`` documents each with units and default; read once at
 start-up, declared read-only)
@@ -62,12 +80,14 @@ start-up, declared read-only)
     (the paper's lambda, 2e-3; ``lambda`` would shadow a Python keyword in code),
     ``noise_std`` (12, DEFAULT_NOISE_STD), ``q_state`` (12, DEFAULT_Q_STATE), ``p0_rel``
     (1.0), ``q_theta_rel`` (1e-5), ``measured`` (channel names, default all 12), ``frame``
-    ('ned' | 'enu'), ``sample_time`` (0.05 s), ``max_gap`` (5.0 s), ``mass_inverse``
-    ('default'), ``save_path`` (''), ``warm_start`` (''). An empty list means the default
+    ('ned' | 'enu'), ``sample_time`` (0.05 s), ``max_gap`` (5.0 s), ``max_bridge``
+    (0.0 = 0.25 s; not yet in config/identifier.yaml), ``mass_inverse`` ('default'),
+    ``save_path`` (''), ``warm_start`` (''). An empty list means the default
     (ROS turns ``[]`` into "not set"). Bad values print one line naming the parameter and exit
     with status 2.
 """
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
@@ -92,7 +112,7 @@ from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.identify import DEFAULT_Q_STATE
 from auv_ident.core.simulate import DEFAULT_NOISE_STD
 from auv_ident.core.vehicle import STATE_NAMES
-from auv_ident.replay import IdentSession, write_estimate_json
+from auv_ident.replay import Event, IdentSession, WarningLimiter, write_estimate_json
 
 RCLError = _rclpy.RCLError
 NODE_NAME = 'identifier'
@@ -100,6 +120,7 @@ STATUS_NAME = 'auv_ident identifier'
 DIAGNOSTICS_PERIOD_S = 1.0
 WARN_THROTTLE_S = 5.0
 ERROR_THROTTLE_S = 1.0
+AUTOSAVE_PERIOD_S = 10.0
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR}
 
@@ -137,6 +158,8 @@ _PARAMETERS = (
     ('sample_time', 0.05, 'nominal sample time and longest single prediction step [s]'),
     ('max_gap', 5.0, 'a longer gap between odometry stamps restarts the vehicle states '
                      '(coefficients kept) [s]'),
+    ('max_bridge', 0.0, 'longest gap between odometry stamps bridged by time updates; a longer '
+                        'one restarts the vehicle states (coefficients kept); 0 = 0.25 s [s]'),
     ('mass_inverse', 'default', "M^-1: 'default' (vehicle file's choice), 'exact' or "
                                 "'mss_literal'"),
     ('save_path', '', 'estimate JSON written on ~/save and on shutdown; empty = none'),
@@ -153,6 +176,11 @@ class IdentifierNode(Node):
         settings = self._read_parameters()
         self.save_path = settings.pop('save_path')
         self.session = IdentSession(**settings)      # ParameterError names a bad parameter
+        self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
+        self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
+        self.internal_errors = 0
+        self._saved_steps = 0
+        self._last_autosave = time.monotonic()
         self.names = list(self.session.names)
         p = len(self.names)
         joined = ','.join(self.names)
@@ -172,7 +200,7 @@ class IdentifierNode(Node):
         self.srv_reset = self.create_service(Trigger, '~/reset', self.on_reset)
         self.srv_save = self.create_service(Trigger, '~/save', self.on_save)
         self.diagnostics_timer = self.create_timer(
-            DIAGNOSTICS_PERIOD_S, self.publish_diagnostics,
+            DIAGNOSTICS_PERIOD_S, self.on_timer,
             clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'identifying {", ".join(self.names)} of {self.session.vehicle.name} '
@@ -205,26 +233,64 @@ class IdentifierNode(Node):
 
     # -- messages --
 
+    def _emit(self, level, text):
+        """Write one log line (tests replace this to count what is logged)."""
+        logger = self.get_logger()
+        if level == 'error':
+            logger.error(text)
+        elif level == 'warning':
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+    def _report(self, ev):
+        """Log an Event's problem, rate-limited per topic and code (WarningLimiter)."""
+        key = (ev.reason.split(':', 1)[0], ev.code)
+        if ev.kind == 'rejected':
+            line = self._warn_limit(key, f'rejected {ev.reason}')
+            if line:
+                self._emit('warning', line)
+        elif ev.kind == 'error':
+            line = self._error_limit(key, ev.reason)
+            if line:
+                self._emit('error', line)
+        elif ev.reason:
+            line = self._warn_limit(key, ev.reason)
+            if line:
+                self._emit('info', line)
+
+    def _internal_error(self, what, err, stamp_ns=None):
+        """Last resort for an unexpected exception in a callback: one line, a count, the
+        reset rule; the node keeps running."""
+        self.internal_errors += 1
+        try:
+            ev = self.session.recover(f'internal error on {what}: {type(err).__name__}: {err}',
+                                      stamp_ns)
+        except Exception:                        # noqa: BLE001 - keep the node alive
+            ev = Event('error', f'{what}: internal error: {type(err).__name__}: {err}',
+                       stamp_ns, code='internal error')
+        self._report(ev)
+        return ev
+
     def on_actuators(self, msg):
         """Buffer an actuator command; returns the session's Event."""
-        ev = self.session.on_actuators(msg)
-        if ev.kind == 'rejected':
-            self.get_logger().warning(f'rejected {ev.reason}',
-                                      throttle_duration_sec=WARN_THROTTLE_S)
+        try:
+            ev = self.session.on_actuators(msg)
+        except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
+            return self._internal_error('actuators', err)
+        self._report(ev)
         return ev
 
     def on_odom(self, msg):
-        """Fuse an odometry measurement and publish the estimate; returns the Event."""
-        ev = self.session.on_odom(msg)
-        if ev.kind == 'update':
+        """Fuse an odometry measurement and publish the estimate if good; returns the Event."""
+        try:
+            ev = self.session.on_odom(msg)
+        except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
+            ev = self._internal_error('odom', err)
+        if ev.kind == 'update' and ev.good:
             self.publish_estimate(ev)
-            if ev.reason:
-                self.get_logger().info(ev.reason, throttle_duration_sec=WARN_THROTTLE_S)
-        elif ev.kind == 'rejected':
-            self.get_logger().warning(f'rejected {ev.reason}',
-                                      throttle_duration_sec=WARN_THROTTLE_S)
-        elif ev.kind == 'error':
-            self.get_logger().error(ev.reason, throttle_duration_sec=ERROR_THROTTLE_S)
+        self._report(ev)
+        if ev.kind == 'error' and self.context.ok():
             self.publish_diagnostics()
         return ev
 
@@ -255,7 +321,7 @@ class IdentifierNode(Node):
         s = self.session
         h = s.health()
         f = s.stream.ekf
-        est, cov = s.current()
+        est, cov = s.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
         def num(v):
@@ -265,10 +331,15 @@ class IdentifierNode(Node):
         values = [('accepted', str(s.odom_accepted)), ('rejected', str(s.odom_rejected)),
                   ('commands', str(s.cmd_accepted)),
                   ('commands_rejected', str(s.cmd_rejected)),
-                  ('errors', str(s.errors)), ('last_error', s.last_error),
+                  ('errors', str(s.errors)), ('guard_resets', str(s.guard_resets)),
+                  ('outliers', str(s.outliers)), ('repairs', str(s.repairs)),
+                  ('time_jumps', str(s.time_jumps)),
+                  ('internal_errors', str(self.internal_errors)),
+                  ('last_error', s.last_error),
                   ('mean_nis_per_dof', num(h.mean_nis_per_dof)),
                   ('nis_band', f'{num(h.band[0])} {num(h.band[1])}'),
                   ('nis_window', str(h.window)),
+                  ('guard_median_nis_per_dof', num(s.guard_median())),
                   ('last_nis', num(s.last_nis)), ('last_dof', str(s.last_dof)),
                   ('last_stamp', 'n/a' if s.last_good is None
                    else num(s.last_good.stamp_ns * 1e-9))]
@@ -279,6 +350,19 @@ class IdentifierNode(Node):
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
                                 hardware_id=s.vehicle.name,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
+
+    def on_timer(self):
+        """1 Hz: /diagnostics, and the autosave of the estimate file."""
+        self.publish_diagnostics()
+        now = time.monotonic()
+        if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S
+                and self.session.odom_accepted != self._saved_steps):
+            self._last_autosave = now
+            ok, message = self.save()
+            if not ok:
+                line = self._error_limit(('save', 'autosave'), message)
+                if line:
+                    self._emit('error', line)
 
     def publish_diagnostics(self):
         arr = DiagnosticArray()
@@ -292,11 +376,13 @@ class IdentifierNode(Node):
         """Write the estimate file; returns (ok, message)."""
         if not self.save_path:
             return False, 'save_path parameter is empty: nothing written'
+        doc = self.session.document()
         try:
-            path = write_estimate_json(self.save_path, self.session.document())
+            path = write_estimate_json(self.save_path, doc)
         except (OSError, ValueError) as err:
             return False, f'cannot write {self.save_path}: {err}'
-        return True, f'wrote {path} ({self.session.odom_accepted} updates)'
+        self._saved_steps = doc['steps']
+        return True, f'wrote {path} ({doc["steps"]} updates)'
 
     def on_save(self, request, response):
         response.success, response.message = self.save()
@@ -315,11 +401,11 @@ class IdentifierNode(Node):
 
     def shutdown_save(self):
         """On shutdown: write save_path if set, and log the final estimate."""
-        est, cov = self.session.current()
+        est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         self._final_log('INFO', f'{self.session.odom_accepted} updates, '
                                 f'{self.session.odom_rejected} rejected, {self.session.errors} '
-                                'errors; estimate: ' + ', '.join(
+                                'filter resets; last good estimate: ' + ', '.join(
                                     f'{n} = {v:.6g} +- {s:.2g}'
                                     for n, v, s in zip(self.names, est, std)))
         if self.save_path:

@@ -1,0 +1,393 @@
+"""Load test of the identifier node: ``python -m auv_ident loadtest`` (wired by cli.py).
+
+A real identifier process (``python -m auv_ident run identifier``, sample_time = 1/rate_hz)
+gets odometry and actuator commands of a simulated run (NPS AUV II, 'ident' manoeuvre) at
+rate_hz in simulation time, published from this process at real_time_factor x real time.
+
+Figures:
+
+- counts: odometry and commands published; odometry accepted and rejected, commands taken,
+  as the identifier reports them on /diagnostics (and the steps in its estimate file, written
+  on SIGINT at the end); every message must be processed (accepted + rejected = published);
+- latency per message, end to end: from just before ``publish(odom)`` here to the arrival
+  here of the ``~/estimate`` with that odometry's stamp (DDS to the identifier, its callback,
+  DDS back), p50 / p99 / max over the estimates received (~/estimate is KEEP_LAST depth 1, so
+  a few can be overwritten before they are read; the count is reported);
+- compute per message: the identifier's per-odometry work alone (IdentSession.on_odom, no
+  ROS), timed in this process over the first compute_samples samples;
+- memory: resident set size (VmRSS of /proc/<pid>/status) of the identifier process, sampled
+  every 0.25 s: at the first estimate (after start-up and warm-up), once 10 % of the samples
+  are out ("start", steady state), at the end, and the maximum; growth = end - start.
+
+Pacing: sample k is published at k / (rate_hz * real_time_factor) s of wall time (0: as fast
+as possible), but never more than max_backlog samples ahead of the last estimate received,
+so a slower machine is measured slower, not with lost messages (the identifier's queues hold
+1000 messages).
+
+DDS stays on this machine: the identifier and this process run with
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a ROS_DOMAIN_ID in 1..101 (this process's if it
+is in that range, else a random one).
+"""
+import json
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RSS_PERIOD_S = 0.25
+ESTIMATE_TOPIC = '/identifier/estimate'
+
+
+def loopback_env(env=None):
+    """The environment for every process of the load test: loopback DDS, domain 1..101.
+
+    Also applied to os.environ, because the publisher node runs in this process."""
+    env = dict(os.environ if env is None else env)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.pop('ROS_LOCALHOST_ONLY', None)
+    try:
+        dom = int(env.get('ROS_DOMAIN_ID', ''))
+    except ValueError:
+        dom = -1
+    if not 1 <= dom <= 101:
+        env['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+    for key in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID'):
+        os.environ[key] = env[key]
+    os.environ.pop('ROS_LOCALHOST_ONLY', None)
+    return env
+
+
+def _rss_kb(pid):
+    try:
+        with open(f'/proc/{pid}/status', encoding='ascii') as fh:
+            for line in fh:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _percentiles(values_ms):
+    a = np.asarray(values_ms, dtype=float)
+    if a.size == 0:
+        return {'n': 0, 'p50': math.nan, 'p99': math.nan, 'max': math.nan, 'mean': math.nan}
+    return {'n': int(a.size), 'p50': float(np.percentile(a, 50)),
+            'p99': float(np.percentile(a, 99)), 'max': float(a.max()), 'mean': float(a.mean())}
+
+
+def compute_latency(run, n_samples):
+    """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
+    from .replay import IdentSession
+    from .sim_bag import sample_messages
+    s = IdentSession(sample_time=float(run.T))
+    s.warm_up()
+    out = []
+    for k in range(min(n_samples, len(run.t))):
+        for topic, _, msg in sample_messages(run, k, with_truth=False):
+            if topic == '/actuators':
+                s.on_actuators(msg)
+            else:
+                t0 = time.perf_counter()
+                s.on_odom(msg)
+                out.append((time.perf_counter() - t0) * 1e3)
+    return _percentiles(out)
+
+
+def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle='nps_auv2',
+                 seed=0, max_backlog=600, compute_samples=5000, env=None, log_dir=None,
+                 start_timeout=90.0, drain_timeout=60.0, progress=None):
+    """Run the load test (module docstring); returns a dict of figures (format_loadtest).
+
+    Raises RuntimeError if the identifier does not start or dies."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import JointState
+
+    from .core.model import Model
+    from .core.simulate import simulate
+    from .core.vehicle import load_vehicle
+    from .sim_bag import sample_messages
+
+    if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
+        raise ValueError('rate_hz and sim_seconds must be > 0, real_time_factor >= 0')
+    env = loopback_env(env)
+    T = 1.0 / float(rate_hz)
+    t_sim = time.perf_counter()
+    run = simulate(Model(load_vehicle(vehicle)), 'ident', duration=float(sim_seconds), T=T,
+                   seed=seed)
+    sim_s = time.perf_counter() - t_sim
+    n = len(run.t)
+    stamps_ns = np.array([round(t * 1e9) for t in run.t], dtype=np.int64)
+    T_ns = int(round(T * 1e9))
+    compute = compute_latency(run, compute_samples) if compute_samples else None
+
+    own_log_dir = log_dir is None
+    log_dir = tempfile.mkdtemp(prefix='auv_ident_loadtest_') if own_log_dir else str(log_dir)
+    save = os.path.join(log_dir, 'estimate.json')
+    out = open(os.path.join(log_dir, 'identifier.out'), 'w')
+    err = open(os.path.join(log_dir, 'identifier.err'), 'w')
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'auv_ident', 'run', 'identifier', '--ros-args',
+         '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}'],
+        env=env, cwd=REPO, stdout=out, stderr=err)
+
+    pub_t = np.full(n, np.nan)
+    recv_t = np.full(n, np.nan)
+    state = {'last_k': -1, 'estimates': 0, 'diag': None, 'bad_estimates': 0}
+    rss = []                    # (perf_counter, kB)
+    stop = threading.Event()
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('auv_ident_loadtest', context=ctx)
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+    def on_estimate(msg):
+        now = time.perf_counter()
+        s_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        k = int(round(s_ns / T_ns))
+        state['estimates'] += 1
+        if not (np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))):
+            state['bad_estimates'] += 1
+        if 0 <= k < n and math.isnan(recv_t[k]):
+            recv_t[k] = now
+            state['last_k'] = max(state['last_k'], k)
+
+    def on_diag(msg):
+        for st in msg.status:
+            if st.name == 'auv_ident identifier':
+                state['diag'] = {v.key: v.value for v in st.values}
+
+    node.create_subscription(JointState, ESTIMATE_TOPIC, on_estimate, qos)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 100)
+    pub_act = node.create_publisher(JointState, '/actuators', qos)
+    pub_odom = node.create_publisher(Odometry, '/odom', qos)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    spin_thread = threading.Thread(target=lambda: _spin(ex, stop), daemon=True)
+    spin_thread.start()
+
+    def sample_rss():
+        while not stop.is_set():
+            kb = _rss_kb(proc.pid)
+            if kb is not None:
+                rss.append((time.perf_counter(), kb))
+            stop.wait(RSS_PERIOD_S)
+    rss_thread = threading.Thread(target=sample_rss, daemon=True)
+    rss_thread.start()
+
+    result = {}
+    waits = 0
+    try:
+        deadline = time.monotonic() + start_timeout
+        while not (pub_act.get_subscription_count() and pub_odom.get_subscription_count()
+                   and node.count_publishers(ESTIMATE_TOPIC)):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError('identifier did not start: '
+                                   + _tail(os.path.join(log_dir, 'identifier.err')))
+            time.sleep(0.02)
+        time.sleep(0.5)          # the identifier's side of the match may lag ours
+        t_start = time.perf_counter()
+        t_first_est = None
+        k_steady = max(1, n // 10)
+        rss_steady_t = None
+        period = 0.0 if real_time_factor == 0 else T / real_time_factor
+        for k in range(n):
+            msgs = sample_messages(run, k, with_truth=False)
+            due = t_start + k * period
+            while True:
+                now = time.perf_counter()
+                if k - state['last_k'] > max_backlog:
+                    waits += 1
+                    time.sleep(0.0005)
+                    if proc.poll() is not None:
+                        raise RuntimeError('identifier died: '
+                                           + _tail(os.path.join(log_dir, 'identifier.err')))
+                    continue
+                if now < due:
+                    time.sleep(min(due - now, 0.002))
+                    continue
+                break
+            act = next(m for tp, _, m in msgs if tp == '/actuators')
+            odom = next(m for tp, _, m in msgs if tp == '/odom')
+            pub_act.publish(act)
+            pub_t[k] = time.perf_counter()
+            pub_odom.publish(odom)
+            if t_first_est is None and state['last_k'] >= 0:
+                t_first_est = time.perf_counter()
+            if k == k_steady:
+                rss_steady_t = time.perf_counter()
+            if progress is not None and k % 2000 == 0:
+                progress(k, n)
+        t_pub_end = time.perf_counter()
+        # drain: the last estimate, then a /diagnostics report counting every message
+        deadline = time.monotonic() + drain_timeout
+        while time.monotonic() < deadline:
+            d = state['diag']
+            if (d is not None and int(d['accepted']) + int(d['rejected']) >= n
+                    and state['last_k'] >= n - 1):
+                break
+            if proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        t_drained = time.perf_counter()
+        time.sleep(2 * RSS_PERIOD_S)
+        rss_end_t = time.perf_counter()
+        proc.send_signal(signal.SIGINT)
+        try:
+            rc = proc.wait(timeout=20.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            rc = proc.wait()
+        d = state['diag'] or {}
+        lat = (recv_t - pub_t) * 1e3
+        lat = lat[np.isfinite(lat)]
+        saved = None
+        try:
+            with open(save, encoding='utf-8') as fh:
+                saved = json.load(fh)
+        except (OSError, ValueError):
+            pass
+
+        def rss_at(t):
+            before = [kb for tt, kb in rss if t is not None and tt <= t]
+            return before[-1] / 1024.0 if before else math.nan
+        rss_mb = np.array([kb for _, kb in rss], dtype=float) / 1024.0
+        steady = rss_at(rss_steady_t)
+        end = rss_at(rss_end_t)
+        after_steady = [kb / 1024.0 for tt, kb in rss
+                        if rss_steady_t is not None and tt >= rss_steady_t]
+        result = {
+            'vehicle': vehicle, 'rate_hz': float(rate_hz), 'sim_seconds': float(run.t[-1]),
+            'samples': n, 'real_time_factor': float(real_time_factor),
+            'achieved_real_time_factor': float(run.t[-1] / max(t_pub_end - t_start, 1e-9)),
+            'wall_publish_s': float(t_pub_end - t_start),
+            'wall_drain_s': float(t_drained - t_pub_end), 'simulate_s': sim_s,
+            'published_odom': n, 'published_actuators': n,
+            'accepted': int(d.get('accepted', -1)), 'rejected': int(d.get('rejected', -1)),
+            'commands': int(d.get('commands', -1)),
+            'commands_rejected': int(d.get('commands_rejected', -1)),
+            'filter_resets': int(d.get('errors', -1)),
+            'internal_errors': int(d.get('internal_errors', -1)),
+            'estimates_received': int(state['estimates']),
+            'non_finite_estimates': int(state['bad_estimates']),
+            'latency_ms': _percentiles(lat),
+            'compute_ms': compute,
+            'rss_mb': {'first_estimate': rss_at(t_first_est), 'start': steady, 'end': end,
+                       'max': float(rss_mb.max()) if rss_mb.size else math.nan,
+                       'growth': end - steady,
+                       'max_growth': (max(after_steady) - steady) if after_steady
+                       else math.nan,
+                       'samples': int(rss_mb.size)},
+            'backlog_waits': waits, 'max_backlog': max_backlog,
+            'identifier_exit_code': rc,
+            'saved_steps': None if saved is None else int(saved['steps']),
+            'log_dir': log_dir,
+        }
+    finally:
+        stop.set()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        out.close()
+        err.close()
+        spin_thread.join(timeout=5.0)
+        rss_thread.join(timeout=5.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        fastdds = os.path.join(os.path.dirname(sys.executable), 'fastdds')
+        if os.path.exists(fastdds):
+            subprocess.run([fastdds, 'shm', 'clean'], capture_output=True, check=False,
+                           env=env)
+    result['all_processed'] = (result['accepted'] + result['rejected'] == n
+                               and result['commands'] + result['commands_rejected'] == n)
+    return result
+
+
+def _spin(ex, stop):
+    while not stop.is_set():
+        try:
+            ex.spin_once(timeout_sec=0.05)
+        except Exception:           # noqa: BLE001 - context shut down at the end
+            if stop.is_set():
+                return
+            raise
+
+
+def _tail(path, n=5):
+    try:
+        with open(path, encoding='utf-8', errors='replace') as fh:
+            return ' | '.join(fh.read().strip().splitlines()[-n:])
+    except OSError:
+        return '(no log)'
+
+
+def format_loadtest(d):
+    """A printable report of run_loadtest's dict."""
+    lat, rss = d['latency_ms'], d['rss_mb']
+    lines = [
+        f"load test: {d['vehicle']}, {d['samples']} samples = {d['sim_seconds']:.0f} s of "
+        f"simulated time at {d['rate_hz']:g} Hz (odometry + actuator command per sample)",
+        f"pacing: target {d['real_time_factor']:g}x real time, achieved "
+        f"{d['achieved_real_time_factor']:.2f}x ({d['wall_publish_s']:.1f} s publishing, "
+        f"{d['wall_drain_s']:.1f} s draining; {d['backlog_waits']} backlog waits at "
+        f"{d['max_backlog']} samples)",
+        f"processed: odometry {d['accepted']} accepted + {d['rejected']} rejected of "
+        f"{d['published_odom']} published; commands {d['commands']} + "
+        f"{d['commands_rejected']} rejected of {d['published_actuators']}; "
+        + ('EVERY MESSAGE PROCESSED' if d['all_processed'] else 'MESSAGES MISSING')
+        + f"; filter resets {d['filter_resets']}, internal errors {d['internal_errors']}",
+        f"estimates received: {d['estimates_received']} (non-finite: "
+        f"{d['non_finite_estimates']}); estimate file steps: {d['saved_steps']}",
+        f"latency publish(odom) -> estimate received, ms: p50 {lat['p50']:.3f}, p99 "
+        f"{lat['p99']:.3f}, max {lat['max']:.3f} (n = {lat['n']})",
+    ]
+    c = d.get('compute_ms')
+    if c:
+        lines.append(f"compute per odometry message (IdentSession.on_odom, no ROS), ms: p50 "
+                     f"{c['p50']:.3f}, p99 {c['p99']:.3f}, max {c['max']:.3f} "
+                     f"(n = {c['n']})")
+    lines.append(f"identifier RSS, MB: {rss['first_estimate']:.1f} at the first estimate, "
+                 f"{rss['start']:.1f} at 10 % of the samples, {rss['end']:.1f} at the end, "
+                 f"max {rss['max']:.1f}; growth {rss['growth']:+.2f} MB (max "
+                 f"{rss['max_growth']:+.2f}) over {rss['samples']} samples")
+    lines.append(f"identifier exit code {d['identifier_exit_code']}; logs in {d['log_dir']}")
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    """``python -m auv_ident.loadtest [--rate HZ] [--seconds S] [--rtf X] [--json OUT]``."""
+    import argparse
+    ap = argparse.ArgumentParser(prog='python -m auv_ident loadtest',
+                                 description=__doc__.split('\n')[0])
+    ap.add_argument('--rate', type=float, default=200.0, help='Hz (default 200)')
+    ap.add_argument('--seconds', type=float, default=300.0, help='simulated s (default 300)')
+    ap.add_argument('--rtf', type=float, default=1.0,
+                    help='real-time factor of the publisher (default 1; 0 = as fast as the '
+                         'identifier keeps up)')
+    ap.add_argument('--vehicle', default='nps_auv2')
+    ap.add_argument('--json', help='write the figures as JSON')
+    args = ap.parse_args(argv)
+    d = run_loadtest(rate_hz=args.rate, sim_seconds=args.seconds,
+                     real_time_factor=args.rtf, vehicle=args.vehicle)
+    print(format_loadtest(d))
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as fh:
+            json.dump(d, fh, indent=1, default=float)
+    return 0 if d['all_processed'] else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
