@@ -5,8 +5,6 @@ line on stderr and exit with status 2; no traceback.
 """
 import argparse
 import csv
-import json
-import math
 import sys
 
 import numpy as np

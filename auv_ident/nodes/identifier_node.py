@@ -95,9 +95,7 @@ import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import (InvalidParameterTypeException, ParameterException,
-                               ParameterUninitializedException)
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -108,10 +106,10 @@ from std_srvs.srv import Trigger
 
 from auv_ident.conversions import ns_to_stamp
 from auv_ident.core.ekf import MODES
-from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.identify import DEFAULT_Q_STATE
 from auv_ident.core.simulate import DEFAULT_NOISE_STD
 from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.nodes.common import run_node
 from auv_ident.replay import Event, IdentSession, WarningLimiter, write_estimate_json
 
 RCLError = _rclpy.RCLError
@@ -424,40 +422,10 @@ class IdentifierNode(Node):
             print(f'[{level}] [{self.get_name()}]: {message}', file=sys.stderr, flush=True)
 
 
-def _type_hint(err):
-    if isinstance(err, InvalidParameterTypeException) and "'DOUBLE'" in str(err):
-        return ' (write floats with a decimal point, e.g. 5.0)'
-    return ''
-
-
 def main(args=None):
     """Entry point: identify until SIGINT/SIGTERM (0), or exit 2 on a bad parameter."""
-    try:
-        rclpy.init(args=args)
-    except RCLError as err:     # unparsable --ros-args (rcl has logged the details)
-        print(f'identifier: error: {err}', file=sys.stderr)
-        return 2
-    try:
-        node = IdentifierNode()
-    except (AuvIdentError, ParameterException) as err:
-        print(f'identifier: error: {err}' + _type_hint(err), file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    except KeyboardInterrupt:
-        rclpy.try_shutdown()
-        return 0
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RCLError:
-        if rclpy.ok():      # a real error, not a signal that invalidated the context
-            raise
-    finally:
-        node.shutdown_save()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('identifier', args, IdentifierNode, rclpy.spin,
+                    on_exit=lambda node: node.shutdown_save())
 
 
 if __name__ == '__main__':

@@ -61,9 +61,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.exceptions import (InvalidParameterTypeException, ParameterException,
-                               ParameterUninitializedException)
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -78,6 +76,7 @@ from auv_ident.core.maneuvers import MANEUVERS
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD, simulate
 from auv_ident.core.vehicle import load_vehicle
+from auv_ident.nodes.common import run_node
 from auv_ident.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
 
 RCLError = _rclpy.RCLError
@@ -318,39 +317,10 @@ class SimulatorNode(Node):
         self.finished.set_result(0)
 
 
-def _type_hint(err):
-    if isinstance(err, InvalidParameterTypeException) and "'DOUBLE'" in str(err):
-        return ' (write floats with a decimal point, e.g. 5.0)'
-    return ''
-
-
 def main(args=None):
     """Entry point: run the simulation, exit 0 when it is over (2 on a bad parameter)."""
-    try:
-        rclpy.init(args=args)
-    except RCLError as err:     # unparsable --ros-args (rcl has logged the details)
-        print(f'simulator: error: {err}', file=sys.stderr)
-        return 2
-    try:
-        node = SimulatorNode()
-    except (AuvIdentError, ParameterException) as err:
-        print(f'simulator: error: {err}' + _type_hint(err), file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    except KeyboardInterrupt:
-        rclpy.try_shutdown()
-        return 0
-    try:
-        rclpy.spin_until_future_complete(node, node.finished)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RCLError:
-        if rclpy.ok():      # a real error, not a signal that invalidated the context
-            raise
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('simulator', args, SimulatorNode,
+                    lambda node: rclpy.spin_until_future_complete(node, node.finished))
 
 
 if __name__ == '__main__':

@@ -1,0 +1,52 @@
+"""What the simulator and identifier entry points share: start-up errors as one line, and the
+Jazzy demo_nodes_py spin/shutdown shape (shared/ros_stack.md section 2)."""
+import sys
+
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rclpy.executors import ExternalShutdownException
+
+from auv_ident.core.errors import AuvIdentError
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+RCLError = _rclpy.RCLError
+
+
+def type_hint(err):
+    """An extra hint for the commonest parameter mistake (an int given for a double)."""
+    if isinstance(err, InvalidParameterTypeException) and "'DOUBLE'" in str(err):
+        return ' (write floats with a decimal point, e.g. 5.0)'
+    return ''
+
+
+def run_node(prog, args, make_node, spin, on_exit=None):
+    """rclpy.init, build the node (a bad parameter: one line, exit 2), spin until done or
+    SIGINT/SIGTERM, then on_exit(node), destroy and shut down. Returns the exit status."""
+    try:
+        rclpy.init(args=args)
+    except RCLError as err:     # unparsable --ros-args (rcl has logged the details)
+        print(f'{prog}: error: {err}', file=sys.stderr)
+        return 2
+    try:
+        node = make_node()
+    except (AuvIdentError, ParameterException) as err:
+        print(f'{prog}: error: {err}' + type_hint(err), file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    except KeyboardInterrupt:
+        rclpy.try_shutdown()
+        return 0
+    try:
+        spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RCLError:
+        if rclpy.ok():      # a real error, not a signal that invalidated the context
+            raise
+    finally:
+        if on_exit is not None:
+            on_exit(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
