@@ -41,7 +41,7 @@ N_PAR = 23
 U_MIN = 1e-6          # m/s: |u| below this is outside the Healey-Lienard propeller's domain
 COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular (theta ~ +-90 deg)
 
-CONFIG_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
+
 
 
 def config_dir():
@@ -101,7 +101,7 @@ class Vehicle:
     raw: dict
     coefficients: list
     par: np.ndarray              # float parameters, layout P_*
-    terms_i: np.ndarray          # int (nt, 2 + MAX_FACTORS): equation, coef index (-1 fixed), factors
+    terms_i: np.ndarray          # int (nt, 2 + MAX_FACTORS): equation, coef (-1 fixed), factors
     terms_s: np.ndarray          # float (nt,): scale (times the value for fixed terms)
     am_i: np.ndarray             # int (na, 3): equation, column, coef index
     am_s: np.ndarray             # float (na,): scale of each added-mass coefficient
