@@ -187,7 +187,7 @@ NODES = ('simulator', 'identifier', 'record', 'play')
 
 
 def run_node(argv):
-    """python -m auv_ident run NODE [--ros-args ...], the same node as `ros2 run auv_ident NODE`."""
+    """python -m auv_ident run NODE [--ros-args ...]: as `ros2 run auv_ident NODE`."""
     if not argv or argv[0] not in NODES:
         print(f'usage: python -m auv_ident run {{{",".join(NODES)}}} [--ros-args ...]',
               file=sys.stderr)
