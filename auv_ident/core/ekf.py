@@ -124,6 +124,16 @@ def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
 
 
 @njit(cache=True)
+def _finish_update(xa_out, P_out, nis, m):
+    """Check the posterior (positive variances, finite state) and wrap the heading."""
+    for i in range(xa_out.shape[0]):
+        if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
+            return ERR_NOT_PD, nis, m
+    xa_out[11] = wrap(xa_out[11])
+    return OK, nis, m
+
+
+@njit(cache=True)
 def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white):
     """Scalar Joseph updates channel by channel (R diagonal); see update()."""
     n = xa.shape[0]
@@ -156,11 +166,7 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
                 v = (P_out[i, j] - k[i] * pj[j] - pj[i] * k[j] + (pjj + r) * k[i] * k[j])
                 P_out[i, j] = v
                 P_out[j, i] = v
-    for i in range(n):
-        if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
-            return ERR_NOT_PD, nis, m
-    xa_out[11] = wrap(xa_out[11])
-    return OK, nis, m
+    return _finish_update(xa_out, P_out, nis, m)
 
 
 @njit(cache=True)
@@ -286,11 +292,7 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
             # A1 (I-KH)^T is symmetric in exact arithmetic: mirror the lower triangle
             P_out[i, j] = s
             P_out[j, i] = s
-    for i in range(n):
-        if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
-            return ERR_NOT_PD, nis, m
-    xa_out[11] = wrap(xa_out[11])
-    return OK, nis, m
+    return _finish_update(xa_out, P_out, nis, m)
 
 
 @njit(cache=True)

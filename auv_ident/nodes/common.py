@@ -3,7 +3,9 @@ Jazzy demo_nodes_py spin/shutdown shape (shared/ros_stack.md section 2)."""
 import sys
 
 import rclpy
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import (InvalidParameterTypeException, ParameterException,
+                              ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException
 
 from auv_ident.core.errors import AuvIdentError
@@ -50,3 +52,19 @@ def run_node(prog, args, make_node, spin, on_exit=None):
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def declare_read_only(node, parameters):
+    """Declare (name, default, description) parameters, read-only: they are read once at
+    start-up, so `ros2 param set` is refused rather than silently ignored."""
+    for name, default, text in parameters:
+        node.declare_parameter(name, default, ParameterDescriptor(description=text,
+                                                                  read_only=True))
+
+
+def param_or_none(node, name):
+    """A parameter's value, or None if it is not set (ROS maps '[]' to not set)."""
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None

@@ -92,10 +92,8 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -109,7 +107,7 @@ from auv_ident.core.ekf import MODES
 from auv_ident.core.identify import DEFAULT_Q_STATE
 from auv_ident.core.simulate import DEFAULT_NOISE_STD
 from auv_ident.core.vehicle import STATE_NAMES
-from auv_ident.nodes.common import run_node
+from auv_ident.nodes.common import declare_read_only, param_or_none, run_node
 from auv_ident.replay import Event, IdentSession, WarningLimiter, write_estimate_json
 
 RCLError = _rclpy.RCLError
@@ -208,17 +206,10 @@ class IdentifierNode(Node):
     # -- parameters --
 
     def _declare_parameters(self):
-        # read_only: they are read once at start-up; `ros2 param set` is refused, not ignored
-        for name, default, text in _PARAMETERS:
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
+        declare_read_only(self, _PARAMETERS)
 
     def _param(self, name):
-        """A parameter's value, or None if it is not set (ROS maps '[]' to not set)."""
-        try:
-            return self.get_parameter(name).value
-        except ParameterUninitializedException:
-            return None
+        return param_or_none(self, name)
 
     def _read_parameters(self):
         """Parameters as IdentSession keywords (it validates them, naming the parameter)."""

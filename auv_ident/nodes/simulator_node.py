@@ -57,11 +57,9 @@ import sys
 import time
 
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -76,7 +74,7 @@ from auv_ident.core.maneuvers import MANEUVERS
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD, simulate
 from auv_ident.core.vehicle import load_vehicle
-from auv_ident.nodes.common import run_node
+from auv_ident.nodes.common import declare_read_only, param_or_none, run_node
 from auv_ident.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
 
 RCLError = _rclpy.RCLError
@@ -167,17 +165,10 @@ class SimulatorNode(Node):
     # -- parameters --
 
     def _declare_parameters(self):
-        # read_only: they are read once at start-up; `ros2 param set` is refused, not ignored
-        for name, default, text in _PARAMETERS:
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
+        declare_read_only(self, _PARAMETERS)
 
     def _param(self, name):
-        """A parameter's value, or None if it is not set (ROS maps '[]' to not set)."""
-        try:
-            return self.get_parameter(name).value
-        except ParameterUninitializedException:
-            return None
+        return param_or_none(self, name)
 
     def _read_parameters(self):
         """Validate every parameter once; ConfigError naming the parameter if one is bad."""
