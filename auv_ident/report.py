@@ -116,6 +116,20 @@ def _save(fig, path):
     return path
 
 
+def _log_axis(ax, values=None):
+    """Log y axis labelled 0.01, 0.02, 0.05, ... (not 2x10^-2), limits around `values`."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    ax.set_yscale('log')
+    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f'{y:g}'))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    if values is not None:
+        v = np.asarray(values, dtype=float)
+        v = v[np.isfinite(v) & (v > 0)]
+        if v.size:
+            ax.set_ylim(v.min() / 2.5, v.max() * 2.5)
+
+
 def _coef_unit(vehicle):
     return ('prime, nondim.' if vehicle.raw.get('scaling') != 'dimensional'
             else 'SI, vehicle-file units')
@@ -149,11 +163,16 @@ def fig_convergence(path, vehicle, res, noise_mode):
         lo, hi = min(ref), max(ref)
         pad = max(0.3 * (hi - lo), 0.05 * max(abs(lo), abs(hi)), 1e-12)
         ax.set_ylim(lo - pad, hi + pad)
-        ax.set_title(n, fontsize=10)
+        title = f'{n}: refined {res.estimate[i]:.4g}'
+        if res.truth is not None:
+            title += f', true {res.truth[i]:.4g} (error {res.error_pct()[i]:+.2f} %)'
+        ax.set_title(title, fontsize=9)
         ax.set_ylabel(f'{n} ({_coef_unit(vehicle)})', fontsize=8)
         ax.grid(alpha=0.3)
-    for ax in axes.flat[p:]:
-        ax.set_visible(False)
+    for k in range(p, nrow * ncol):        # empty slot: the panel above keeps its time axis
+        axes.flat[k].set_visible(False)
+        axes.flat[k - ncol].xaxis.set_tick_params(labelbottom=True)
+        axes.flat[k - ncol].set_xlabel('time (s)')
     for ax in axes[-1]:
         ax.set_xlabel('time (s)')
     axes.flat[0].legend(fontsize=7, loc='best')
@@ -165,7 +184,8 @@ def _overlay(path, val, rows, title, reference):
     """Grid of true-vs-identified channels; rows is a list of rows of state indices."""
     plt = _plt()
     ncol = len(rows[0])
-    fig, axes = plt.subplots(len(rows), ncol, figsize=(6.0 * ncol, 2.2 * len(rows) + 0.9),
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(max(9.0, 6.0 * ncol),
+                                                       2.2 * len(rows) + 1.0),
                              sharex=True, squeeze=False, layout='constrained')
     t, Xt, Xi, rms = val
     for r, row in enumerate(rows):
@@ -196,6 +216,7 @@ def fig_nis(path, res, T, hist_every):
     h = res.history
     t, nis, dof = h['t'], h['nis'], h['dof']
     ok = np.isfinite(nis) & (dof > 0)
+    ok[:1] = False     # the first update sets the state from y0 itself: NIS ~ 0, no evidence
     dofs = np.where(ok, dof, np.nan)
     w = max(1, int(round(NIS_WINDOW_S / (hist_every * T))))
     num = np.convolve(np.where(ok, nis, 0.0), np.ones(w))[:len(nis)]
@@ -206,7 +227,7 @@ def fig_nis(path, res, T, hist_every):
         # the mean of n independent chi2(d) NIS is chi2(sum d) / n
         ma_lo = chi2.ppf(0.025, dsum) / cnt
         ma_hi = chi2.ppf(0.975, dsum) / cnt
-    fig, ax = plt.subplots(figsize=(10, 4.6), layout='constrained')
+    fig, ax = plt.subplots(figsize=(10, 5.0), layout='constrained')
     ax.plot(t[ok], nis[ok], '.', color='0.55', ms=2, label='NIS per step')
     ax.plot(t, chi2.ppf(0.025, dofs), color='C2', ls='--', lw=1,
             label='95 % band per step')
@@ -214,14 +235,15 @@ def fig_nis(path, res, T, hist_every):
     ax.fill_between(t, ma_lo, ma_hi, color='C0', alpha=0.2, lw=0,
                     label=f'95 % band of the {NIS_WINDOW_S:.0f} s mean')
     ax.plot(t, ma, color='C0', lw=1.6, label=f'{NIS_WINDOW_S:.0f} s moving mean')
-    ax.set_yscale('log')
     d = int(np.nanmedian(dofs)) if ok.any() else 0
+    # limits from the bands: the first update (state set from y0) has NIS ~ 0
+    _log_axis(ax, [chi2.ppf(0.005, max(d, 1)), np.nanmax(nis[ok]) if ok.any() else 1.0])
     ax.set_xlabel('time (s)')
     ax.set_ylabel('NIS $\\nu^T S^{-1} \\nu$ (dimensionless)')
     ax.set_title(f'Normalised innovation squared ({d} degrees of freedom; mean NIS/dof '
                  f'{res.mean_nis_per_dof:.3f}, expected 1)', fontsize=10)
     ax.grid(alpha=0.3, which='both')
-    ax.legend(fontsize=8, loc='upper right', ncol=2)
+    fig.legend(fontsize=8, loc='outside lower center', ncol=4)
     return _save(fig, path)
 
 
@@ -230,27 +252,32 @@ def fig_noise(path, res, noise_mode):
     plt = _plt()
     h = res.history
     t = h['t']
-    fig, axes = plt.subplots(5, 1, figsize=(9, 12.5), sharex=True, layout='constrained')
+    fig, axes = plt.subplots(5, 1, figsize=(10, 12.5), sharex=True, layout='constrained')
+    # equal channels (u, v, w share a sensor) would hide each other: vary the line style
+    styles = ('-', '--', ':', '-.', (0, (5, 1, 1, 1, 1, 1)))
     sd = np.sqrt(h['R_diag'])
     for ax, (group, idx) in zip(axes, GROUPS):
-        for i in idx:
-            ax.plot(t, SCALE[i] * sd[:, i], lw=1.2, label=STATE_NAMES[i])
+        for k, i in enumerate(idx):
+            ax.plot(t, SCALE[i] * sd[:, i], lw=2.4 - 0.5 * k, ls=styles[k],
+                    label=STATE_NAMES[i])
         ax.set_ylabel(f'R 1-sigma ({UNITS[idx[0]]})')
-        ax.set_title(f'measurement noise, {group}', fontsize=9)
+        ax.set_title(f'measurement noise 1-sigma, {group}', fontsize=9)
+        _log_axis(ax, SCALE[list(idx)] * sd[:, idx])
     qrel = np.sqrt(h['Q_theta_diag']) / np.abs(res.initial)[None, :]
     for i, n in enumerate(res.names):
-        axes[4].plot(t, qrel[:, i], lw=1.2, label=n)
-    axes[4].set_ylabel('Q 1-sigma / |initial|')
-    axes[4].set_title('coefficient random walk per step, relative to the initial guess',
+        axes[4].plot(t, qrel[:, i], lw=2.4 - 0.3 * (i % 5), ls=styles[i % 5], label=n)
+    axes[4].set_ylabel('Q 1-sigma / |initial guess|')
+    axes[4].set_title('coefficient random walk 1-sigma per step, relative to the initial guess',
                       fontsize=9)
+    _log_axis(axes[4], qrel)
     axes[4].set_xlabel('time (s)')
     for ax in axes:
-        ax.set_yscale('log')
         ax.grid(alpha=0.3, which='both')
-        ax.legend(fontsize=8, loc='upper right', ncol=len(res.names) if ax is axes[4] else 3)
-    note = (' (mode fixed: not adapted, constant at the configured values)'
+        ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
+    note = ('\nmode fixed: Q and R are not adapted and stay at their configured values'
             if noise_mode == 'fixed' else '')
-    fig.suptitle(f'Adapted noise covariances, mode {noise_mode!r}{note}', fontsize=11)
+    fig.suptitle(f'Noise covariances used by the EKF, adaptation mode {noise_mode!r}{note}',
+                 fontsize=11)
     return _save(fig, path)
 
 
@@ -278,7 +305,7 @@ def _versions():
             'python': platform.python_version()}
 
 
-def _markdown(doc, src, cfg, val, val_error, figures, command):
+def _markdown(doc, src, cfg, val_error, figures, command):
     v = src.vehicle
     co = doc['coefficients']
     known = src.truth is not None
@@ -358,7 +385,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
     command : the command line that produced the report (quoted in report.md)
     validation_maneuver, validation_duration : held-out manoeuvre and its length (s); its
-        seed is seed + 1000 and process noise is DEFAULT_PROCESS_STD
+        seed is seed + 1000 (the bag's recorded seed + 1000 when it has one) and its process
+        noise is DEFAULT_PROCESS_STD
     progress : show progress bars (only when stderr is a terminal)
 
     Returns
@@ -386,7 +414,10 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     if bar:
         bar.close()
 
-    val_seed = seed + 1000
+    try:        # the run's own seed when the source knows it (a bag's metadata: text)
+        val_seed = int(src.seed) + 1000
+    except (TypeError, ValueError):
+        val_seed = seed + 1000
     rpm = float(np.median(src.U[:, 5]))
     val, val_error = None, None
     try:
@@ -416,7 +447,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     figures = {'convergence': fig_convergence(j('convergence'), v, res, noise_mode)}
     if val is not None:
         ref = 'true model' if src.truth is not None else 'vehicle-file model (prior)'
-        what = (f'{v.title}: held-out {val.maneuver!r} manoeuvre, seed {val_seed}, '
+        what = (f'{v.title}\nheld-out {val.maneuver!r} manoeuvre, seed {val_seed}, '
                 'process noise on')
         figures['validation_positions'] = _overlay(
             j('validation_positions'), val, [[6], [7], [8]], f'{what}: positions', ref)
@@ -429,5 +460,5 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
 
     md_path = os.path.join(out_dir, 'report.md')
     with open(md_path, 'w', encoding='utf-8') as fh:
-        fh.write(_markdown(doc, src, cfg, val, val_error, figures, command) + '\n')
+        fh.write(_markdown(doc, src, cfg, val_error, figures, command) + '\n')
     return {'report': md_path, 'json': json_path, 'figures': figures, 'result': doc}

@@ -1,64 +1,158 @@
-"""Tier 1/5: the validation report (figures, table vs JSON, held-out validation)."""
+"""Tier 1: the report (figures, report.md, result.json) and the held-out validation."""
 import json
-import re
+import os
 
-import matplotlib.image as mpimg
+import matplotlib.image
 import numpy as np
 import pytest
 
+from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.vehicle import load_vehicle
+from auv_ident.core.model import Model
+from auv_ident.core.vehicle import STATE_NAMES, load_vehicle
+from auv_ident.experiments import coefficient_list, load_source
 from auv_ident.report import make_report, validate
 
-PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
+FIGURES = ('convergence', 'validation_positions', 'validation_attitudes', 'validation_speeds',
+           'nis', 'adapted_noise')
+PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+SEED = 3
 
 
 @pytest.fixture(scope='module')
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp('report')
-    return make_report(str(out), vehicle='nps_auv2', simulate_maneuver='ident', seed=2,
-                       duration=60.0, validation_duration=40.0, command='pytest',
-                       progress=False)
+    r = make_report(str(out), vehicle='nps_auv2', simulate_maneuver='ident', seed=SEED,
+                    duration=60.0, validation_duration=40.0, command='pytest', progress=False)
+    with open(r['json'], encoding='utf-8') as fh:
+        doc = json.load(fh)
+    with open(r['report'], encoding='utf-8') as fh:
+        md = fh.read()
+    return r, doc, md
 
 
-def test_every_figure_exists_and_is_a_valid_png(report):
-    names = set(report['figures'])
-    assert {'convergence', 'validation_positions', 'validation_attitudes',
-            'validation_speeds', 'nis', 'adapted_noise'} <= names
-    for path in report['figures'].values():
-        with open(path, 'rb') as fh:
-            assert fh.read(8) == PNG_MAGIC, path
-        img = mpimg.imread(path)
-        assert img.shape[0] > 200 and img.shape[1] > 300, path
-
-
-def test_report_table_numbers_equal_the_json(report):
-    text = open(report['report'], encoding='utf-8').read()
-    doc = json.load(open(report['json'], encoding='utf-8'))
-    assert doc == json.loads(json.dumps(report['result']))
-    for name, c in doc['coefficients'].items():
-        row = next(line for line in text.splitlines()
-                   if re.match(rf'^\|\s*`?{re.escape(name)}`?\s*\|', line))
-        nums = [float(x) for x in re.findall(r'[-+]?\d+\.?\d*(?:[eE][-+]?\d+)?', row)]
-        for key in ('truth', 'estimate', 'std'):
-            assert any(np.isclose(n, c[key], rtol=1e-5) for n in nums), (name, key, row)
-    for fig in ('convergence.png', 'validation_positions.png', 'nis.png'):
-        assert f']({fig})' in text
-    assert 'pytest' in text          # the exact command
-
-
-def test_validation_with_true_coefficients_is_exact_and_with_wrong_ones_is_not():
+@pytest.fixture(scope='module')
+def nps():
     v = load_vehicle('nps_auv2')
-    names = ['Z_w', 'K_v']
-    truth = np.array([v.values[v.index(n)] for n in names])
-    val = validate(v, names, truth, 'steps', 30.0, 1000, identification_maneuver='ident')
-    assert val.maneuver == 'steps'
-    assert all(r == 0.0 for r in val.rms.values())
-    bad = validate(v, names, truth * 1.2, 'steps', 30.0, 1000, identification_maneuver='ident')
-    assert bad.rms['w'] > 0 and bad.rms['z'] > 0
+    names = coefficient_list(v, '')
+    return v, names, Model(v, names).theta_true
 
 
-def test_validation_on_the_identification_manoeuvre_is_refused():
+def test_every_figure_is_a_readable_png_linked_from_the_report(report):
+    r, _, md = report
+    assert set(r['figures']) == set(FIGURES)
+    for name in FIGURES:
+        path = r['figures'][name]
+        assert os.path.basename(path) == name + '.png'
+        with open(path, 'rb') as fh:
+            assert fh.read(8) == PNG_SIGNATURE
+        assert os.path.getsize(path) > 20_000          # not an empty canvas
+        img = matplotlib.image.imread(path)
+        assert img.ndim == 3 and img.shape[0] >= 300 and img.shape[1] >= 600
+        assert img.std() > 0.01                        # something is drawn
+        assert f']({name}.png)' in md                  # embedded with a relative link
+
+
+def _rows(md, first_header):
+    """Cells of the Markdown table whose header row starts with first_header."""
+    lines = md.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(f'| {first_header} |'))
+    header = [c.strip() for c in lines[start].strip('|').split('|')]
+    rows = {}
+    for ln in lines[start + 2:]:
+        if not ln.startswith('|'):
+            break
+        cells = [c.strip() for c in ln.strip('|').split('|')]
+        rows[cells[0]] = dict(zip(header, cells))
+    return rows
+
+
+def _same(cell, value):
+    if value is None:
+        return cell == '-'
+    if isinstance(value, str):
+        return cell == value
+    return float(cell) == float(f'{value:.6g}')    # the table prints 6 significant digits
+
+
+def test_report_tables_hold_the_result_json_numbers(report):
+    r, doc, md = report
+    assert doc == json.loads(json.dumps(r['result']))     # the file is the returned document
+    co = doc['coefficients']
+    main = _rows(md, 'coefficient')
+    assert list(main) == list(co) == coefficient_list(load_vehicle('nps_auv2'), '')
+    cols = {'truth': 'truth', 'estimate': 'estimate', '1-sigma': 'std', 'error %': 'error_pct',
+            'paper estimate': 'paper_estimate', 'paper error %': 'paper_error_pct'}
+    ekf_cols = {'initial': 'initial', 'EKF estimate': 'ekf_estimate', 'EKF 1-sigma': 'ekf_std',
+                'EKF error %': 'ekf_error_pct', 'refined estimate': 'estimate',
+                'refined error %': 'error_pct'}
+    ekf = _rows(md[md.index('### EKF pass alone'):], 'coefficient')
+    for n, c in co.items():
+        for col, key in cols.items():
+            assert _same(main[n][col], c[key]), (n, col, main[n][col], c[key])
+        for col, key in ekf_cols.items():
+            assert _same(ekf[n][col], c[key]), (n, col, ekf[n][col], c[key])
+        assert c['truth'] is not None and abs(c['error_pct']) < 20
+    rms = _rows(md, 'channel')
+    assert list(rms) == list(STATE_NAMES)
+    for ch in STATE_NAMES:
+        assert _same(rms[ch]['RMS difference'], doc['validation']['rms'][ch])
+        assert rms[ch]['unit'] == doc['validation']['rms_units'][ch]
+    assert f'{doc["mean_nis_per_dof"]:.3f}' in md and '`pytest`' in md
+
+
+def test_validation_uses_a_held_out_manoeuvre_and_its_own_seed(report):
+    _, doc, md = report
+    vd = doc['validation']
+    assert doc['maneuver'] == 'ident' and vd['maneuver'] == 'steps'
+    assert vd['seed'] == SEED + 1000 and f'seed {SEED + 1000}' in md
+    src = load_source('nps_auv2', 'ident', seed=SEED, duration=40.0)
+    held_out = maneuvers.commands('steps', src.t, rpm=src.U[0, 5], seed=SEED + 1000)
+    assert not np.allclose(held_out[:, :5], src.U[:, :5])
+
+
+def test_true_coefficients_reproduce_the_truth_exactly(nps):
+    v, names, truth = nps
+    val = validate(v, names, truth, maneuver='steps', duration=40.0, seed=1001)
+    t, X_true, X_ident, rms = val
+    assert val.maneuver == 'steps' and val.seed == 1001 and len(t) == len(X_true) == 801
+    assert np.array_equal(X_true, X_ident)
+    assert rms == {n: 0.0 for n in STATE_NAMES}
+    # the manoeuvre moves the vehicle: a zero RMS is not from a vehicle at rest
+    assert np.ptp(X_true[:, 11]) > 0.1 and np.ptp(X_true[:, 8]) > 0.1
+
+
+def test_perturbed_coefficients_give_a_positive_rms_on_every_channel(nps):
+    v, names, truth = nps
+    _, X_true, X_ident, rms = validate(v, names, 1.2 * truth, maneuver='steps', duration=40.0,
+                                       seed=1001)
+    assert np.array_equal(X_true[0], X_ident[0])      # same start: the trim of the true model
+    assert all(rms[n] > 0 for n in STATE_NAMES), rms
+    assert rms['w'] > 1e-4 and rms['theta'] > 1e-3     # m/s, deg: visibly different
+
+
+def test_validating_on_the_identification_manoeuvre_is_refused(nps, tmp_path):
+    v, names, truth = nps
     with pytest.raises(ConfigError, match='held-out'):
-        validate('nps_auv2', ['Z_w'], np.array([-0.3]), 'ident', 10.0, 1000,
-                 identification_maneuver='ident')
+        validate(v, names, truth, maneuver='ident', identification_maneuver='ident')
+    with pytest.raises(ValueError, match='held-out'):     # before the identification runs
+        make_report(str(tmp_path), vehicle='nps_auv2', simulate_maneuver='zigzag',
+                    duration=10.0, validation_maneuver='zigzag', progress=False)
+    assert not os.listdir(tmp_path)
+
+
+def test_unknown_truth_validates_against_the_vehicle_file_prior(tmp_path, monkeypatch):
+    from auv_ident import experiments
+    src = load_source('nps_auv2', 'zigzag', seed=5, duration=30.0)
+    src.truth, src.maneuver, src.description = None, '', 'a bag with unknown truth'
+    monkeypatch.setattr(experiments, 'load_source', lambda **kw: src)
+    r = make_report(str(tmp_path), bag='unused.mcap', progress=False)
+    doc = r['result']
+    assert all(c['truth'] is None and c['error_pct'] is None
+               for c in doc['coefficients'].values())
+    assert doc['validation']['reference'].startswith("vehicle file's prior")
+    assert set(r['figures']) == set(FIGURES)
+    with open(r['report'], encoding='utf-8') as fh:
+        md = fh.read()
+    assert "the 'true' model below is the vehicle file's prior model" in md
+    assert all(row['truth'] == '-' for row in _rows(md, 'coefficient').values())
