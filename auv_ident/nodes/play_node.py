@@ -56,21 +56,16 @@ import time
 
 from mcap.reader import make_reader
 from rcl_interfaces.msg import ParameterDescriptor
-import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 import yaml
 
-from auv_ident.bag_io import bag_topics, BagError, read_bag
+from auv_ident.bag_io import bag_topics, read_bag
 from auv_ident.conversions import ns_to_stamp
-from auv_ident.core.errors import ConfigError
-from auv_ident.nodes.record_node import (check_command_line, message_class, number_param,
-                                         param_error, StopFlag, string_list_param)
+from auv_ident.nodes.record_node import (message_class, number_param, param_error,
+                                         run_with_stop_flag, string_list_param)
 
 NODE_NAME = 'player'
 CLOCK_TOPIC = '/clock'
@@ -290,34 +285,8 @@ class PlayNode(Node):
 
 def main(args=None):
     """Entry point of ``play``; returns the exit status (0, or 2 on a bad bag/parameter)."""
-    status = check_command_line(args, 'play', __doc__, '-p bag:=run1')
-    if status is not None:
-        return status
-    stop = StopFlag()
-    rc = 0
-    node = None
-    try:
-        try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        except _rclpy.RCLError as exc:
-            print(f'[play] error: bad --ros-args: {str(exc).splitlines()[0]}', file=sys.stderr)
-            return 2
-        try:
-            node = PlayNode()
-            node.play(stop)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        except (ConfigError, BagError) as exc:
-            print(f'[play] error: {exc}', file=sys.stderr)
-            rc = 2
-        finally:
-            stop.hold()
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-    finally:
-        stop.restore()
-    return rc
+    return run_with_stop_flag('play', args, __doc__, '-p bag:=run1', PlayNode,
+                              lambda node, stop: node.play(stop))
 
 
 if __name__ == '__main__':

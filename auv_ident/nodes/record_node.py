@@ -382,9 +382,12 @@ def check_command_line(args, prog, doc, example):
     return 2
 
 
-def main(args=None):
-    """Entry point of ``record``; returns the exit status (0, or 2 on bad parameters)."""
-    status = check_command_line(args, 'record', __doc__, '-p topics:=[/odom] -p output:=run1')
+def run_with_stop_flag(prog, args, doc, example, make_node, work, finish=None):
+    """Entry-point shape shared by record and play: our own signal flag (so queued samples can
+    still be handled after SIGINT/SIGTERM), one error line and exit 2 for bad parameters or
+    bags. work(node, stop) does the job; finish(node), if given, runs before the node is
+    destroyed and returns False on failure (exit 2)."""
+    status = check_command_line(args, prog, doc, example)
     if status is not None:
         return status
     stop = StopFlag()
@@ -394,35 +397,51 @@ def main(args=None):
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         except _rclpy.RCLError as exc:
-            print(f'[record] error: bad --ros-args: {str(exc).splitlines()[0]}',
+            print(f'[{prog}] error: bad --ros-args: {str(exc).splitlines()[0]}',
                   file=sys.stderr)
             return 2
         try:
-            node = RecordNode()
-            if node.start(stop):
-                executor = SingleThreadedExecutor()
-                executor.add_node(node)
-                while not stop.is_set() and rclpy.ok():
-                    executor.spin_once(timeout_sec=POLL_S)
-                node.drain(executor)
+            node = make_node()
+            work(node, stop)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         except (ConfigError, BagError) as exc:
-            print(f'[record] error: {exc}', file=sys.stderr)
+            print(f'[{prog}] error: {exc}', file=sys.stderr)
             rc = 2
         finally:
             stop.hold()
             if node is not None:
-                try:
-                    node.close()
-                except (BagError, OSError) as exc:
-                    print(f'[record] error: {exc}', file=sys.stderr)
+                if finish is not None and finish(node) is False:
                     rc = 2
                 node.destroy_node()
             rclpy.try_shutdown()
     finally:
         stop.restore()
     return rc
+
+
+def _record(node, stop):
+    if node.start(stop):
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=POLL_S)
+        node.drain(executor)
+
+
+def _close(node):
+    try:
+        node.close()
+    except (BagError, OSError) as exc:
+        print(f'[record] error: {exc}', file=sys.stderr)
+        return False
+    return True
+
+
+def main(args=None):
+    """Entry point of ``record``; returns the exit status (0, or 2 on bad parameters)."""
+    return run_with_stop_flag('record', args, __doc__, '-p topics:=[/odom] -p output:=run1',
+                              RecordNode, _record, _close)
 
 
 if __name__ == '__main__':
