@@ -47,58 +47,109 @@ ERR_NAN_STATE = 11
 @njit(cache=True)
 def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
                       recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
-    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p))."""
+    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)).
+
+    Chain rule through the stages: k_s = f(x + a_s k_{s-1}) with a_s = (0, T/2, T/2, T), so
+    dk_s/dx* = [A_s | B_s] + a_s A_s dk_{s-1}/dx* (A_s = df/dx, B_s = df/dtheta at stage s) and
+    Fa = I + T/6 sum_s w_s dk_s/dx* on the vehicle rows (the parameter rows are [0 I]). f does
+    not depend on the position x, y, z (no depth effects in the model), so those columns of A_s
+    are zero and the product skips them; then Fa[:, 6:9] are identity columns.
+    """
     p = theta_idx.shape[0]
     n = 12 + p
     c = c0.copy()
     for j in range(p):
         c[theta_idx[j]] = xa[12 + j]
-    x = xa[:12]
-    acc = np.zeros(12)
-    dacc = np.zeros((12, n))
-    k = np.zeros(12)
-    dk = np.zeros((12, n))
-    A = np.zeros((12, 12))
-    Bt = np.zeros((12, p))
-    xs = np.empty(12)
-    D = np.zeros((12, n))
-    frac = (0.0, 0.5, 0.5, 1.0)
-    wts = (1.0, 2.0, 2.0, 1.0)
-    for s in range(4):
-        a = frac[s] * T
+    vec = np.zeros(36)
+    xs = vec[0:12]
+    k = vec[12:24]
+    acc = vec[24:36]
+    A = np.empty((12, 12))
+    Bt = np.empty((12, p))
+    dk = np.empty((12, n))
+    dk_new = np.empty((12, n))
+    if want_jac:
         for i in range(12):
-            xs[i] = x[i] + a * k[i]
-        if want_jac:
-            for i in range(12):
-                for j in range(n):
-                    D[i, j] = a * dk[i, j]
-                D[i, i] += 1.0
+            for j in range(n):
+                Fa[i, j] = 0.0
+    for s in range(4):
+        a = T * (0.0, 0.5, 0.5, 1.0)[s]
+        wt = (1.0, 2.0, 2.0, 1.0)[s]
+        for i in range(12):
+            xs[i] = xa[i] + a * k[i]
         st = state_derivative(xs, ui, c, par, terms_i, terms_s, am_i, am_s, Minv,
                               recompute_minv, M_RB, theta_pos, p, want_jac, k, A, Bt)
         if st != OK:
             return st
         for i in range(12):
-            acc[i] += wts[s] * k[i]
+            acc[i] += wt * k[i]
         if want_jac:
-            dk[:, :] = A @ D
+            # dk_new = [A | Bt] + a A dk. Columns 6..8 of A (position x, y, z) are always
+            # zero, so the sum skips them; the constant trip counts let the compiler unroll.
             for i in range(12):
-                for j in range(p):
-                    dk[i, 12 + j] += Bt[i, j]
                 for j in range(n):
-                    dacc[i, j] += wts[s] * dk[i, j]
+                    acc_ij = 0.0
+                    if s > 0:
+                        for kk in range(6):
+                            acc_ij += A[i, kk] * dk[kk, j]
+                        for kk in range(9, 12):
+                            acc_ij += A[i, kk] * dk[kk, j]
+                    dk_new[i, j] = a * acc_ij + (A[i, j] if j < 12 else Bt[i, j - 12])
+            dk, dk_new = dk_new, dk
+            ws = T / 6.0 * wt
+            for i in range(12):
+                for j in range(n):
+                    Fa[i, j] += ws * dk[i, j]
     for i in range(12):
-        xa_next[i] = x[i] + T / 6.0 * acc[i]
+        xa_next[i] = xa[i] + T / 6.0 * acc[i]
     for j in range(p):
         xa_next[12 + j] = xa[12 + j]
     if want_jac:
-        for i in range(n):
+        for i in range(12):
+            Fa[i, i] += 1.0
+        for i in range(12, n):
             for j in range(n):
                 Fa[i, j] = 0.0
             Fa[i, i] = 1.0
-        for i in range(12):
-            for j in range(n):
-                Fa[i, j] += T / 6.0 * dacc[i, j]
     return OK
+
+
+@njit(cache=True)
+def propagate_covariance(Fa, P, Q, P_out):
+    """P_out = Fa P Fa^T + Q, symmetric, for Fa = [[Phi, Psi], [0, I]] (parameters constant).
+
+    With M = Fa[:12, :] P: P_out[:12, :12] = M Fa[:12, :]^T, P_out[:12, 12:] = M[:, 12:] and
+    P_out[12:, 12:] = P[12:, 12:] (plus Q). The products run along contiguous rows (the inner
+    loops vectorise) and skip the zeros of Fa.
+    """
+    n = P.shape[0]
+    M = np.zeros((12, n))
+    FaT = np.empty((n, 12))
+    for i in range(12):
+        for kk in range(n):
+            f = Fa[i, kk]
+            FaT[kk, i] = f
+            if f != 0.0:
+                for j in range(n):
+                    M[i, j] += f * P[kk, j]
+    for i in range(12):
+        for j in range(12):
+            P_out[i, j] = 0.0
+        for kk in range(n):
+            mk = M[i, kk]
+            for j in range(12):
+                P_out[i, j] += mk * FaT[kk, j]
+    for i in range(n):
+        for j in range(i + 1):
+            if i < 12:
+                v = 0.5 * (P_out[i, j] + P_out[j, i])
+            elif j < 12:
+                v = M[j, i]
+            else:
+                v = 0.5 * (P[i, j] + P[j, i])
+            v += 0.5 * (Q[i, j] + Q[j, i])
+            P_out[i, j] = v
+            P_out[j, i] = v
 
 
 @njit(cache=True)
@@ -116,10 +167,7 @@ def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
                            recompute_minv, M_RB, theta_pos, T, True, xa_out, Fa)
     if st != OK:
         return st
-    Pn = Fa @ P @ Fa.T + Q
-    for i in range(n):
-        for j in range(n):
-            P_out[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
+    propagate_covariance(Fa, P, Q, P_out)
     return OK
 
 
@@ -144,28 +192,38 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
         S_diag[ch] = P[ch, ch] + R[ch, ch]
     k = np.empty(n)
     pj = np.empty(n)
+    g = np.empty(n)
     nis = 0.0
     for a in range(m):
         ch = idx[a]
         r = R[ch, ch]
-        s = P_out[ch, ch] + r
+        # column ch of the current P; only the lower triangle of P_out is updated in the loop
+        for i in range(ch):
+            pj[i] = P_out[ch, i]
+        for i in range(ch, n):
+            pj[i] = P_out[i, ch]
+        s = pj[ch] + r
         if not (s > 0.0) or not math.isfinite(s):
             return ERR_NOT_PD, np.nan, m
         d = y[ch] - xa_out[ch]
         if ch >= 9:
             d = wrap(d)
         for i in range(n):
-            pj[i] = P_out[i, ch]
             k[i] = pj[i] / s
             xa_out[i] += k[i] * d
         white[ch] = d / math.sqrt(s)
         nis += d * d / s
-        pjj = pj[ch]
+        # Joseph form, P - k pj^T - pj k^T + s k k^T = P - k g^T - pj k^T with g = pj - s k
         for i in range(n):
+            g[i] = pj[i] - s * k[i]
+        for i in range(n):
+            ki = k[i]
+            pi = pj[i]
             for j in range(i + 1):
-                v = (P_out[i, j] - k[i] * pj[j] - pj[i] * k[j] + (pjj + r) * k[i] * k[j])
-                P_out[i, j] = v
-                P_out[j, i] = v
+                P_out[i, j] -= ki * g[j] + pi * k[j]
+    for i in range(n):
+        for j in range(i):
+            P_out[j, i] = P_out[i, j]
     return _finish_update(xa_out, P_out, nis, m)
 
 

@@ -40,26 +40,308 @@ STATUS_TEXT = {
 
 
 @njit(cache=True)
-def saturate(u_in, par, out):
-    """Fins to +-fin limit (rad), shaft speed to +-n limit (rpm); out may alias u_in."""
-    fl = par[P_FIN]
-    for i in range(5):
-        out[i] = min(max(u_in[i], -fl), fl)
-    nl = par[P_NMAX]
-    out[5] = min(max(u_in[5], -nl), nl)
-
-
-@njit(cache=True)
 def _sign(a):
     return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else 0.0)
 
 
 @njit(cache=True)
-def nu_dot_and_jac(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv, M_RB,
-                   theta_pos, p, want_jac, nudot, A6, B6):
-    """nu_dot = M^-1 F; with want_jac, A6 = d nu_dot / dx (6x12), B6 = d nu_dot / d theta (6xp).
+def _propulsion(u, n_rpm, par, z, zd, xdot, A, want_jac):
+    """Propeller force/moment into xdot[0:6] (and A), the Healey-Lienard epsilon into z, zd.
+    Returns a status code."""
+    pm = int(par[P_PROP])
+    rho = par[P_RHO]
+    L = par[P_L]
+    z[Z_EPS] = 0.0
+    zd[Z_EPS] = 0.0
+    if pm == 1:   # Healey & Lienard (MSS npsauv.m)
+        if abs(u) < par[P_U_MIN]:
+            return ERR_U_ZERO
+        n_rad = n_rpm * 2.0 * math.pi / 60.0
+        Cd0 = par[P_PROP_A]
+        a = par[P_PROP_B] * n_rad                 # eta = a / u
+        eta = a / u
+        ee = abs(eta) * eta
+        h2 = 0.5 * rho * L * L
+        # u^2 Cd0 (|eta| eta - 1) = Cd0 (|a| a sign(u) - u^2): thrust does not depend on u
+        xdot[0] += h2 * u * u * Cd0 * (ee - 1.0)
+        ctg = par[P_PROP_C] * L * L / 2.0
+        Ct = ctg * ee
+        if Ct + 1.0 < 0.0:
+            return ERR_EPS_COMPLEX
+        den = math.sqrt(ctg + 1.0) - 1.0          # Ct at eta = 1
+        sgn = _sign(n_rad) / _sign(u)
+        sq = math.sqrt(Ct + 1.0)
+        z[Z_EPS] = -1.0 + sgn * (sq - 1.0) / den
+        if want_jac:
+            A[0, 0] += h2 * Cd0 * (-2.0 * u)
+            au = abs(u)
+            dee_du = -2.0 * abs(a) * a / (au * au * au)
+            zd[Z_EPS] = sgn * (0.5 / sq) * ctg * dee_du / den
+    elif pm == 2:  # thrust and torque quadratic in n (Prestero's constant Xprop, Kprop at n0)
+        s = n_rpm / par[P_PROP_C]
+        xdot[0] += par[P_PROP_A] * s * abs(s)
+        xdot[3] += par[P_PROP_B] * s * abs(s)
+    return OK
 
-    theta_pos[ci] is the position of coefficient ci in theta, or -1. Returns a status code.
+
+@njit(cache=True)
+def _monomials(c, terms_i, terms_s, theta_pos, z, zd, want_jac, xdot, A, Bt):
+    """Sum of monomial terms k c_i z_a z_b ... into xdot[0:6]; d/dx into A[0:6], d/dtheta into
+    Bt[0:6]. zd[i] is d z_i / d x_(i mod 6) (1 for u..r, sign for |u|..|r|, 0 for the fins,
+    d eps/du for eps, whose column is 18 mod 6 = 0 = u), so every factor is differentiated by
+    the same branch-free line."""
+    for t in range(terms_i.shape[0]):
+        eq = terms_i[t, 0]
+        ci = terms_i[t, 1]
+        f0 = terms_i[t, 2]
+        f1 = terms_i[t, 3]
+        k = terms_s[t]
+        if ci >= 0:
+            k = k * c[ci]
+        if f1 >= 0 and terms_i[t, 4] < 0:        # two factors: most terms
+            z0 = z[f0]
+            z1 = z[f1]
+            prod = z0 * z1
+            if want_jac:
+                A[eq, f0 % 6] += k * z1 * zd[f0]
+                A[eq, f1 % 6] += k * z0 * zd[f1]
+        else:
+            prod = 1.0
+            nf = 0
+            for j in range(MAX_FACTORS):
+                fj = terms_i[t, 2 + j]
+                if fj < 0:
+                    break
+                prod *= z[fj]
+                nf += 1
+            if want_jac:
+                for j in range(nf):
+                    rest = k
+                    for jj in range(nf):
+                        if jj != j:
+                            rest *= z[terms_i[t, 2 + jj]]
+                    fj = terms_i[t, 2 + j]
+                    A[eq, fj % 6] += rest * zd[fj]
+        xdot[eq] += k * prod
+        if want_jac and ci >= 0:
+            tp = theta_pos[ci]
+            if tp >= 0:
+                Bt[eq, tp] += terms_s[t] * prod
+
+
+@njit(cache=True)
+def _restoring(par, sph, cph, sth, cth, want_jac, xdot, A):
+    """Restoring forces g(eta) (Fossen eq. 4.6), sign flipped to the right-hand side."""
+    W = par[P_W]
+    B = par[P_B]
+    WB = W - B
+    gx = par[P_XG] * W - par[P_XB] * B
+    gy = par[P_YG] * W - par[P_YB] * B
+    gz = par[P_ZG] * W - par[P_ZB] * B
+    xdot[0] += -WB * sth
+    xdot[1] += WB * cth * sph
+    xdot[2] += WB * cth * cph
+    xdot[3] += gy * cth * cph - gz * cth * sph
+    xdot[4] += -gz * sth - gx * cth * cph
+    xdot[5] += gx * cth * sph + gy * sth
+    if want_jac:
+        A[0, 10] += -WB * cth
+        A[1, 9] += WB * cth * cph
+        A[1, 10] += -WB * sth * sph
+        A[2, 9] += -WB * cth * sph
+        A[2, 10] += -WB * sth * cph
+        A[3, 9] += -gy * cth * sph - gz * cth * cph
+        A[3, 10] += -gy * sth * cph + gz * sth * sph
+        A[4, 9] += gx * cth * sph
+        A[4, 10] += -gz * cth + gx * sth * cph
+        A[5, 9] += gx * cth * cph
+        A[5, 10] += -gx * sth * sph + gy * cth
+
+
+@njit(cache=True)
+def _crossflow(par, v, w, q, r, want_jac, xdot, A):
+    """Cross-flow drag, MSS classic strip sum (skipped when v = w = 0, as MSS does).
+
+    Per strip at x_l: a = v + x_l r, b = w - x_l q, U = sqrt(a^2 + b^2), g = (c_y a^2 +
+    c_z b^2) / U; Y -= rho/2 sum g a dx, Z += .. g b, M -= .. g (w + x_l q) x_l ('+' as in MSS,
+    sic), N -= .. g a x_l. The derivatives w.r.t. (v, w, q, r) follow from da = (1, 0, 0, x_l),
+    db = (0, 1, -x_l, 0), dc = (0, 1, x_l, 0), written out term by term."""
+    if int(par[P_CF]) != 1 or (v * v + w * w) == 0.0:
+        return
+    L = par[P_L]
+    ns = int(par[P_CF_N])
+    dx = L / (ns - 1)
+    cy = par[P_CF_CY]
+    cz = par[P_CF_CZ]
+    Sy = Sz = Sm = Sn = 0.0
+    Yv = Yw = Yq = Yr = 0.0     # d Sy / d(v, w, q, r), and so on
+    Zv = Zw = Zq = Zr = 0.0
+    Mv = Mw = Mq = Mr = 0.0
+    Nv = Nw = Nq = Nr = 0.0
+    for i in range(ns):
+        xl = -L / 2.0 + i * dx
+        aa = v + xl * r
+        bb = w - xl * q
+        U = math.sqrt(aa * aa + bb * bb)
+        if U == 0.0:
+            continue          # integrand -> 0 as U -> 0 (it is O(U)); avoid 0/0
+        N_ = cy * aa * aa + cz * bb * bb
+        g = N_ / U
+        cc = w + xl * q
+        Sy += g * aa
+        Sz += g * bb
+        Sm += g * cc * xl
+        Sn += g * aa * xl
+        if want_jac:
+            U3 = U * U * U
+            ga = 2.0 * cy * aa / U - N_ * aa / U3     # dg/da
+            gb = 2.0 * cz * bb / U - N_ * bb / U3     # dg/db
+            ya = ga * aa + g                          # d(g a)/da
+            zb = gb * bb + g                          # d(g b)/db
+            Yv += ya
+            Yw += gb * aa
+            Yq -= gb * aa * xl
+            Yr += ya * xl
+            Zv += ga * bb
+            Zw += zb
+            Zq -= zb * xl
+            Zr += ga * bb * xl
+            Mv += ga * cc * xl
+            Mw += (gb * cc + g) * xl
+            Mq += (-gb * xl * cc + g * xl) * xl
+            Mr += ga * xl * cc * xl
+            Nv += ya * xl
+            Nw += gb * aa * xl
+            Nq -= gb * aa * xl * xl
+            Nr += ya * xl * xl
+    h = 0.5 * par[P_RHO] * dx
+    xdot[1] -= h * Sy
+    xdot[2] += h * Sz
+    xdot[4] -= h * Sm
+    xdot[5] -= h * Sn
+    if want_jac:
+        A[1, 1] -= h * Yv
+        A[1, 2] -= h * Yw
+        A[1, 4] -= h * Yq
+        A[1, 5] -= h * Yr
+        A[2, 1] += h * Zv
+        A[2, 2] += h * Zw
+        A[2, 4] += h * Zq
+        A[2, 5] += h * Zr
+        A[4, 1] -= h * Mv
+        A[4, 2] -= h * Mw
+        A[4, 4] -= h * Mq
+        A[4, 5] -= h * Mr
+        A[5, 1] -= h * Nv
+        A[5, 2] -= h * Nw
+        A[5, 4] -= h * Nq
+        A[5, 5] -= h * Nr
+
+
+@njit(cache=True)
+def _solve_minv(Mi, X, ncols):
+    """X[0:6, :ncols] <- M^-1 X[0:6, :ncols] in place (one column at a time)."""
+    for j in range(ncols):
+        f0 = X[0, j]
+        f1 = X[1, j]
+        f2 = X[2, j]
+        f3 = X[3, j]
+        f4 = X[4, j]
+        f5 = X[5, j]
+        for i in range(6):
+            X[i, j] = (Mi[i, 0] * f0 + Mi[i, 1] * f1 + Mi[i, 2] * f2 + Mi[i, 3] * f3
+                       + Mi[i, 4] * f4 + Mi[i, 5] * f5)
+
+
+@njit(cache=True)
+def _solve_vec(Mi, v):
+    """v[0:6] <- M^-1 v[0:6] in place."""
+    f0 = v[0]
+    f1 = v[1]
+    f2 = v[2]
+    f3 = v[3]
+    f4 = v[4]
+    f5 = v[5]
+    for i in range(6):
+        v[i] = (Mi[i, 0] * f0 + Mi[i, 1] * f1 + Mi[i, 2] * f2 + Mi[i, 3] * f3 + Mi[i, 4] * f4
+                + Mi[i, 5] * f5)
+
+
+@njit(cache=True)
+def _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A):
+    """eta_dot = J(eta) nu (Fossen eq. 2.40, ZYX) into xdot[6:12], d/dx into A[6:12]."""
+    u = x[0]
+    v = x[1]
+    w = x[2]
+    p = x[3]
+    q = x[4]
+    r = x[5]
+    psi = x[11]
+    cp = math.cos(psi)
+    sp = math.sin(psi)
+    tt = sth / cth
+    R00 = cp * cth
+    R01 = -sp * cph + cp * sth * sph
+    R02 = sp * sph + cp * cph * sth
+    R10 = sp * cth
+    R11 = cp * cph + sph * sth * sp
+    R12 = -cp * sph + sth * sp * cph
+    R20 = -sth
+    R21 = cth * sph
+    R22 = cth * cph
+    xd = R00 * u + R01 * v + R02 * w
+    yd = R10 * u + R11 * v + R12 * w
+    xdot[6] = xd
+    xdot[7] = yd
+    xdot[8] = R20 * u + R21 * v + R22 * w
+    xdot[9] = p + sph * tt * q + cph * tt * r
+    xdot[10] = cph * q - sph * r
+    xdot[11] = (sph * q + cph * r) / cth
+    if want_jac:          # rows 6..11 were zeroed by the caller
+        A[6, 0] = R00
+        A[6, 1] = R01
+        A[6, 2] = R02
+        A[7, 0] = R10
+        A[7, 1] = R11
+        A[7, 2] = R12
+        A[8, 0] = R20
+        A[8, 1] = R21
+        A[8, 2] = R22
+        # d/dphi
+        A[6, 9] = (sp * sph + cp * sth * cph) * v + (sp * cph - cp * sph * sth) * w
+        A[7, 9] = (-cp * sph + cph * sth * sp) * v + (-cp * cph - sth * sp * sph) * w
+        A[8, 9] = cth * cph * v - cth * sph * w
+        # d/dtheta
+        A[6, 10] = -cp * sth * u + cp * cth * sph * v + cp * cph * cth * w
+        A[7, 10] = -sp * sth * u + sph * cth * sp * v + cth * sp * cph * w
+        A[8, 10] = -cth * u - sth * sph * v - sth * cph * w
+        # d/dpsi
+        A[6, 11] = -yd
+        A[7, 11] = xd
+        # Euler-angle rates
+        A[9, 3] = 1.0
+        A[9, 4] = sph * tt
+        A[9, 5] = cph * tt
+        A[10, 4] = cph
+        A[10, 5] = -sph
+        A[11, 4] = sph / cth
+        A[11, 5] = cph / cth
+        A[9, 9] = cph * tt * q - sph * tt * r
+        A[10, 9] = -sph * q - cph * r
+        A[11, 9] = (cph * q - sph * r) / cth
+        A[9, 10] = (sph * q + cph * r) / (cth * cth)
+        A[11, 10] = (sph * q + cph * r) * sth / (cth * cth)
+
+
+@njit(cache=True)
+def state_derivative(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv, M_RB,
+                     theta_pos, p, want_jac, xdot, A, Bt):
+    """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
+
+    theta_pos[ci] is the position of coefficient ci in theta, or -1. Returns a status code
+    (OK = 0). nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A,
+    Bt and M^-1 is applied in place at the end. Nothing is allocated but one small scratch
+    vector (this runs four times per EKF step).
     """
     for i in range(12):
         if not math.isfinite(x[i]):
@@ -67,210 +349,53 @@ def nu_dot_and_jac(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_
     for i in range(6):
         if not math.isfinite(ui[i]):
             return ERR_NONFINITE
-    phi = x[9]
     th = x[10]
     cth = math.cos(th)
     if abs(cth) < COS_THETA_MIN:
         return ERR_THETA_90
-    d = np.empty(6)
-    saturate(ui, par, d)
-    u = x[0]
-    v = x[1]
-    w = x[2]
-    q = x[4]
-    r = x[5]
-    rho = par[P_RHO]
-    L = par[P_L]
-
-    z = np.zeros(NZ)
-    dz = np.zeros(NZ)    # dz/du only matters for eps; velocity factors handled by index
+    sth = math.sin(th)
+    sph = math.sin(x[9])
+    cph = math.cos(x[9])
+    for i in range(6):
+        xdot[i] = 0.0
+    if want_jac:
+        for i in range(12):
+            for j in range(12):
+                A[i, j] = 0.0
+            for j in range(p):
+                Bt[i, j] = 0.0
+    # factor vector z (vehicle.FACTORS) and zd = d z_i / d x_(i mod 6)
+    ws = np.empty(2 * NZ)
+    z = ws[:NZ]
+    zd = ws[NZ:]
     for i in range(6):
         z[i] = x[i]
         z[6 + i] = abs(x[i])
-    z[12] = d[0]
-    z[13] = d[1]
-    z[14] = d[2]
-    z[15] = d[3]
-    z[16] = d[4]
-    z[17] = d[3] + d[4]
-
-    F = np.zeros(6)
-    dF = np.zeros((6, 12))     # dF/dx (x: 12 states)
-    G = np.zeros((6, p))       # dF/dtheta
-
-    # --- propulsion
-    pm = int(par[P_PROP])
-    n_rad = d[5] * 2.0 * math.pi / 60.0
-    if pm == 1:   # Healey & Lienard (MSS npsauv.m)
-        if abs(u) < par[P_U_MIN]:
-            return ERR_U_ZERO
-        Cd0 = par[P_PROP_A]
-        a = par[P_PROP_B] * n_rad                 # eta = a / u
-        eta = a / u
-        ee = abs(eta) * eta
-        h2 = 0.5 * rho * L * L
-        # u^2 Cd0 (|eta| eta - 1) = Cd0 (|a| a sign(u) - u^2): thrust does not depend on u
-        F[0] += h2 * u * u * Cd0 * (ee - 1.0)
-        dF[0, 0] += h2 * Cd0 * (-2.0 * u)
-        ctg = par[P_PROP_C] * L * L / 2.0
-        Ct = ctg * ee
-        Ct1 = ctg
-        if Ct + 1.0 < 0.0:
-            return ERR_EPS_COMPLEX
-        den = math.sqrt(Ct1 + 1.0) - 1.0
-        sgn = _sign(n_rad) / _sign(u)
-        sq = math.sqrt(Ct + 1.0)
-        z[Z_EPS] = -1.0 + sgn * (sq - 1.0) / den
-        dee_du = -2.0 * abs(a) * a / (abs(u) ** 3)
-        dz[Z_EPS] = sgn * (0.5 / sq) * ctg * dee_du / den
-    elif pm == 2:  # thrust and torque quadratic in n (Prestero's constant Xprop, Kprop at n0)
-        s = d[5] / par[P_PROP_C]
-        F[0] += par[P_PROP_A] * s * abs(s)
-        F[3] += par[P_PROP_B] * s * abs(s)
-
-    # --- monomial terms: coefficients and rigid-body Coriolis
-    nt = terms_i.shape[0]
-    for t in range(nt):
-        eq = terms_i[t, 0]
-        ci = terms_i[t, 1]
-        k = terms_s[t]
-        if ci >= 0:
-            k = k * c[ci]
-        prod = 1.0
-        nf = 0
-        for j in range(MAX_FACTORS):
-            fj = terms_i[t, 2 + j]
-            if fj < 0:
-                break
-            prod *= z[fj]
-            nf += 1
-        F[eq] += k * prod
-        if want_jac:
-            if ci >= 0 and theta_pos[ci] >= 0:
-                G[eq, theta_pos[ci]] += terms_s[t] * prod
-            for j in range(nf):
-                fj = terms_i[t, 2 + j]
-                if fj >= 12 and fj != Z_EPS:
-                    continue       # fins: inputs, not states
-                rest = k
-                for jj in range(nf):
-                    if jj != j:
-                        rest *= z[terms_i[t, 2 + jj]]
-                if fj < 6:
-                    dF[eq, fj] += rest
-                elif fj < 12:
-                    dF[eq, fj - 6] += rest * _sign(x[fj - 6])
-                else:
-                    dF[eq, 0] += rest * dz[Z_EPS]
-
-    # --- restoring forces g(eta), sign flipped to the right-hand side
-    W = par[P_W]
-    B = par[P_B]
-    sph = math.sin(phi)
-    cph = math.cos(phi)
-    sth = math.sin(th)
-    WB = W - B
-    gx = par[P_XG] * W - par[P_XB] * B
-    gy = par[P_YG] * W - par[P_YB] * B
-    gz = par[P_ZG] * W - par[P_ZB] * B
-    F[0] += -WB * sth
-    F[1] += WB * cth * sph
-    F[2] += WB * cth * cph
-    F[3] += gy * cth * cph - gz * cth * sph
-    F[4] += -gz * sth - gx * cth * cph
-    F[5] += gx * cth * sph + gy * sth
-    if want_jac:
-        dF[0, 10] += -WB * cth
-        dF[1, 9] += WB * cth * cph
-        dF[1, 10] += -WB * sth * sph
-        dF[2, 9] += -WB * cth * sph
-        dF[2, 10] += -WB * sth * cph
-        dF[3, 9] += -gy * cth * sph - gz * cth * cph
-        dF[3, 10] += -gy * sth * cph + gz * sth * sph
-        dF[4, 9] += gx * cth * sph
-        dF[4, 10] += -gz * cth + gx * sth * cph
-        dF[5, 9] += gx * cth * cph
-        dF[5, 10] += -gx * sth * sph + gy * cth
-
-    # --- cross-flow drag, MSS classic strip sum (skipped when v = w = 0, as MSS does)
-    if int(par[P_CF]) == 1 and (v * v + w * w) != 0.0:
-        ns = int(par[P_CF_N])
-        dx = L / (ns - 1)
-        cy = par[P_CF_CY]
-        cz = par[P_CF_CZ]
-        Sy = 0.0
-        Sz = 0.0
-        Sm = 0.0
-        Sn = 0.0
-        # derivatives of the sums w.r.t. (v, w, q, r)
-        dSy = np.zeros(4)
-        dSz = np.zeros(4)
-        dSm = np.zeros(4)
-        dSn = np.zeros(4)
-        for i in range(ns):
-            xl = -L / 2.0 + i * dx
-            aa = v + xl * r
-            bb = w - xl * q
-            U = math.sqrt(aa * aa + bb * bb)
-            if U == 0.0:
-                continue          # integrand -> 0 as U -> 0 (it is O(U)); avoid 0/0
-            N_ = cy * aa * aa + cz * bb * bb
-            g = N_ / U
-            cc = w + xl * q       # '+' as in MSS (sic)
-            Sy += dx * g * aa
-            Sz += dx * g * bb
-            Sm += dx * g * cc * xl
-            Sn += dx * g * aa * xl
-            if want_jac:
-                ga = 2.0 * cy * aa / U - N_ * aa / U ** 3
-                gb = 2.0 * cz * bb / U - N_ * bb / U ** 3
-                # d(a)/d(v,w,q,r) = (1, 0, 0, xl); d(b)/d(...) = (0, 1, -xl, 0)
-                da = (1.0, 0.0, 0.0, xl)
-                db = (0.0, 1.0, -xl, 0.0)
-                dc = (0.0, 1.0, xl, 0.0)
-                for m in range(4):
-                    dg = ga * da[m] + gb * db[m]
-                    dSy[m] += dx * (dg * aa + g * da[m])
-                    dSz[m] += dx * (dg * bb + g * db[m])
-                    dSm[m] += dx * (dg * cc + g * dc[m]) * xl
-                    dSn[m] += dx * (dg * aa + g * da[m]) * xl
-        h = 0.5 * rho
-        F[1] -= h * Sy
-        F[2] += h * Sz
-        F[4] -= h * Sm
-        F[5] -= h * Sn
-        if want_jac:
-            cols = (1, 2, 4, 5)
-            for m in range(4):
-                dF[1, cols[m]] -= h * dSy[m]
-                dF[2, cols[m]] += h * dSz[m]
-                dF[4, cols[m]] -= h * dSm[m]
-                dF[5, cols[m]] -= h * dSn[m]
-
-    # --- nu_dot = M^-1 F
+        zd[i] = 1.0
+        zd[6 + i] = _sign(x[i])
+    fl = par[P_FIN]
+    for i in range(5):                       # fins saturated to +-fin limit (rad)
+        z[12 + i] = min(max(ui[i], -fl), fl)
+        zd[12 + i] = 0.0
+    z[17] = z[15] + z[16]
+    zd[17] = 0.0
+    n_rpm = min(max(ui[5], -par[P_NMAX]), par[P_NMAX])
+    st = _propulsion(x[0], n_rpm, par, z, zd, xdot, A, want_jac)
+    if st != OK:
+        return st
+    _monomials(c, terms_i, terms_s, theta_pos, z, zd, want_jac, xdot, A, Bt)
+    _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
+    _crossflow(par, x[1], x[2], x[4], x[5], want_jac, xdot, A)
     Mi = Minv
     if recompute_minv:
         M = M_RB.copy()
         for a_ in range(am_i.shape[0]):
             M[am_i[a_, 0], am_i[a_, 1]] -= am_s[a_] * c[am_i[a_, 2]]
         Mi = np.linalg.inv(M)
-    for i in range(6):
-        s = 0.0
-        for j in range(6):
-            s += Mi[i, j] * F[j]
-        nudot[i] = s
+    _solve_vec(Mi, xdot)
     if want_jac:
-        for i in range(6):
-            for j in range(12):
-                s = 0.0
-                for kk in range(6):
-                    s += Mi[i, kk] * dF[kk, j]
-                A6[i, j] = s
-            for j in range(p):
-                s = 0.0
-                for kk in range(6):
-                    s += Mi[i, kk] * G[kk, j]
-                B6[i, j] = s
+        _solve_minv(Mi, A, 12)
+        _solve_minv(Mi, Bt, p)
         # added-mass coefficients in theta: d(M^-1 F)/da = -M^-1 (dM/da) nu_dot,
         # dM/da = -scale at (equation, column)
         for a_ in range(am_i.shape[0]):
@@ -279,117 +404,11 @@ def nu_dot_and_jac(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_
                 col = am_i[a_, 1]
                 eq = am_i[a_, 0]
                 for i in range(6):
-                    B6[i, theta_pos[ci]] += Mi[i, eq] * am_s[a_] * nudot[col]
+                    Bt[i, theta_pos[ci]] += Mi[i, eq] * am_s[a_] * xdot[col]
     for i in range(6):
-        if not math.isfinite(nudot[i]):
+        if not math.isfinite(xdot[i]):
             return ERR_NONFINITE
-    return OK
-
-
-@njit(cache=True)
-def kinematics_and_jac(x, want_jac, etadot, Ak):
-    """eta_dot = J(eta) nu (Fossen eq. 2.40, ZYX); Ak = d eta_dot / dx (6x12)."""
-    u = x[0]
-    v = x[1]
-    w = x[2]
-    p = x[3]
-    q = x[4]
-    r = x[5]
-    phi = x[9]
-    th = x[10]
-    psi = x[11]
-    cf = math.cos(phi)
-    sf = math.sin(phi)
-    ct = math.cos(th)
-    st = math.sin(th)
-    cp = math.cos(psi)
-    sp = math.sin(psi)
-    tt = st / ct
-    R00 = cp * ct
-    R01 = -sp * cf + cp * st * sf
-    R02 = sp * sf + cp * cf * st
-    R10 = sp * ct
-    R11 = cp * cf + sf * st * sp
-    R12 = -cp * sf + st * sp * cf
-    R20 = -st
-    R21 = ct * sf
-    R22 = ct * cf
-    xd = R00 * u + R01 * v + R02 * w
-    yd = R10 * u + R11 * v + R12 * w
-    zd = R20 * u + R21 * v + R22 * w
-    etadot[0] = xd
-    etadot[1] = yd
-    etadot[2] = zd
-    etadot[3] = p + sf * tt * q + cf * tt * r
-    etadot[4] = cf * q - sf * r
-    etadot[5] = (sf * q + cf * r) / ct
-    if want_jac:
-        for i in range(6):
-            for j in range(12):
-                Ak[i, j] = 0.0
-        Ak[0, 0] = R00
-        Ak[0, 1] = R01
-        Ak[0, 2] = R02
-        Ak[1, 0] = R10
-        Ak[1, 1] = R11
-        Ak[1, 2] = R12
-        Ak[2, 0] = R20
-        Ak[2, 1] = R21
-        Ak[2, 2] = R22
-        # d/dphi
-        Ak[0, 9] = (sp * sf + cp * st * cf) * v + (sp * cf - cp * sf * st) * w
-        Ak[1, 9] = (-cp * sf + cf * st * sp) * v + (-cp * cf - st * sp * sf) * w
-        Ak[2, 9] = ct * cf * v - ct * sf * w
-        # d/dtheta
-        Ak[0, 10] = -cp * st * u + cp * ct * sf * v + cp * cf * ct * w
-        Ak[1, 10] = -sp * st * u + sf * ct * sp * v + ct * sp * cf * w
-        Ak[2, 10] = -ct * u - st * sf * v - st * cf * w
-        # d/dpsi
-        Ak[0, 11] = -yd
-        Ak[1, 11] = xd
-        # Euler-angle rates
-        Ak[3, 3] = 1.0
-        Ak[3, 4] = sf * tt
-        Ak[3, 5] = cf * tt
-        Ak[4, 4] = cf
-        Ak[4, 5] = -sf
-        Ak[5, 4] = sf / ct
-        Ak[5, 5] = cf / ct
-        Ak[3, 9] = cf * tt * q - sf * tt * r
-        Ak[4, 9] = -sf * q - cf * r
-        Ak[5, 9] = (cf * q - sf * r) / ct
-        Ak[3, 10] = (sf * q + cf * r) / (ct * ct)
-        Ak[5, 10] = (sf * q + cf * r) * st / (ct * ct)
-
-
-@njit(cache=True)
-def state_derivative(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv, M_RB,
-                     theta_pos, p, want_jac, xdot, A, Bt):
-    """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
-
-    Returns a status code (OK = 0).
-    """
-    A6 = np.zeros((6, 12))
-    B6 = np.zeros((6, p))
-    nudot = np.empty(6)
-    st = nu_dot_and_jac(x, ui, c, par, terms_i, terms_s, am_i, am_s, Minv, recompute_minv,
-                        M_RB, theta_pos, p, want_jac, nudot, A6, B6)
-    if st != OK:
-        return st
-    etadot = np.empty(6)
-    Ak = np.zeros((6, 12))
-    kinematics_and_jac(x, want_jac, etadot, Ak)
-    for i in range(6):
-        xdot[i] = nudot[i]
-        xdot[6 + i] = etadot[i]
-    if want_jac:
-        for i in range(6):
-            for j in range(12):
-                A[i, j] = A6[i, j]
-                A[6 + i, j] = Ak[i, j]
-            for j in range(p):
-                Bt[i, j] = B6[i, j]
-                Bt[6 + i, j] = 0.0
+    _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A)
     return OK
 
 
