@@ -33,7 +33,7 @@ Noise adaptation (`mode`), gamma = 1 - exp(-T/tau) (Eq. 20, "t" read as the samp
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from .model import OK, state_derivative
 
@@ -118,36 +118,26 @@ def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, 
 def propagate_covariance(Fa, P, Q, P_out):
     """P_out = Fa P Fa^T + Q, symmetric, for Fa = [[Phi, Psi], [0, I]] (parameters constant).
 
-    With M = Fa[:12, :] P: P_out[:12, :12] = M Fa[:12, :]^T, P_out[:12, 12:] = M[:, 12:] and
-    P_out[12:, 12:] = P[12:, 12:] (plus Q). The products run along contiguous rows (the inner
-    loops vectorise) and skip the zeros of Fa.
+    With F12 = Fa[:12, :] and M = F12 P: P_out[:12, :12] = M F12^T, P_out[:12, 12:] = M[:, 12:]
+    and P_out[12:, 12:] = P[12:, 12:] (plus Q): two products of 12 rows instead of the full
+    n x n ones.
     """
     n = P.shape[0]
-    M = np.zeros((12, n))
-    FaT = np.empty((n, 12))
+    F12 = Fa[:12]
+    M = np.dot(F12, P)
+    O = np.dot(M, F12.T)
     for i in range(12):
-        for kk in range(n):
-            f = Fa[i, kk]
-            FaT[kk, i] = f
-            if f != 0.0:
-                for j in range(n):
-                    M[i, j] += f * P[kk, j]
-    for i in range(12):
-        for j in range(12):
-            P_out[i, j] = 0.0
-        for kk in range(n):
-            mk = M[i, kk]
-            for j in range(12):
-                P_out[i, j] += mk * FaT[kk, j]
-    for i in range(n):
         for j in range(i + 1):
-            if i < 12:
-                v = 0.5 * (P_out[i, j] + P_out[j, i])
-            elif j < 12:
-                v = M[j, i]
-            else:
-                v = 0.5 * (P[i, j] + P[j, i])
-            v += 0.5 * (Q[i, j] + Q[j, i])
+            v = 0.5 * (O[i, j] + O[j, i] + Q[i, j] + Q[j, i])
+            P_out[i, j] = v
+            P_out[j, i] = v
+    for i in range(12, n):
+        for j in range(12):
+            v = M[j, i] + 0.5 * (Q[i, j] + Q[j, i])
+            P_out[i, j] = v
+            P_out[j, i] = v
+        for j in range(12, i + 1):
+            v = 0.5 * (P[i, j] + P[j, i] + Q[i, j] + Q[j, i])
             P_out[i, j] = v
             P_out[j, i] = v
 
@@ -186,7 +176,7 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
     """Scalar Joseph updates channel by channel (R diagonal); see update()."""
     n = xa.shape[0]
     for a in range(m):                   # prior innovations and variances, for adaptation
-        ch = idx[a]
+        ch = uint64(idx[a])              # unsigned: no negative-index test when indexing
         d = y[ch] - xa[ch]
         innov[ch] = wrap(d) if ch >= 9 else d
         S_diag[ch] = P[ch, ch] + R[ch, ch]
@@ -195,12 +185,13 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
     g = np.empty(n)
     nis = 0.0
     for a in range(m):
-        ch = idx[a]
+        ci = idx[a]
+        ch = uint64(ci)
         r = R[ch, ch]
         # column ch of the current P; only the lower triangle of P_out is updated in the loop
-        for i in range(ch):
+        for i in range(ci):
             pj[i] = P_out[ch, i]
-        for i in range(ch, n):
+        for i in range(ci, n):
             pj[i] = P_out[i, ch]
         s = pj[ch] + r
         if not (s > 0.0) or not math.isfinite(s):
@@ -208,8 +199,9 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
         d = y[ch] - xa_out[ch]
         if ch >= 9:
             d = wrap(d)
+        inv_s = 1.0 / s
         for i in range(n):
-            k[i] = pj[i] / s
+            k[i] = pj[i] * inv_s
             xa_out[i] += k[i] * d
         white[ch] = d / math.sqrt(s)
         nis += d * d / s
@@ -420,6 +412,9 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     status = OK
     h = 0
     done = 0
+    xa_b[:] = xa0
+    P_b[:, :] = P0
+    # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
             st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s,
@@ -427,20 +422,18 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
             if st != OK:
                 status = st
                 break
-            xa[:] = xa_b
-            P[:, :] = P_b
         for i in range(p):
-            theta_prev[i] = xa[12 + i]
-        st, nis, m = update(xa, P, Y[k], measured, R, xa_b, P_b, innov, S_diag, white)
+            theta_prev[i] = xa_b[12 + i]
+        st, nis, m = update(xa_b, P_b, Y[k], measured, R, xa, P, innov, S_diag, white)
         if want_white:
             white_out[k, :] = white
         if st != OK:
+            xa[:] = xa_b          # report the prior, not a half-updated state
+            P[:, :] = P_b
             status = st
             break
-        adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_b, innov, S_diag, P, Q, R,
+        adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa, innov, S_diag, P_b, Q, R,
               Q0, R0)
-        xa[:] = xa_b
-        P[:, :] = P_b
         if m > 0:
             sum_nis += nis
             sum_dof += m
