@@ -39,7 +39,8 @@ def test_update_equals_closed_form_kalman_update_with_missing_channels(full_R):
     measured[7] = False                # a channel the suite does not have
     out_x, out_P = np.empty(n), np.empty((n, n))
     innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
-    st, nis, m = K.update(xa, P, y, measured, R, out_x, out_P, innov, S_diag, white)
+    st, nis, m = K.update(xa, P, y, measured, R, out_x, out_P, innov, S_diag, white,
+                          K.new_workspace(len(xa), 1))
     assert st == K.OK and m == 10
     idx = [j for j in range(12) if j not in (4, 7)]
     H = np.zeros((len(idx), n))
@@ -68,7 +69,8 @@ def test_angle_innovation_is_wrapped():
     y[11] = -np.pi + 0.01              # 0.02 rad away across the +-pi cut
     out_x, out_P = np.empty(n), np.empty((n, n))
     innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
-    st, _, _ = K.update(xa, P, y, np.ones(12, bool), R, out_x, out_P, innov, S_diag, white)
+    st, _, _ = K.update(xa, P, y, np.ones(12, bool), R, out_x, out_P, innov, S_diag, white,
+                        K.new_workspace(len(xa), 1))
     assert st == K.OK and innov[11] == pytest.approx(0.02)
     assert abs(abs(out_x[11]) - np.pi) < 0.02
 
@@ -107,7 +109,7 @@ def test_predict_is_F_P_Ft_plus_Q():
     x1, Fa = np.empty(n), np.empty((n, n))
     K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa)
     xo, Po = np.empty(n), np.empty((n, n))
-    assert K.predict(xa, P, ui, Q, *args, 0.05, xo, Po) == K.OK
+    assert K.predict(xa, P, ui, Q, *args, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
     assert np.allclose(xo, x1) and np.allclose(Po, Fa @ P @ Fa.T + Q, rtol=1e-12, atol=1e-18)
 
 

@@ -31,6 +31,7 @@ Noise adaptation (`mode`), gamma = 1 - exp(-T/tau) (Eq. 20, "t" read as the samp
   [q_floor * Q0_th,ii, Q0_th,ii]: large while the estimates move, small once they settle.
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, uint64
@@ -43,11 +44,34 @@ MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
 ERR_NOT_PD = 10
 ERR_NAN_STATE = 11
 
+# Scratch arrays of one filter, allocated once and reused at every step (allocating them per
+# step cost about a tenth of the step; a fresh n x n Fa per step made the BLAS products slower).
+Workspace = namedtuple('Workspace', 'c vec A Bt dk dk_new Fa M O idx kpg')
+
+
+@njit(cache=True)
+def new_workspace(n, n_coef):
+    """Workspace for an augmented state of size n and a vehicle with n_coef coefficients."""
+    p = n - 12
+    return Workspace(np.empty(n_coef), np.empty(36), np.empty((12, 12)), np.empty((12, p)),
+                     np.empty((12, n)), np.empty((12, n)), np.empty((n, n)), np.empty((12, n)),
+                     np.empty((12, 12)), np.empty(12, dtype=np.int64), np.empty((3, n)))
+
 
 @njit(cache=True)
 def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
                       recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
-    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)).
+    """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
+    ws = new_workspace(xa.shape[0], c0.shape[0])
+    return rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+                         recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws)
+
+
+@njit(cache=True)
+def rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+                  recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws):
+    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)),
+    scratch from the Workspace ws.
 
     Chain rule through the stages: k_s = f(x + a_s k_{s-1}) with a_s = (0, T/2, T/2, T), so
     dk_s/dx* = [A_s | B_s] + a_s A_s dk_{s-1}/dx* (A_s = df/dx, B_s = df/dtheta at stage s) and
@@ -57,17 +81,19 @@ def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, 
     """
     p = theta_idx.shape[0]
     n = 12 + p
-    c = c0.copy()
+    c = ws.c
+    c[:] = c0
     for j in range(p):
         c[theta_idx[j]] = xa[12 + j]
-    vec = np.zeros(36)
+    vec = ws.vec
+    vec[:] = 0.0
     xs = vec[0:12]
     k = vec[12:24]
     acc = vec[24:36]
-    A = np.empty((12, 12))
-    Bt = np.empty((12, p))
-    dk = np.empty((12, n))
-    dk_new = np.empty((12, n))
+    A = ws.A
+    Bt = ws.Bt
+    dk = ws.dk
+    dk_new = ws.dk_new
     if want_jac:
         for i in range(12):
             for j in range(n):
@@ -96,10 +122,10 @@ def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, 
                             acc_ij += A[i, kk] * dk[kk, j]
                     dk_new[i, j] = a * acc_ij + (A[i, j] if j < 12 else Bt[i, j - 12])
             dk, dk_new = dk_new, dk
-            ws = T / 6.0 * wt
+            w_T = T / 6.0 * wt
             for i in range(12):
                 for j in range(n):
-                    Fa[i, j] += ws * dk[i, j]
+                    Fa[i, j] += w_T * dk[i, j]
     for i in range(12):
         xa_next[i] = xa[i] + T / 6.0 * acc[i]
     for j in range(p):
@@ -115,17 +141,17 @@ def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, 
 
 
 @njit(cache=True)
-def propagate_covariance(Fa, P, Q, P_out):
+def propagate_covariance(Fa, P, Q, P_out, M, O):
     """P_out = Fa P Fa^T + Q, symmetric, for Fa = [[Phi, Psi], [0, I]] (parameters constant).
 
     With F12 = Fa[:12, :] and M = F12 P: P_out[:12, :12] = M F12^T, P_out[:12, 12:] = M[:, 12:]
     and P_out[12:, 12:] = P[12:, 12:] (plus Q): two products of 12 rows instead of the full
-    n x n ones.
+    n x n ones. M (12 x n) and O (12 x 12) are scratch.
     """
     n = P.shape[0]
     F12 = Fa[:12]
-    M = np.dot(F12, P)
-    O = np.dot(M, F12.T)
+    np.dot(F12, P, M)
+    np.dot(M, F12.T, O)
     for i in range(12):
         for j in range(i + 1):
             v = 0.5 * (O[i, j] + O[j, i] + Q[i, j] + Q[j, i])
@@ -149,15 +175,14 @@ def wrap(a):
 
 @njit(cache=True)
 def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
-            recompute_minv, M_RB, theta_pos, T, xa_out, P_out):
-    """Time update (Eqs. 9-10). Returns a status code."""
-    n = xa.shape[0]
-    Fa = np.empty((n, n))
-    st = rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
-                           recompute_minv, M_RB, theta_pos, T, True, xa_out, Fa)
+            recompute_minv, M_RB, theta_pos, T, xa_out, P_out, ws):
+    """Time update (Eqs. 9-10); ws.Fa holds the transition Jacobian afterwards. Returns a
+    status code."""
+    st = rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
+                       recompute_minv, M_RB, theta_pos, T, True, xa_out, ws.Fa, ws)
     if st != OK:
         return st
-    propagate_covariance(Fa, P, Q, P_out)
+    propagate_covariance(ws.Fa, P, Q, P_out, ws.M, ws.O)
     return OK
 
 
@@ -172,7 +197,7 @@ def _finish_update(xa_out, P_out, nis, m):
 
 
 @njit(cache=True)
-def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white):
+def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white, kpg):
     """Scalar Joseph updates channel by channel (R diagonal); see update()."""
     n = xa.shape[0]
     for a in range(m):                   # prior innovations and variances, for adaptation
@@ -180,9 +205,9 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
         d = y[ch] - xa[ch]
         innov[ch] = wrap(d) if ch >= 9 else d
         S_diag[ch] = P[ch, ch] + R[ch, ch]
-    k = np.empty(n)
-    pj = np.empty(n)
-    g = np.empty(n)
+    k = kpg[0]
+    pj = kpg[1]
+    g = kpg[2]
     nis = 0.0
     for a in range(m):
         ci = idx[a]
@@ -220,13 +245,13 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
 
 
 @njit(cache=True)
-def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
+def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):
     """Measurement update (Eqs. 11-13), Joseph form.
 
     measured: bool (12,), channels the sensor suite provides; a NaN in y skips a channel.
     innov (12,) gets the innovations (NaN where not used), S_diag (12,) their predicted
     variances, white (12,) the innovations whitened with the Cholesky factor of S.
-    Returns (status, NIS, number of channels used).
+    Returns (status, NIS, number of channels used). ws: the filter's Workspace (scratch).
 
     With R diagonal on the used channels (the usual case) the channels are fused one at a
     time: for uncorrelated measurement noise this is algebraically the batch update, each
@@ -236,7 +261,7 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
     A full R (the paper's Eq. 17 makes one) takes the batch path.
     """
     n = xa.shape[0]
-    idx = np.empty(12, dtype=np.int64)
+    idx = ws.idx
     m = 0
     for j in range(12):
         innov[j] = np.nan
@@ -257,7 +282,8 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white):
             if a != b and R[idx[a], idx[b]] != 0.0:
                 diag_R = False
     if diag_R:
-        return _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white)
+        return _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white,
+                                  ws.kpg)
     nu = np.empty(m)
     S = np.empty((m, m))
     PHt = np.empty((n, m))
@@ -402,6 +428,7 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     R = R0.copy()
     xa_b = np.empty(n)
     P_b = np.empty((n, n))
+    ws = new_workspace(n, c0.shape[0])
     innov = np.empty(12)
     S_diag = np.empty(12)
     white = np.empty(12)
@@ -418,13 +445,13 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     for k in range(N):
         if k > 0:
             st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s,
-                         Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b)
+                         Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b, ws)
             if st != OK:
                 status = st
                 break
         for i in range(p):
             theta_prev[i] = xa_b[12 + i]
-        st, nis, m = update(xa_b, P_b, Y[k], measured, R, xa, P, innov, S_diag, white)
+        st, nis, m = update(xa_b, P_b, Y[k], measured, R, xa, P, innov, S_diag, white, ws)
         if want_white:
             white_out[k, :] = white
         if st != OK:

@@ -122,6 +122,7 @@ class AugmentedEKF:
         self.theta0 = th0
         n = 12 + p
         self.n = n
+        self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0)])
         self.Q0 = np.diag(q ** 2)
@@ -190,7 +191,7 @@ class AugmentedEKF:
         P_b = np.empty((self.n, self.n))
         theta_prev = self.xa[12:].copy()
         st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
-                              self.innov, self.S_diag, self.white)
+                              self.innov, self.S_diag, self.white, self.ws)
         self._check(st, 'measurement update')
         self.gated = False
         if self.gate is not None and m > 0 and not nis <= self.gate[m]:
@@ -211,7 +212,7 @@ class AugmentedEKF:
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
         st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q, m.c,
-                       m.theta_idx, *m.args[:-1], T, xa_b, P_b)
+                       m.theta_idx, *m.args[:-1], T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
