@@ -129,7 +129,6 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                    seed=seed)
     sim_s = time.perf_counter() - t_sim
     n = len(run.t)
-    stamps_ns = np.array([round(t * 1e9) for t in run.t], dtype=np.int64)
     T_ns = int(round(T * 1e9))
     compute = compute_latency(run, compute_samples) if compute_samples else None
 

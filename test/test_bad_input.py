@@ -50,6 +50,7 @@ from auv_ident.replay import (GUARD_SECONDS, IdentSession, ParameterError, repla
                               ReplayWarnings, write_estimate_json)
 from auv_ident.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
                                write_run_bag)
+from helpers import spawn_node, stop_process
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATION = 30.0
@@ -843,28 +844,6 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
 # --- processes ----------------------------------------------------------------------------
 
 
-def _spawn(args, env, log_dir, name):
-    out = open(os.path.join(log_dir, f'{name}.out'), 'w')
-    err = open(os.path.join(log_dir, f'{name}.err'), 'w')
-    proc = subprocess.Popen([sys.executable, '-m', 'auv_ident', 'run', 'identifier',
-                             '--ros-args', *args], env=env, cwd=REPO, stdout=out, stderr=err)
-    proc.logs = (out, err)
-    return proc
-
-
-def _finish(proc, sig=signal.SIGINT, timeout=15.0):
-    if proc.poll() is None:
-        proc.send_signal(sig)
-        try:
-            proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    for fh in proc.logs:
-        fh.close()
-    return proc.returncode
-
-
 @pytest.mark.parametrize('args, name', [
     (['-p', 'sample_time:=0.0'], 'sample_time'),
     (['-p', "coefficients:=['Z_w','Z_nonsense']"], 'coefficients'),
@@ -873,11 +852,11 @@ def _finish(proc, sig=signal.SIGINT, timeout=15.0):
 ])
 def test_node_process_exits_2_with_one_line_on_an_absurd_parameter(args, name, ros_env,
                                                                    tmp_path):
-    proc = _spawn(args, ros_env, str(tmp_path), 'identifier')
+    proc = spawn_node('identifier', args, ros_env, str(tmp_path))
     try:
         rc = proc.wait(timeout=60.0)
     finally:
-        _finish(proc, signal.SIGKILL)
+        stop_process(proc, signal.SIGKILL, timeout=15.0)
     err = (tmp_path / 'identifier.err').read_text()
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert rc == 2 and len(lines) == 1 and f"parameter '{name}'" in lines[0], err
@@ -892,7 +871,8 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
     from rclpy.executors import SingleThreadedExecutor
     from diagnostic_msgs.msg import DiagnosticArray
     save = tmp_path / 'estimate.json'
-    proc = _spawn(['-p', f'save_path:={save}'], ros_env, str(tmp_path), 'identifier')
+    proc = spawn_node('identifier', ['-p', f'save_path:={save}'], ros_env,
+                      str(tmp_path))
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('bad_input_pub', context=ctx)
@@ -946,10 +926,10 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
         kv = {v.key: v.value for v in diags[-1].status[0].values}
         assert kv['internal_errors'] == '0'
         assert int(kv['outliers']) == 8
-        rc = _finish(proc, signal.SIGTERM)
+        rc = stop_process(proc, signal.SIGTERM, timeout=15.0)
     finally:
         if proc.poll() is None:
-            _finish(proc, signal.SIGKILL)
+            stop_process(proc, signal.SIGKILL, timeout=15.0)
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     err = (tmp_path / 'identifier.err').read_text()

@@ -1,5 +1,4 @@
 """Tests of auv_ident.bag_io: rosbag2-layout MCAP writing, reading, interop and bad input."""
-import array
 import json
 from pathlib import Path
 import shutil
@@ -25,6 +24,7 @@ import yaml
 from auv_ident import bag_io
 from auv_ident import conversions as cv
 from auv_ident.bag_io import BagError, BagWriter, read_bag
+from helpers import assert_msg_equal
 
 N = 120  # samples per topic
 DT_NS = 5_000_000  # 200 Hz
@@ -75,19 +75,6 @@ def bag(tmp_path_factory):
     return _write_bag(tmp_path_factory.mktemp('bags') / 'run1')
 
 
-def _assert_msg_equal(expected, actual, where='msg'):
-    """Compare an rclpy message with a decoded one (rosbags, rclpy or mcap_ros2) by field."""
-    if hasattr(expected, 'get_fields_and_field_types'):
-        for name in expected.get_fields_and_field_types():
-            _assert_msg_equal(getattr(expected, name), getattr(actual, name), f'{where}.{name}')
-    elif isinstance(expected, (list, tuple, array.array, np.ndarray)):
-        assert len(expected) == len(actual), where
-        for i, (e, a) in enumerate(zip(expected, actual)):
-            _assert_msg_equal(e, a, f'{where}[{i}]')
-    else:
-        assert expected == actual, f'{where}: {expected!r} != {actual!r}'
-
-
 def _mcap_file(bag_dir):
     return bag_dir / f'{bag_dir.name}_0.mcap'
 
@@ -99,7 +86,7 @@ def test_read_back_with_our_reader(bag):
     got = list(read_bag(bag))
     assert [(t, ns) for t, ns, _ in got] == [(t, ns) for t, ns, _ in EXPECTED]
     for (_, _, expected), (_, _, actual) in zip(EXPECTED, got):
-        _assert_msg_equal(expected, actual)
+        assert_msg_equal(expected, actual)
     # the EKF-facing view: conversions accept the decoded (rosbags) objects
     t, x12, pcov, _ = cv.odometry_to_state(got[0][2])
     assert cv.sec_to_ns(t) == T0_NS
@@ -121,7 +108,7 @@ def test_topic_selection_and_raw(bag):
     assert len(got) == N and {t for t, _, _ in got} == {'/actuators'}
     raw = list(read_bag(bag, topics={'/clock': 'rosgraph_msgs/Clock'}, raw=True))
     assert all(isinstance(m, bytes) for _, _, m in raw)
-    _assert_msg_equal(EXPECTED[2][2], deserialize_message(raw[0][2], Clock))
+    assert_msg_equal(EXPECTED[2][2], deserialize_message(raw[0][2], Clock))
 
 
 def test_log_time_order(tmp_path):
@@ -153,7 +140,7 @@ def test_rosbags_reader_and_anyreader(bag):
             decoded.append((conn.topic, t_ns, msg))
     assert [(t, ns) for t, ns, _ in decoded] == [(t, ns) for t, ns, _ in EXPECTED]
     for (_, _, expected), (_, _, actual) in zip(EXPECTED, decoded):
-        _assert_msg_equal(expected, actual)
+        assert_msg_equal(expected, actual)
 
 
 def test_mcap_ros2_decoder(bag):
@@ -164,13 +151,13 @@ def test_mcap_ros2_decoder(bag):
     assert len(decoded) == len(EXPECTED)
     for (topic, t_ns, expected), (topic2, t2, actual) in zip(EXPECTED, decoded):
         assert (topic, t_ns) == (topic2, t2)
-        _assert_msg_equal(expected, actual)
+        assert_msg_equal(expected, actual)
 
 
 def test_bare_mcap_file_and_info(bag):
     got = list(read_bag(_mcap_file(bag), topics=['/odom']))
     assert len(got) == N
-    _assert_msg_equal(EXPECTED[0][2], got[0][2])
+    assert_msg_equal(EXPECTED[0][2], got[0][2])
     topics = bag_io.bag_topics(bag)
     assert topics == {'/odom': 'nav_msgs/msg/Odometry',
                       '/actuators': 'sensor_msgs/msg/JointState',
@@ -186,7 +173,7 @@ def test_zstd_bag(tmp_path):
     assert {c.compression for c in summary.chunk_indexes} == {'zstd'}
     got = list(read_bag(path))
     for (_, _, expected), (_, _, actual) in zip(EXPECTED, got):
-        _assert_msg_equal(expected, actual)
+        assert_msg_equal(expected, actual)
     with AnyReader([path]) as reader:
         assert sum(1 for _ in reader.messages()) == len(EXPECTED)
 
@@ -491,7 +478,7 @@ def test_truncated_file(tmp_path, fraction):
         assert 0 < len(got) < len(EXPECTED) or fraction < 0.1
     assert [(t, ns) for t, ns, _ in got] == [(t, ns) for t, ns, _ in EXPECTED[:len(got)]]
     for (_, _, expected), (_, _, actual) in zip(EXPECTED, got):
-        _assert_msg_equal(expected, actual)
+        assert_msg_equal(expected, actual)
 
 
 def test_truncated_by_one_byte(tmp_path, bag):

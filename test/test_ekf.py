@@ -244,3 +244,50 @@ def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
         AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), 0.0)
     with pytest.raises(ConfigError, match="unknown coefficient 'Z_wx'"):
         Model(NPS, ['Z_wx'])
+
+
+def test_stale_numba_cache_is_dropped_when_any_compiled_source_changes(tmp_path):
+    """A cached ekf function keeps the model code it inlined: editing model.py alone must drop
+    the cached entries of every compiled source (numba checks each file on its own only)."""
+    from auv_ident.core import _COMPILED_SOURCES, _STAMP, _drop_stale_compiled_code
+    pkg = tmp_path / 'auv_ident'
+    for rel in _COMPILED_SOURCES:
+        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
+        (pkg / rel).write_text(f'# {rel}\n')
+    ekf_cache = pkg / 'core' / '__pycache__' / 'ekf.run_filter-1.py311.nbi'
+    bench_cache = pkg / '__pycache__' / 'bench._model_loop-1.py311.1.nbc'
+    other = pkg / 'core' / '__pycache__' / 'model.cpython-311.pyc'
+
+    def make_caches():
+        for f in (ekf_cache, bench_cache, other):
+            f.parent.mkdir(parents=True, exist_ok=True)
+            f.write_bytes(b'x')
+    make_caches()
+    _drop_stale_compiled_code(str(pkg))          # first sight: no stamp, caches dropped
+    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
+    assert (pkg / 'core' / '__pycache__' / _STAMP).is_file()
+    make_caches()
+    _drop_stale_compiled_code(str(pkg))          # nothing changed: caches kept
+    assert ekf_cache.exists() and bench_cache.exists()
+    (pkg / 'core' / 'model.py').write_text('# model.py, edited\n')
+    _drop_stale_compiled_code(str(pkg))          # model.py changed: ekf's cache goes too
+    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
+
+
+def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
+    """The per-message API (one Workspace reused by every step) and the compiled loop (its own
+    Workspace) run the same filter: same estimates to rounding."""
+    v = load_vehicle('nps_auv2')
+    names = list(v.identify_default)
+    truth = Model(v)
+    run = simulate(truth, 'ident', duration=20.0, seed=5)
+    m = Model(v, names)
+    cfg = FilterConfig(coefficients=names, initial_offset=0.5)
+    f = AugmentedEKF(m, cfg, run.T)
+    run_ekf(f, run.y, run.u)
+    g = AugmentedEKF(m, cfg, run.T)
+    g.start(run.y[0], run.u[0, 5])
+    for k in range(1, len(run.t)):
+        g.step(run.u[k - 1], run.y[k])
+    np.testing.assert_allclose(g.xa, f.xa, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(g.P, f.P, rtol=1e-7, atol=1e-15)

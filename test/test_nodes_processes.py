@@ -23,6 +23,7 @@ from std_msgs.msg import Float64MultiArray
 
 from auv_ident.core.model import Model
 from auv_ident.core.vehicle import load_vehicle
+from helpers import spawn_node, stop_process
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATION = 40.0
@@ -33,29 +34,6 @@ N_SAMPLES = int(round(DURATION * RATE)) + 1
 MAX_REL_ERROR = 0.15
 LATCHED = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def _spawn(node, ros_args, env, log_dir):
-    out = open(os.path.join(log_dir, f'{node}.out'), 'w')
-    err = open(os.path.join(log_dir, f'{node}.err'), 'w')
-    proc = subprocess.Popen([sys.executable, '-m', 'auv_ident', 'run', node, '--ros-args',
-                             *ros_args], env=env, cwd=REPO, stdout=out, stderr=err)
-    proc.logs = (out, err)
-    return proc
-
-
-def _stop(proc, sig=signal.SIGINT, timeout=10.0):
-    """Stop a spawned process (SIGINT, then SIGKILL); returns its exit status."""
-    if proc.poll() is None:
-        proc.send_signal(sig)
-        try:
-            proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    for fh in proc.logs:
-        fh.close()
-    return proc.returncode
 
 
 def _read(path):
@@ -92,7 +70,7 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
     save = tmp_path / 'estimate.json'
     procs = []
     try:
-        ident = _spawn('identifier', ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
+        ident = spawn_node('identifier', ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
         procs.append(ident)
 
         def identifier_subscribed():
@@ -103,7 +81,7 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
                            timeout=40.0)
         assert ident.poll() is None, _read(tmp_path / 'identifier.err')
         t_start = time.monotonic()
-        sim = _spawn('simulator', ['-p', f'duration:={DURATION}', '-p', f'rate_hz:={RATE}',
+        sim = spawn_node('simulator', ['-p', f'duration:={DURATION}', '-p', f'rate_hz:={RATE}',
                                    '-p', 'real_time_factor:=10.0', '-p', 'seed:=0',
                                    '-p', "wait_for_subscribers:=['identifier']"],
                      ros_env, str(tmp_path))
@@ -111,7 +89,7 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
         assert _spin_until(ex, lambda: sim.poll() is not None, timeout=30.0), \
             'simulator did not finish'
         sim_wall = time.monotonic() - t_start
-        assert _stop(sim) == 0, _read(tmp_path / 'simulator.err')
+        assert stop_process(sim) == 0, _read(tmp_path / 'simulator.err')
         assert 'run over: 801 samples' in _read(tmp_path / 'simulator.err')
 
         def accepted():
@@ -121,13 +99,13 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
         # the identifier drains its queue; /diagnostics (1 Hz) reports the count
         _spin_until(ex, lambda: accepted() >= N_SAMPLES - 1, timeout=20.0)
         assert ident.poll() is None, _read(tmp_path / 'identifier.err')
-        rc = _stop(ident, signal.SIGINT)
+        rc = stop_process(ident, signal.SIGINT)
         assert rc == 0, _read(tmp_path / 'identifier.err')
         err = _read(tmp_path / 'identifier.err')
         assert 'Traceback' not in err, err
     finally:
         for p in procs:
-            _stop(p, signal.SIGKILL if p.poll() is None else signal.SIGINT)
+            stop_process(p, signal.SIGKILL if p.poll() is None else signal.SIGINT)
         subprocess.run([os.path.join(os.path.dirname(sys.executable), 'fastdds'), 'shm',
                         'clean'], capture_output=True, check=False)
 
@@ -174,11 +152,11 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
 
 
 def test_identifier_bad_parameter_exits_nonzero(ros_env, tmp_path):
-    proc = _spawn('identifier', ['-p', 'vehicle:=nope'], ros_env, str(tmp_path))
+    proc = spawn_node('identifier', ['-p', 'vehicle:=nope'], ros_env, str(tmp_path))
     try:
         rc = proc.wait(timeout=30.0)
     finally:
-        _stop(proc, signal.SIGKILL)
+        stop_process(proc, signal.SIGKILL)
     err = _read(tmp_path / 'identifier.err')
     assert rc != 0
     assert 'Traceback' not in err, err

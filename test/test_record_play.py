@@ -4,7 +4,6 @@ Every node process gets the ros_env environment (loopback DDS, this run's ROS_DO
 conftest.py). Messages are compared decoded, field by field, never as payload bytes (rclpy
 payloads contain uninitialized padding).
 """
-import array
 import os
 from pathlib import Path
 import select
@@ -17,7 +16,6 @@ import warnings
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
-import numpy as np
 import pytest
 import rclpy
 from rclpy.context import Context
@@ -34,6 +32,7 @@ from auv_ident.conversions import sec_to_ns, stamp_to_ns
 from auv_ident.sim_bag import sample_messages, TOPIC_TYPES, write_run_bag
 import ros_pub_helper
 from conftest import require_loopback_dds
+from helpers import assert_msg_equal
 
 HELPER = Path(__file__).with_name('ros_pub_helper.py')
 N = 60            # samples the helper publishes (x 3 topics)
@@ -55,19 +54,6 @@ def sim_run():
     from auv_ident.core.vehicle import load_vehicle
     return simulate(Model(load_vehicle('nps_auv2'), ()), 'zigzag', duration=2.0, T=0.05,
                     seed=3)
-
-
-def _assert_msg_equal(expected, actual, where='msg'):
-    """Compare an rclpy message with a decoded one (rosbags, rclpy or mcap_ros2) by field."""
-    if hasattr(expected, 'get_fields_and_field_types'):
-        for name in expected.get_fields_and_field_types():
-            _assert_msg_equal(getattr(expected, name), getattr(actual, name), f'{where}.{name}')
-    elif isinstance(expected, (list, tuple, array.array, np.ndarray)):
-        assert len(expected) == len(actual), where
-        for i, (e, a) in enumerate(zip(expected, actual)):
-            _assert_msg_equal(e, a, f'{where}[{i}]')
-    else:
-        assert expected == actual, f'{where}: {expected!r} != {actual!r}'
 
 
 def _node_cmd(node, *params):
@@ -146,7 +132,7 @@ def _check_recorded(bag, samples, window, allow_truncated=False):
         assert window[0] <= times[0] and times[-1] <= window[1], topic
         assert times == sorted(times)
         for k, (_, msg) in enumerate(per_topic[topic]):
-            _assert_msg_equal(samples[k][j][1], msg, f'{topic}[{k}]')
+            assert_msg_equal(samples[k][j][1], msg, f'{topic}[{k}]')
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
@@ -181,7 +167,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
             got[conn.topic].append(msg)
     for j, topic in enumerate(TOPICS):
         for k, msg in enumerate(got[topic]):
-            _assert_msg_equal(samples[k][j][1], msg, f'AnyReader {topic}[{k}]')
+            assert_msg_equal(samples[k][j][1], msg, f'AnyReader {topic}[{k}]')
     # mcap + mcap_ros2
     got = {t: [] for t in TOPICS}
     with open(bag / f'{bag.name}_0.mcap', 'rb') as f:
@@ -191,7 +177,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
     assert {t: len(v) for t, v in got.items()} == {t: N for t in TOPICS}
     for j, topic in enumerate(TOPICS):
         for k, msg in enumerate(got[topic]):
-            _assert_msg_equal(samples[k][j][1], msg, f'mcap_ros2 {topic}[{k}]')
+            assert_msg_equal(samples[k][j][1], msg, f'mcap_ros2 {topic}[{k}]')
 
 
 def test_record_sigkill_keeps_flushed_chunks(tmp_path, ros_env, samples):
@@ -257,7 +243,7 @@ def test_play_publishes_every_message_in_order(tmp_path, ros_env, ctx, sim_run):
         err, [stamp_to_ns(m.clock) for _, m in got['/clock']])
     for k in range(n):
         for topic, _, expected in sample_messages(sim_run, k):
-            _assert_msg_equal(expected, got[topic][k][1], f'{topic}[{k}]')
+            assert_msg_equal(expected, got[topic][k][1], f'{topic}[{k}]')
     # /clock = the log times (here the sample times), ascending
     clock_ns = [stamp_to_ns(m.clock) for _, m in got['/clock']]
     assert clock_ns == [sec_to_ns(t) for t in sim_run.t]
@@ -295,8 +281,8 @@ def test_record_play_round_trip(tmp_path, ros_env, sim_run):
         for k in range(len(a)):
             # rebuild the rclpy messages: the reference for field-by-field comparison
             expected = dict((t, m) for t, _, m in sample_messages(sim_run, k))[topic]
-            _assert_msg_equal(expected, a[k], f'source {topic}[{k}]')
-            _assert_msg_equal(expected, b[k], f'copy {topic}[{k}]')
+            assert_msg_equal(expected, a[k], f'source {topic}[{k}]')
+            assert_msg_equal(expected, b[k], f'copy {topic}[{k}]')
     times = [t_ns for t, t_ns, _ in recorded if t == '/odom']
     span = (times[-1] - times[0]) * 1e-9
     expected_span = (sim_run.t[-1] - sim_run.t[0]) / PLAY_RATE

@@ -7,7 +7,7 @@ _COMPILED_SOURCES = ('core/model.py', 'core/ekf.py', 'bench.py')
 _STAMP = 'numba_sources.sha256'
 
 
-def _drop_stale_compiled_code():
+def _drop_stale_compiled_code(pkg=None):
     """Key numba's on-disk cache on all compiled sources together.
 
     numba checks a cached function against its own file only, but a compiled function keeps
@@ -17,7 +17,8 @@ def _drop_stale_compiled_code():
     use. A read-only install is left alone (there the files only change on reinstall, which
     renews every file's time stamp, and numba's own check catches that).
     """
-    pkg = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    if pkg is None:   # the auv_ident package folder
+        pkg = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     h = hashlib.sha256()
     for rel in _COMPILED_SOURCES:
         try:

@@ -258,7 +258,9 @@ def _solve_minv(Mi, X, ncols):
 
 @njit(cache=True)
 def _solve_vec(Mi, v):
-    """v[0:6] <- M^-1 v[0:6] in place."""
+    """v[0:6] <- M^-1 v[0:6] in place. (The same sum as _solve_minv, written again on purpose:
+    going through _solve_minv with v reshaped to a column cost 0.4 us per EKF step, numba's
+    reference counting of the view.)"""
     f0 = v[0]
     f1 = v[1]
     f2 = v[2]

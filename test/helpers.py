@@ -1,0 +1,56 @@
+"""Helpers shared by the test modules: node processes and message comparison."""
+import array
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+
+from conftest import require_loopback_dds
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def spawn_node(node, ros_args, env, log_dir, name=None):
+    """Start `python -m auv_ident run NODE --ros-args ...` with stdout/stderr in log_dir.
+
+    The spawning environment must keep DDS on loopback (checked here as well as in the
+    ros_env fixture that builds env)."""
+    require_loopback_dds()
+    if env.get('ROS_AUTOMATIC_DISCOVERY_RANGE') != 'LOCALHOST':
+        raise RuntimeError('refusing to spawn a node whose environment lets DDS leave loopback')
+    name = name or node
+    out = open(os.path.join(log_dir, f'{name}.out'), 'w')
+    err = open(os.path.join(log_dir, f'{name}.err'), 'w')
+    proc = subprocess.Popen([sys.executable, '-m', 'auv_ident', 'run', node, '--ros-args',
+                             *ros_args], env=env, cwd=REPO, stdout=out, stderr=err)
+    proc.logs = (out, err)
+    return proc
+
+
+def stop_process(proc, sig=signal.SIGINT, timeout=10.0):
+    """Stop a spawned process (sig, then SIGKILL after timeout s); returns its exit status."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    for fh in proc.logs:
+        fh.close()
+    return proc.returncode
+
+
+def assert_msg_equal(expected, actual, where='msg'):
+    """Compare an rclpy message with a decoded one (rosbags, rclpy or mcap_ros2) by field."""
+    if hasattr(expected, 'get_fields_and_field_types'):
+        for name in expected.get_fields_and_field_types():
+            assert_msg_equal(getattr(expected, name), getattr(actual, name), f'{where}.{name}')
+    elif isinstance(expected, (list, tuple, array.array, np.ndarray)):
+        assert len(expected) == len(actual), where
+        for i, (e, a) in enumerate(zip(expected, actual)):
+            assert_msg_equal(e, a, f'{where}[{i}]')
+    else:
+        assert expected == actual, f'{where}: {expected!r} != {actual!r}'
