@@ -276,6 +276,16 @@ def _as_cov6(values, name):
     return arr
 
 
+def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
+    """NED/FRD <-> ENU/FLU for position, linear and angular velocity, orientation and the two
+    6x6 covariances. Every transform is an involution, so the same call maps either way."""
+    return (_signed_perm(pos, _POS_PERM, _POS_SIGN), _signed_perm(lin, _VEC_PERM, _VEC_SIGN),
+            _signed_perm(ang, _VEC_PERM, _VEC_SIGN),
+            quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU),
+            _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN),
+            _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN))
+
+
 def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
                       frame_id=None, child_frame_id=None):
     """Return a nav_msgs/Odometry for a NED/FRD state, expressed in convention ``frame``.
@@ -301,12 +311,7 @@ def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
     lin, ang, pos = x[0:3], x[3:6], x[6:9]
     quat = euler_to_quat(x[9], x[10], x[11])
     if frame == 'enu':
-        pos = _signed_perm(pos, _POS_PERM, _POS_SIGN)
-        lin = _signed_perm(lin, _VEC_PERM, _VEC_SIGN)
-        ang = _signed_perm(ang, _VEC_PERM, _VEC_SIGN)
-        quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
-        pcov = _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN)
-        tcov = _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN)
+        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
     default_world, default_body = DEFAULT_FRAME_IDS[frame]
 
     msg = Odometry()
@@ -367,13 +372,7 @@ def odometry_to_state(msg, frame='ned'):
     pcov = _as_cov6(_field(msg, 'pose.covariance'), 'pose.covariance')
     tcov = _as_cov6(_field(msg, 'twist.covariance'), 'twist.covariance')
     if frame == 'enu':
-        # Every transform is an involution: applying it again maps ENU/FLU back to NED/FRD.
-        pos = _signed_perm(pos, _POS_PERM, _POS_SIGN)
-        lin = _signed_perm(lin, _VEC_PERM, _VEC_SIGN)
-        ang = _signed_perm(ang, _VEC_PERM, _VEC_SIGN)
-        quat = quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU)
-        pcov = _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN)
-        tcov = _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN)
+        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
     if all(math.isfinite(c) for c in quat):
         try:
             eul = quat_to_euler(*quat)

@@ -36,6 +36,17 @@ def require_loopback_dds():
 
 
 @pytest.fixture
+def ctx():
+    """An rclpy context of the test's own (loopback DDS checked), shut down afterwards."""
+    require_loopback_dds()
+    import rclpy
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
 def ros_env():
     """Environment for a node process a test spawns (loopback DDS, this run's domain)."""
     require_loopback_dds()

@@ -30,7 +30,6 @@ import subprocess
 import sys
 import time
 
-from conftest import require_loopback_dds
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -377,15 +376,6 @@ CASES = [
 
 
 # --- running a case through the three paths ---------------------------------------------------
-
-
-@pytest.fixture
-def ctx():
-    require_loopback_dds()
-    context = rclpy.context.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 class _Recorder:

@@ -18,7 +18,6 @@ from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 import pytest
 import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -201,14 +200,6 @@ def _probe(ctx, topics):
             cls, topic, lambda m, t=topic: got[t].append((time.monotonic(), m)),
             QoSProfile(depth=1000))
     return node, got
-
-
-@pytest.fixture
-def ctx(ros_env):
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def test_play_publishes_every_message_in_order(tmp_path, ros_env, ctx, sim_run):

@@ -54,12 +54,23 @@ def run_node(prog, args, make_node, spin, on_exit=None):
     return 0
 
 
-def declare_read_only(node, parameters):
-    """Declare (name, default, description) parameters, read-only: they are read once at
-    start-up, so `ros2 param set` is refused rather than silently ignored."""
+def declare_described(node, parameters, **descriptor):
+    """Declare (name, default, description) parameters, each with a ParameterDescriptor
+    carrying its description and the given fields (read_only=..., dynamic_typing=...)."""
     for name, default, text in parameters:
         node.declare_parameter(name, default, ParameterDescriptor(description=text,
-                                                                  read_only=True))
+                                                                  **descriptor))
+
+
+def declare_read_only(node, parameters):
+    """Declare parameters read-only: they are read once at start-up, so `ros2 param set` is
+    refused rather than silently ignored."""
+    declare_described(node, parameters, read_only=True)
+
+
+def parameter_values(node, parameters):
+    """{name: value} of the declared (name, default, description) parameters."""
+    return {name: node.get_parameter(name).value for name, _, _ in parameters}
 
 
 def param_or_none(node, name):

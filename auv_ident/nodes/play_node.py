@@ -55,7 +55,6 @@ import sys
 import time
 
 from mcap.reader import make_reader
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -64,6 +63,7 @@ import yaml
 
 from auv_ident.bag_io import bag_topics, read_bag
 from auv_ident.conversions import ns_to_stamp
+from auv_ident.nodes.common import declare_described, parameter_values
 from auv_ident.nodes.record_node import (message_class, number_param, param_error,
                                          run_with_stop_flag, string_list_param)
 
@@ -127,12 +127,10 @@ class PlayNode(Node):
     # --- parameters ---
 
     def _declare_parameters(self):
-        for name, default, description in _PARAMETERS:
-            self.declare_parameter(name, default, ParameterDescriptor(
-                description=description, dynamic_typing=True))
+        declare_described(self, _PARAMETERS, dynamic_typing=True)
 
     def _read_parameters(self):
-        value = {name: self.get_parameter(name).value for name, _, _ in _PARAMETERS}
+        value = parameter_values(self, _PARAMETERS)
         bag = value['bag']
         if not isinstance(bag, str) or not bag.strip():
             raise param_error('bag', 'required: a bag directory or .mcap file, e.g. '

@@ -57,7 +57,6 @@ import sys
 import threading
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -69,6 +68,7 @@ from rclpy.utilities import remove_ros_args
 
 from auv_ident.bag_io import BagError, BagWriter, normalize_msgtype
 from auv_ident.core.errors import ConfigError
+from auv_ident.nodes.common import declare_described, parameter_values
 
 NODE_NAME = 'recorder'
 SUBSCRIPTION_DEPTH = 1000
@@ -179,12 +179,10 @@ class RecordNode(Node):
     # --- parameters ---
 
     def _declare_parameters(self):
-        for name, default, description in _PARAMETERS:
-            self.declare_parameter(name, default, ParameterDescriptor(
-                description=description, dynamic_typing=True))
+        declare_described(self, _PARAMETERS, dynamic_typing=True)
 
     def _read_parameters(self):
-        value = {name: self.get_parameter(name).value for name, _, _ in _PARAMETERS}
+        value = parameter_values(self, _PARAMETERS)
         topics = []
         for t in string_list_param('topics', value['topics'], required=True):
             try:
