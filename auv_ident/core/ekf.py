@@ -428,8 +428,8 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     P = P0.copy()
     Q = Q0.copy()
     R = R0.copy()
-    xa_b = np.empty(n)
-    P_b = np.empty((n, n))
+    xa_b = xa0.copy()             # the prior of sample 0
+    P_b = P0.copy()
     ws = new_workspace(n, c0.shape[0])
     innov = np.empty(12)
     S_diag = np.empty(12)
@@ -441,8 +441,6 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     status = OK
     h = 0
     done = 0
-    xa_b[:] = xa0
-    P_b[:, :] = P0
     # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
