@@ -36,7 +36,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, uint64
 
-from .model import OK, state_derivative
+from .model import NZ, OK, kernel, mass_inverse_into, state_derivative
 
 MODE_FIXED, MODE_PAPER, MODE_PAPER_Q, MODE_MATCHING = 0, 1, 2, 3
 MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
@@ -46,14 +46,16 @@ ERR_NAN_STATE = 11
 
 # Scratch arrays of one filter, allocated once and reused at every step (allocating them per
 # step cost about a tenth of the step; a fresh n x n Fa per step made the BLAS products slower).
-Workspace = namedtuple('Workspace', 'c vec A Bt dk dk_new Fa M O idx kpg')
+Workspace = namedtuple('Workspace', 'c Minv M6 zz xs k acc A Bt dk dk_new Fa M O idx kpg')
 
 
 @njit(cache=True)
 def new_workspace(n, n_coef):
     """Workspace for an augmented state of size n and a vehicle with n_coef coefficients."""
     p = n - 12
-    return Workspace(np.empty(n_coef), np.empty(36), np.empty((12, 12)), np.empty((12, p)),
+    return Workspace(np.empty(n_coef), np.empty((6, 6)), np.empty((6, 6)),
+                     np.empty(2 * NZ), np.empty(12), np.empty(12), np.empty(12),
+                     np.empty((12, 12)), np.empty((12, p)),
                      np.empty((12, n)), np.empty((12, n)), np.empty((n, n)), np.empty((12, n)),
                      np.empty((12, 12)), np.empty(12, dtype=np.int64), np.empty((3, n)))
 
@@ -67,7 +69,7 @@ def rk4_jacobian_step(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, 
                          recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws)
 
 
-@njit(cache=True)
+@kernel
 def rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv,
                   recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws):
     """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)),
@@ -82,14 +84,26 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
     p = theta_idx.shape[0]
     n = 12 + p
     c = ws.c
-    c[:] = c0
+    for j in range(c0.shape[0]):
+        c[j] = c0[j]
     for j in range(p):
         c[theta_idx[j]] = xa[12 + j]
-    vec = ws.vec
-    vec[:] = 0.0
-    xs = vec[0:12]
-    k = vec[12:24]
-    acc = vec[24:36]
+    Mi = ws.Minv                  # M^-1 for this step's coefficients (fixed over the step)
+    if recompute_minv:
+        st = mass_inverse_into(c, M_RB, am_i, am_s, ws.M6, Mi)
+        if st != OK:
+            return st
+    else:
+        for i in range(6):
+            for j in range(6):
+                Mi[i, j] = Minv[i, j]
+    zz = ws.zz
+    xs = ws.xs
+    k = ws.k
+    acc = ws.acc
+    for i in range(12):
+        k[i] = 0.0
+        acc[i] = 0.0
     A = ws.A
     Bt = ws.Bt
     dk = ws.dk
@@ -103,24 +117,27 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
         wt = (1.0, 2.0, 2.0, 1.0)[s]
         for i in range(12):
             xs[i] = xa[i] + a * k[i]
-        st = state_derivative(xs, ui, c, par, terms_i, terms_s, am_i, am_s, Minv,
-                              recompute_minv, M_RB, theta_pos, p, want_jac, k, A, Bt)
+        st = state_derivative(xs, ui, c, Mi, par, terms_i, terms_s, am_i, am_s, theta_pos, p,
+                              want_jac, k, A, Bt, zz)
         if st != OK:
             return st
         for i in range(12):
             acc[i] += wt * k[i]
         if want_jac:
-            # dk_new = [A | Bt] + a A dk. Columns 6..8 of A (position x, y, z) are always
-            # zero, so the sum skips them; the constant trip counts let the compiler unroll.
+            # dk_new = [A | Bt] + a A dk, row by row as a sum of rows of dk (contiguous, so
+            # the compiler vectorises it). Columns 6..8 of A (position x, y, z) are always
+            # zero, and the rest of A is sparse too (kinematics rows): zeros are skipped.
             for i in range(12):
-                for j in range(n):
-                    acc_ij = 0.0
-                    if s > 0:
-                        for kk in range(6):
-                            acc_ij += A[i, kk] * dk[kk, j]
-                        for kk in range(9, 12):
-                            acc_ij += A[i, kk] * dk[kk, j]
-                    dk_new[i, j] = a * acc_ij + (A[i, j] if j < 12 else Bt[i, j - 12])
+                for j in range(12):
+                    dk_new[i, j] = A[i, j]
+                for j in range(p):
+                    dk_new[i, 12 + j] = Bt[i, j]
+                if s > 0:
+                    for kk in (0, 1, 2, 3, 4, 5, 9, 10, 11):
+                        f = a * A[i, kk]
+                        if f != 0.0:
+                            for j in range(n):
+                                dk_new[i, j] += f * dk[kk, j]
             dk, dk_new = dk_new, dk
             w_T = T / 6.0 * wt
             for i in range(12):
@@ -168,7 +185,7 @@ def propagate_covariance(Fa, P, Q, P_out, M, O):
             P_out[j, i] = v
 
 
-@njit(cache=True)
+@kernel
 def wrap(a):
     return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
@@ -188,7 +205,7 @@ def predict(xa, P, ui, Q, c0, theta_idx, par, terms_i, terms_s, am_i, am_s, Minv
     return OK
 
 
-@njit(cache=True)
+@kernel
 def _finish_update(xa_out, P_out, nis, m):
     """Check the posterior (positive variances, finite state) and wrap the heading."""
     for i in range(xa_out.shape[0]):
@@ -198,7 +215,7 @@ def _finish_update(xa_out, P_out, nis, m):
     return OK, nis, m
 
 
-@njit(cache=True)
+@kernel
 def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white, kpg):
     """Scalar Joseph updates channel by channel (R diagonal); see update()."""
     n = xa.shape[0]
