@@ -249,13 +249,15 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white,
             xa_out[i] += k[i] * d
         white[ch] = d / math.sqrt(s)
         nis += d * d / s
-        # Joseph form, P - k pj^T - pj k^T + s k k^T = P - k g^T - pj k^T with g = pj - s k
+        # Joseph form, P - k pj^T - pj k^T + s k k^T = P - k g^T - pj k^T with g = pj - s k.
+        # Whole rows are updated (uniform loops of n vectorise; a ragged triangle loop was
+        # slower), but only the lower triangle is read (pj above) and kept (mirrored below).
         for i in range(n):
             g[i] = pj[i] - s * k[i]
         for i in range(n):
             ki = k[i]
             pi = pj[i]
-            for j in range(i + 1):
+            for j in range(n):
                 P_out[i, j] -= ki * g[j] + pi * k[j]
     for i in range(n):
         for j in range(i):
@@ -295,8 +297,14 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):
             P_out[i, j] = P[i, j]
     if m == 0:
         return OK, 0.0, 0
+    # R diagonal on the used channels? A whole-matrix scan (vectorised) settles the usual
+    # case; only an R with off-diagonal terms needs the look at the used pairs.
+    off = 0
+    for i in range(12):
+        for j in range(12):
+            off += (R[i, j] != 0.0) & (i != j)
     diag_R = True
-    for a in range(m):
+    for a in range(m if off > 0 else 0):
         for b in range(m):
             if a != b and R[idx[a], idx[b]] != 0.0:
                 diag_R = False
