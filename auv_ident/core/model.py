@@ -7,8 +7,9 @@ c = every coefficient of the vehicle file in the file's units (prime values if n
     M nu_dot = F(nu, eta, delta, c),   eta_dot = J(eta) nu            (Fossen 2021, eq. 6.3)
 
 F = sum of monomial terms (hydrodynamic/control coefficients and rigid-body Coriolis, see
-vehicle.py) + restoring g(eta) + propulsion + cross-flow drag. The Jacobians are analytic:
-each monomial is differentiated factor by factor, and propulsion, cross-flow, restoring and
+vehicle.py; compiled per vehicle from its term table by monomials.py) + restoring g(eta) +
+propulsion + cross-flow drag. The Jacobians are analytic: each monomial is differentiated
+factor by factor, and propulsion, cross-flow, restoring and
 kinematics have hand-derived derivatives (all checked against finite differences in the tests).
 Why analytic and compiled: the EKF needs f and both Jacobians four times per RK4 step, tens of
 thousands of times per second.
@@ -18,15 +19,14 @@ Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 import math
 
 import numpy as np
-from numba import njit, uint64
+from numba import njit
 
 from .errors import DomainError
-from .vehicle import (COS_THETA_MIN, MAX_FACTORS, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
+from .monomials import NZ, Z_EPS, monomial_kernel
+from .vehicle import (COS_THETA_MIN, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
                       P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_U_MIN, P_W,
                       P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
 
-NZ = 19          # length of the factor vector z (vehicle.FACTORS)
-Z_EPS = 18       # index of the propeller epsilon in z
 
 # The hot kernels are compiled without numba's reference counting (its `_nrt` option; numba is
 # pinned in requirements.txt). A kernel only reads and writes arrays its caller owns and
@@ -92,55 +92,6 @@ def _propulsion(u, n_rpm, par, zz, xdot, A, want_jac):
         xdot[0] += par[P_PROP_A] * s * abs(s)
         xdot[3] += par[P_PROP_B] * s * abs(s)
     return OK
-
-
-@kernel
-def _monomials(c, terms_i, terms_s, theta_pos, zz, want_jac, xdot, A, Bt):
-    """Sum of monomial terms k c_i z_a z_b ... into xdot[0:6]; d/dx into A[0:6], d/dtheta into
-    Bt[0:6]. z = zz[:NZ] are the factors, zd = zz[NZ:] their derivatives: zd[i] is d z_i / d x_(i mod 6) (1 for u..r, sign for |u|..|r|, 0 for the fins,
-    d eps/du for eps, whose column is 18 mod 6 = 0 = u), so every factor is differentiated by
-    the same branch-free line. Indices read from the tables are cast to unsigned: numba then
-    skips its negative-index wraparound test, a third of this loop's time."""
-    six = uint64(6)
-    nz = uint64(NZ)
-    for t in range(terms_i.shape[0]):
-        eq = uint64(terms_i[t, 0])
-        ci = terms_i[t, 1]
-        f1s = terms_i[t, 3]
-        f0 = uint64(terms_i[t, 2])
-        f1 = uint64(f1s)
-        k = terms_s[t]
-        if ci >= 0:
-            k = k * c[uint64(ci)]
-        if f1s >= 0 and terms_i[t, 4] < 0:        # two factors: most terms
-            z0 = zz[f0]
-            z1 = zz[f1]
-            prod = z0 * z1
-            if want_jac:
-                A[eq, f0 % six] += k * z1 * zz[nz + f0]
-                A[eq, f1 % six] += k * z0 * zz[nz + f1]
-        else:
-            prod = 1.0
-            nf = 0
-            for j in range(MAX_FACTORS):
-                fj = terms_i[t, 2 + j]
-                if fj < 0:
-                    break
-                prod *= zz[uint64(fj)]
-                nf += 1
-            if want_jac:
-                for j in range(nf):
-                    rest = k
-                    for jj in range(nf):
-                        if jj != j:
-                            rest *= zz[uint64(terms_i[t, 2 + jj])]
-                    fj = uint64(terms_i[t, 2 + j])
-                    A[eq, fj % six] += rest * zz[nz + fj]
-        xdot[eq] += k * prod
-        if want_jac and ci >= 0:
-            tp = theta_pos[uint64(ci)]
-            if tp >= 0:
-                Bt[eq, uint64(tp)] += terms_s[t] * prod
 
 
 @kernel
@@ -391,12 +342,15 @@ def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
 
 
 @kernel
-def state_derivative(x, ui, c, Minv, par, terms_i, terms_s, am_i, am_s, theta_pos, p, want_jac,
-                     xdot, A, Bt, zz):
+def state_derivative(x, ui, c, Minv, par, mono, theta_terms, am_i, am_s, theta_pos, p, want_jac,
+                     xdot, A, Bt, zz, dprod):
     """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
 
-    Minv is M^-1 for these coefficients c (mass_inverse_into). theta_pos[ci] is the position
-    of coefficient ci in theta, or -1. zz (2 NZ,) is scratch. Returns a status code (OK = 0).
+    Minv is M^-1 for these coefficients c (mass_inverse_into). mono is the vehicle's compiled
+    monomial kernel and theta_terms (p x 2) its [equation, coefficient] per identified
+    coefficient (equation -1 for added mass) (monomials.py, Model). theta_pos[ci] is the
+    position of coefficient ci in theta, or -1. zz (2 NZ,) and dprod (n_coef,) are scratch.
+    Returns a status code (OK = 0).
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
     """
@@ -437,7 +391,12 @@ def state_derivative(x, ui, c, Minv, par, terms_i, terms_s, am_i, am_s, theta_po
     st = _propulsion(x[0], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
         return st
-    _monomials(c, terms_i, terms_s, theta_pos, zz, want_jac, xdot, A, Bt)
+    mono(c, zz, want_jac, xdot, A, dprod)
+    if want_jac:
+        for j in range(p):
+            eq = theta_terms[j, 0]
+            if eq >= 0:
+                Bt[eq, j] += dprod[theta_terms[j, 1]]
     _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
     _crossflow(par, x[1], x[2], x[4], x[5], want_jac, xdot, A)
     _solve_vec(Minv, xdot)
@@ -503,7 +462,13 @@ class Model:
         self.recompute_minv = bool(am_theta)
         self.Minv = (vehicle.Minv_literal.copy() if mi == 'mss_literal'
                      else np.linalg.inv(vehicle.mass_matrix(self.c)))
-        self.args = (vehicle.par, vehicle.terms_i, vehicle.terms_s, vehicle.am_i, vehicle.am_s,
+        # the vehicle's compiled monomial kernel, and per identified coefficient its
+        # [equation, coefficient index] (equation -1: added mass, which has no monomial)
+        self.mono = monomial_kernel(vehicle.terms_i, vehicle.terms_s)
+        self.theta_terms = np.array(
+            [[-1 if vehicle.coefficients[ci].is_added_mass else vehicle.coefficients[ci].equation,
+              ci] for ci in self.theta_idx], dtype=np.int64).reshape(-1, 2)
+        self.args = (vehicle.par, self.mono, self.theta_terms, vehicle.am_i, vehicle.am_s,
                      self.Minv, self.recompute_minv, vehicle.M_RB, self.theta_pos, self.p)
 
     @property
@@ -536,8 +501,9 @@ class Model:
         xdot = np.empty(12)
         A = np.empty((12, 12))
         Bt = np.empty((12, self.p))
-        st = state_derivative(x, ui, c, Minv, v.par, v.terms_i, v.terms_s, v.am_i, v.am_s,
-                              self.theta_pos, self.p, want_jac, xdot, A, Bt, np.empty(2 * NZ))
+        st = state_derivative(x, ui, c, Minv, v.par, self.mono, self.theta_terms, v.am_i,
+                              v.am_s, self.theta_pos, self.p, want_jac, xdot, A, Bt,
+                              np.empty(2 * NZ), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
 
     def f(self, x, ui, theta=None):

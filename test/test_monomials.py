@@ -1,0 +1,87 @@
+"""Tier 1: the generated monomial kernel against a plain reading of the vehicle's term table,
+and its file cache."""
+import numpy as np
+import pytest
+
+from auv_ident.core import monomials
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.monomials import NZ, kernel_source, monomial_kernel
+from auv_ident.core.vehicle import available_vehicles, load_vehicle
+
+
+def _factors(rng):
+    """zz = [z, dz/dx] as the model builds it: dz/dx is 1 for u..r, sign for |u|..|r|, 0 for
+    the fins and their sums, and the propeller's d eps/du for eps."""
+    x = rng.uniform(-2.0, 2.0, 6)
+    fins = rng.uniform(-0.3, 0.3, 5)
+    z = np.concatenate([x, np.abs(x), fins, [fins[3] + fins[4]], [rng.uniform(-1.0, 1.0)]])
+    dz = np.concatenate([np.ones(6), np.sign(x), np.zeros(6), [rng.uniform(-3.0, 3.0)]])
+    return np.concatenate([z, dz])
+
+
+def _by_the_table(v, c, zz):
+    """F's monomial part, dF/dx and dF/dc read term by term from the table, in Python."""
+    z, dz = zz[:NZ], zz[NZ:]
+    xdot, A, dprod = np.zeros(12), np.zeros((12, 12)), np.zeros(len(c))
+    for (eq, ci, *fs), s in zip(v.terms_i, v.terms_s):
+        fs = [f for f in fs if f >= 0]
+        k = s * (c[ci] if ci >= 0 else 1.0)
+        xdot[eq] += k * np.prod(z[fs])
+        for j, f in enumerate(fs):
+            A[eq, f % 6] += k * np.prod(np.delete(z[fs], j)) * dz[f]
+        if ci >= 0:
+            dprod[ci] = s * np.prod(z[fs])
+    return xdot, A, dprod
+
+
+@pytest.mark.parametrize('name', available_vehicles())
+def test_kernel_equals_the_term_table(name):
+    v = load_vehicle(name)
+    kernel = monomial_kernel(v.terms_i, v.terms_s)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        c = v.values * rng.uniform(0.5, 1.5, len(v.values))
+        zz = _factors(rng)
+        want = _by_the_table(v, c, zz)
+        xdot, A, dprod = rng.standard_normal(12), rng.standard_normal((12, 12)), np.zeros(len(c))
+        start = xdot.copy(), A.copy()
+        kernel(c, zz, True, xdot, A, dprod)
+        assert np.allclose(xdot - start[0], want[0], rtol=1e-12,
+                           atol=1e-12 * np.abs(want[0]).max())
+        assert np.allclose(A - start[1], want[1], rtol=1e-9, atol=1e-12 * np.abs(want[1]).max())
+        has_term = v.terms_i[v.terms_i[:, 1] >= 0, 1]
+        assert np.allclose(dprod[has_term], want[2][has_term], rtol=1e-12, atol=0.0)
+        assert np.array_equal(A[6:] - start[1][6:], np.zeros((6, 12)))   # kinematics rows
+        x_only, A_only = start[0].copy(), start[1].copy()
+        kernel(c, zz, False, x_only, A_only, np.zeros(len(c)))
+        assert np.array_equal(x_only, xdot) and np.array_equal(A_only, start[1])
+
+
+def test_kernel_is_built_once_per_table_and_loaded_from_its_file(tmp_path, monkeypatch):
+    v = load_vehicle('isimi')
+    monkeypatch.setenv('AUV_IDENT_KERNEL_CACHE', str(tmp_path))
+    monkeypatch.setattr(monomials, '_loaded', {})
+    first = monomial_kernel(v.terms_i, v.terms_s)
+    assert monomial_kernel(v.terms_i, v.terms_s) is first
+    files = list(tmp_path.glob('auv_ident_monomials_*.py'))
+    assert len(files) == 1 and kernel_source(v.terms_i, v.terms_s) in files[0].read_text()
+
+
+def test_unwritable_cache_folders_fall_back_then_fail_clearly(tmp_path, monkeypatch):
+    blocked = tmp_path / 'file'
+    blocked.write_text('not a folder')
+    monkeypatch.setattr(monomials, '_cache_dirs',
+                        lambda: iter([str(blocked / 'a'), str(tmp_path / 'ok')]))
+    path = monomials._write_source('k', 'x = 1\n')
+    assert path == str(tmp_path / 'ok' / 'k.py')
+    monkeypatch.setattr(monomials, '_cache_dirs', lambda: iter([str(blocked / 'a')]))
+    with pytest.raises(ConfigError, match='AUV_IDENT_KERNEL_CACHE'):
+        monomials._write_source('k', 'x = 1\n')
+
+
+def test_a_coefficient_with_two_terms_is_refused():
+    v = load_vehicle('nps_auv2')
+    ti = v.terms_i.copy()
+    ti[1, 1] = ti[0, 1]
+    with pytest.raises(ConfigError, match='more than one term'):
+        kernel_source(ti, v.terms_s)
