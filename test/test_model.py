@@ -124,6 +124,38 @@ def test_inputs_are_saturated():
     assert np.array_equal(a, b)
 
 
+def _strip_sum(par, v, w, q, r):
+    """MSS classic cross-flow (Y, Z, M, N), station by station in numpy, skipping U = 0."""
+    from auv_ident.core.vehicle import P_CF_CY, P_CF_CZ, P_CF_N, P_L, P_RHO
+    L, ns = par[P_L], int(par[P_CF_N])
+    out = np.zeros(4)
+    for xl in np.linspace(-L / 2, L / 2, ns):
+        a, b = v + xl * r, w - xl * q
+        U = np.hypot(a, b)
+        if U > 0:
+            g = (par[P_CF_CY] * a * a + par[P_CF_CZ] * b * b) / U
+            out += 0.5 * par[P_RHO] * (L / (ns - 1)) * np.array(
+                [-g * a, g * b, -g * (w + xl * q) * xl, -g * a * xl])
+    return out
+
+
+def test_crossflow_station_at_rest_adds_nothing():
+    """A station with zero cross-flow speed (here the seventh: v = r = 0, w = x_7 q, with
+    q = 1 so that x_7 q is exact and U is exactly 0 there) is a 0/0 in the strip formula; it
+    must add nothing rather than a NaN."""
+    from auv_ident.core.model import _crossflow
+    from auv_ident.core.vehicle import P_CF_N, P_L
+    v = load_vehicle('nps_auv2')
+    L, ns = v.par[P_L], int(v.par[P_CF_N])
+    q = 1.0
+    w = (-L / 2 + 6 * (L / (ns - 1))) * q
+    xdot, A = np.zeros(12), np.zeros((12, 12))
+    _crossflow(v.par, 0.0, w, q, 0.0, True, xdot, A)
+    assert np.all(np.isfinite(xdot)) and np.all(np.isfinite(A))
+    assert np.allclose(xdot[[1, 2, 4, 5]], _strip_sum(v.par, 0.0, w, q, 0.0), rtol=1e-12,
+                       atol=1e-15)
+
+
 @pytest.mark.parametrize('x_mod,ui_mod,needle', [
     ({0: 0.0}, {}, 'propeller ratio'),
     ({0: -0.5}, {5: 1500.0}, 'complex'),
