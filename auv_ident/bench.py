@@ -67,8 +67,8 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
 
 
 @njit(cache=True)
-def _model_loop(X, U, theta, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv, rec, M_RB,
-                theta_pos, T):
+def _model_loop(X, U, theta, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
+                M_RB, theta_pos, T):
     n = 12 + theta.shape[0]
     xa = np.empty(n)
     xa[12:] = theta
@@ -77,7 +77,7 @@ def _model_loop(X, U, theta, c0, theta_idx, par, mono, theta_terms, am_i, am_s, 
     ws = new_workspace(n, c0.shape[0])
     for k in range(X.shape[0]):
         xa[:12] = X[k]
-        rk4_step_into(xa, U[k], c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv, rec,
+        rk4_step_into(xa, U[k], c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
                       M_RB, theta_pos, T, True, x1, Fa, ws)
     return x1
 

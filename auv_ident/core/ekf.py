@@ -61,16 +61,16 @@ def new_workspace(n, n_coef):
 
 
 @njit(cache=True)
-def rk4_jacobian_step(xa, ui, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv,
+def rk4_jacobian_step(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
                       recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
     """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
     ws = new_workspace(xa.shape[0], c0.shape[0])
-    return rk4_step_into(xa, ui, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv,
+    return rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
                          recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws)
 
 
 @kernel
-def rk4_step_into(xa, ui, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv,
+def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
                   recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws):
     """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)),
     scratch from the Workspace ws.
@@ -117,7 +117,7 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Min
         wt = (1.0, 2.0, 2.0, 1.0)[s]
         for i in range(12):
             xs[i] = xa[i] + a * k[i]
-        st = state_derivative(xs, ui, c, Mi, par, mono, theta_terms, am_i, am_s, theta_pos, p,
+        st = state_derivative(xs, ui, c, Mi, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
                               want_jac, k, A, Bt, zz, ws.dprod)
         if st != OK:
             return st
@@ -193,11 +193,11 @@ def wrap(a):
 # predict, update and adapt are inlined into run_filter (inline='always'): a call from compiled
 # code costs numba two reference-count operations per array argument, some 50 arrays a step.
 @njit(cache=True, inline='always')
-def predict(xa, P, ui, Q, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv,
+def predict(xa, P, ui, Q, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
             recompute_minv, M_RB, theta_pos, T, xa_out, P_out, ws):
     """Time update (Eqs. 9-10); ws.Fa holds the transition Jacobian afterwards. Returns a
     status code."""
-    st = rk4_step_into(xa, ui, c0, theta_idx, par, mono, theta_terms, am_i, am_s, Minv,
+    st = rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
                        recompute_minv, M_RB, theta_pos, T, True, xa_out, ws.Fa, ws)
     if st != OK:
         return st
@@ -436,7 +436,7 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
 
 @njit(cache=True)
 def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_floor, c0,
-               theta_idx, par, mono, theta_terms, am_i, am_s, Minv, recompute_minv, M_RB,
+               theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, recompute_minv, M_RB,
                theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, rq_hist, want_white,
                white_out, out_xa, out_P, out_Q, out_R, stats):
     """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
@@ -469,8 +469,8 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
-            st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, mono, theta_terms, am_i, am_s,
-                         Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b, ws)
+            st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, mono_addr, theta_terms, am_i,
+                         am_s, Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b, ws)
             if st != OK:
                 status = st
                 break

@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .errors import DomainError
-from .monomials import NZ, Z_EPS, monomial_kernel
+from .monomials import NZ, Z_EPS, kernel_at, monomial_kernel
 from .vehicle import (COS_THETA_MIN, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
                       P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_U_MIN, P_W,
                       P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
@@ -346,15 +346,15 @@ def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
 
 
 @kernel
-def state_derivative(x, ui, c, Minv, par, mono, theta_terms, am_i, am_s, theta_pos, p, want_jac,
-                     xdot, A, Bt, zz, dprod):
+def state_derivative(x, ui, c, Minv, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
+                     want_jac, xdot, A, Bt, zz, dprod):
     """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
 
-    Minv is M^-1 for these coefficients c (mass_inverse_into). mono is the vehicle's compiled
-    monomial kernel and theta_terms (p x 2) its [equation, coefficient] per identified
-    coefficient (equation -1 for added mass) (monomials.py, Model). theta_pos[ci] is the
-    position of coefficient ci in theta, or -1. zz (2 NZ,) and dprod (n_coef,) are scratch.
-    Returns a status code (OK = 0).
+    Minv is M^-1 for these coefficients c (mass_inverse_into). mono_addr is the address of
+    the vehicle's compiled monomial kernel (monomials.kernel_at) and theta_terms (p x 2) its
+    [equation, coefficient] per identified coefficient (equation -1 for added mass; Model).
+    theta_pos[ci] is the position of coefficient ci in theta, or -1. zz (2 NZ,) and dprod
+    (n_coef,) are scratch. Returns a status code (OK = 0).
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
     """
@@ -395,7 +395,7 @@ def state_derivative(x, ui, c, Minv, par, mono, theta_terms, am_i, am_s, theta_p
     st = _propulsion(x[0], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
         return st
-    mono(c, zz, want_jac, xdot, A, dprod)
+    kernel_at(mono_addr)(c, zz, want_jac, xdot, A, dprod)
     if want_jac:
         for j in range(p):
             eq = theta_terms[j, 0]
@@ -468,11 +468,11 @@ class Model:
                      else np.linalg.inv(vehicle.mass_matrix(self.c)))
         # the vehicle's compiled monomial kernel, and per identified coefficient its
         # [equation, coefficient index] (equation -1: added mass, which has no monomial)
-        self.mono = monomial_kernel(vehicle.terms_i, vehicle.terms_s)
+        self.mono_addr = monomial_kernel(vehicle.terms_i, vehicle.terms_s).address
         self.theta_terms = np.array(
             [[-1 if vehicle.coefficients[ci].is_added_mass else vehicle.coefficients[ci].equation,
               ci] for ci in self.theta_idx], dtype=np.int64).reshape(-1, 2)
-        self.args = (vehicle.par, self.mono, self.theta_terms, vehicle.am_i, vehicle.am_s,
+        self.args = (vehicle.par, self.mono_addr, self.theta_terms, vehicle.am_i, vehicle.am_s,
                      self.Minv, self.recompute_minv, vehicle.M_RB, self.theta_pos, self.p)
 
     @property
@@ -505,7 +505,7 @@ class Model:
         xdot = np.empty(12)
         A = np.empty((12, 12))
         Bt = np.empty((12, self.p))
-        st = state_derivative(x, ui, c, Minv, v.par, self.mono, self.theta_terms, v.am_i,
+        st = state_derivative(x, ui, c, Minv, v.par, self.mono_addr, self.theta_terms, v.am_i,
                               v.am_s, self.theta_pos, self.p, want_jac, xdot, A, Bt,
                               np.empty(2 * NZ), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
