@@ -8,7 +8,7 @@ from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ek
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
 from auv_ident.core.stream import StreamIdentifier
-from auv_ident.core.vehicle import load_vehicle
+from auv_ident.core.vehicle import available_vehicles, load_vehicle
 
 NPS = load_vehicle('nps_auv2')
 NAMES = list(NPS.identify_default)
@@ -75,8 +75,12 @@ def test_angle_innovation_is_wrapped():
     assert abs(abs(out_x[11]) - np.pi) < 0.02
 
 
-def test_rk4_transition_jacobian_matches_finite_differences():
-    m = Model(NPS, NAMES)
+@pytest.mark.parametrize('name', available_vehicles())
+def test_rk4_transition_jacobian_matches_finite_differences(name):
+    """Also checks, for every vehicle, the sparsity the chain through the stages relies on
+    (rk4_step_into: F depends on neither the position nor psi)."""
+    v = load_vehicle(name)
+    m = Model(v, list(v.identify_default))
     rng = np.random.default_rng(3)
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
                          m.theta_true * 1.2])

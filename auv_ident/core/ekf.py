@@ -124,20 +124,53 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
         for i in range(12):
             acc[i] += wt * k[i]
         if want_jac:
-            # dk_new = [A | Bt] + a A dk, row by row as a sum of rows of dk (contiguous, so
-            # the compiler vectorises it). Columns 6..8 of A (position x, y, z) are always
-            # zero, and the rest of A is sparse too (kinematics rows): zeros are skipped.
+            # dk_new = [A | Bt] + a A dk as sums of rows of dk, one pass over a row of dk for
+            # several rows of dk_new (a loop per element of A cost more in loop overhead than
+            # in arithmetic at this size). Only the columns where A can be nonzero are used:
+            # F depends on neither the position nor psi (dynamics rows: u..r, phi, theta),
+            # the position rates on u, v, w and the Euler angles, the Euler-angle rates on
+            # p, q, r, phi, theta (the Jacobian tests check this against finite differences).
             for i in range(12):
                 for j in range(12):
                     dk_new[i, j] = A[i, j]
                 for j in range(p):
                     dk_new[i, 12 + j] = Bt[i, j]
-                if s > 0:
-                    for kk in (0, 1, 2, 3, 4, 5, 9, 10, 11):
-                        f = a * A[i, kk]
-                        if f != 0.0:
-                            for j in range(n):
-                                dk_new[i, j] += f * dk[kk, j]
+            if s > 0:
+                # dynamics rows 0..5, all six per pass
+                for kk in (0, 1, 2, 3, 4, 5, 9, 10):
+                    f0 = a * A[0, kk]
+                    f1 = a * A[1, kk]
+                    f2 = a * A[2, kk]
+                    f3 = a * A[3, kk]
+                    f4 = a * A[4, kk]
+                    f5 = a * A[5, kk]
+                    for j in range(n):
+                        d = dk[kk, j]
+                        dk_new[0, j] += f0 * d
+                        dk_new[1, j] += f1 * d
+                        dk_new[2, j] += f2 * d
+                        dk_new[3, j] += f3 * d
+                        dk_new[4, j] += f4 * d
+                        dk_new[5, j] += f5 * d
+                # position rows 6..8 and Euler-angle rows 9..11, three per pass
+                for kk in (0, 1, 2, 9, 10, 11):
+                    f0 = a * A[6, kk]
+                    f1 = a * A[7, kk]
+                    f2 = a * A[8, kk]
+                    for j in range(n):
+                        d = dk[kk, j]
+                        dk_new[6, j] += f0 * d
+                        dk_new[7, j] += f1 * d
+                        dk_new[8, j] += f2 * d
+                for kk in (3, 4, 5, 9, 10):
+                    f0 = a * A[9, kk]
+                    f1 = a * A[10, kk]
+                    f2 = a * A[11, kk]
+                    for j in range(n):
+                        d = dk[kk, j]
+                        dk_new[9, j] += f0 * d
+                        dk_new[10, j] += f1 * d
+                        dk_new[11, j] += f2 * d
             dk, dk_new = dk_new, dk
             w_T = T / 6.0 * wt
             for i in range(12):
