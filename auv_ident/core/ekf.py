@@ -152,25 +152,19 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
                         dk_new[3, j] += f3 * d
                         dk_new[4, j] += f4 * d
                         dk_new[5, j] += f5 * d
-                # position rows 6..8 and Euler-angle rows 9..11, three per pass
-                for kk in (0, 1, 2, 9, 10, 11):
-                    f0 = a * A[6, kk]
-                    f1 = a * A[7, kk]
-                    f2 = a * A[8, kk]
-                    for j in range(n):
-                        d = dk[kk, j]
-                        dk_new[6, j] += f0 * d
-                        dk_new[7, j] += f1 * d
-                        dk_new[8, j] += f2 * d
-                for kk in (3, 4, 5, 9, 10):
-                    f0 = a * A[9, kk]
-                    f1 = a * A[10, kk]
-                    f2 = a * A[11, kk]
-                    for j in range(n):
-                        d = dk[kk, j]
-                        dk_new[9, j] += f0 * d
-                        dk_new[10, j] += f1 * d
-                        dk_new[11, j] += f2 * d
+                # position rows 6..8 and Euler-angle rows 9..11, three per pass (over the
+                # union of their columns: the position rates use u, v, w, phi, theta, psi,
+                # the Euler-angle rates p, q, r, phi, theta; the other terms add exact zeros)
+                for r in (6, 9):
+                    for kk in (0, 1, 2, 3, 4, 5, 9, 10, 11):
+                        f0 = a * A[r, kk]
+                        f1 = a * A[r + 1, kk]
+                        f2 = a * A[r + 2, kk]
+                        for j in range(n):
+                            d = dk[kk, j]
+                            dk_new[r, j] += f0 * d
+                            dk_new[r + 1, j] += f1 * d
+                            dk_new[r + 2, j] += f2 * d
             dk, dk_new = dk_new, dk
             w_T = T / 6.0 * wt
             for i in range(12):
