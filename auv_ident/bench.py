@@ -96,6 +96,17 @@ def _rss_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def best_interleaved(measures, repeats):
+    """{name: best of `repeats` results} for measures returning a rate (higher is better), the
+    measures taking turns within each round so that all see the same machine (on a shared VM a
+    slow spell would otherwise land on one of them and swing their ratio)."""
+    rates = dict.fromkeys(measures, 0.0)
+    for _ in range(repeats):
+        for name, measure in measures.items():
+            rates[name] = max(rates[name], measure())
+    return rates
+
+
 def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     v = load_vehicle('nps_auv2')
     names = list(v.identify_default)
@@ -106,16 +117,6 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     T = run.T
     # warm up the compiled code (numba caches it on disk; first call loads it)
     run_ekf(AugmentedEKF(m, cfg, T), run.y[:50], run.u[:50])
-
-    def best_interleaved(measures):
-        """The same statistic for every filter: the best of `repeats` runs (steps/s), the
-        filters taking turns within each round so that all see the same machine (on a shared
-        VM a slow spell would otherwise land on one of them and swing the ratio)."""
-        rates = dict.fromkeys(measures, 0.0)
-        for _ in range(repeats):
-            for name, measure in measures.items():
-                rates[name] = max(rates[name], measure())
-        return rates
 
     def compiled_loop():
         f = AugmentedEKF(m, cfg, T)
@@ -136,7 +137,7 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     rates = best_interleaved({
         'ours': compiled_loop, 'streaming': streaming_api,
         'filterpy': lambda: _filterpy_rate(m, cfg, run.y, run.u, T,
-                                           min(filterpy_steps, len(run.t) - 1))[0]})
+                                           min(filterpy_steps, len(run.t) - 1))[0]}, repeats)
     steps_per_s, stream_rate, fp_rate = rates['ours'], rates['streaming'], rates['filterpy']
     model_us = _model_step_us(m, run, 3000)
     t0 = time.perf_counter()

@@ -69,15 +69,16 @@ def runners(package, run, n_steps):
 
 def race(candidates, n_steps, rounds):
     """Best round of each candidate (us per step), the candidates taking turns."""
-    best = dict.fromkeys(candidates, float('inf'))
+    from auv_ident.bench import best_interleaved
     for f in candidates.values():
         f()                                    # compile / load before timing
-    for _ in range(rounds):
-        for name, f in candidates.items():
-            t0 = time.perf_counter()
-            f()
-            best[name] = min(best[name], time.perf_counter() - t0)
-    return {k: v / n_steps * 1e6 for k, v in best.items()}
+
+    def rate(f):
+        t0 = time.perf_counter()
+        f()
+        return n_steps / (time.perf_counter() - t0)
+    best = best_interleaved({k: (lambda f=f: rate(f)) for k, f in candidates.items()}, rounds)
+    return {k: 1e6 / v for k, v in best.items()}
 
 
 def main(argv=None):

@@ -9,8 +9,8 @@ c = every coefficient of the vehicle file in the file's units (prime values if n
 F = sum of monomial terms (hydrodynamic/control coefficients and rigid-body Coriolis, see
 vehicle.py; compiled per vehicle from its term table by monomials.py) + restoring g(eta) +
 propulsion + cross-flow drag. The Jacobians are analytic: each monomial is differentiated
-factor by factor, and propulsion, cross-flow, restoring and
-kinematics have hand-derived derivatives (all checked against finite differences in the tests).
+factor by factor, and propulsion, cross-flow, restoring and kinematics have hand-derived
+derivatives (all checked against finite differences in the tests).
 Why analytic and compiled: the EKF needs f and both Jacobians four times per RK4 step, tens of
 thousands of times per second.
 
