@@ -28,10 +28,10 @@ setup(
     entry_points={
         'console_scripts': [
             'auv_ident = auv_ident.cli:main',
-            'simulator = auv_ident.nodes.simulator_node:main',
-            'identifier = auv_ident.nodes.identifier_node:main',
-            'record = auv_ident.nodes.record_node:main',
-            'play = auv_ident.nodes.play_node:main',
+            'simulator = auv_ident.ros.simulator_node:main',
+            'identifier = auv_ident.ros.identifier_node:main',
+            'record = auv_ident.ros.record_node:main',
+            'play = auv_ident.ros.play_node:main',
         ],
     },
 )

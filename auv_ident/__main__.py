@@ -1,6 +1,6 @@
 """python -m auv_ident ..."""
 import sys
 
-from .cli import main
+from auv_ident.cli import main
 
 sys.exit(main())

@@ -9,18 +9,19 @@ import sys
 
 import numpy as np
 
-from .core.errors import AuvIdentError
+from auv_ident.core.errors import AuvIdentError
 
 
 def _model(args, theta_names=()):
-    from .core.model import Model
-    from .core.vehicle import load_vehicle
+    from auv_ident.core.model import Model
+    from auv_ident.vehicles import load_vehicle
     return Model(load_vehicle(args.vehicle), theta_names,
                  mass_inverse=getattr(args, 'mass_inverse', 'default'))
 
 
 def cmd_simulate(args):
-    from .core.simulate import DEFAULT_PROCESS_STD, save_run_csv, simulate
+    from auv_ident.core.sensors import DEFAULT_PROCESS_STD
+    from auv_ident.core.simulate import save_run_csv, simulate
     m = _model(args)
     run = simulate(m, args.maneuver, duration=args.duration, T=args.dt, seed=args.seed,
                    rpm=args.rpm, process_std=DEFAULT_PROCESS_STD if args.process_noise else None)
@@ -36,34 +37,35 @@ def cmd_simulate(args):
         if args.out.endswith('.csv'):
             save_run_csv(run, args.out)
         else:
-            from .sim_bag import write_run_bag
+            from auv_ident.bags.sim_bag import write_run_bag
             write_run_bag(run, args.out, command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
         print(f'wrote {args.out}')
     return 0
 
 
 def _progress(label, total):
-    from .progress import Progress
+    from auv_ident.analysis.progress import Progress
     pr = Progress(total, label)
     return pr
 
 
 def cmd_identify(args):
-    from . import experiments as ex
-    from .core.vehicle import load_vehicle
+    from auv_ident.analysis import experiments as ex
+    from auv_ident.analysis import results
+    from auv_ident.vehicles import load_vehicle
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     mode = 'fixed' if args.fixed_noise else args.noise_mode
     if args.bag:
-        from .replay import identify_bag
+        from auv_ident.analysis.bag_identify import identify_bag
         doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
                                   noise_mode=mode, initial_offset=args.initial_offset,
                                   refine_pass=not args.no_refine)
         print(table)
     else:
         v = load_vehicle(args.vehicle or 'nps_auv2')
-        names = ex.coefficient_list(v, args.coefficients)
-        cfg = ex.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
+        names = results.coefficient_list(v, args.coefficients)
+        cfg = results.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
                              tau=args.tau)
         pr = _progress('batch refinement', 40 * len(names))
         res, run, _ = ex.identify_simulated(
@@ -78,22 +80,23 @@ def cmd_identify(args):
         print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
               f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                          if not args.no_refine else 'EKF pass only'))
-        print(ex.result_table(v, res))
+        print(results.result_table(v, res))
         print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
               f'wall {res.wall_s:.2f} s')
-        doc = ex.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
+        doc = results.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
                                       'duration_s': float(run.t[-1]), 'noise_mode': mode})
     if args.json:
-        ex.write_json(args.json, doc)
+        results.write_json(args.json, doc)
         print(f'wrote {args.json}')
     return 0
 
 
 def cmd_montecarlo(args):
-    from . import experiments as ex
-    from .core.vehicle import load_vehicle
+    from auv_ident.analysis import experiments as ex
+    from auv_ident.analysis import results
+    from auv_ident.vehicles import load_vehicle
     v = load_vehicle(args.vehicle)
-    names = ex.coefficient_list(v, args.coefficients)
+    names = results.coefficient_list(v, args.coefficients)
     offsets = [float(o) for o in args.offsets.split(',')]
     pr = _progress('monte carlo', args.seeds * len(offsets))
     st = ex.montecarlo(v.name, names, seeds=args.seeds, offsets=offsets,
@@ -107,14 +110,14 @@ def cmd_montecarlo(args):
           + ('refined' if st['refined'] else 'EKF only') + f', wall {st["wall_s"]:.0f} s')
     print(ex.montecarlo_table(st))
     if args.json:
-        ex.write_json(args.json, st)
+        results.write_json(args.json, st)
         print(f'wrote {args.json}')
     return 0
 
 
 def cmd_report(args):
-    from .experiments import doc_table
-    from .report import make_report
+    from auv_ident.analysis.results import doc_table
+    from auv_ident.analysis.report import make_report
     out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
                       bag=args.bag, seed=args.seed, duration=args.duration,
                       coefficients=args.coefficients, noise_mode=args.noise_mode,
@@ -133,11 +136,11 @@ def cmd_report(args):
 
 
 def cmd_bench(args):
-    from .bench import bench, format_bench
+    from auv_ident.analysis.bench import bench, format_bench
     b = bench(duration=args.duration)
     print(format_bench(b))
     if args.json:
-        from .experiments import write_json
+        from auv_ident.analysis.results import write_json
         write_json(args.json, b)
         print(f'wrote {args.json}')
     return 0
@@ -149,7 +152,7 @@ OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
 def cmd_derivatives(args):
-    from .core.model import OK, STATUS_TEXT
+    from auv_ident.core.model import OK, STATUS_TEXT
     m = _model(args)
     bad = 0
     with open(args.input, newline='', encoding='utf-8') as fin, \
@@ -193,7 +196,7 @@ def run_node(argv):
               file=sys.stderr)
         return 2
     import importlib
-    mod = importlib.import_module(f'auv_ident.nodes.{argv[0]}_node')
+    mod = importlib.import_module(f'auv_ident.ros.{argv[0]}_node')
     return mod.main([f'auv_ident_{argv[0]}'] + list(argv[1:])) or 0
 
 
@@ -286,7 +289,7 @@ def main(argv=None):
     if argv and argv[0] == 'run':
         return run_node(argv[1:])
     if argv and argv[0] == 'loadtest':
-        from .loadtest import main as loadtest_main
+        from auv_ident.ros.loadtest import main as loadtest_main
         return loadtest_main(argv[1:]) or 0
     args = build_parser().parse_args(argv)
     try:

@@ -39,16 +39,20 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from auv_ident.bag_io import BagError, BagWriter
-from auv_ident.conversions import euler_to_quat, RPM_TO_RAD_S, sec_to_stamp
+from auv_ident.bags.schema import BagError
+from auv_ident.bags.writer import BagWriter
+from auv_ident.session.messages import euler_to_quat, RPM_TO_RAD_S
+from auv_ident.ros.conversions import sec_to_stamp
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
-from auv_ident.core.vehicle import load_vehicle
-from auv_ident.nodes.identifier_node import IdentifierNode
-from auv_ident.replay import (GUARD_SECONDS, IdentSession, ParameterError, replay_bag,
-                              ReplayWarnings, write_estimate_json)
-from auv_ident.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
-                               write_run_bag)
+from auv_ident.vehicles import load_vehicle
+from auv_ident.ros.identifier_node import IdentifierNode
+from auv_ident.session.session import GUARD_SECONDS, IdentSession
+from auv_ident.session.settings import ParameterError
+from auv_ident.bags.replay import replay_bag, ReplayWarnings
+from auv_ident.session.estimate_file import write_estimate_json
+from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
+                                    write_run_bag)
 from helpers import spawn_node, stop_process
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -307,8 +311,8 @@ def _state_modified(run, fn, seg=SEG):
     def bad(k):
         y = run.y[k].copy()
         fn(y)
-        from auv_ident.conversions import state_to_odometry
-        from auv_ident.sim_bag import noise_covariances
+        from auv_ident.ros.conversions import state_to_odometry
+        from auv_ident.bags.sim_bag import noise_covariances
         pc, tc = noise_covariances(run.noise_std)
         msgs = _sample(run, k)
         return [msgs[0], (ODOM_TOPIC, state_to_odometry(float(run.t[k]), y, 'ned', pc, tc))]
@@ -947,7 +951,7 @@ def test_legitimate_data_pass_untouched():
     bag = os.path.join(REPO, 'bags', 'nps_auv2_ident')
     res = replay_bag(bag)
     assert res.accepted == 12001 and res.rejected == 0 and res.errors == 0, res.reasons
-    from auv_ident.core.simulate import DEFAULT_PROCESS_STD
+    from auv_ident.core.sensors import DEFAULT_PROCESS_STD
     for vehicle, T, frame, pn, mode in [('remus100', 0.005, 'enu', True, 'matching'),
                                         ('isimi', 0.05, 'ned', True, 'fixed'),
                                         ('nps_auv2', 0.005, 'ned', False, 'paper_q')]:
@@ -967,7 +971,7 @@ def test_legitimate_data_pass_untouched():
 def test_estimate_file_is_autosaved_while_updates_arrive(run, ctx, tmp_path, monkeypatch):
     """Besides ~/save and shutdown, the 1 Hz timer rewrites save_path every
     AUTOSAVE_PERIOD_S while new updates arrive (atomically), so a SIGKILL loses little."""
-    import auv_ident.nodes.identifier_node as mod
+    import auv_ident.ros.identifier_node as mod
     save = tmp_path / 'auto.json'
     node = _node(ctx, save_path=str(save))
     node.pub_diagnostics = _Recorder()

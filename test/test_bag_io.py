@@ -1,4 +1,4 @@
-"""Tests of auv_ident.bag_io: rosbag2-layout MCAP writing, reading, interop and bad input."""
+"""Tests of auv_ident.bags (schema, writer, reader): rosbag2-layout MCAP writing, reading, interop and bad input."""
 import json
 from pathlib import Path
 import shutil
@@ -21,9 +21,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
-from auv_ident import bag_io
-from auv_ident import conversions as cv
-from auv_ident.bag_io import BagError, BagWriter, read_bag
+from auv_ident.bags import reader as bag_reader, schema
+from auv_ident.ros import conversions as rc
+from auv_ident.session import messages as sm
+from auv_ident.bags.schema import BagError
+from auv_ident.bags.writer import BagWriter
+from auv_ident.bags.reader import read_bag
 from helpers import assert_msg_equal
 
 N = 120  # samples per topic
@@ -39,14 +42,14 @@ def _expected_messages():
     out = []
     for i in range(N):
         t_ns = T0_NS + i * DT_NS
-        t = cv.stamp_to_sec(cv.ns_to_stamp(t_ns))
+        t = sm.stamp_to_sec(rc.ns_to_stamp(t_ns))
         x = rng.normal(size=12)
         cov = rng.normal(size=(6, 6))
-        odom = cv.state_to_odometry(t, x, 'ned', pose_cov=cov @ cov.T, twist_cov=np.eye(6))
-        odom.header.stamp = cv.ns_to_stamp(t_ns)
-        joints = cv.actuators_to_joint_state(t, rng.normal(size=6))  # effort empty: pitfall
-        joints.header.stamp = cv.ns_to_stamp(t_ns)
-        clock = Clock(clock=cv.ns_to_stamp(t_ns))
+        odom = rc.state_to_odometry(t, x, 'ned', pose_cov=cov @ cov.T, twist_cov=np.eye(6))
+        odom.header.stamp = rc.ns_to_stamp(t_ns)
+        joints = rc.actuators_to_joint_state(t, rng.normal(size=6))  # effort empty: pitfall
+        joints.header.stamp = rc.ns_to_stamp(t_ns)
+        clock = Clock(clock=rc.ns_to_stamp(t_ns))
         out += [('/odom', t_ns, odom), ('/actuators', t_ns + 1, joints),
                 ('/clock', t_ns + 2, clock)]
     return out
@@ -55,7 +58,7 @@ def _expected_messages():
 EXPECTED = _expected_messages()
 
 
-def _write_bag(path, compression=None, chunk_size=bag_io.DEFAULT_CHUNK_SIZE, messages=None):
+def _write_bag(path, compression=None, chunk_size=schema.DEFAULT_CHUNK_SIZE, messages=None):
     with BagWriter(path, compression=compression, chunk_size=chunk_size) as writer:
         writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
         writer.add_topic('/actuators', 'sensor_msgs/JointState',
@@ -88,11 +91,11 @@ def test_read_back_with_our_reader(bag):
     for (_, _, expected), (_, _, actual) in zip(EXPECTED, got):
         assert_msg_equal(expected, actual)
     # the EKF-facing view: conversions accept the decoded (rosbags) objects
-    t, x12, pcov, _ = cv.odometry_to_state(got[0][2])
-    assert cv.sec_to_ns(t) == T0_NS
+    t, x12, pcov, _ = sm.odometry_to_state(got[0][2])
+    assert sm.sec_to_ns(t) == T0_NS
     np.testing.assert_array_equal(pcov, np.asarray(EXPECTED[0][2].pose.covariance).reshape(6, 6))
-    t, u6 = cv.joint_state_to_actuators(got[1][2])
-    np.testing.assert_array_equal(u6, cv.joint_state_to_actuators(EXPECTED[1][2])[1])
+    t, u6 = sm.joint_state_to_actuators(got[1][2])
+    np.testing.assert_array_equal(u6, sm.joint_state_to_actuators(EXPECTED[1][2])[1])
 
 
 def test_rclpy_joint_state_needs_the_fallback():
@@ -158,11 +161,11 @@ def test_bare_mcap_file_and_info(bag):
     got = list(read_bag(_mcap_file(bag), topics=['/odom']))
     assert len(got) == N
     assert_msg_equal(EXPECTED[0][2], got[0][2])
-    topics = bag_io.bag_topics(bag)
+    topics = bag_reader.bag_topics(bag)
     assert topics == {'/odom': 'nav_msgs/msg/Odometry',
                       '/actuators': 'sensor_msgs/msg/JointState',
                       '/clock': 'rosgraph_msgs/msg/Clock'}
-    assert bag_io.message_counts(_mcap_file(bag)) == {t: N for t in topics}
+    assert bag_reader.message_counts(_mcap_file(bag)) == {t: N for t in topics}
 
 
 def test_zstd_bag(tmp_path):
@@ -205,13 +208,13 @@ def test_metadata_yaml_v9(bag):
     assert meta['type'] == 'nav_msgs/msg/Odometry'
     assert meta['serialization_format'] == 'cdr'
     assert meta['type_description_hash'] == _share_hash('nav_msgs/msg/Odometry')
-    assert meta['offered_qos_profiles'] == [bag_io.DEFAULT_QOS]
+    assert meta['offered_qos_profiles'] == [schema.DEFAULT_QOS]
     qos = topics['/actuators']['topic_metadata']['offered_qos_profiles'][0]
     assert (qos['history'], qos['depth'], qos['reliability'], qos['durability'],
             qos['liveliness']) == ('keep_last', 5, 'best_effort', 'volatile', 'system_default')
     assert qos['deadline'] == {'sec': 0, 'nsec': 0}  # rclpy default: unspecified
     assert topics['/clock']['topic_metadata']['offered_qos_profiles'][0]['depth'] == 1
-    assert bag_io.DEFAULT_QOS['lifespan'] == {'sec': 9223372036, 'nsec': 854775807}
+    assert schema.DEFAULT_QOS['lifespan'] == {'sec': 9223372036, 'nsec': 854775807}
 
 
 def _share_hash(msgtype):
@@ -268,22 +271,22 @@ def test_schema_text_is_rosbag2_full_text(bag):
         name, body = section.split('\n', 1)
         pkg, typ = name[5:].split('/')
         assert body == (SHARE / pkg / 'msg' / f'{typ}.msg').read_text()
-    clock = bag_io.message_definition('rosgraph_msgs/msg/Clock')
+    clock = schema.message_definition('rosgraph_msgs/msg/Clock')
     assert clock == ((SHARE / 'rosgraph_msgs/msg/Clock.msg').read_text() + SEP
                      + 'MSG: builtin_interfaces/Time\n'
                      + (SHARE / 'builtin_interfaces/msg/Time.msg').read_text())
 
 
 def test_qos_yaml_form():
-    text = bag_io.qos_yaml([bag_io.qos_to_dict({'reliability': 'best_effort'})])
+    text = schema.qos_yaml([schema.qos_to_dict({'reliability': 'best_effort'})])
     assert text.startswith('- history: keep_last\n  depth: 10\n  reliability: best_effort\n')
     assert '  deadline:\n    sec: 9223372036\n    nsec: 854775807\n' in text
     assert text.endswith('avoid_ros_namespace_conventions: false')
-    assert bag_io.qos_yaml([]) == '[]'
+    assert schema.qos_yaml([]) == '[]'
     with pytest.raises(BagError, match='reliability'):
-        bag_io.qos_to_dict({'reliability': 'sometimes'})
+        schema.qos_to_dict({'reliability': 'sometimes'})
     with pytest.raises(BagError, match='unknown QoS keys'):
-        bag_io.qos_to_dict({'depht': 3})
+        schema.qos_to_dict({'depht': 3})
 
 
 # --- writer behaviour -------------------------------------------------------------------------
@@ -324,14 +327,14 @@ def test_writer_errors(tmp_path):
     with pytest.raises(BagError, match='closed'):
         writer.write('/odom', 8, serialize_message(Odometry()))
     writer.flush()  # no-op once closed
-    assert bag_io.message_counts(tmp_path / 'w') == {'/odom': 1}
+    assert bag_reader.message_counts(tmp_path / 'w') == {'/odom': 1}
 
 
 def test_empty_bag_is_valid(tmp_path):
     with BagWriter(tmp_path / 'empty') as writer:
         writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
     assert list(read_bag(tmp_path / 'empty')) == []
-    assert bag_io.message_counts(tmp_path / 'empty') == {'/odom': 0}
+    assert bag_reader.message_counts(tmp_path / 'empty') == {'/odom': 0}
     with RosbagsReader(tmp_path / 'empty') as reader:
         assert reader.message_count == 0
 
@@ -348,7 +351,7 @@ def test_exception_in_with_block_still_finalises(tmp_path):
 _CHILD = textwrap.dedent('''
     import sys, time
     from rosgraph_msgs.msg import Clock
-    from auv_ident.bag_io import BagWriter
+    from auv_ident.bags.writer import BagWriter
     with BagWriter(sys.argv[1], chunk_size=1024) as w:
         for i in range(100):
             w.write_msg('/clock', i, Clock())
@@ -421,7 +424,7 @@ def test_missing_empty_and_not_a_bag(tmp_path):
     with pytest.raises(BagError, match=r'zero.mcap: empty file'):
         read_bag(tmp_path / 'zero.mcap')
     with pytest.raises(BagError, match=r'zero.mcap: empty file'):
-        bag_io.bag_topics(tmp_path / 'zero.mcap')
+        bag_reader.bag_topics(tmp_path / 'zero.mcap')
     (tmp_path / 'text.mcap').write_text('definitely not an mcap file, but long enough ' * 3)
     with pytest.raises(BagError, match=r'text.mcap: not an MCAP file'):
         read_bag(tmp_path / 'text.mcap')
@@ -471,7 +474,7 @@ def test_truncated_file(tmp_path, fraction):
     with pytest.raises(BagError, match=r'cut_0.mcap: truncated'):
         read_bag(path)
     with pytest.raises(BagError, match='truncated'):
-        bag_io.message_counts(path)
+        bag_reader.message_counts(path)
     with pytest.warns(UserWarning, match='recovered'):
         got = list(read_bag(path, allow_truncated=True))
     if fraction < 0.9:  # at 0.97 only the summary is cut: every chunk is still complete

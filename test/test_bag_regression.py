@@ -4,7 +4,7 @@ import os
 
 import numpy as np
 
-from auv_ident.replay import identify_bag
+from auv_ident.analysis.bag_identify import identify_bag
 
 BAG = os.path.join(os.path.dirname(__file__), '..', 'bags', 'nps_auv2_ident')
 # python -m auv_ident identify --bag bags/nps_auv2_ident --json out.json  (2026-11-22)

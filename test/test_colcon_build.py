@@ -85,7 +85,7 @@ def test_installed_executables_run(install, ros_env):
     env = dict(ros_env, PATH=f'{VENV_BIN}{os.pathsep}{ros_env.get("PATH", "")}')
     lib = install / PKG / 'lib' / PKG
     # the installed package, not the working tree's editable install, is what gets imported
-    proc = _sourced(install, f'"{sys.executable}" -c "import auv_ident.nodes.play_node as m; '
+    proc = _sourced(install, f'"{sys.executable}" -c "import auv_ident.ros.play_node as m; '
                              'print(m.__file__)"', env)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().startswith(str(install / PKG / 'lib')), proc.stdout

@@ -1,4 +1,4 @@
-"""Tests of auv_ident.conversions: rotations, frames, covariances, JointState, stamps."""
+"""Tests of auv_ident.session.messages and auv_ident.ros.conversions: rotations, frames, covariances, JointState, stamps."""
 import math
 
 from builtin_interfaces.msg import Time
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
 
-from auv_ident import conversions as cv
-from auv_ident.conversions import ConversionError
+from auv_ident.ros import conversions as rc
+from auv_ident.session import messages as sm
+from auv_ident.session.messages import ConversionError
 
 
 def _quat_matrix(x, y, z, w):
@@ -50,24 +51,24 @@ def test_euler_to_quat_is_zyx_fossen():
     rng = np.random.default_rng(0)
     for _ in range(200):
         phi, theta, psi = rng.uniform(-3, 3), rng.uniform(-1.5, 1.5), rng.uniform(-3, 3)
-        q = cv.euler_to_quat(phi, theta, psi)
+        q = sm.euler_to_quat(phi, theta, psi)
         assert math.isclose(np.linalg.norm(q), 1.0, abs_tol=1e-15)
         expected = _rz(psi) @ _ry(theta) @ _rx(phi)
         np.testing.assert_allclose(_quat_matrix(*q), expected, atol=1e-14)
-        np.testing.assert_allclose(cv.euler_to_rotation_matrix(phi, theta, psi), expected,
+        np.testing.assert_allclose(sm.euler_to_rotation_matrix(phi, theta, psi), expected,
                                    atol=1e-15)
 
 
 def test_known_quaternions():
     s = math.sqrt(0.5)
-    np.testing.assert_allclose(cv.euler_to_quat(0, 0, 0), (0, 0, 0, 1))
-    np.testing.assert_allclose(cv.euler_to_quat(0, 0, math.pi / 2), (0, 0, s, s), atol=1e-16)
-    np.testing.assert_allclose(cv.euler_to_quat(math.pi / 2, 0, 0), (s, 0, 0, s), atol=1e-16)
-    np.testing.assert_allclose(cv.quat_to_euler(0, 0, s, s), (0, 0, math.pi / 2), atol=1e-15)
+    np.testing.assert_allclose(sm.euler_to_quat(0, 0, 0), (0, 0, 0, 1))
+    np.testing.assert_allclose(sm.euler_to_quat(0, 0, math.pi / 2), (0, 0, s, s), atol=1e-16)
+    np.testing.assert_allclose(sm.euler_to_quat(math.pi / 2, 0, 0), (s, 0, 0, s), atol=1e-16)
+    np.testing.assert_allclose(sm.quat_to_euler(0, 0, s, s), (0, 0, math.pi / 2), atol=1e-15)
     # yaw of pi: (-pi, pi] wants +pi, also for the sign-flipped quaternion
-    assert cv.quat_to_euler(0, 0, 1, 0)[2] == math.pi
-    assert cv.quat_to_euler(0, 0, -1, 0)[2] == math.pi
-    assert cv.quat_to_euler(0, 0, 1, -0.0)[2] == math.pi  # atan2(-0.0, -1) is -pi
+    assert sm.quat_to_euler(0, 0, 1, 0)[2] == math.pi
+    assert sm.quat_to_euler(0, 0, -1, 0)[2] == math.pi
+    assert sm.quat_to_euler(0, 0, 1, -0.0)[2] == math.pi  # atan2(-0.0, -1) is -pi
 
 
 def test_random_euler_round_trip():
@@ -75,24 +76,24 @@ def test_random_euler_round_trip():
     for _ in range(2000):
         eul = (rng.uniform(-math.pi, math.pi), rng.uniform(-1.55, 1.55),
                rng.uniform(-math.pi, math.pi))
-        back = cv.quat_to_euler(*cv.euler_to_quat(*eul))
+        back = sm.quat_to_euler(*sm.euler_to_quat(*eul))
         assert np.max(np.abs(_angle_diff(back, eul))) < 1e-12
         assert -math.pi < back[0] <= math.pi and -math.pi < back[2] <= math.pi
 
 
 def test_non_unit_quaternion_is_normalised():
-    q = np.array(cv.euler_to_quat(0.3, -0.4, 2.0))
+    q = np.array(sm.euler_to_quat(0.3, -0.4, 2.0))
     for scale in (1e-6, 0.5, 3.0, 1e6):
-        np.testing.assert_allclose(cv.quat_to_euler(*(scale * q)), (0.3, -0.4, 2.0),
+        np.testing.assert_allclose(sm.quat_to_euler(*(scale * q)), (0.3, -0.4, 2.0),
                                    atol=1e-14)
     # q and -q are the same rotation
-    np.testing.assert_allclose(cv.quat_to_euler(*(-q)), (0.3, -0.4, 2.0), atol=1e-14)
+    np.testing.assert_allclose(sm.quat_to_euler(*(-q)), (0.3, -0.4, 2.0), atol=1e-14)
 
 
 @pytest.mark.parametrize('quat', [(0, 0, 0, 0), (math.nan, 0, 0, 1), (0, math.inf, 0, 1)])
 def test_bad_quaternion_raises(quat):
     with pytest.raises(ConversionError, match='quaternion'):
-        cv.quat_to_euler(*quat)
+        sm.quat_to_euler(*quat)
 
 
 @pytest.mark.parametrize('theta', [math.pi / 2, -math.pi / 2, math.pi / 2 - 1e-9,
@@ -101,29 +102,29 @@ def test_near_gimbal_lock_keeps_rotation(theta):
     rng = np.random.default_rng(3)
     for _ in range(100):
         phi, psi = rng.uniform(-math.pi, math.pi, 2)
-        q = cv.euler_to_quat(phi, theta, psi)
-        back = cv.quat_to_euler(*q)
+        q = sm.euler_to_quat(phi, theta, psi)
+        back = sm.quat_to_euler(*q)
         assert math.isfinite(back[0]) and math.isfinite(back[2])
         assert abs(back[1] - theta) < 1e-7
         # individual phi/psi are ill-defined at gimbal lock; the rotation is not
-        np.testing.assert_allclose(cv.euler_to_rotation_matrix(*back),
-                                   cv.euler_to_rotation_matrix(phi, theta, psi), atol=2e-8)
+        np.testing.assert_allclose(sm.euler_to_rotation_matrix(*back),
+                                   sm.euler_to_rotation_matrix(phi, theta, psi), atol=2e-8)
 
 
 def test_gimbal_lock_convention_sets_phi_zero():
     phi, theta, psi = 0.4, math.pi / 2, 1.0
-    back = cv.quat_to_euler(*cv.euler_to_quat(phi, theta, psi))
+    back = sm.quat_to_euler(*sm.euler_to_quat(phi, theta, psi))
     assert back[0] == 0.0
     assert math.isclose(back[1], math.pi / 2, abs_tol=1e-15)
     assert math.isclose(back[2], psi - phi, abs_tol=1e-12)  # only psi - phi is defined there
 
 
 def test_wrap_angle():
-    assert cv.wrap_angle(math.pi) == math.pi
-    assert cv.wrap_angle(-math.pi) == math.pi
-    assert math.isclose(cv.wrap_angle(3 * math.pi / 2), -math.pi / 2, abs_tol=1e-15)
-    assert math.isclose(cv.wrap_angle(-7.0), -7.0 + 2 * math.pi, abs_tol=1e-15)
-    assert cv.wrap_angle(0.25) == 0.25
+    assert sm.wrap_angle(math.pi) == math.pi
+    assert sm.wrap_angle(-math.pi) == math.pi
+    assert math.isclose(sm.wrap_angle(3 * math.pi / 2), -math.pi / 2, abs_tol=1e-15)
+    assert math.isclose(sm.wrap_angle(-7.0), -7.0 + 2 * math.pi, abs_tol=1e-15)
+    assert sm.wrap_angle(0.25) == 0.25
 
 
 # --- Odometry, NED/ENU -------------------------------------------------------------------------
@@ -136,8 +137,8 @@ def test_state_round_trip(frame):
         a = rng.normal(size=(6, 6))
         pcov = a @ a.T
         tcov = rng.normal(size=(6, 6))
-        msg = cv.state_to_odometry(17.25, x, frame, pose_cov=pcov, twist_cov=tcov.ravel())
-        t, x2, pcov2, tcov2 = cv.odometry_to_state(msg, frame)
+        msg = rc.state_to_odometry(17.25, x, frame, pose_cov=pcov, twist_cov=tcov.ravel())
+        t, x2, pcov2, tcov2 = sm.odometry_to_state(msg, frame)
         assert t == 17.25
         np.testing.assert_allclose(x2[:9], x[:9], rtol=0, atol=1e-12)
         assert np.max(np.abs(_angle_diff(x2[9:], x[9:]))) < 1e-12
@@ -151,15 +152,15 @@ def test_psi_is_wrapped(frame):
     x = np.zeros(12)
     for psi in (3.5, -3.5, 7.0, math.pi, -math.pi, 2 * math.pi + 0.1):
         x[11] = psi
-        _, x2, _, _ = cv.odometry_to_state(cv.state_to_odometry(0.0, x, frame), frame)
+        _, x2, _, _ = sm.odometry_to_state(rc.state_to_odometry(0.0, x, frame), frame)
         assert -math.pi < x2[11] <= math.pi
         assert abs(_angle_diff(x2[11], psi)) < 1e-12
-        assert abs(x2[11] - cv.wrap_angle(psi)) < 1e-12 or abs(abs(x2[11]) - math.pi) < 1e-12
+        assert abs(x2[11] - sm.wrap_angle(psi)) < 1e-12 or abs(abs(x2[11]) - math.pi) < 1e-12
 
 
 def test_ned_message_layout():
     x = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 10.0, 20.0, 30.0, 0.0, 0.0, 0.0])
-    msg = cv.state_to_odometry(1.5, x, 'ned')
+    msg = rc.state_to_odometry(1.5, x, 'ned')
     assert (msg.header.frame_id, msg.child_frame_id) == ('odom_ned', 'base_link_frd')
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1, 500_000_000)
     p, v, w = msg.pose.pose.position, msg.twist.twist.linear, msg.twist.twist.angular
@@ -172,7 +173,7 @@ def test_ned_message_layout():
 
 def test_enu_message_layout():
     x = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 10.0, 20.0, 30.0, 0.0, 0.0, 0.0])
-    msg = cv.state_to_odometry(0.0, x, 'enu')
+    msg = rc.state_to_odometry(0.0, x, 'enu')
     assert (msg.header.frame_id, msg.child_frame_id) == ('odom', 'base_link')
     p, v, w = msg.pose.pose.position, msg.twist.twist.linear, msg.twist.twist.angular
     assert (p.x, p.y, p.z) == (20.0, 10.0, -30.0)  # east, north, up
@@ -180,23 +181,23 @@ def test_enu_message_layout():
     assert (w.x, w.y, w.z) == (0.1, -0.2, -0.3)
     # heading north (psi = 0 in NED) is yaw pi/2 in ENU
     o = msg.pose.pose.orientation
-    np.testing.assert_allclose(cv.quat_to_euler(o.x, o.y, o.z, o.w), (0, 0, math.pi / 2),
+    np.testing.assert_allclose(sm.quat_to_euler(o.x, o.y, o.z, o.w), (0, 0, math.pi / 2),
                                atol=1e-15)
-    custom = cv.state_to_odometry(0.0, x, 'enu', frame_id='map', child_frame_id='auv')
+    custom = rc.state_to_odometry(0.0, x, 'enu', frame_id='map', child_frame_id='auv')
     assert (custom.header.frame_id, custom.child_frame_id) == ('map', 'auv')
 
 
 def test_enu_orientation_is_the_documented_product():
     for x in _random_states(200, seed=5):
-        msg = cv.state_to_odometry(0.0, x, 'enu')
+        msg = rc.state_to_odometry(0.0, x, 'enu')
         o = msg.pose.pose.orientation
         r_enu_flu = _quat_matrix(o.x, o.y, o.z, o.w)
         p = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]])
         d = np.diag([1, -1, -1])
-        r_ned_frd = cv.euler_to_rotation_matrix(*x[9:])
+        r_ned_frd = sm.euler_to_rotation_matrix(*x[9:])
         np.testing.assert_allclose(r_enu_flu, p @ r_ned_frd @ d, atol=1e-14)
         # closed form in Euler angles: (phi, -theta, pi/2 - psi)
-        eul = cv.quat_to_euler(o.x, o.y, o.z, o.w)
+        eul = sm.quat_to_euler(o.x, o.y, o.z, o.w)
         expected = (x[9], -x[10], math.pi / 2 - x[11])
         assert np.max(np.abs(_angle_diff(eul, expected))) < 1e-12
 
@@ -209,12 +210,12 @@ def test_enu_covariance_matches_the_angle_and_vector_maps():
 
     # Jacobian of (ENU position, ENU Euler) and (ENU twist) w.r.t. the NED state, numerically
     def enu_pose(xx):
-        m = cv.state_to_odometry(0.0, xx, 'enu')
+        m = rc.state_to_odometry(0.0, xx, 'enu')
         p, o = m.pose.pose.position, m.pose.pose.orientation
-        return np.array([p.x, p.y, p.z, *cv.quat_to_euler(o.x, o.y, o.z, o.w)])
+        return np.array([p.x, p.y, p.z, *sm.quat_to_euler(o.x, o.y, o.z, o.w)])
 
     def enu_twist(xx):
-        m = cv.state_to_odometry(0.0, xx, 'enu')
+        m = rc.state_to_odometry(0.0, xx, 'enu')
         v, w = m.twist.twist.linear, m.twist.twist.angular
         return np.array([v.x, v.y, v.z, w.x, w.y, w.z])
 
@@ -227,19 +228,19 @@ def test_enu_covariance_matches_the_angle_and_vector_maps():
         dx = np.zeros(12)
         dx[k] = h
         j_twist[:, k] = (enu_twist(x + dx) - enu_twist(x - dx)) / (2 * h)
-    np.testing.assert_allclose(j_pose, cv.T_POSE_NED_TO_ENU, atol=1e-8)
-    np.testing.assert_allclose(j_twist, cv.T_TWIST_FRD_TO_FLU, atol=1e-8)
+    np.testing.assert_allclose(j_pose, sm.T_POSE_NED_TO_ENU, atol=1e-8)
+    np.testing.assert_allclose(j_twist, sm.T_TWIST_FRD_TO_FLU, atol=1e-8)
 
     a = rng.normal(size=(6, 6))
     pcov = a @ a.T
-    msg = cv.state_to_odometry(0.0, x, 'enu', pose_cov=pcov, twist_cov=2 * pcov)
+    msg = rc.state_to_odometry(0.0, x, 'enu', pose_cov=pcov, twist_cov=2 * pcov)
     c_pose = np.asarray(msg.pose.covariance).reshape(6, 6)
     c_twist = np.asarray(msg.twist.covariance).reshape(6, 6)
     np.testing.assert_allclose(c_pose, j_pose @ pcov @ j_pose.T, atol=1e-7)
     np.testing.assert_allclose(c_twist, j_twist @ (2 * pcov) @ j_twist.T, atol=1e-7)
-    np.testing.assert_array_equal(c_pose, cv.T_POSE_NED_TO_ENU @ pcov @ cv.T_POSE_NED_TO_ENU.T)
+    np.testing.assert_array_equal(c_pose, sm.T_POSE_NED_TO_ENU @ pcov @ sm.T_POSE_NED_TO_ENU.T)
     np.testing.assert_array_equal(
-        c_twist, cv.T_TWIST_FRD_TO_FLU @ (2 * pcov) @ cv.T_TWIST_FRD_TO_FLU.T)
+        c_twist, sm.T_TWIST_FRD_TO_FLU @ (2 * pcov) @ sm.T_TWIST_FRD_TO_FLU.T)
     # known entries: north variance becomes the ENU y variance, yaw sign flips
     assert c_pose[1, 1] == pcov[0, 0] and c_pose[0, 0] == pcov[1, 1]
     assert c_pose[5, 0] == -pcov[5, 1]
@@ -247,7 +248,7 @@ def test_enu_covariance_matches_the_angle_and_vector_maps():
 
 
 def test_default_covariances_are_zero():
-    msg = cv.state_to_odometry(0.0, np.zeros(12))
+    msg = rc.state_to_odometry(0.0, np.zeros(12))
     assert not np.any(msg.pose.covariance) and not np.any(msg.twist.covariance)
 
 
@@ -255,32 +256,32 @@ def test_non_finite_values_pass_through():
     x = np.zeros(12)
     x[0] = math.nan
     x[6] = math.inf
-    msg = cv.state_to_odometry(0.0, x, 'enu')
-    _, x2, _, _ = cv.odometry_to_state(msg, 'enu')
+    msg = rc.state_to_odometry(0.0, x, 'enu')
+    _, x2, _, _ = sm.odometry_to_state(msg, 'enu')
     assert math.isnan(x2[0]) and x2[6] == math.inf and x2[7] == 0.0
-    assert not cv.is_finite_state(x2) and cv.is_finite_state(np.zeros(12))
+    assert not sm.is_finite_state(x2) and sm.is_finite_state(np.zeros(12))
     x[9] = math.nan  # a NaN angle makes a NaN quaternion: NaN angles come back
-    _, x3, _, _ = cv.odometry_to_state(cv.state_to_odometry(0.0, x), 'ned')
+    _, x3, _, _ = sm.odometry_to_state(rc.state_to_odometry(0.0, x), 'ned')
     assert np.all(np.isnan(x3[9:]))
 
 
 def test_odometry_errors():
     with pytest.raises(ConversionError, match='x12'):
-        cv.state_to_odometry(0.0, np.zeros(11))
+        rc.state_to_odometry(0.0, np.zeros(11))
     with pytest.raises(ConversionError, match='frame'):
-        cv.state_to_odometry(0.0, np.zeros(12), frame='nwu')
+        rc.state_to_odometry(0.0, np.zeros(12), frame='nwu')
     with pytest.raises(ConversionError, match='pose_cov'):
-        cv.state_to_odometry(0.0, np.zeros(12), pose_cov=np.zeros((3, 3)))
+        rc.state_to_odometry(0.0, np.zeros(12), pose_cov=np.zeros((3, 3)))
     with pytest.raises(ConversionError, match='twist_cov'):
-        cv.state_to_odometry(0.0, np.zeros(12), twist_cov='abc')
-    unset = cv.state_to_odometry(0.0, np.zeros(12))
+        rc.state_to_odometry(0.0, np.zeros(12), twist_cov='abc')
+    unset = rc.state_to_odometry(0.0, np.zeros(12))
     unset.pose.pose.orientation.w = 0.0
     with pytest.raises(ConversionError, match='pose.pose.orientation'):
-        cv.odometry_to_state(unset)
+        sm.odometry_to_state(unset)
     with pytest.raises(ConversionError, match='nav_msgs/Odometry'):
-        cv.odometry_to_state(JointState())
+        sm.odometry_to_state(JointState())
     with pytest.raises(ConversionError, match='frame'):
-        cv.odometry_to_state(unset, frame='NED')
+        sm.odometry_to_state(unset, frame='NED')
 
 
 # --- JointState -------------------------------------------------------------------------------
@@ -288,49 +289,49 @@ def test_odometry_errors():
 
 def test_joint_state_layout_and_round_trip():
     u6 = np.array([0.1, -0.2, 0.05, -0.03, 0.04, 1200.0])
-    msg = cv.actuators_to_joint_state(3.25, u6)
+    msg = rc.actuators_to_joint_state(3.25, u6)
     assert list(msg.name) == ['rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                               'bow_plane_starboard', 'propeller']
     assert list(msg.position) == [0.1, -0.2, 0.05, -0.03, 0.04, 0.0]
     assert list(msg.velocity)[:5] == [0.0] * 5
     assert math.isclose(msg.velocity[5], 1200.0 * 2 * math.pi / 60, rel_tol=1e-15)
     assert len(msg.effort) == 0
-    t, u2 = cv.joint_state_to_actuators(msg)
+    t, u2 = sm.joint_state_to_actuators(msg)
     assert t == 3.25
     np.testing.assert_allclose(u2, u6, rtol=1e-14, atol=0)
 
 
 def test_joint_state_matches_by_name_in_any_order():
-    msg = cv.actuators_to_joint_state(0.0, [1, 2, 3, 4, 5, 600])
+    msg = rc.actuators_to_joint_state(0.0, [1, 2, 3, 4, 5, 600])
     order = [5, 2, 0, 4, 1, 3]
     shuffled = JointState(name=[msg.name[i] for i in order] + ['extra_joint'],
                           position=[msg.position[i] for i in order] + [9.0],
                           velocity=[msg.velocity[i] for i in order] + [9.0])
     shuffled.header = msg.header
-    _, u = cv.joint_state_to_actuators(shuffled)
+    _, u = sm.joint_state_to_actuators(shuffled)
     np.testing.assert_allclose(u, [1, 2, 3, 4, 5, 600], rtol=1e-14)
 
 
 def test_joint_state_errors():
-    good = cv.actuators_to_joint_state(0.0, np.zeros(6))
+    good = rc.actuators_to_joint_state(0.0, np.zeros(6))
     missing = JointState(name=list(good.name[:4]) + ['propeller'], position=[0.0] * 5,
                          velocity=[0.0] * 5)
     with pytest.raises(ConversionError, match='bow_plane_starboard'):
-        cv.joint_state_to_actuators(missing)
+        sm.joint_state_to_actuators(missing)
     short_pos = JointState(name=list(good.name), position=[0.0] * 5, velocity=[0.0] * 6)
     with pytest.raises(ConversionError, match='position'):
-        cv.joint_state_to_actuators(short_pos)
+        sm.joint_state_to_actuators(short_pos)
     no_vel = JointState(name=list(good.name), position=[0.0] * 6)
     with pytest.raises(ConversionError, match='velocity'):
-        cv.joint_state_to_actuators(no_vel)
+        sm.joint_state_to_actuators(no_vel)
     twice = JointState(name=list(good.name) + ['rudder'], position=[0.0] * 7,
                        velocity=[0.0] * 7)
     with pytest.raises(ConversionError, match='rudder'):
-        cv.joint_state_to_actuators(twice)
+        sm.joint_state_to_actuators(twice)
     with pytest.raises(ConversionError, match='u6'):
-        cv.actuators_to_joint_state(0.0, np.zeros(5))
+        rc.actuators_to_joint_state(0.0, np.zeros(5))
     with pytest.raises(ConversionError, match='JointState'):
-        cv.joint_state_to_actuators(cv.state_to_odometry(0.0, np.zeros(12)))
+        sm.joint_state_to_actuators(rc.state_to_odometry(0.0, np.zeros(12)))
 
 
 # --- time -------------------------------------------------------------------------------------
@@ -338,41 +339,41 @@ def test_joint_state_errors():
 
 def test_stamp_exactness():
     stamp = Time(sec=1_700_000_000, nanosec=123_456_789)
-    assert cv.stamp_to_ns(stamp) == 1_700_000_000_123_456_789
-    assert cv.ns_to_stamp(1_700_000_000_123_456_789) == stamp
+    assert sm.stamp_to_ns(stamp) == 1_700_000_000_123_456_789
+    assert rc.ns_to_stamp(1_700_000_000_123_456_789) == stamp
     # 1.1 s is 1.100000000000000088... in binary: nearest ns, no float drift
-    assert cv.sec_to_stamp(1.1) == Time(sec=1, nanosec=100_000_000)
-    assert cv.sec_to_ns(0.3) == 300_000_000
+    assert rc.sec_to_stamp(1.1) == Time(sec=1, nanosec=100_000_000)
+    assert sm.sec_to_ns(0.3) == 300_000_000
     # epoch-scale floats: split sec/fraction keeps the ns nearest to the float's value
     t = 1_700_000_000.25
-    assert cv.sec_to_ns(t) == 1_700_000_000_250_000_000
+    assert sm.sec_to_ns(t) == 1_700_000_000_250_000_000
     # negative times: nanosec stays in [0, 1e9)
-    assert cv.sec_to_stamp(-1.7) == Time(sec=-2, nanosec=300_000_000)
-    assert cv.stamp_to_sec(Time(sec=-2, nanosec=300_000_000)) == -1.7
+    assert rc.sec_to_stamp(-1.7) == Time(sec=-2, nanosec=300_000_000)
+    assert sm.stamp_to_sec(Time(sec=-2, nanosec=300_000_000)) == -1.7
     # fraction rounding up to a whole second carries
-    assert cv.sec_to_stamp(2.9999999999) == Time(sec=3, nanosec=0)
+    assert rc.sec_to_stamp(2.9999999999) == Time(sec=3, nanosec=0)
 
 
 def test_stamp_round_trips():
     rng = np.random.default_rng(8)
     for _ in range(2000):
         stamp = Time(sec=int(rng.integers(0, 100_000)), nanosec=int(rng.integers(0, 10**9)))
-        assert cv.sec_to_stamp(cv.stamp_to_sec(stamp)) == stamp
-        assert cv.ns_to_stamp(cv.stamp_to_ns(stamp)) == stamp
+        assert rc.sec_to_stamp(sm.stamp_to_sec(stamp)) == stamp
+        assert rc.ns_to_stamp(sm.stamp_to_ns(stamp)) == stamp
     for _ in range(2000):
         ns = int(rng.integers(-2**31 * 10**9, 2**31 * 10**9))
-        assert cv.stamp_to_ns(cv.ns_to_stamp(ns)) == ns
+        assert sm.stamp_to_ns(rc.ns_to_stamp(ns)) == ns
     # stamp_to_sec is correctly rounded (sec + nanosec * 1e-9 is not always)
-    assert cv.stamp_to_sec(Time(sec=0, nanosec=3)) == 3e-9
+    assert sm.stamp_to_sec(Time(sec=0, nanosec=3)) == 3e-9
 
 
 def test_time_errors():
     with pytest.raises(ConversionError):
-        cv.sec_to_stamp(math.nan)
+        rc.sec_to_stamp(math.nan)
     with pytest.raises(ConversionError, match='int32'):
-        cv.ns_to_stamp(2**31 * 10**9)
+        rc.ns_to_stamp(2**31 * 10**9)
 
 
 def test_clock_msg():
-    msg = cv.clock_msg(12.000000001)
+    msg = rc.clock_msg(12.000000001)
     assert (msg.clock.sec, msg.clock.nanosec) == (12, 1)

@@ -8,7 +8,7 @@ from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ek
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
 from auv_ident.core.stream import StreamIdentifier
-from auv_ident.core.vehicle import available_vehicles, load_vehicle
+from auv_ident.vehicles import available_vehicles, load_vehicle
 
 NPS = load_vehicle('nps_auv2')
 NAMES = list(NPS.identify_default)
@@ -259,7 +259,7 @@ def test_stale_numba_cache_is_dropped_when_any_compiled_source_changes(tmp_path)
         (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
         (pkg / rel).write_text(f'# {rel}\n')
     ekf_cache = pkg / 'core' / '__pycache__' / 'ekf.run_filter-1.py311.nbi'
-    bench_cache = pkg / '__pycache__' / 'bench._model_loop-1.py311.1.nbc'
+    bench_cache = pkg / 'analysis' / '__pycache__' / 'bench._model_loop-1.py311.1.nbc'
     other = pkg / 'core' / '__pycache__' / 'model.cpython-311.pyc'
 
     def make_caches():

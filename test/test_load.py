@@ -1,6 +1,6 @@
 """Load: a real identifier process takes 200 Hz odometry and actuator commands for two minutes
 of simulated time (24001 samples of each) at 6x real time, published from this process
-(auv_ident.loadtest, the `python -m auv_ident loadtest` benchmark in a shorter run).
+(auv_ident.ros.loadtest, the `python -m auv_ident loadtest` benchmark in a shorter run).
 
 Every message must be processed (the identifier's /diagnostics counts: accepted + rejected =
 published, for both topics; nothing rejected, no filter reset), every estimate finite, the
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from auv_ident.loadtest import format_loadtest, run_loadtest
-from auv_ident.replay import IdentSession
+from auv_ident.ros.loadtest import format_loadtest, run_loadtest
+from auv_ident.session.session import IdentSession
 
 RATE_HZ = 200.0
 SIM_SECONDS = 120.0

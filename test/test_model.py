@@ -7,7 +7,7 @@ import pytest
 
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.model import Model
-from auv_ident.core.vehicle import available_vehicles, load_vehicle
+from auv_ident.vehicles import available_vehicles, load_vehicle
 
 # shared/reference/vehicles.md section 1.7: classic MSS npsauv.m run in GNU Octave
 ROW_A_IN = [2, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0], [0, 0, 0, 0, 0, 1000]

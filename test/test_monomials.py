@@ -6,7 +6,7 @@ import pytest
 from auv_ident.core import monomials
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.monomials import NZ, kernel_source, monomial_kernel
-from auv_ident.core.vehicle import available_vehicles, load_vehicle
+from auv_ident.vehicles import available_vehicles, load_vehicle
 
 
 def _factors(rng):

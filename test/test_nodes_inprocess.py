@@ -24,17 +24,21 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from auv_ident.bag_io import BagError, BagWriter
-from auv_ident.conversions import actuators_to_joint_state, stamp_to_ns, state_to_odometry
+from auv_ident.bags.schema import BagError
+from auv_ident.bags.writer import BagWriter
+from auv_ident.ros.conversions import actuators_to_joint_state, state_to_odometry
+from auv_ident.session.messages import stamp_to_ns
 from auv_ident.core.errors import ConfigError, DivergenceError
 from auv_ident.core.model import Model
-from auv_ident.core.simulate import DEFAULT_NOISE_STD, simulate
-from auv_ident.core.vehicle import load_vehicle
-from auv_ident.nodes.identifier_node import IdentifierNode
-from auv_ident.nodes.simulator_node import SimulatorNode
-from auv_ident.replay import IdentSession, replay_bag, replay_messages
-from auv_ident.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
-                               write_run_bag)
+from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulate import simulate
+from auv_ident.vehicles import load_vehicle
+from auv_ident.ros.identifier_node import IdentifierNode
+from auv_ident.ros.simulator_node import SimulatorNode
+from auv_ident.session.session import IdentSession
+from auv_ident.bags.replay import replay_bag, replay_messages
+from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
+                                    write_run_bag)
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
 LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,

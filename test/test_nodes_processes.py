@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from auv_ident.core.model import Model
-from auv_ident.core.vehicle import load_vehicle
+from auv_ident.vehicles import load_vehicle
 from helpers import spawn_node, stop_process
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -26,9 +26,10 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
-from auv_ident.bag_io import BagError, message_counts, read_bag
-from auv_ident.conversions import sec_to_ns, stamp_to_ns
-from auv_ident.sim_bag import sample_messages, TOPIC_TYPES, write_run_bag
+from auv_ident.bags.schema import BagError
+from auv_ident.bags.reader import message_counts, read_bag
+from auv_ident.session.messages import sec_to_ns, stamp_to_ns
+from auv_ident.bags.sim_bag import sample_messages, TOPIC_TYPES, write_run_bag
 import ros_pub_helper
 from conftest import require_loopback_dds
 from helpers import assert_msg_equal
@@ -50,7 +51,7 @@ def samples():
 def sim_run():
     from auv_ident.core.model import Model
     from auv_ident.core.simulate import simulate
-    from auv_ident.core.vehicle import load_vehicle
+    from auv_ident.vehicles import load_vehicle
     return simulate(Model(load_vehicle('nps_auv2'), ()), 'zigzag', duration=2.0, T=0.05,
                     seed=3)
 

@@ -9,9 +9,11 @@ import pytest
 from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
-from auv_ident.core.vehicle import STATE_NAMES, load_vehicle
-from auv_ident.experiments import coefficient_list, load_source
-from auv_ident.report import make_report, validate
+from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.vehicles import load_vehicle
+from auv_ident.analysis.experiments import load_source
+from auv_ident.analysis.results import coefficient_list
+from auv_ident.analysis.report import make_report, validate
 
 FIGURES = ('convergence', 'validation_positions', 'validation_attitudes', 'validation_speeds',
            'nis', 'adapted_noise')
@@ -142,7 +144,7 @@ def test_validating_on_the_identification_manoeuvre_is_refused(nps, tmp_path):
 
 
 def test_unknown_truth_validates_against_the_vehicle_file_prior(tmp_path, monkeypatch):
-    from auv_ident import experiments
+    from auv_ident.analysis import experiments
     src = load_source('nps_auv2', 'zigzag', seed=5, duration=30.0)
     src.truth, src.maneuver, src.description = None, '', 'a bag with unknown truth'
     monkeypatch.setattr(experiments, 'load_source', lambda **kw: src)

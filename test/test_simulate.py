@@ -10,8 +10,10 @@ from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.integrators import rk4_step
 from auv_ident.core.model import Model
-from auv_ident.core.simulate import DEFAULT_NOISE_STD, simulate, trim_speed
-from auv_ident.core.vehicle import available_vehicles, load_vehicle
+from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulate import simulate
+from auv_ident.core.trim import trim_speed
+from auv_ident.vehicles import available_vehicles, load_vehicle
 
 
 def test_rk4_is_fourth_order_on_a_linear_system():

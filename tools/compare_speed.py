@@ -69,7 +69,7 @@ def runners(package, run, n_steps):
 
 def race(candidates, n_steps, rounds):
     """Best round of each candidate (us per step), the candidates taking turns."""
-    from auv_ident.bench import best_interleaved
+    from auv_ident.analysis.bench import best_interleaved
     for f in candidates.values():
         f()                                    # compile / load before timing
 
@@ -102,7 +102,7 @@ def main(argv=None):
     sys.path.insert(0, pkgs)
     from auv_ident.core.model import Model
     from auv_ident.core.simulate import simulate
-    from auv_ident.core.vehicle import load_vehicle
+    from auv_ident.vehicles import load_vehicle
     run = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=a.steps / 20.0 + 1.0,
                    seed=1)
     old_model, old_full = runners('core_old', run, a.steps)

@@ -3,7 +3,7 @@ import hashlib
 import os
 
 # Files holding numba functions compiled with cache=True (paths inside the package).
-_COMPILED_SOURCES = ('core/model.py', 'core/ekf.py', 'bench.py')
+_COMPILED_SOURCES = ('core/model.py', 'core/ekf.py', 'analysis/bench.py')
 _STAMP = 'numba_sources.sha256'
 
 

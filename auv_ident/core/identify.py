@@ -21,7 +21,8 @@ from scipy.optimize import least_squares
 from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
-from .simulate import DEFAULT_NOISE_STD, trim_speed
+from .sensors import DEFAULT_NOISE_STD
+from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
 # coefficients are learnt from how well the model predicts the motion, and a large state Q lets

@@ -1,36 +1,18 @@
 """Simulator core: integrate a vehicle under a manoeuvre and add sensor noise (no ROS).
 
-Sensor-noise defaults (1-sigma, per output channel y = x) describe a typical small-AUV suite:
-
-======== ============================ =========== ============================================
-channel  sensor                       sigma       why
-======== ============================ =========== ============================================
-u v w    DVL (bottom lock)            0.01 m/s    ~0.3-1 % of speed + 2-5 mm/s at 0.5-2 m/s
-p q r    MEMS/FOG gyro                0.001 rad/s ~0.06 deg/s, tactical-grade MEMS
-x y      USBL/LBL fix                 0.5 m       acoustic positioning, short range
-z        pressure depth sensor        0.05 m      0.05-0.1 % full scale of a 50-100 m sensor
-phi th   AHRS roll/pitch              0.002 rad   ~0.1 deg
-psi      AHRS/compass heading         0.005 rad   ~0.3 deg
-======== ============================ =========== ============================================
-
-Process noise (off by default) adds white accelerations to nu_dot, sigma per DOF in m/s^2 and
-rad/s^2, to stand for unmodelled forces (waves, tether, currents).
+Sensor-noise defaults: :mod:`auv_ident.core.sensors`.
 """
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from . import maneuvers
-from .errors import ConfigError, DomainError
+from .errors import ConfigError
 from .integrators import rk4_step
+from .sensors import DEFAULT_NOISE_STD, DEFAULT_T
+from .trim import initial_state
 from .vehicle import P_FIN
 
-DEFAULT_NOISE_STD = np.array([0.01, 0.01, 0.01, 0.001, 0.001, 0.001,
-                              0.5, 0.5, 0.05, 0.002, 0.002, 0.005])
-DEFAULT_PROCESS_STD = np.array([1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4])
-DEFAULT_T = 0.05        # s, sample time (the paper's T)
-DEFAULT_DEPTH = 10.0    # m, initial depth
 
 
 def wrap_angle(a):
@@ -68,27 +50,6 @@ class Run:
             'std': {'v': float(x[:, 1].std()), 'w': float(x[:, 2].std()),
                     'p': float(x[:, 3].std())},
         }
-
-
-def trim_speed(model, rpm):
-    """Steady surge speed (m/s) with fins at zero and shaft speed rpm: X(u) = 0."""
-    ui = np.array([0, 0, 0, 0, 0, rpm], dtype=float)
-
-    def surge(u):
-        x = np.zeros(12)
-        x[0] = u
-        return model.f(x, ui)[0]
-    lo, hi = 1e-3, 10.0
-    if surge(lo) * surge(hi) > 0:
-        raise DomainError(f'no steady surge speed in [{lo}, {hi}] m/s at {rpm} rpm')
-    return brentq(surge, lo, hi, xtol=1e-12)
-
-
-def initial_state(model, rpm, depth=DEFAULT_DEPTH):
-    x0 = np.zeros(12)
-    x0[0] = trim_speed(model, rpm)
-    x0[8] = depth
-    return x0
 
 
 def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=None,

@@ -44,36 +44,6 @@ COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular
 
 
 
-def config_dir():
-    """Folder of the vehicle YAMLs: the source tree's `config/`, or the installed share dir."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    candidates = [os.path.join(here, '..', '..', 'config')]
-    try:  # colcon / ros2 install: share/auv_ident/config
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(os.path.join(get_package_share_directory('auv_ident'), 'config'))
-    except Exception:  # noqa: BLE001 - ament index absent outside a ROS install
-        pass
-    import sys
-    candidates.append(os.path.join(sys.prefix, 'share', 'auv_ident', 'config'))
-    for c in candidates:
-        if os.path.isdir(c):
-            return os.path.abspath(c)
-    raise ConfigError('cannot find the auv_ident config/ folder (looked in: '
-                      + ', '.join(os.path.abspath(c) for c in candidates) + ')')
-
-
-def available_vehicles():
-    """Names of the vehicle files in config/ (those with a `coefficients:` block)."""
-    out = []
-    d = config_dir()
-    for fn in sorted(os.listdir(d)):
-        if fn.endswith('.yaml'):
-            with open(os.path.join(d, fn), encoding='utf-8') as fh:
-                if '\ncoefficients:' in fh.read():
-                    out.append(fn[:-5])
-    return out
-
-
 @dataclass
 class Coefficient:
     """One hydrodynamic/control coefficient of the vehicle file."""
@@ -240,25 +210,15 @@ def rigid_body_mass_matrix(mass, r_G, I):
     return M
 
 
-def resolve_vehicle_path(name_or_path):
-    """A vehicle name (file in config/) or a path to a YAML file."""
-    if os.path.sep in name_or_path or name_or_path.endswith('.yaml'):
-        path = name_or_path
-    else:
-        path = os.path.join(config_dir(), name_or_path + '.yaml')
-    if not os.path.isfile(path):
-        raise ConfigError(f'unknown vehicle {name_or_path!r}: no file {path} '
-                          f'(available: {", ".join(available_vehicles())})')
-    return path
-
-
-_CACHE = {}
-
-
-def load_vehicle(name_or_path):
-    """Load and validate a vehicle file (cached per path: parse once, never in a hot path)."""
-    path = os.path.abspath(resolve_vehicle_path(name_or_path))
-    key = (path, os.path.getmtime(path))
+def vehicle_from_file(path):
+    """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
+    parsed once, never in a hot path). Looking a vehicle up by name is
+    :func:`auv_ident.vehicles.load_vehicle`."""
+    path = os.path.abspath(path)
+    try:
+        key = (path, os.path.getmtime(path))
+    except OSError:
+        raise ConfigError(f'no vehicle file {path}') from None
     if key not in _CACHE:
         with open(path, encoding='utf-8') as fh:
             try:
@@ -267,6 +227,9 @@ def load_vehicle(name_or_path):
                 raise ConfigError(f'{path}: not valid YAML: {err}') from None
         _CACHE[key] = _build(raw, path)
     return _CACHE[key]
+
+
+_CACHE = {}
 
 
 def _build(raw, path):

@@ -1,40 +1,24 @@
 """Experiments over the core: identify a simulated run, tables, JSON, Monte Carlo statistics.
 
-ROS-free (bags come in through replay.py). Every figure printed here can be reproduced with
+ROS-free (bags come in through analysis/bag_identify.py). Every figure printed here can be reproduced with
 the command shown next to it in the README.
 """
-import json
 import multiprocessing as mp
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from .core.errors import ConfigError
-from .core.identify import FilterConfig, identify
-from .core.model import Model
-from .core.simulate import DEFAULT_NOISE_STD, simulate
-from .core.vehicle import load_vehicle
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.identify import identify
+from auv_ident.core.model import Model
+from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulate import simulate
+from auv_ident.vehicles import load_vehicle
+from auv_ident.analysis.bag_identify import bag_source
+from auv_ident.analysis.results import (coefficient_list, DEFAULT_NOISE_MODE, make_config, Source)
 
 DEFAULT_DURATION = 600.0     # s of the identification run
 DEFAULT_MANEUVER = 'ident'
-DEFAULT_NOISE_MODE = 'fixed'  # see README "Noise adaptation": fixed Q/R wins on accuracy
-
-
-def coefficient_list(vehicle, text):
-    """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
-    names = [n.strip() for n in (text or '').split(',') if n.strip()]
-    names = names or list(vehicle.identify_default)
-    if not names:
-        raise ConfigError(f'no coefficients chosen and {vehicle.name} has no identify_default')
-    return [vehicle.names[vehicle.index(n)] for n in names]
-
-
-def make_config(names, noise_mode=DEFAULT_NOISE_MODE, initial_offset=0.5, initial=None,
-                noise_std=None, tau=10.0):
-    return FilterConfig(coefficients=list(names), initial=initial, initial_offset=initial_offset,
-                        mode=noise_mode, tau=tau,
-                        noise_std=DEFAULT_NOISE_STD.copy() if noise_std is None else noise_std)
 
 
 def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
@@ -51,34 +35,12 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     return res, run, m
 
 
-@dataclass
-class Source:
-    """Data to identify from: a simulated run or a bag, as arrays on the sample grid.
-
-    U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/stream.py);
-    X_true and truth are known only for simulated data."""
-
-    vehicle: object
-    names: list
-    t: np.ndarray
-    Y: np.ndarray
-    U: np.ndarray
-    T: float
-    noise_std: np.ndarray
-    description: str
-    X_true: object = None
-    truth: object = None
-    seed: object = None
-    maneuver: str = ''
-
-
 def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None):
     """A Source from --simulate MANEUVER (in memory) or --bag PATH."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
     if bag:
-        from .replay import bag_source
         return bag_source(bag, vehicle=vehicle, coefficients=coefficients)
     v = load_vehicle(vehicle or 'nps_auv2')
     names = coefficient_list(v, coefficients)
@@ -90,63 +52,6 @@ def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                   maneuver=run.maneuver,
                   description=f'simulated {run.maneuver!r} run of {run.t[-1]:.0f} s at '
                               f'T = {run.T} s, seed {seed}, {run.u[0, 5]:.0f} rpm')
-
-
-def paper_values(vehicle, name):
-    """(paper's estimate, paper's error % text) or (None, None)."""
-    p = vehicle.paper or {}
-    est = (p.get('estimated') or {}).get(name)
-    err = (p.get('error_pct') or {}).get(name)
-    return est, err
-
-
-def result_dict(vehicle, res, extra=None):
-    """The JSON document of `identify --json` (schema in the README)."""
-    err = res.error_pct()
-    ekf_err = res.error_pct('ekf_estimate')
-    coeffs = {}
-    for i, n in enumerate(res.names):
-        pe, perr = paper_values(vehicle, n)
-        coeffs[n] = {
-            'estimate': float(res.estimate[i]), 'std': float(res.std[i]),
-            'truth': None if res.truth is None else float(res.truth[i]),
-            'error_pct': None if err is None else float(err[i]),
-            'initial': float(res.initial[i]),
-            'ekf_estimate': float(res.ekf_estimate[i]), 'ekf_std': float(res.ekf_std[i]),
-            'ekf_error_pct': None if ekf_err is None else float(ekf_err[i]),
-            'paper_estimate': pe, 'paper_error_pct': perr,
-        }
-    d = {'vehicle': vehicle.name, 'coefficients': coeffs, 'steps': res.steps,
-         'wall_s': res.wall_s, 'refined': res.refined,
-         'mean_nis_per_dof': res.mean_nis_per_dof,
-         'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
-         + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
-            else 'dimensional SI') + ')'}
-    if extra:
-        d.update(extra)
-    return d
-
-
-def _fmt(v, width=12):
-    return f'{v:>{width}.6g}' if v is not None else f'{"-":>{width}}'
-
-
-def result_table(vehicle, res):
-    """The coefficient table: truth, estimate, 1-sigma, error %, and the paper's figures."""
-    return doc_table(result_dict(vehicle, res))
-
-
-def doc_table(doc):
-    """The coefficient table of a result document (result_dict / identify --json)."""
-    lines = [f'{"coefficient":<12}{"truth":>12}{"estimate":>12}{"1-sigma":>12}{"error %":>10}'
-             f'{"paper est.":>12}{"paper err %":>12}']
-    for n, c in doc['coefficients'].items():
-        err = c['error_pct']
-        perr = c['paper_error_pct']
-        lines.append(f'{n:<12}{_fmt(c["truth"])}{_fmt(c["estimate"])}{_fmt(c["std"])}'
-                     + (f'{err:>+10.3f}' if err is not None else f'{"-":>10}')
-                     + _fmt(c['paper_estimate']) + f'{perr if perr is not None else "-":>12}')
-    return '\n'.join(lines)
 
 
 def _mc_case(args):
@@ -238,6 +143,3 @@ def montecarlo_table(stats):
     return '\n'.join(lines)
 
 
-def write_json(path, doc):
-    with open(path, 'w', encoding='utf-8') as fh:
-        json.dump(doc, fh, indent=2)

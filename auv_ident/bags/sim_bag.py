@@ -9,7 +9,8 @@ Topics (absolute names as they appear in the root namespace and in bags):
 """
 import numpy as np
 
-from .conversions import actuators_to_joint_state, sec_to_ns, state_to_odometry
+from auv_ident.ros.conversions import actuators_to_joint_state, state_to_odometry
+from auv_ident.session.messages import sec_to_ns
 
 ODOM_TOPIC = '/odom'
 ACTUATOR_TOPIC = '/actuators'
@@ -49,7 +50,7 @@ def run_metadata(run, frame='ned', command=''):
 
 def write_run_bag(run, path, frame='ned', compression='zstd', command=''):
     """Write a simulated run as a rosbag2 MCAP bag directory at path (must not exist)."""
-    from .bag_io import BagWriter
+    from auv_ident.bags.writer import BagWriter
     with BagWriter(path, compression=compression) as w:
         for topic, typ in TOPIC_TYPES.items():
             w.add_topic(topic, typ)

@@ -1,8 +1,8 @@
 """Online identification of hydrodynamic coefficients: ``ros2 run auv_ident identifier``.
 
-Thin layer over :class:`auv_ident.replay.IdentSession` (message conversion, rejection policy,
+Thin layer over :class:`auv_ident.session.session.IdentSession` (message conversion, rejection policy,
 the augmented EKF through core.stream.StreamIdentifier, recovery, health rule). Offline,
-:func:`auv_ident.replay.replay_bag` drives the same class with a bag's messages in log-time
+:func:`auv_ident.bags.replay.replay_bag` drives the same class with a bag's messages in log-time
 order, so a recorded run replays to the same estimates.
 
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
@@ -14,7 +14,7 @@ is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed 
 
 Publications
     ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good in
-        auv_ident/replay.py: fused, finite, positive definite, innovations consistent; during a
+        auv_ident/session/session.py: fused, finite, positive definite, innovations consistent; during a
         divergence nothing is published, so the latched value stays the last good estimate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
         (vehicle file's units); velocity = 1-sigma; effort empty.
@@ -31,7 +31,7 @@ Publications
             or the divergence guard: innovations inconsistent for 1 s) within the last 200
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
             updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
-            (rules and reset in auv_ident/replay.py);
+            (rules and reset in auv_ident/session/session.py);
         WARN 'waiting for data': no update since start-up or the last restart;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
@@ -53,13 +53,13 @@ Services (std_srvs/srv/Trigger)
     ``~/save``: write the estimate file to ``save_path`` (fails if save_path is empty).
 
 Errors never stop the node: rejected messages (the rejection policy and plausibility rule of
-auv_ident/replay.py: conversion errors, wrong frame, non-finite or implausible values, zero,
+auv_ident/session/session.py: conversion errors, wrong frame, non-finite or implausible values, zero,
 duplicate, out-of-order stamps, backward time jumps, no command yet, outliers) are warnings
 naming the problem, rate-limited per topic and problem (WarningLimiter: at most one line per
 kind every 5 s, with the count of those suppressed), so a flood of one problem never hides
 another. A filter fault (core error or divergence guard) is logged as an error (at most one
 per second), reported as ERROR on /diagnostics at once, and handled by the reset rule of
-auv_ident/replay.py (vehicle states restart, coefficients from the last good estimate with
+auv_ident/session/session.py (vehicle states restart, coefficients from the last good estimate with
 inflated covariance); the last good estimate stays available (latched ~/estimate, ~/save).
 Nothing non-finite is published. An unexpected exception inside a callback (a bug) is caught,
 logged as one line, counted in internal_errors and handled by the same reset rule, so the
@@ -67,7 +67,7 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/replay.py) of the last good estimate. Written on
+null, "steps": accepted updates}`` (auv_ident/session/session.py) of the last good estimate. Written on
 ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady clock)
 while new updates arrive, always atomically (temp file + rename: a kill leaves the previous
 complete file). ``warm_start`` starts a later run from it.
@@ -102,13 +102,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.conversions import ns_to_stamp
+from auv_ident.ros.conversions import ns_to_stamp
 from auv_ident.core.ekf import MODES
 from auv_ident.core.identify import DEFAULT_Q_STATE
-from auv_ident.core.simulate import DEFAULT_NOISE_STD
+from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.vehicle import STATE_NAMES
-from auv_ident.nodes.common import declare_read_only, param_or_none, run_node
-from auv_ident.replay import Event, IdentSession, WarningLimiter, write_estimate_json
+from auv_ident.ros.toolkit import declare_read_only, param_or_none, run_node
+from auv_ident.session.session import Event, IdentSession
+from auv_ident.session.warning_limiter import WarningLimiter
+from auv_ident.session.estimate_file import write_estimate_json
 
 RCLError = _rclpy.RCLError
 NODE_NAME = 'identifier'

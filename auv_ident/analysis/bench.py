@@ -18,12 +18,12 @@ import time
 import numpy as np
 from numba import njit
 
-from .core import ekf as K
-from .core.ekf import new_workspace, rk4_step_into
-from .core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
-from .core.model import Model
-from .core.simulate import simulate
-from .core.vehicle import load_vehicle
+from auv_ident.core import ekf as K
+from auv_ident.core.ekf import new_workspace, rk4_step_into
+from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.vehicles import load_vehicle
 
 
 def _filterpy_rate(m, cfg, Y, U, T, n_steps):

@@ -11,13 +11,17 @@ import platform
 
 import numpy as np
 
-from . import __version__
-from . import experiments as ex
-from .core.errors import ConfigError
-from .core.identify import identify
-from .core.model import Model
-from .core.simulate import DEFAULT_PROCESS_STD, DEFAULT_T, initial_state, simulate, wrap_angle
-from .core.vehicle import STATE_NAMES, load_vehicle
+from auv_ident import __version__
+from auv_ident.analysis import experiments as ex
+from auv_ident.analysis import results
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.identify import identify
+from auv_ident.core.model import Model
+from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
+from auv_ident.core.trim import initial_state
+from auv_ident.core.simulate import simulate, wrap_angle
+from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.vehicles import load_vehicle
 
 HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)
 NIS_WINDOW_S = 10.0      # s, moving-average window of the NIS plot
@@ -393,7 +397,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     -------
     dict with 'report', 'json' and 'figures' (name -> path) paths and 'result' (the JSON doc)
     """
-    from .progress import Progress
+    from auv_ident.analysis.progress import Progress
     os.makedirs(out_dir, exist_ok=True)
     src = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
                          seed=seed, duration=duration, coefficients=coefficients)
@@ -402,7 +406,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
                           'manoeuvre: validation must use a held-out manoeuvre')
     v = src.vehicle
-    cfg = ex.make_config(src.names, noise_mode=noise_mode,
+    cfg = results.make_config(src.names, noise_mode=noise_mode,
                          noise_std=np.asarray(src.noise_std, dtype=float).copy())
     # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
@@ -437,9 +441,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                                           else "vehicle file's prior model (truth unknown)"),
                             'rms': None if val is None else val.rms,
                             'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}}
-    doc = ex.result_dict(v, res, extra)
+    doc = results.result_dict(v, res, extra)
     json_path = os.path.join(out_dir, 'result.json')
-    ex.write_json(json_path, doc)
+    results.write_json(json_path, doc)
 
     def j(name):
         return os.path.join(out_dir, name + '.png')

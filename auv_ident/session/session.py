@@ -1,10 +1,10 @@
-"""Identification from a message stream without a ROS graph: the live node's logic and bag replay.
+"""The identifier's per-message logic, without a ROS graph: :class:`IdentSession`.
 
 :class:`IdentSession` is everything the identifier node does per message, minus ROS: it turns
 nav_msgs/Odometry and sensor_msgs/JointState (rclpy or rosbags objects) into arrays with
-:mod:`auv_ident.conversions`, applies the rejection policy, feeds
+:mod:`auv_ident.session.messages`, applies the rejection policy, feeds
 :class:`auv_ident.core.stream.StreamIdentifier`, guards against divergence and judges the
-filter's health. The identifier node (``nodes/identifier_node.py``) and :func:`replay_bag` both
+filter's health. The identifier node (``ros/identifier_node.py``) and :func:`replay_bag` both
 drive one IdentSession with the messages in arrival (log-time) order, so the same message
 sequence gives identical estimates online and offline.
 
@@ -93,33 +93,27 @@ while updates arrive; read by ``warm_start``; always the last good estimate)::
      "stamp_ns": 123450000000,              # the same stamp in integer ns (null: none)
      "steps": 2400}                         # accepted odometry updates since start-up
 """
-import bisect
 from collections import Counter, deque
-from dataclasses import dataclass, field
-import json
-import logging
+from dataclasses import dataclass
 import math
-import os
-from pathlib import Path
 import re
 
 import numpy as np
-import yaml
 
-from .bag_io import bag_topics, BagError, read_bag
-from .conversions import (ConversionError, FRAMES, JOINT_NAMES, joint_state_to_actuators,
-                          NS_PER_S, odometry_to_state, stamp_to_ns)
-from .core.ekf import MODES
-from .core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from .core.identify import DEFAULT_Q_STATE, FilterConfig, is_positive_definite
-from .core.model import Model
-from .core.simulate import DEFAULT_NOISE_STD
-from .core.stream import StreamIdentifier
-from .core.vehicle import load_vehicle, P_FIN, P_NMAX, STATE_NAMES
-
-log = logging.getLogger('auv_ident.replay')
-
-MASS_INVERSES = ('default', 'exact', 'mss_literal')
+from auv_ident.core.ekf import MODES
+from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
+from auv_ident.core.identify import DEFAULT_Q_STATE, FilterConfig, is_positive_definite
+from auv_ident.core.model import Model
+from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.stream import StreamIdentifier
+from auv_ident.core.vehicle import P_FIN, P_NMAX, STATE_NAMES
+from auv_ident.session.estimate_file import estimate_document, load_estimate_json
+from auv_ident.session.messages import (ConversionError, FRAMES, JOINT_NAMES,
+                                        joint_state_to_actuators, NS_PER_S, odometry_to_state,
+                                        stamp_to_ns)
+from auv_ident.session.settings import (_positive, _vector, MASS_INVERSES, measured_mask,
+                                        ParameterError)
+from auv_ident.vehicles import load_vehicle
 
 # Plausibility rule (module docstring)
 MAX_BODY_SPEED = 10.0       # m/s, |u| |v| |w|
@@ -155,122 +149,6 @@ NIS_BAND_PROB = 0.999     # two-sided chi-square band of the window's mean NIS p
 CONVERGED_REL_STD = 0.05  # 'converged' needs every coefficient's 1-sigma below 5 % of |estimate|
 GROSS_NIS_FACTOR = 10.0   # mean NIS/dof above 10x the band's upper edge: ERROR
 
-
-class ParameterError(ConfigError):
-    """A bad identifier setting; ``name`` is the node parameter (= keyword argument) at fault."""
-
-    def __init__(self, name, message):
-        self.name = name
-        super().__init__(f'parameter {name!r}: {message}')
-
-
-def _vector(name, values, n, default):
-    """Return a float (n,) array; None or empty gives the default (ROS maps [] to 'not set')."""
-    if values is None or len(values) == 0:
-        return np.array(default, dtype=float)
-    try:
-        a = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterError(name, f'expected {n} numbers, got {values!r}') from None
-    if a.shape != (n,):
-        raise ParameterError(name, f'expected {n} numbers, got {a.size}')
-    return a
-
-
-def _positive(name, value, allow_zero=False):
-    v = float(value)
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        what = 'non-negative' if allow_zero else 'positive'
-        raise ParameterError(name, f'{value!r} must be a {what} finite number')
-    return v
-
-
-def measured_mask(names):
-    """(12,) bool from state channel names (u v w p q r x y z phi theta psi); empty: all."""
-    if names is None or len(names) == 0:
-        return np.ones(12, dtype=bool)
-    if isinstance(names, np.ndarray) and names.dtype == bool:
-        if names.shape != (12,):
-            raise ParameterError('measured', f'a mask must have 12 entries, got {names.shape}')
-        return names.copy()
-    mask = np.zeros(12, dtype=bool)
-    for n in names:
-        if n not in STATE_NAMES:
-            raise ParameterError('measured', f'unknown channel {n!r}; use names from '
-                                             + ' '.join(STATE_NAMES))
-        if mask[STATE_NAMES.index(n)]:
-            raise ParameterError('measured', f'channel {n!r} listed twice')
-        mask[STATE_NAMES.index(n)] = True
-    return mask
-
-
-# --- estimate files --------------------------------------------------------------------------
-
-
-def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps):
-    """The JSON-ready dict of an estimate (schema in the module docstring)."""
-    est = [float(v) for v in estimate]
-    cov = np.asarray(cov, dtype=float)
-    return {'vehicle': vehicle, 'coefficients': list(names), 'estimate': est,
-            'std': [float(v) for v in np.sqrt(np.clip(np.diag(cov), 0.0, None))],
-            'covariance': [[float(v) for v in row] for row in cov],
-            'stamp': None if stamp_ns is None else stamp_ns / NS_PER_S,
-            'stamp_ns': None if stamp_ns is None else int(stamp_ns),
-            'steps': int(steps)}
-
-
-def write_estimate_json(path, doc):
-    """Write an estimate document atomically (temp file + rename); NaN/Inf refused."""
-    path = Path(path)
-    text = json.dumps(doc, indent=1, allow_nan=False) + '\n'
-    # a plain open() (not mkstemp, which makes the file 0600) keeps the umask's permissions
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
-    try:
-        with open(tmp, 'w', encoding='utf-8') as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
-
-
-def load_estimate_json(path):
-    """Read an estimate file: (vehicle, names, estimate (p,), covariance (p, p)).
-
-    Raises ParameterError('warm_start', ...) naming what is wrong."""
-    try:
-        with open(path, encoding='utf-8') as fh:
-            doc = json.load(fh)
-    except (OSError, ValueError) as err:
-        raise ParameterError('warm_start', f'cannot read {path}: {err}') from None
-    try:
-        vehicle = str(doc['vehicle'])
-        names = [str(n) for n in doc['coefficients']]
-        est = np.asarray(doc['estimate'], dtype=float)
-        cov = np.asarray(doc['covariance'], dtype=float)
-    except (KeyError, TypeError, ValueError) as err:
-        raise ParameterError('warm_start', f'{path}: not an estimate file ({err!r}); expected '
-                                           'keys vehicle, coefficients, estimate, covariance') \
-            from None
-    p = len(names)
-    if p == 0 or est.shape != (p,) or cov.shape != (p, p):
-        raise ParameterError('warm_start', f'{path}: {p} coefficients but estimate shape '
-                                           f'{est.shape} and covariance shape {cov.shape}')
-    if not (np.all(np.isfinite(est)) and np.all(np.isfinite(cov))):
-        raise ParameterError('warm_start', f'{path}: non-finite estimate or covariance')
-    cov = 0.5 * (cov + cov.T)
-    if np.any(np.linalg.eigvalsh(cov) <= 0):
-        raise ParameterError('warm_start', f'{path}: covariance is not positive definite')
-    return vehicle, names, est, cov
-
-
-# --- the session -----------------------------------------------------------------------------
-
-
 @dataclass
 class Event:
     """What one message did.
@@ -302,7 +180,6 @@ class Event:
     def accepted(self):
         return self.kind in ('update', 'command')
 
-
 @dataclass
 class LastGood:
     """The latest estimate that passed every check."""
@@ -311,7 +188,6 @@ class LastGood:
     estimate: np.ndarray
     std: np.ndarray
     cov: np.ndarray
-
 
 @dataclass
 class Health:
@@ -322,7 +198,6 @@ class Health:
     mean_nis_per_dof: float
     band: tuple
     window: int
-
 
 class IdentSession:
     """Online identification from ROS messages, ROS-graph-free (the node's per-message logic).
@@ -565,7 +440,7 @@ class IdentSession:
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
         loads (or, with a stale cache, compiles: ~15 s) the EKF before real data arrive."""
-        from .core.simulate import initial_state
+        from auv_ident.core.trim import initial_state
         try:
             s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap)
             rpm = float(self.vehicle.cruise_rpm)
@@ -875,13 +750,11 @@ class IdentSession:
             return Health('OK', 'converged', m, band, n)
         return Health('OK', 'converging', m, band, n)
 
-
 def _stamp_ns(msg):
     try:
         return stamp_to_ns(msg.header.stamp)
     except (AttributeError, TypeError, ValueError):
         return None
-
 
 def _warm_start_ekf(ekf, theta_cov):
     """Make the EKF's start() use theta_cov for the coefficient block of P (not p0_rel).
@@ -898,292 +771,3 @@ def _warm_start_ekf(ekf, theta_cov):
         ekf.P = P
         ekf.update(y0)
     ekf.start = warm_start
-
-
-# --- bag replay ------------------------------------------------------------------------------
-
-
-@dataclass
-class ReplayResult:
-    """Identification over a bag.
-
-    names : coefficient names; vehicle, frame : what was used
-    updates : list of (stamp_ns, estimate (p,), std (p,)), one per accepted odometry update
-    estimate, std, cov : final (last good) estimate, 1-sigma, covariance (p,), (p,), (p, p)
-    initial : the initial guesses; truth : the vehicle file's values (the truth of a simulated
-        bag)
-    accepted, rejected : odometry messages fused / dropped; commands : actuator messages
-        buffered; errors : core errors (each restarted the filter); reasons : Counter of
-        rejection reasons
-    t, Y, U : (N,), (N, 12), (N, 6) of the accepted measurements (NaN: unmeasured channel) and
-        U[k] = the command in force at t[k] (latest stamp <= t[k]), for identify.refine
-    mean_nis_per_dof : over the last NIS window; health : the node's health verdict at the end
-    """
-
-    names: list
-    vehicle: str
-    frame: str
-    updates: list
-    estimate: np.ndarray
-    std: np.ndarray
-    cov: np.ndarray
-    initial: np.ndarray
-    truth: np.ndarray
-    accepted: int
-    rejected: int
-    commands: int
-    errors: int
-    reasons: Counter
-    t: np.ndarray
-    Y: np.ndarray
-    U: np.ndarray
-    mean_nis_per_dof: float
-    health: Health
-    T: float = 0.05
-    settings: dict = field(default_factory=dict)
-
-    def document(self, stamp_ns=None):
-        """The estimate file's dict of the final estimate."""
-        if stamp_ns is None and self.updates:
-            stamp_ns = self.updates[-1][0]
-        return estimate_document(self.vehicle, self.names, self.estimate, self.cov, stamp_ns,
-                                 self.accepted)
-
-
-def bag_custom_data(path):
-    """metadata.yaml's custom_data of a bag directory ({} if absent or unreadable)."""
-    meta = Path(path) / 'metadata.yaml'
-    if not meta.is_file():
-        return {}
-    try:
-        doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
-        data = doc['rosbag2_bagfile_information'].get('custom_data') or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-        return {}
-    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
-
-
-class WarningLimiter:
-    """Rate limit for the warnings of rejected messages: at most one line per key (topic and
-    rejection code) per `period` of `clock` (seconds), and that line says how many like it
-    were suppressed since the previous one. The identifier node uses it with the steady clock,
-    so every distinct problem is named within `period` even while another one floods."""
-
-    def __init__(self, period, clock):
-        self.period = float(period)
-        self.clock = clock
-        self._last = {}
-        self.suppressed = Counter()
-
-    def __call__(self, key, text):
-        """The line to log now for this occurrence, or None if it is suppressed."""
-        now = self.clock()
-        last = self._last.get(key)
-        if last is not None and now - last < self.period:
-            self.suppressed[key] += 1
-            return None
-        self._last[key] = now
-        n = self.suppressed.pop(key, 0)
-        if n:
-            text += f' ({n} more like it in the last {now - last:.1f} s)'
-        return text
-
-
-class ReplayWarnings:
-    """Offline counterpart of WarningLimiter: logs (logger 'auv_ident.replay', WARNING) the
-    first `first` rejections/errors of each key (topic, code), then only counts them;
-    :meth:`summary` logs one line per key with more."""
-
-    def __init__(self, first=3, logger=None):
-        self.first = first
-        self.log = logger or log
-        self.counts = Counter()
-
-    def __call__(self, ev):
-        key = (ev.reason.split(':', 1)[0], ev.code)
-        self.counts[key] += 1
-        n = self.counts[key]
-        if n <= self.first:
-            self.log.warning('%s %s' % ('rejected' if ev.kind == 'rejected' else 'filter reset:',
-                                        ev.reason)
-                             + (f' [first {self.first} of this kind logged]'
-                                if n == self.first else ''))
-
-    def summary(self):
-        for (topic, code), n in sorted(self.counts.items()):
-            if n > self.first:
-                self.log.warning(f'{topic}: {n} messages in all with problem {code!r} '
-                                 f'({n - self.first} not logged)')
-
-
-def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actuators',
-                    warn=None):
-    """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
-
-    warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
-    Returns the list of (stamp_ns, estimate, std) of the accepted updates."""
-    updates = []
-    for topic, _, msg in messages:
-        if topic == actuator_topic:
-            ev = session.on_actuators(msg)
-        elif topic == odom_topic:
-            ev = session.on_odom(msg)
-            if ev.kind == 'update':
-                updates.append((ev.stamp_ns, ev.estimate, ev.std))
-        else:
-            continue
-        if warn is not None and ev.kind in ('rejected', 'error'):
-            warn(ev)
-    return updates
-
-
-def session_result(session, updates, settings=None):
-    """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
-    cmd = sorted(session.commands, key=lambda c: c[0])   # stable: later same-stamp one last
-    cmd_t = [c[0] for c in cmd]
-    t = np.array([m[0] for m in session.measurements], dtype=float)
-    Y = (np.array([m[1] for m in session.measurements], dtype=float)
-         if session.measurements else np.zeros((0, 12)))
-    U = np.full((len(t), 6), np.nan)
-    for k, tk in enumerate(t):
-        i = bisect.bisect_right(cmd_t, tk)
-        if i > 0:
-            U[k] = cmd[i - 1][1]
-    est, cov = session.current()
-    if session.last_good is not None:
-        est, cov = session.last_good.estimate, session.last_good.cov
-    return ReplayResult(
-        names=list(session.names), vehicle=session.vehicle.name, frame=session.frame,
-        updates=updates, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-        initial=session.theta0.copy(), truth=session.model.theta_true,
-        accepted=session.odom_accepted, rejected=session.odom_rejected,
-        commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
-        t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),
-        T=session.T, settings=dict(settings or {}))
-
-
-def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
-               actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
-    """Identify from a bag exactly as the identifier node would have live.
-
-    Odometry and actuator messages are read in log-time order (as recorded) and fed to an
-    IdentSession in that order.
-
-    Parameters
-    ----------
-    path : bag directory or .mcap file
-    vehicle, frame : default from the bag's metadata custom_data ('auv_ident.vehicle',
-        'auv_ident.frame', written for simulated runs), else 'nps_auv2' and 'ned'
-    coefficients : names (empty: the vehicle's identify_default)
-    odom_topic, actuator_topic : topics to read
-    allow_truncated : read the complete chunks of a bag whose writer died (bag_io.read_bag);
-        default: such a bag is a BagError naming the option
-    warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
-        then a count), or False
-    **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
-        noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
-        warm_start); defaults are the node's parameter defaults
-
-    Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
-    not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad
-    setting; nothing else for bad input.
-    """
-    present = bag_topics(path, allow_truncated=allow_truncated)
-    for what, topic in (('odometry', odom_topic), ('actuator', actuator_topic)):
-        if topic not in present:
-            listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
-            raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
-                           f'{listing}')
-    meta = bag_custom_data(path)
-    vehicle = vehicle or meta.get('auv_ident.vehicle') or 'nps_auv2'
-    frame = frame or meta.get('auv_ident.frame') or 'ned'
-    settings.pop('keep_arrays', None)
-    session = IdentSession(vehicle=vehicle, coefficients=coefficients, frame=frame,
-                           keep_arrays=True, **settings)
-    msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
-                           actuator_topic: 'sensor_msgs/msg/JointState'},
-                    allow_truncated=allow_truncated)
-    warner = ReplayWarnings() if warn else None
-    try:
-        updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
-    finally:
-        if warner is not None:
-            warner.summary()
-    return session_result(session, updates, dict(settings, vehicle=vehicle, frame=frame,
-                                                 coefficients=list(coefficients)))
-
-
-
-def _bag_truth_and_noise(path, model):
-    """Truth (the vehicle file's values) only for bags our simulator wrote; the noise 1-sigma
-    stored with them, else the default sensor suite."""
-    meta = bag_custom_data(path)
-    simulated = meta.get('auv_ident.simulated') == 'true'
-    noise = DEFAULT_NOISE_STD.copy()
-    if 'auv_ident.noise_std' in meta:
-        try:
-            vals = np.array([float(v) for v in meta['auv_ident.noise_std'].split()])
-            if vals.shape == (12,) and np.all(vals > 0):
-                noise = vals
-        except ValueError:
-            pass
-    return (model.theta_true if simulated else None), noise, meta
-
-
-def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
-                 refine_pass=True, progress=None):
-    """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag), then the
-    batch refinement on the paired arrays. Returns (JSON document, printable table)."""
-    import time
-    from . import experiments as ex
-    from .core.identify import Result, refine
-    t0 = time.perf_counter()
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
-                    initial_offset=initial_offset)
-    v = load_vehicle(rr.vehicle)
-    model = Model(v, rr.names)
-    truth, noise, meta = _bag_truth_and_noise(path, model)
-    if rr.accepted < 2:
-        raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
-                       f'(rejected: {dict(rr.reasons)})')
-    est, cov = rr.estimate, rr.cov
-    if refine_pass:
-        ok = np.all(np.isfinite(rr.U), axis=1)
-        cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise)
-        est, cov, _ = refine(model, cfg, rr.Y[ok], rr.U[ok], rr.T, rr.estimate,
-                             progress=progress)
-    res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-                 ekf_estimate=rr.estimate, ekf_std=rr.std, initial=rr.initial, truth=truth,
-                 steps=rr.accepted, wall_s=time.perf_counter() - t0,
-                 mean_nis_per_dof=rr.mean_nis_per_dof, refined=refine_pass)
-    head = (f'{v.title}: identified {", ".join(rr.names)} from bag {path} '
-            f'({rr.accepted} odometry samples used, {rr.rejected} rejected, {rr.commands} '
-            f'actuator commands; frame {rr.frame})')
-    if meta.get('auv_ident.simulated') == 'true':
-        head += (f'\nsimulated by auv_ident: manoeuvre {meta.get("auv_ident.maneuver")!r}, seed '
-                 f'{meta.get("auv_ident.seed")}; truth = the vehicle file values')
-    head += (f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
-             f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
-                                              if refine_pass else 'EKF pass only'))
-    doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
-                                  'noise_mode': noise_mode,
-                                  'rejection_reasons': dict(rr.reasons)})
-    table = (head + '\n' + ex.result_table(v, res) + f'\n{res.steps} EKF steps, mean NIS/dof '
-             f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')
-    return doc, table
-
-
-def bag_source(path, vehicle=None, coefficients=''):
-    """experiments.Source of a bag: the paired arrays (U[k] = command in force at t_k)."""
-    from .experiments import Source, coefficient_list
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names)
-    v = load_vehicle(rr.vehicle)
-    names = coefficient_list(v, ','.join(rr.names))
-    truth, noise, meta = _bag_truth_and_noise(path, Model(v, names))
-    ok = np.all(np.isfinite(rr.U), axis=1)
-    return Source(vehicle=v, names=names, t=rr.t[ok], Y=rr.Y[ok], U=rr.U[ok], T=rr.T,
-                  noise_std=noise, description=f'bag {path} ({int(ok.sum())} samples)',
-                  truth=truth, seed=meta.get('auv_ident.seed'),
-                  maneuver=meta.get('auv_ident.maneuver', ''))

@@ -1,4 +1,8 @@
-"""The one place where ROS messages meet numpy arrays.
+"""ROS-shaped messages read into numpy arrays, and the NED/FRD <-> ENU/FLU frame algebra.
+
+Reading is duck-typed (attribute access only), so rclpy messages and rosbags-decoded ones are
+read alike and this module imports no ROS package: the session layer and the bag layer both
+use it. Building ROS messages (rclpy classes) is :mod:`auv_ident.ros.conversions`.
 
 Conventions
 -----------
@@ -48,11 +52,7 @@ Bad input raises :class:`ConversionError` naming the field.
 """
 import math
 
-from builtin_interfaces.msg import Time
 import numpy as np
-from nav_msgs.msg import Odometry
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 
 from auv_ident.core.errors import AuvIdentError
 
@@ -138,22 +138,6 @@ def sec_to_ns(t_sec):
     return int(whole) * NS_PER_S + int(frac_ns)
 
 
-def ns_to_stamp(t_ns):
-    """Return integer nanoseconds as a builtin_interfaces/Time (nanosec in [0, 1e9))."""
-    sec, nanosec = divmod(int(t_ns), NS_PER_S)
-    if not -2**31 <= sec < 2**31:
-        raise ConversionError(f'time {t_ns} ns does not fit builtin_interfaces/Time.sec (int32)')
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def sec_to_stamp(t_sec):
-    """Return float seconds as a builtin_interfaces/Time, rounded to the nearest ns."""
-    return ns_to_stamp(sec_to_ns(t_sec))
-
-
-def clock_msg(t_sec):
-    """Return a rosgraph_msgs/Clock for simulation time ``t_sec`` (s)."""
-    return Clock(clock=sec_to_stamp(t_sec))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -286,48 +270,6 @@ def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
             _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN))
 
 
-def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
-                      frame_id=None, child_frame_id=None):
-    """Return a nav_msgs/Odometry for a NED/FRD state, expressed in convention ``frame``.
-
-    Parameters
-    ----------
-    t_sec : float
-        Sample time (s), goes to header.stamp (rounded to ns).
-    x12 : array_like, shape (12,)
-        ``[u v w p q r x y z phi theta psi]`` (m/s, rad/s, m, rad), always NED/FRD.
-    frame : {'ned', 'enu'}
-        Convention of the message.
-    pose_cov, twist_cov : array_like, shape (6, 6) or (36,), optional
-        NED/FRD covariances over (x, y, z, phi, theta, psi) and (u, v, w, p, q, r); zeros if
-        omitted. Transformed with ``T C T^T`` for 'enu'.
-    frame_id, child_frame_id : str, optional
-        Override the convention's default frame ids.
-    """
-    _check_frame(frame)
-    x = _as_vector(x12, 12, 'x12')
-    pcov = _as_cov6(pose_cov, 'pose_cov')
-    tcov = _as_cov6(twist_cov, 'twist_cov')
-    lin, ang, pos = x[0:3], x[3:6], x[6:9]
-    quat = euler_to_quat(x[9], x[10], x[11])
-    if frame == 'enu':
-        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
-    default_world, default_body = DEFAULT_FRAME_IDS[frame]
-
-    msg = Odometry()
-    msg.header.stamp = sec_to_stamp(t_sec)
-    msg.header.frame_id = default_world if frame_id is None else frame_id
-    msg.child_frame_id = default_body if child_frame_id is None else child_frame_id
-    p = msg.pose.pose.position
-    p.x, p.y, p.z = (float(v) for v in pos)
-    o = msg.pose.pose.orientation
-    o.x, o.y, o.z, o.w = quat
-    tl, ta = msg.twist.twist.linear, msg.twist.twist.angular
-    tl.x, tl.y, tl.z = (float(v) for v in lin)
-    ta.x, ta.y, ta.z = (float(v) for v in ang)
-    msg.pose.covariance = pcov.reshape(36)
-    msg.twist.covariance = tcov.reshape(36)
-    return msg
 
 
 def _field(msg, path):
@@ -388,19 +330,6 @@ def odometry_to_state(msg, frame='ned'):
 # JointState
 
 
-def actuators_to_joint_state(t_sec, u6):
-    """Return a sensor_msgs/JointState for actuator vector ``u6`` at time ``t_sec`` (s).
-
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm).
-    """
-    u = _as_vector(u6, 6, 'u6')
-    msg = JointState()
-    msg.header.stamp = sec_to_stamp(t_sec)
-    msg.name = list(JOINT_NAMES)
-    msg.position = [float(v) for v in u[:5]] + [0.0]
-    msg.velocity = [0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]
-    msg.effort = []
-    return msg
 
 
 def joint_state_to_actuators(msg):

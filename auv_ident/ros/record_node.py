@@ -1,7 +1,7 @@
 """Record topics into a rosbag2 (Jazzy, MCAP) bag: ``ros2 run auv_ident record``.
 
 rosbag2 is not on PyPI, so this node stands in for ``ros2 bag record`` in the wheel-based stack;
-the bag it writes is the rosbag2 MCAP layout of :mod:`auv_ident.bag_io`. Messages are recorded
+the bag it writes is the rosbag2 MCAP layout of :mod:`auv_ident.bags.writer`. Messages are recorded
 as the serialized CDR bytes DDS delivers (``raw=True``): no decode/encode on the way.
 
 Run::
@@ -41,7 +41,7 @@ QoS
     publisher offers it (to catch latched samples), else VOLATILE: rosbag2's adaptation rule.
     The bag stores the publishers' offered profiles (``get_publishers_info_by_topic``) in
     ``offered_qos_profiles``, as rosbag2 does; for a topic without a discovered publisher
-    (given in ``types``) it stores bag_io.DEFAULT_QOS (RELIABLE, VOLATILE, KEEP_LAST 10).
+    (given in ``types``) it stores bags.schema.DEFAULT_QOS (RELIABLE, VOLATILE, KEEP_LAST 10).
 
 Stopping
     SIGINT and SIGTERM both stop recording: the samples DDS has already received are drained
@@ -66,9 +66,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
-from auv_ident.bag_io import BagError, BagWriter, normalize_msgtype
+from auv_ident.bags.schema import BagError, normalize_msgtype
+from auv_ident.bags.writer import BagWriter
 from auv_ident.core.errors import ConfigError
-from auv_ident.nodes.common import declare_described, parameter_values
+from auv_ident.ros.toolkit import declare_described, parameter_values
 
 NODE_NAME = 'recorder'
 SUBSCRIPTION_DEPTH = 1000

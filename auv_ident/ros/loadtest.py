@@ -86,8 +86,8 @@ def _percentiles(values_ms):
 
 def compute_latency(run, n_samples):
     """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
-    from .replay import IdentSession
-    from .sim_bag import sample_messages
+    from auv_ident.session.session import IdentSession
+    from auv_ident.bags.sim_bag import sample_messages
     s = IdentSession(sample_time=float(run.T))
     s.warm_up()
     out = []
@@ -115,10 +115,10 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import JointState
 
-    from .core.model import Model
-    from .core.simulate import simulate
-    from .core.vehicle import load_vehicle
-    from .sim_bag import sample_messages
+    from auv_ident.core.model import Model
+    from auv_ident.core.simulate import simulate
+    from auv_ident.vehicles import load_vehicle
+    from auv_ident.bags.sim_bag import sample_messages
 
     if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
         raise ValueError('rate_hz and sim_seconds must be > 0, real_time_factor >= 0')
@@ -367,7 +367,7 @@ def format_loadtest(d):
 
 
 def main(argv=None):
-    """``python -m auv_ident.loadtest [--rate HZ] [--seconds S] [--rtf X] [--json OUT]``."""
+    """``python -m auv_ident.ros.loadtest [--rate HZ] [--seconds S] [--rtf X] [--json OUT]``."""
     import argparse
     ap = argparse.ArgumentParser(prog='python -m auv_ident loadtest',
                                  description=__doc__.split('\n')[0])

@@ -61,11 +61,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 import yaml
 
-from auv_ident.bag_io import bag_topics, read_bag
-from auv_ident.conversions import ns_to_stamp
-from auv_ident.nodes.common import declare_described, parameter_values
-from auv_ident.nodes.record_node import (message_class, number_param, param_error,
-                                         run_with_stop_flag, string_list_param)
+from auv_ident.bags.reader import bag_topics, read_bag
+from auv_ident.ros.conversions import ns_to_stamp
+from auv_ident.ros.toolkit import declare_described, parameter_values
+from auv_ident.ros.record_node import (message_class, number_param, param_error,
+                                       run_with_stop_flag, string_list_param)
 
 NODE_NAME = 'player'
 CLOCK_TOPIC = '/clock'

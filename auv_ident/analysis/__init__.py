@@ -1,0 +1,1 @@
+"""Analysis: experiments, Monte Carlo, results tables and JSON, the report, the benchmark."""

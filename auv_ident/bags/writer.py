@@ -1,0 +1,298 @@
+"""Rosbag2 (Jazzy) MCAP bag writer without rosbag2: :class:`BagWriter`.
+
+
+Layout written (that of Jazzy's rosbag2 with the MCAP storage plugin, which ``ros2 bag play``
+expects)::
+
+    <bag>/metadata.yaml       rosbag2_bagfile_information, version 9
+    <bag>/<bag>_0.mcap        profile 'ros2'; one Schema per type: name 'pkg/msg/Type',
+                              encoding 'ros2msg', data = rosbag2's full message definition
+                              text; one Channel per topic: message_encoding 'cdr', metadata
+                              'offered_qos_profiles' (YAML) and 'topic_type_hash' (RIHS01_...);
+                              a 'rosbag2' Metadata record (serialized_metadata); Statistics.
+
+Message definitions and type hashes come from the installed interface packages
+(``<prefix>/share/<pkg>/msg/<Type>.msg`` and ``.json``), exactly as rosbag2 reads them.
+"""
+import atexit
+import functools
+import numbers
+import os
+from pathlib import Path
+import threading
+import weakref
+
+from mcap.writer import CompressionType
+# Why mcap.writer.Writer and not rosbags.rosbag2.Writer: rosbags writes its own comment-less
+# message definitions, no 'topic_type_hash' channel metadata and a fixed 1 MiB chunk held in
+# memory; mcap's Writer takes our rosbag2-exact schema text and channel metadata verbatim, a
+# chunk size of our choosing, and has a public flush() that closes the chunk in progress.
+from mcap.writer import Writer as McapWriter
+import yaml
+
+from auv_ident import __version__
+from auv_ident.bags.schema import (BagError, DEFAULT_CHUNK_SIZE, message_definition,
+                                   METADATA_VERSION, normalize_msgtype, _qos_list, qos_yaml,
+                                   ROS_DISTRO, type_hash)
+
+# ---------------------------------------------------------------------------------------------
+# writer
+
+
+def _close_if_alive(ref):
+    writer = ref()
+    if writer is not None:
+        writer.close()
+
+
+class _Topic:
+    __slots__ = ('name', 'msgtype', 'channel_id', 'qos', 'hash', 'count')
+
+    def __init__(self, name, msgtype, channel_id, qos, hash_string):
+        self.name = name
+        self.msgtype = msgtype
+        self.channel_id = channel_id
+        self.qos = qos
+        self.hash = hash_string
+        self.count = 0
+
+
+def _rclpy_msgtype(msg):
+    """Return 'pkg/msg/Type' of an rclpy message instance."""
+    parts = type(msg).__module__.split('.')
+    if len(parts) < 2 or not hasattr(type(msg), 'get_fields_and_field_types'):
+        raise BagError(f'{type(msg).__name__} is not an rclpy ROS message')
+    return f'{parts[0]}/{parts[1]}/{type(msg).__name__}'
+
+
+class BagWriter:
+    """Write a rosbag2 (Jazzy, MCAP, metadata v9) bag directory.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create; must not exist. The data file is ``<path>/<name>_0.mcap``.
+    compression : {None, 'zstd'}
+        Chunk compression (rosbag2's storage-level compression; metadata.yaml then says
+        ``compression_format: ''`` as rosbag2 does for it).
+    chunk_size : int
+        Uncompressed bytes per chunk, see :data:`DEFAULT_CHUNK_SIZE`.
+
+    Crash behaviour: every completed chunk is handed to the OS at once, so a killed process
+    (even SIGKILL) leaves a file whose complete chunks ``read_bag(..., allow_truncated=True)``
+    recovers; only ``close()`` writes the summary and metadata.yaml. :meth:`flush` closes the
+    chunk in progress early (call it periodically to bound the loss in time, not only size).
+    ``close()`` is idempotent, thread-safe, runs on leaving a ``with`` block (also on an
+    exception) and at interpreter exit; SIGINT/SIGTERM handlers must let a ``finally:`` call it
+    (rclpy turns both into exceptions, see shared/ros_stack.md section 2).
+    """
+
+    def __init__(self, path, compression=None, chunk_size=DEFAULT_CHUNK_SIZE):
+        self.path = Path(path)
+        if compression not in (None, 'zstd'):
+            raise BagError(f'{self.path}: compression must be None or \'zstd\', '
+                           f'got {compression!r}')
+        if self.path.exists():
+            raise BagError(f'{self.path}: bag path exists already, not overwriting')
+        self.compression = compression
+        self._lock = threading.Lock()
+        self._closed = True
+        self._topics = {}
+        self._schema_ids = {}
+        self._custom_data = {}
+        self._t_min = None
+        self._t_max = None
+        self._count = 0
+        try:
+            self.path.mkdir(parents=True)
+            self.mcap_path = self.path / f'{self.path.absolute().name}_0.mcap'
+            self._fh = open(self.mcap_path, 'xb')
+        except OSError as exc:
+            raise BagError(f'{self.path}: cannot create bag: {exc}') from None
+        self._writer = McapWriter(
+            self._fh, chunk_size=int(chunk_size),
+            compression=CompressionType.ZSTD if compression else CompressionType.NONE)
+        self._writer.start(profile='ros2', library=f'auv_ident {__version__}; mcap-python')
+        self._fh.flush()
+        self._closed = False
+        self._atexit = functools.partial(_close_if_alive, weakref.ref(self))
+        atexit.register(self._atexit)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close()
+        return False
+
+    @property
+    def message_count(self):
+        """Messages written so far."""
+        return self._count
+
+    @property
+    def closed(self):
+        """True once close() has run."""
+        return self._closed
+
+    def _check_open(self):
+        if self._closed:
+            raise BagError(f'{self.path}: bag writer is closed')
+
+    def set_custom_data(self, key, value):
+        """Store a string pair in metadata.yaml's custom_data (rosbag2 v6+)."""
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise BagError(f'{self.path}: custom_data key and value must be str, '
+                           f'got {key!r}: {value!r}')
+        self._custom_data[key] = value
+
+    def add_topic(self, topic, msgtype, qos=None):
+        """Register ``topic`` with type ``msgtype`` ('pkg/msg/Type').
+
+        ``qos``: the publishers' offered QoS: None (:data:`DEFAULT_QOS`), a dict, an rclpy
+        QoSProfile, or a list of those (one per publisher, as rosbag2 records them). Adding a
+        topic again with the same type does nothing; with another type raises BagError.
+        """
+        if not isinstance(topic, str) or not topic.startswith('/') or topic.endswith('/'):
+            raise BagError(f'{self.path}: topic name must be absolute, e.g. /odom; '
+                           f'got {topic!r}')
+        try:
+            full = normalize_msgtype(msgtype)
+        except BagError as exc:
+            raise BagError(f'{self.path}: topic {topic}: {exc}') from None
+        with self._lock:
+            self._check_open()
+            known = self._topics.get(topic)
+            if known is not None:
+                if known.msgtype != full:
+                    raise BagError(f'{self.path}: topic {topic} already has type '
+                                   f'{known.msgtype}, cannot add it as {full}')
+                return
+            try:
+                profiles = _qos_list(qos)
+                definition = message_definition(full)
+            except BagError as exc:
+                raise BagError(f'{self.path}: topic {topic}: {exc}') from None
+            schema_id = self._schema_ids.get(full)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(
+                    name=full, encoding='ros2msg', data=definition.encode('utf-8'))
+                self._schema_ids[full] = schema_id
+            hash_string = type_hash(full)
+            channel_id = self._writer.register_channel(
+                topic=topic, message_encoding='cdr', schema_id=schema_id,
+                metadata={'offered_qos_profiles': qos_yaml(profiles),
+                          'topic_type_hash': hash_string})
+            self._topics[topic] = _Topic(topic, full, channel_id, profiles, hash_string)
+
+    def write(self, topic, t_ns, payload):
+        """Write one CDR payload (bytes as rclpy serialize_message or DDS give them).
+
+        ``t_ns`` (int ns) is both the MCAP log time (rosbag2: receive time) and publish time.
+        """
+        if isinstance(t_ns, bool) or not isinstance(t_ns, numbers.Integral) or t_ns < 0:
+            raise BagError(f'{self.path}: topic {topic}: time must be a non-negative int of '
+                           f'nanoseconds, got {t_ns!r}')
+        if not isinstance(payload, (bytes, bytearray, memoryview)):
+            raise BagError(f'{self.path}: topic {topic}: payload must be CDR bytes, '
+                           f'got {type(payload).__name__}')
+        data = bytes(payload)
+        # CDR encapsulation header: 00 00 (big endian) or 00 01 (little endian), 2 option bytes.
+        if len(data) < 4 or data[0] != 0 or data[1] > 1:
+            start = data[:4].hex() or 'empty'
+            raise BagError(f'{self.path}: topic {topic}: payload is not CDR (starts {start})')
+        t_ns = int(t_ns)
+        with self._lock:
+            self._check_open()
+            info = self._topics.get(topic)
+            if info is None:
+                raise BagError(f'{self.path}: topic {topic} was not added; added topics: '
+                               f'{sorted(self._topics)}')
+            self._writer.add_message(channel_id=info.channel_id, log_time=t_ns,
+                                     publish_time=t_ns, sequence=info.count, data=data)
+            info.count += 1
+            self._count += 1
+            self._t_min = t_ns if self._t_min is None else min(self._t_min, t_ns)
+            self._t_max = t_ns if self._t_max is None else max(self._t_max, t_ns)
+            # Hands a just-completed chunk to the OS, so that a kill cannot lose it; a no-op
+            # (cheap) while the chunk is still being filled in memory.
+            self._fh.flush()
+
+    def write_msg(self, topic, t_ns, msg):
+        """Serialize an rclpy message and write it; adds the topic (default QoS) if new."""
+        from rclpy.serialization import serialize_message
+        try:
+            msgtype = _rclpy_msgtype(msg)
+        except BagError as exc:
+            raise BagError(f'{self.path}: topic {topic}: {exc}') from None
+        known = self._topics.get(topic)
+        if known is None:
+            self.add_topic(topic, msgtype)
+        elif known.msgtype != msgtype:
+            raise BagError(f'{self.path}: topic {topic} has type {known.msgtype}, '
+                           f'got a {msgtype} message')
+        self.write(topic, t_ns, serialize_message(msg))
+
+    def flush(self):
+        """Close the chunk in progress and hand everything written so far to the OS.
+
+        A no-op once closed, so a periodic flush timer may race with close().
+        """
+        with self._lock:
+            if not self._closed:
+                self._writer.flush()
+
+    def _metadata(self):
+        start = self._t_min if self._t_min is not None else 0
+        duration = (self._t_max - self._t_min) if self._t_min is not None else 0
+        name = self.mcap_path.name
+        return {
+            'version': METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': self._count,
+            'topics_with_message_count': [
+                {'topic_metadata': {'name': t.name,
+                                    'type': t.msgtype,
+                                    'serialization_format': 'cdr',
+                                    'offered_qos_profiles': t.qos,
+                                    'type_description_hash': t.hash},
+                 'message_count': t.count}
+                for t in self._topics.values()],
+            # Chunk compression is storage-internal: rosbag2 leaves these empty for it too.
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [name],
+            'files': [{'path': name,
+                       'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': {'nanoseconds': duration},
+                       'message_count': self._count}],
+            'custom_data': dict(self._custom_data) or None,
+            'ros_distro': ROS_DISTRO,
+        }
+
+    def close(self):
+        """Finish the MCAP file (summary, statistics) and write metadata.yaml; idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            atexit.unregister(self._atexit)
+            info = self._metadata()
+            dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
+            try:
+                self._writer.add_metadata('rosbag2', {'serialized_metadata': dump(info)})
+                self._writer.finish()
+                self._fh.close()
+                meta = self.path / 'metadata.yaml'
+                tmp = self.path / 'metadata.yaml.tmp'
+                tmp.write_text(dump({'rosbag2_bagfile_information': info}), encoding='utf-8')
+                os.replace(tmp, meta)  # a reader never sees a half-written metadata.yaml
+            except OSError as exc:
+                raise BagError(f'{self.path}: cannot finish bag: {exc}') from None
+            finally:
+                if not self._fh.closed:
+                    self._fh.close()
+
+

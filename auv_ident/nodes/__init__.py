@@ -1,1 +1,0 @@
-"""ROS 2 nodes: thin layers over the core (parameters, message conversion, core call, publish)."""
