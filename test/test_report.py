@@ -9,7 +9,7 @@ import pytest
 from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
-from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.core.state import STATE_NAMES
 from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.experiments import load_source
 from auv_ident.analysis.results import coefficient_list

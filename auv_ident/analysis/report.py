@@ -20,7 +20,7 @@ from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.trim import initial_state
 from auv_ident.core.simulate import simulate, wrap_angle
-from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.core.state import STATE_NAMES
 from auv_ident.vehicles import load_vehicle
 
 HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)

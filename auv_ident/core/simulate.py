@@ -99,7 +99,7 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
 
 def save_run_csv(run, path):
     """Write a run as CSV: t, true states, measured states (y_*), inputs (documented in README)."""
-    from .vehicle import INPUT_NAMES, STATE_NAMES
+    from .state import INPUT_NAMES, STATE_NAMES
     header = (['t'] + list(STATE_NAMES) + ['y_' + s for s in STATE_NAMES] + list(INPUT_NAMES))
     data = np.column_stack([run.t, run.x, run.y, run.u])
     np.savetxt(path, data, delimiter=',', header=','.join(header), comments='', fmt='%.17g')

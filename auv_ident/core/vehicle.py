@@ -15,11 +15,8 @@ import numpy as np
 import yaml
 
 from .errors import ConfigError
+from .state import NU_NAMES
 
-STATE_NAMES = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi')
-STATE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s', 'm', 'm', 'm', 'rad', 'rad', 'rad')
-INPUT_NAMES = ('delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
-INPUT_UNITS = ('rad', 'rad', 'rad', 'rad', 'rad', 'rpm')
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
 # Factor vector z (see model.py): index of each multiplier factor.
@@ -27,7 +24,6 @@ FACTORS = ('u', 'v', 'w', 'p', 'q', 'r', '|u|', '|v|', '|w|', '|p|', '|q|', '|r|
            'dr', 'ds', 'db', 'dbp', 'dbs', 'db2', 'eps')
 FACTOR_INDEX = {name: i for i, name in enumerate(FACTORS)}
 MAX_FACTORS = 5
-NU_NAMES = STATE_NAMES[:6]
 
 PROPULSION_MODELS = {'none': 0, 'healey_lienard': 1, 'quadratic_thrust': 2}
 CROSSFLOW_MODELS = {'none': 0, 'mss_classic_strip': 1}

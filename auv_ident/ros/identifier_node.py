@@ -106,7 +106,7 @@ from auv_ident.ros.conversions import ns_to_stamp
 from auv_ident.core.ekf import MODES
 from auv_ident.core.identify import DEFAULT_Q_STATE
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.core.state import STATE_NAMES
 from auv_ident.ros.toolkit import declare_read_only, param_or_none, run_node
 from auv_ident.session.session import Event, IdentSession
 from auv_ident.session.warning_limiter import WarningLimiter

@@ -106,7 +106,8 @@ from auv_ident.core.identify import DEFAULT_Q_STATE, FilterConfig, is_positive_d
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.stream import StreamIdentifier
-from auv_ident.core.vehicle import P_FIN, P_NMAX, STATE_NAMES
+from auv_ident.core.state import STATE_NAMES
+from auv_ident.core.vehicle import P_FIN, P_NMAX
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.messages import (ConversionError, FRAMES, JOINT_NAMES,
                                         joint_state_to_actuators, NS_PER_S, odometry_to_state,

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.vehicle import STATE_NAMES
+from auv_ident.core.state import STATE_NAMES
 
 MASS_INVERSES = ('default', 'exact', 'mss_literal')
 
