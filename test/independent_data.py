@@ -104,6 +104,7 @@ class DataConfig:
     seed: int = 0
     rpm: float = 500.0                 # constant shaft speed
     depth0: float = 10.0               # m, initial depth (z, NED)
+    u0: object = None                  # m/s, initial surge through the water (None: trim)
     heading0_deg: float = 0.0          # initial heading psi
     start_time: str = '2025-06-03T09:00:00Z'   # stamp of t = 0 (UTC)
 
@@ -410,7 +411,9 @@ def command_values(cfg, targets, ticks, rpm):
         prev_t = 0.0
         for k, t in enumerate(ticks):
             step = rate * (t - prev_t)
-            pos += min(max(target[k] - pos, -step), step)
+            gap = target[k] - pos
+            # (1 + 1e-9): a tick period that rounds a hair short must not leave a 1e-17 rest
+            pos = target[k] if abs(gap) <= step * (1 + 1e-9) else pos + math.copysign(step, gap)
             prev_t = t
             vals[k, ch] = pos
     if q > 0:
@@ -678,7 +681,7 @@ def generate(cfg, out_dir, overwrite=False):
     # truth: start in the steady straight run through the water
     u_trim = trim_speed(model, cfg.rpm)
     y0 = np.zeros(12)
-    y0[0] = u_trim
+    y0[0] = u_trim if cfg.u0 is None else float(cfg.u0)
     y0[8] = cfg.depth0
     y0[11] = math.radians(cfg.heading0_deg)
     dyn = Dynamics(model, cfg.current_ned)
@@ -793,6 +796,8 @@ def config_parser():
         elif f.name == 'perturb_keep':
             p.add_argument(opt, type=lambda s: tuple(n.strip() for n in s.split(',')
                                                      if n.strip()), default=default)
+        elif f.name == 'u0':
+            p.add_argument(opt, type=float, default=None, help='default: trim speed')
         elif f.name in ('noise_tau', 'noise_std'):
             p.add_argument(opt, type=lambda s: (_parse_tuple(s) if ',' in s else float(s)),
                            default=default)
