@@ -50,7 +50,7 @@ Usage::
 
     python test/independent_data.py --out out/run1 --duration 600 --odom-rate 10 \
         --odom-jitter 0.1 --dropout 0.05 --commands on_change --noise ar1 --noise-tau 1 \
-        --noise-level 2 --current-ned 0.0707,0.0707,0 --perturb 0.2 \
+        --noise-level 2 --current-ned=-0.0707,-0.0707,0 --perturb 0.2 \
         --perturb-keep Z_ds,Z_q,Z_w,M_ds,K_v
 """
 import argparse
@@ -785,7 +785,8 @@ def config_parser():
     p = argparse.ArgumentParser(
         description='Make a rosbag2 MCAP bag of an AUV run independently of auv_ident\'s own '
                     'simulator (truth.json next to it). Tuples: comma-separated; gaps: '
-                    'start:length,start:length; names: comma-separated.')
+                    'start:length,start:length; names: comma-separated. A value that starts '
+                    'with "-" needs "=": --current-ned=-0.07,-0.07,0.')
     p.add_argument('--out', required=True, help='output directory (bag/ and truth.json)')
     p.add_argument('--overwrite', action='store_true')
     for f in dataclasses.fields(DataConfig):
