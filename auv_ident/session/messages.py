@@ -55,6 +55,7 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.state import FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
 
@@ -64,6 +65,7 @@ DEFAULT_FRAME_IDS = {
     'enu': ('odom', 'base_link'),
 }
 
+# the joint of each core.state.Input channel, in that order
 JOINT_NAMES = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                'bow_plane_starboard', 'propeller')
 PROPELLER_JOINT = 'propeller'
@@ -349,7 +351,7 @@ def _state(pos, quat, lin, ang):
             raise ConversionError('pose.pose.orientation is a zero quaternion') from None
     else:
         eul = (math.nan, math.nan, math.nan)
-    return np.array([*lin, *ang, *pos, *eul])
+    return np.array([*lin, *ang, *pos, *eul])     # core.state.State order
 
 
 def odometry_to_state(msg, frame='ned'):
@@ -424,8 +426,8 @@ def joint_state_to_actuators(msg):
     if missing:
         raise ConversionError(
             f'JointState lacks joint(s) {missing}; present: {names}')
-    u6 = np.empty(6)
-    for k, name in enumerate(JOINT_NAMES[:5]):
+    u6 = np.empty(N_INPUT)
+    for k, name in enumerate(JOINT_NAMES[FINS]):
         u6[k] = position[index[name]]
-    u6[5] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
+    u6[Input.N_RPM] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
     return stamp_to_sec(stamp), u6
