@@ -124,8 +124,10 @@ class Health:
 def innovation_gate():
     """(13,) largest NIS accepted from an update with m = 0..12 channels (m = 0: no limit)."""
     from scipy.stats import chi2
-    return np.array([math.inf] + [OUTLIER_GATE_FACTOR * chi2.ppf(1.0 - OUTLIER_P, m)
+    gate = np.array([math.inf] + [OUTLIER_GATE_FACTOR * chi2.ppf(1.0 - OUTLIER_P, m)
                                   for m in range(1, N_STATE + 1)])
+    gate.flags.writeable = False        # one array shared by every session's filter
+    return gate
 
 
 @lru_cache(maxsize=None)
@@ -274,12 +276,12 @@ def reset_start(last_good, code, reset_from_good):
     return last_good
 
 
-def judge_health(nis, guard_inconsistent, since_reset, started, estimate, cov):
+def judge_health(nis_window, guard_inconsistent, since_reset, started, estimate, cov):
     """The filter's health (the rule the /diagnostics status reports).
 
-    Over the last NIS_WINDOW (200) updates (`nis`, a NisWindow), m = sum(NIS) / sum(dof) and
-    the chi-square band [lo, hi] of m for D = sum(dof) degrees of freedom (two-sided 99.9 %:
-    windows overlap, so a 99 % band would blip WARN now and then on a healthy filter):
+    Over the last NIS_WINDOW (200) updates (`nis_window`, a NisWindow), m = sum(NIS) / sum(dof)
+    and the chi-square band [lo, hi] of m for D = sum(dof) degrees of freedom (two-sided
+    99.9 %: windows overlap, so a 99 % band would blip WARN now and then on a healthy filter):
 
     - a filter reset (core error or divergence guard) and fewer than NIS_WINDOW updates
       since (`since_reset`: updates since the last reset, None if none): ERROR 'diverging';
@@ -291,9 +293,9 @@ def judge_health(nis, guard_inconsistent, since_reset, started, estimate, cov):
       OK 'converged';
     - otherwise OK 'converging'. (m < lo, a conservative filter, is not flagged.)
     """
-    m = nis.mean()
-    n = len(nis)
-    band = nis.band()
+    m = nis_window.mean()
+    n = len(nis_window)
+    band = nis_window.band()
     if since_reset is not None and since_reset < NIS_WINDOW:
         return Health('ERROR', 'diverging', m, band, n)
     if not started:

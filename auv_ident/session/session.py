@@ -125,8 +125,8 @@ class IdentSession:
         self.keep_arrays = keep_arrays
         self.commands = []          # (t, u6) in arrival order, if keep_arrays
         self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
-        self.guard = noise_mode != 'paper'      # the divergence guard (session/guard.py)
-        self.gate = innovation_gate() if self.guard else None
+        self.guard_on = noise_mode != 'paper'   # the divergence guard (session/guard.py)
+        self.gate = innovation_gate() if self.guard_on else None
         try:
             self.stream = self._new_stream()
         except ConfigError as err:  # what the checks above did not catch
@@ -153,8 +153,8 @@ class IdentSession:
         self.last_nis = math.nan
         self.last_dof = 0
         self._since_error = None    # updates since the last reset (None: no reset yet)
-        self._nis = NisWindow()     # the health window
-        self._guard = GuardWindow()
+        self._nis_window = NisWindow()      # the health window
+        self._guard_window = GuardWindow()  # the divergence guard's window
         self._after_reset = False   # a fault reset, and the guard window not yet full since
         self._reset_from_good = False   # the last reset started from last_good, none good since
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
@@ -176,8 +176,8 @@ class IdentSession:
         return s
 
     def _clear_windows(self):
-        self._nis.clear()
-        self._guard.clear()
+        self._nis_window.clear()
+        self._guard_window.clear()
 
     def reset(self):
         """Restart the filter from the start-up configuration (the ~/reset service): buffered
@@ -201,7 +201,7 @@ class IdentSession:
         self._reset_from_good = start_from is not None
         self.stream = self._new_stream(keep_commands_from=self.stream, start_from=start_from)
         self._clear_windows()
-        self._after_reset = self.guard
+        self._after_reset = self.guard_on
         start = ('the last good estimate (covariance x '
                  f'{RESET_COV_INFLATION:g})' if start_from is not None
                  else 'the start-up configuration')
@@ -369,7 +369,8 @@ class IdentSession:
         elif code == 'time jump':
             self.time_jumps += 1
         nis, dof = float(f.nis), int(f.dof)
-        sustained = fused and self.guard and dof > 0 and self._guard.add(t, nis, dof)
+        window = self._guard_window
+        sustained = fused and self.guard_on and dof > 0 and window.add(t, nis, dof)
         if not out.accepted:
             if code == 'outlier':
                 self.outliers += 1
@@ -380,18 +381,17 @@ class IdentSession:
         self.odom_accepted += 1
         self.last_nis, self.last_dof = nis, dof
         if fused and dof > 0 and math.isfinite(nis):
-            self._nis.add(nis, dof)
+            self._nis_window.add(nis, dof)
         if self._since_error is not None:
             self._since_error += 1
         if self.keep_arrays:
             self.measurements.append((t, y))
         if sustained:
             return self._guard_reset(t, stamp_ns)
-        guard = self._guard
-        if (self._after_reset and len(guard) >= GUARD_WINDOW
-                and guard.median() <= GUARD_PROBATION):
+        if (self._after_reset and len(window) >= GUARD_WINDOW
+                and window.median() <= GUARD_PROBATION):
             self._after_reset = False
-        good = (guard.since is None and not self._after_reset
+        good = (window.since is None and not self._after_reset
                 and not self.gross_inconsistency())
         if good:
             self._reset_from_good = False
@@ -400,16 +400,16 @@ class IdentSession:
                 self._frame_ids = (frame_id, child_frame_id)
             return Event('update', f'odom: {out.reason}' if out.reason else '', stamp_ns, est,
                          std, cov, nis, dof, code, True)
-        if guard.since is not None:
-            why = (f'innovations inconsistent since {guard.since:.3f} s (guard median NIS/dof '
-                   f'{guard.median():.4g})')
+        if window.since is not None:
+            why = (f'innovations inconsistent since {window.since:.3f} s (guard median NIS/dof '
+                   f'{window.median():.4g})')
         elif self._after_reset:
-            why = (f'probation after the filter reset ({len(guard)} of {GUARD_WINDOW} '
-                   f'updates, median NIS/dof {guard.median():.4g}, needs <= '
+            why = (f'probation after the filter reset ({len(window)} of {GUARD_WINDOW} '
+                   f'updates, median NIS/dof {window.median():.4g}, needs <= '
                    f'{GUARD_PROBATION:g})')
         else:
             why = (f'mean NIS/dof {self.mean_nis_per_dof():.4g} over the last '
-                   f'{len(self._nis)} updates is more than {GROSS_NIS_FACTOR:g}x its '
+                   f'{len(self._nis_window)} updates is more than {GROSS_NIS_FACTOR:g}x its '
                    'chi-square band')
         reason = 'odom: ' + (out.reason + '; ' if out.reason else '') + why + ': not taken as good'
         return Event('update', reason, stamp_ns, est, std, cov, nis, dof, 'guard', False)
@@ -439,37 +439,38 @@ class IdentSession:
 
     def _guard_reset(self, t, stamp_ns):
         self.guard_resets += 1
+        window = self._guard_window
         return self._fault_reset('guard', f'innovations inconsistent for '
-                                          f'{t - self._guard.since:.3f} s (median NIS/dof '
-                                          f'{self._guard.median():.4g} over the last '
-                                          f'{len(self._guard)} updates, above '
-                                          f'{GUARD_FACTOR:g})', stamp_ns)
+                                          f'{t - window.since:.3f} s (median NIS/dof '
+                                          f'{window.median():.4g} over the last {len(window)} '
+                                          f'updates, above {GUARD_FACTOR:g})', stamp_ns)
 
     # -- guard and health --
 
     def guard_median(self):
         """Median NIS/dof over the divergence guard's window (outliers included); NaN if
         empty."""
-        return self._guard.median()
+        return self._guard_window.median()
 
     def guard_inconsistent(self):
         """True if the divergence guard is on and its window is full and inconsistent."""
-        return self.guard and self._guard.inconsistent()
+        return self.guard_on and self._guard_window.inconsistent()
 
     def mean_nis_per_dof(self):
         """Mean NIS per dof over the health window (NaN if empty)."""
-        return self._nis.mean()
+        return self._nis_window.mean()
 
     def gross_inconsistency(self):
         """True if the health window's mean NIS/dof is above GROSS_NIS_FACTOR x the upper edge
         of its band (what health() reports as ERROR 'diverging'); such updates are not good.
         Judged once the window holds GUARD_WINDOW updates, with the divergence guard on."""
-        return self.guard and len(self._nis) >= GUARD_WINDOW and self._nis.gross()
+        window = self._nis_window
+        return self.guard_on and len(window) >= GUARD_WINDOW and window.gross()
 
     def health(self):
         """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
         est, cov = self.current()
-        return judge_health(self._nis, self.guard_inconsistent(), self._since_error,
+        return judge_health(self._nis_window, self.guard_inconsistent(), self._since_error,
                             self.started, est, cov)
 
 
