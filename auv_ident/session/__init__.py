@@ -1,3 +1,10 @@
-"""Session layer: what one message does, without ROS (screening, the stream identifier, the
-divergence guard, health, the estimate file). Takes arrays and stamps; reads ROS-shaped messages
-by duck typing only (:mod:`auv_ident.session.messages`)."""
+"""Session layer: what one message does, without ROS. Takes arrays and stamps; reads
+ROS-shaped messages by duck typing only.
+
+- session.py: IdentSession, the identifier's per-message logic (array API and message adapters);
+- screening.py: rejection policy, frame-id and plausibility rules (pure functions);
+- guard.py: divergence guard, reset rule, health rule; the Event/LastGood/Health records;
+- settings.py: parameter checks (ParameterError) and the choice lists;
+- messages.py: nav_msgs/Odometry and sensor_msgs/JointState read into arrays, frame algebra;
+- estimate_file.py: the estimate JSON file; warning_limiter.py: rate limit of warnings.
+"""

@@ -1,8 +1,17 @@
 """The estimate file: one JSON document holding a coefficient estimate and its covariance.
 
-Written atomically by the identifier node (``~/save``, autosave, shutdown) and by
-``identify --json``; read back for a warm start. Keys: vehicle, coefficients (names), estimate,
-std, covariance (p x p), stamp (s), stamp_ns, steps (odometry updates fused).
+Written atomically by the identifier node (``~/save``, on shutdown and every 10 s while
+updates arrive; always the session's last good estimate, IdentSession.document()) and by
+``identify --json``; read back by ``warm_start`` (:func:`load_estimate_json`)::
+
+    {"vehicle": "nps_auv2",                 # vehicle name
+     "coefficients": ["Z_ds", ...],         # p names, order of everything below
+     "estimate": [..p floats..],            # vehicle file's units
+     "std": [..p floats..],                 # 1-sigma, sqrt(diag(covariance))
+     "covariance": [[..p..], ..p rows..],   # p x p, symmetric
+     "stamp": 123.45,                       # s, odometry stamp of the last update (null: none)
+     "stamp_ns": 123450000000,              # the same stamp in integer ns (null: none)
+     "steps": 2400}                         # accepted odometry updates since start-up
 """
 import json
 import os

@@ -55,6 +55,7 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.state import FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
 
@@ -64,6 +65,7 @@ DEFAULT_FRAME_IDS = {
     'enu': ('odom', 'base_link'),
 }
 
+# the joint of each core.state.Input channel, in that order
 JOINT_NAMES = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                'bow_plane_starboard', 'propeller')
 PROPELLER_JOINT = 'propeller'
@@ -89,6 +91,9 @@ _POSE_PERM = np.array([1, 0, 2, 3, 4, 5])
 _POSE_SIGN = np.array([1.0, 1.0, -1.0, 1.0, -1.0, -1.0])
 _TWIST_PERM = np.arange(6)
 _TWIST_SIGN = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
+# the vector maps as tuples, for Python floats
+_POS_PERM_T, _POS_SIGN_T = (1, 0, 2), (1.0, 1.0, -1.0)
+_VEC_PERM_T, _VEC_SIGN_T = (0, 1, 2), (1.0, -1.0, -1.0)
 
 # Below this cos(theta) the split of the rotation about the vertical into phi and psi is
 # numerically meaningless (rounding error ~1e-16 / cos(theta)); phi is then set to 0.
@@ -163,13 +168,14 @@ def euler_to_quat(phi, theta, psi):
 
 
 def _unit_quat(x, y, z, w, name='quaternion'):
-    vals = (float(x), float(y), float(z), float(w))
-    if not all(math.isfinite(v) for v in vals):
-        raise ConversionError(f'{name} is not finite: {vals}')
-    n = math.sqrt(sum(v * v for v in vals))
+    x, y, z, w = float(x), float(y), float(z), float(w)
+    isfinite = math.isfinite
+    if not (isfinite(x) and isfinite(y) and isfinite(z) and isfinite(w)):
+        raise ConversionError(f'{name} is not finite: {(x, y, z, w)}')
+    n = math.sqrt(sum((x * x, y * y, z * z, w * w)))
     if n == 0.0:
         raise ConversionError(f'{name} has zero norm')
-    return tuple(v / n for v in vals)
+    return x / n, y / n, z / n, w / n
 
 
 def quat_to_euler(x, y, z, w):
@@ -236,6 +242,8 @@ def _check_frame(frame):
 
 
 def _as_vector(values, n, name):
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (n,):
+        return values               # the common case, without asarray's overhead
     try:
         arr = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -249,6 +257,8 @@ def _as_cov6(values, name):
     """Return a 6x6 float array from None (zeros), a 6x6 or a flat 36 array."""
     if values is None:
         return np.zeros((6, 6))
+    if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (36,):
+        return values.reshape(6, 6)     # what a message holds, without asarray's overhead
     try:
         arr = np.asarray(values, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -260,6 +270,15 @@ def _as_cov6(values, name):
     return arr
 
 
+def _swap_state(pos, lin, ang, quat):
+    """NED/FRD <-> ENU/FLU for position, linear and angular velocity (sequences of 3 floats,
+    returned as lists) and the orientation quaternion (x, y, z, w). An involution."""
+    return ([pos[i] * s for i, s in zip(_POS_PERM_T, _POS_SIGN_T)],
+            [lin[i] * s for i, s in zip(_VEC_PERM_T, _VEC_SIGN_T)],
+            [ang[i] * s for i, s in zip(_VEC_PERM_T, _VEC_SIGN_T)],
+            quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU))
+
+
 def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
     """NED/FRD <-> ENU/FLU for position, linear and angular velocity, orientation and the two
     6x6 covariances. Every transform is an involution, so the same call maps either way."""
@@ -268,8 +287,6 @@ def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
             quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU),
             _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN),
             _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN))
-
-
 
 
 def _field(msg, path):
@@ -286,7 +303,55 @@ def _field(msg, path):
 
 
 def _xyz(msg, path):
-    return np.array([float(_field(msg, f'{path}.{axis}')) for axis in 'xyz'])
+    return [float(_field(msg, f'{path}.{axis}')) for axis in 'xyz']
+
+
+def _odometry_fields_named(msg):
+    """The fields of an Odometry, path by path, naming a missing one in a ConversionError:
+    (t_sec, pos, quat, lin, ang, pose_cov, twist_cov), as in the message."""
+    t_sec = stamp_to_sec(_field(msg, 'header.stamp'))
+    pos = _xyz(msg, 'pose.pose.position')
+    quat = tuple(float(_field(msg, f'pose.pose.orientation.{c}')) for c in 'xyzw')
+    lin = _xyz(msg, 'twist.twist.linear')
+    ang = _xyz(msg, 'twist.twist.angular')
+    pcov = _as_cov6(_field(msg, 'pose.covariance'), 'pose.covariance')
+    tcov = _as_cov6(_field(msg, 'twist.covariance'), 'twist.covariance')
+    return t_sec, pos, quat, lin, ang, pcov, tcov
+
+
+def _odometry_fields(msg):
+    """:func:`_odometry_fields_named` without the per-field bookkeeping (the per-message cost
+    of the live identifier). Reads and converts in the same order, so the first failure is
+    the same one; a missing field (AttributeError) is left to the named version."""
+    try:
+        t_sec = stamp_to_sec(msg.header.stamp)
+        pose = msg.pose
+        p = pose.pose.position
+        pos = [float(p.x), float(p.y), float(p.z)]
+        o = pose.pose.orientation
+        quat = (float(o.x), float(o.y), float(o.z), float(o.w))
+        twist = msg.twist
+        v = twist.twist.linear
+        lin = [float(v.x), float(v.y), float(v.z)]
+        w = twist.twist.angular
+        ang = [float(w.x), float(w.y), float(w.z)]
+        pcov = _as_cov6(pose.covariance, 'pose.covariance')
+        tcov = _as_cov6(twist.covariance, 'twist.covariance')
+    except AttributeError:
+        return _odometry_fields_named(msg)
+    return t_sec, pos, quat, lin, ang, pcov, tcov
+
+
+def _state(pos, quat, lin, ang):
+    """x12 (NED/FRD) from the fields of an NED/FRD Odometry."""
+    if all(map(math.isfinite, quat)):
+        try:
+            eul = quat_to_euler(*quat)
+        except ConversionError:
+            raise ConversionError('pose.pose.orientation is a zero quaternion') from None
+    else:
+        eul = (math.nan, math.nan, math.nan)
+    return np.array([*lin, *ang, *pos, *eul])     # core.state.State order
 
 
 def odometry_to_state(msg, frame='ned'):
@@ -306,24 +371,23 @@ def odometry_to_state(msg, frame='ned'):
         Covariances over (x, y, z, phi, theta, psi) and (u, v, w, p, q, r), NED/FRD.
     """
     _check_frame(frame)
-    t_sec = stamp_to_sec(_field(msg, 'header.stamp'))
-    pos = _xyz(msg, 'pose.pose.position')
-    quat = tuple(float(_field(msg, f'pose.pose.orientation.{c}')) for c in 'xyzw')
-    lin = _xyz(msg, 'twist.twist.linear')
-    ang = _xyz(msg, 'twist.twist.angular')
-    pcov = _as_cov6(_field(msg, 'pose.covariance'), 'pose.covariance')
-    tcov = _as_cov6(_field(msg, 'twist.covariance'), 'twist.covariance')
+    t_sec, pos, quat, lin, ang, pcov, tcov = _odometry_fields(msg)
     if frame == 'enu':
-        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
-    if all(math.isfinite(c) for c in quat):
-        try:
-            eul = quat_to_euler(*quat)
-        except ConversionError:
-            raise ConversionError('pose.pose.orientation is a zero quaternion') from None
-    else:
-        eul = (math.nan, math.nan, math.nan)
-    x12 = np.concatenate([lin, ang, pos, eul])
-    return t_sec, x12, pcov, tcov
+        pos, lin, ang, quat = _swap_state(pos, lin, ang, quat)
+        pcov = _signed_perm_cov(pcov, _POSE_PERM, _POSE_SIGN)
+        tcov = _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN)
+    return t_sec, _state(pos, quat, lin, ang), pcov, tcov
+
+
+def odometry_state(msg, frame='ned'):
+    """Return ``(t_sec, x12)`` of :func:`odometry_to_state`, without transforming the
+    covariances (they are checked all the same: a message that odometry_to_state refuses is
+    refused here too). What the identifier reads per message."""
+    _check_frame(frame)
+    t_sec, pos, quat, lin, ang, _, _ = _odometry_fields(msg)
+    if frame == 'enu':
+        pos, lin, ang, quat = _swap_state(pos, lin, ang, quat)
+    return t_sec, _state(pos, quat, lin, ang)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -362,8 +426,8 @@ def joint_state_to_actuators(msg):
     if missing:
         raise ConversionError(
             f'JointState lacks joint(s) {missing}; present: {names}')
-    u6 = np.empty(6)
-    for k, name in enumerate(JOINT_NAMES[:5]):
+    u6 = np.empty(N_INPUT)
+    for k, name in enumerate(JOINT_NAMES[FINS]):
         u6[k] = position[index[name]]
-    u6[5] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
+    u6[Input.N_RPM] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
     return stamp_to_sec(stamp), u6

@@ -1,0 +1,354 @@
+"""Tests of the session layer on its own: the array API against the message API, the screening
+functions, the guard and health windows, and parameter validation (no ROS graph)."""
+from collections import deque
+import math
+import random
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, sample_messages
+from auv_ident.core.ekf import MODES
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.core.state import Input, State, STATE_NAMES
+from auv_ident.core.vehicle import P_FIN, P_NMAX
+from auv_ident.session import screening
+from auv_ident.session.guard import (GUARD_FACTOR, GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
+                                     NIS_WINDOW, nis_band, NisWindow)
+from auv_ident.session.messages import (ConversionError, joint_state_to_actuators,
+                                        odometry_state, odometry_to_state, stamp_to_ns)
+from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import (FRAMES, MASS_INVERSES, NOISE_MODES, ParameterError)
+from auv_ident.vehicles import load_vehicle
+
+T = 0.05
+N = 300                     # samples of the short run (15 s)
+
+
+@pytest.fixture(scope='module')
+def run():
+    return simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=N * T + 1.0, T=T,
+                    seed=5)
+
+
+def _messages(run, frame='ned'):
+    return [(topic, msg) for k in range(N)
+            for topic, _, msg in sample_messages(run, k, frame, with_truth=False)]
+
+
+def _feed_messages(session, messages):
+    return [session.on_actuators(m) if topic == ACTUATOR_TOPIC else session.on_odom(m)
+            for topic, m in messages]
+
+
+def _feed_arrays(session, messages, frame='ned'):
+    """The same messages read by the caller and given to the array API."""
+    events = []
+    for topic, m in messages:
+        stamp_ns = stamp_to_ns(m.header.stamp)
+        if topic == ACTUATOR_TOPIC:
+            events.append(session.add_command(stamp_ns, joint_state_to_actuators(m)[1]))
+        else:
+            _, x12, _, _ = odometry_to_state(m, frame)
+            events.append(session.add_odometry(stamp_ns, x12, m.header.frame_id,
+                                               m.child_frame_id))
+    return events
+
+
+def _assert_same_events(a, b):
+    assert len(a) == len(b)
+    for i, (x, y) in enumerate(zip(a, b)):
+        assert (x.kind, x.reason, x.code, x.good, x.stamp_ns, x.dof) == \
+            (y.kind, y.reason, y.code, y.good, y.stamp_ns, y.dof), i
+        assert x.nis == y.nis or (math.isnan(x.nis) and math.isnan(y.nis)), i
+        for field in ('estimate', 'std', 'cov'):
+            u, v = getattr(x, field), getattr(y, field)
+            assert (u is None and v is None) or np.array_equal(u, v), (i, field)
+
+
+def _corrupted(run):
+    """A clean run with a NaN, an implausible speed, a duplicate, a wrong frame id, degrees
+    on the fins and an absurd burst (outliers, then a guard reset) in it."""
+    msgs = _messages(run)
+    odom = [i for i, (topic, _) in enumerate(msgs) if topic != ACTUATOR_TOPIC]
+    msgs[odom[50]][1].twist.twist.linear.y = math.nan
+    msgs[odom[60]][1].twist.twist.linear.x = 150.0
+    msgs[odom[70]][1].header.frame_id = 'odom_enu'
+    cmd = msgs[odom[80] - 1][1]
+    cmd.position = [math.degrees(v) for v in cmd.position]
+    msgs.insert(odom[90] + 1, msgs[odom[90]])                  # duplicate stamp
+    for i in odom[150:190]:                                    # 2 s absurd burst
+        msgs[i + 1][1].pose.pose.position.z += 50.0
+    return msgs
+
+
+@pytest.mark.parametrize('case', ['clean', 'corrupted'])
+def test_array_api_gives_the_events_of_the_message_api(run, case):
+    messages = _messages(run) if case == 'clean' else _corrupted(run)
+    by_message, by_array = IdentSession(), IdentSession()
+    a = _feed_messages(by_message, messages)
+    b = _feed_arrays(by_array, messages)
+    _assert_same_events(a, b)
+    assert by_message.reasons == by_array.reasons
+    if case == 'clean':
+        assert not by_message.reasons and all(e.accepted for e in a)
+    else:
+        assert {'odom: non-finite', 'odom: implausible', 'odom: wrong frame',
+                'actuators: implausible', 'odom: duplicate stamp',
+                'odom: outlier'} <= set(by_message.reasons)
+        assert by_message.guard_resets >= 1
+    assert by_message.document() == by_array.document()
+    h1, h2 = by_message.health(), by_array.health()
+    assert (h1.level, h1.message, h1.window) == (h2.level, h2.message, h2.window)
+
+
+def test_array_api_takes_ned_arrays_whatever_the_frame_setting(run):
+    """An 'enu' session reads ENU/FLU messages; its array API takes the NED/FRD state that
+    odometry_to_state(msg, 'enu') returns, and gives the same events."""
+    messages = _messages(run, 'enu')
+    a = _feed_messages(IdentSession(frame='enu'), messages)
+    b = _feed_arrays(IdentSession(frame='enu'), messages, 'enu')
+    _assert_same_events(a, b)
+    assert all(e.accepted for e in a)
+
+
+def test_array_api_rejects_unreadable_arrays_by_name(run):
+    s = IdentSession()
+    ev = s.add_odometry(1.5, run.y[0])
+    assert ev.kind == 'rejected' and ev.code == 'conversion' and ev.stamp_ns is None
+    assert 'stamp_ns must be an integer' in ev.reason
+    ev = s.add_odometry(10, run.y[0][:11])
+    assert ev.code == 'conversion' and 'x12 must have shape (12,)' in ev.reason
+    assert ev.stamp_ns == 10
+    ev = s.add_command(np.int64(10), ['a'] * 6)
+    assert ev.code == 'conversion' and 'u6 is not numeric' in ev.reason
+    assert s.reasons == {'odom: conversion': 2, 'actuators: conversion': 1}
+    # numpy integer stamps and plain lists are taken
+    assert s.add_command(np.int64(0), list(run.u[0])).kind == 'command'
+    assert s.add_odometry(np.int64(0), list(run.y[0])).kind == 'update'
+
+
+def test_array_api_copies_the_callers_arrays(run):
+    """A caller may reuse its buffers: what the session keeps is its own copy."""
+    reused, fresh = IdentSession(keep_arrays=True), IdentSession(keep_arrays=True)
+    u, x = np.empty(6), np.empty(12)
+    for k in range(40):
+        stamp_ns = round(run.t[k] * 1e9)
+        u[:] = run.u[k]
+        x[:] = run.y[k]
+        reused.add_command(stamp_ns, u)
+        reused.add_odometry(stamp_ns, x)
+        fresh.add_command(stamp_ns, run.u[k].copy())
+        fresh.add_odometry(stamp_ns, run.y[k].copy())
+    u[:] = math.nan
+    x[:] = math.nan
+    assert np.array_equal(reused.last_good.estimate, fresh.last_good.estimate)
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(reused.commands, fresh.commands))
+    assert all(np.array_equal(a[1], b[1])
+               for a, b in zip(reused.measurements, fresh.measurements))
+
+
+def test_session_odometry_reading_refuses_what_the_full_reader_refuses(run):
+    """on_odom skips transforming the (unused) covariances but refuses the same messages."""
+    msg = _messages(run)[1][1]
+    for frame in FRAMES:
+        t1, x1, _, _ = odometry_to_state(msg, frame)
+        t2, x2 = odometry_state(msg, frame)
+        assert t1 == t2 and np.array_equal(x1, x2)
+    no_twist_cov = SimpleNamespace(header=msg.header, pose=msg.pose,
+                                   twist=SimpleNamespace(twist=msg.twist.twist))
+    short_pose_cov = SimpleNamespace(header=msg.header, twist=msg.twist,
+                                     pose=SimpleNamespace(pose=msg.pose.pose,
+                                                          covariance=[0.0] * 35))
+    for reader in (odometry_to_state, odometry_state):
+        with pytest.raises(ConversionError, match="no field 'twist.covariance'"):
+            reader(no_twist_cov)
+        with pytest.raises(ConversionError, match='pose.covariance must be 6x6 or 36 long'):
+            reader(short_pose_cov, 'enu')
+    s = IdentSession()
+    ev = s.on_odom(short_pose_cov)
+    assert ev.kind == 'rejected' and ev.code == 'conversion' and 'pose.covariance' in ev.reason
+
+
+# --- screening, on its own ----------------------------------------------------------------
+
+
+def test_frame_id_rule():
+    assert screening.frame_problem('odom_ned', 'base_link_frd', 'ned') is None
+    assert screening.frame_problem('odom', 'base_link', 'enu') is None
+    assert screening.frame_problem('friend', 'menu_flux', 'ned') is None     # not tokens
+    code, text = screening.frame_problem('odom_enu', 'base_link_FLU', 'ned')
+    assert code == 'wrong frame' and 'name the ENU convention' in text
+    assert "frame parameter is 'ned'" in text
+    code, text = screening.frame_problem('odom_ned', 'base_link_flu', 'ned')
+    assert code == 'wrong frame' and 'ENU/NED' in text
+    code, text = screening.frame_problem('map', 'base_link', 'ned', ('odom', 'base_link'))
+    assert code == 'frame changed' and "'odom' / 'base_link' of the first" in text
+    assert screening.frame_problem('odom', 'base_link', 'ned', ('odom', 'base_link')) is None
+
+
+def test_nonfinite_and_implausible_states_look_only_at_the_given_channels():
+    x = [0.5, 0.0, 0.1, 0.01, 0.02, 0.03, 100.0, -50.0, 10.0, 0.1, -0.1, 3.0]
+    everything = tuple(State)
+    assert screening.nonfinite_states(x, everything) == []
+    assert screening.implausible_states(x, everything) == ''
+    y = list(x)
+    y[State.V], y[State.PSI] = math.nan, math.inf
+    assert screening.nonfinite_states(y, everything) == ['v', 'psi']
+    assert screening.nonfinite_states(y, (State.U, State.W)) == []
+    bounds = dict(zip(STATE_NAMES, screening.STATE_BOUNDS))
+    for s in State:
+        if math.isinf(bounds[s.name.lower()]):
+            continue
+        y = list(x)
+        y[s] = -1.01 * bounds[s.name.lower()]
+        text = screening.implausible_states(y, everything)
+        assert text.startswith(f'implausible {s.name.lower()} = ') and 'wrong units' in text
+        assert screening.implausible_states(y, tuple(c for c in State if c != s)) == ''
+    y = list(x)
+    y[State.PSI] = 1e9                     # yaw is not bounded (any number of turns)
+    assert screening.implausible_states(y, everything) == ''
+    y[State.U], y[State.Q] = 70.0, math.radians(20.0) * 57.3
+    text = screening.implausible_states(y, everything)
+    assert 'u = 70 m/s (|u| <= 10)' in text and 'q = ' in text and 'rad/s' in text
+
+
+def test_command_problem_names_the_fin_or_the_shaft():
+    v = load_vehicle('nps_auv2')
+    fin, shaft = float(v.par[P_FIN]), float(v.par[P_NMAX])
+    u = [0.1, -0.1, 0.0, 0.05, -0.05, 0.8 * shaft]
+    assert screening.command_problem(u, 1.0, fin, shaft) is None
+    bad = list(u)
+    bad[Input.N_RPM] = math.nan
+    code, text = screening.command_problem(bad, 1.0, fin, shaft)
+    assert code == 'non-finite' and 'nan' in text and 'at 1.000000000 s' in text
+    bad = list(u)
+    bad[Input.DELTA_S] = math.degrees(0.3)
+    code, text = screening.command_problem(bad, 1.0, fin, shaft)
+    assert code == 'implausible' and 'stern_planes = 17.18' in text and 'rudder' not in text
+    bad = list(u)
+    bad[Input.DELTA_R] = 2.0 * fin           # at the bound: still plausible
+    assert screening.command_problem(bad, 1.0, fin, shaft) is None
+    bad[Input.N_RPM] = 2.01 * shaft
+    code, text = screening.command_problem(bad, 1.0, fin, shaft)
+    assert code == 'implausible' and 'shaft speed' in text and 'rpm' in text
+
+
+# --- guard and health windows ---------------------------------------------------------------
+
+
+def test_guard_window_median_is_numpy_median_of_the_window():
+    rng = random.Random(1)
+    w, ref = GuardWindow(), deque(maxlen=GUARD_WINDOW)
+    assert math.isnan(w.median())
+    for k in range(300):
+        nis = rng.choice([rng.expovariate(1 / 12), 1e6 * rng.random(), math.inf, 12.0])
+        dof = rng.choice([12, 9, 1])
+        w.add(k * T, nis, dof)
+        ref.append((nis if math.isfinite(nis) else 1e300) / dof)
+        assert w.median() == float(np.median(list(ref)))
+        assert len(w) == len(ref)
+        assert w.inconsistent() == (len(ref) == GUARD_WINDOW
+                                    and np.median(list(ref)) > GUARD_FACTOR)
+
+
+def test_guard_window_reports_a_sustained_inconsistency_after_guard_seconds():
+    w = GuardWindow()
+    for k in range(GUARD_WINDOW):
+        assert not w.add(k * T, 12.0, 12)
+    steps = []
+    for k in range(GUARD_WINDOW, 200):
+        steps.append(w.add(k * T, 1e6, 12))
+    first = GUARD_WINDOW + steps.index(True)
+    # inconsistent once half the window is large (the median moved), sustained from
+    # GUARD_SECONDS of stamps later on
+    assert w.since == (GUARD_WINDOW + GUARD_WINDOW // 2 - 1) * T
+    assert first * T - w.since >= GUARD_SECONDS > (first - 1) * T - w.since
+    assert all(steps[first - GUARD_WINDOW:])
+    w.clear()
+    assert len(w) == 0 and w.since is None and math.isnan(w.median())
+
+
+def test_nis_window_mean_is_the_correctly_rounded_sum_over_the_window():
+    rng = random.Random(2)
+    w, ref = NisWindow(), deque(maxlen=NIS_WINDOW)
+    assert math.isnan(w.mean()) and math.isnan(w.band()[0])
+    for k in range(1000):
+        nis = rng.choice([rng.expovariate(1 / 12), 1e-300 * rng.random(), 5e-324,
+                          1e12 * rng.random(), 0.0, 12.0])
+        dof = rng.choice([12, 11, 3])
+        w.add(nis, dof)
+        ref.append((nis, dof))
+        total, dof_sum = math.fsum(n for n, _ in ref), sum(d for _, d in ref)
+        assert w.mean() == total / dof_sum and w.dof == dof_sum
+        assert w.total() == total
+    assert len(w) == NIS_WINDOW
+    assert w.band() == nis_band(w.dof)
+    w.clear()
+    assert len(w) == 0 and w.dof == 0 and not w.gross()
+
+
+def test_nis_band_brackets_one_and_narrows_with_dof():
+    lo1, hi1 = nis_band(12)
+    lo2, hi2 = nis_band(2400)
+    assert lo1 < lo2 < 1.0 < hi2 < hi1
+
+
+# --- parameters -------------------------------------------------------------------------------
+
+
+def test_choice_lists_are_defined_once():
+    assert NOISE_MODES == tuple(MODES)
+    assert FRAMES == ('ned', 'enu')
+    assert MASS_INVERSES == ('default', 'exact', 'mss_literal')
+    for mode in NOISE_MODES:
+        assert IdentSession(noise_mode=mode).cfg.mode == mode
+    for mi in ('default', 'exact'):
+        IdentSession(mass_inverse=mi)
+
+
+BAD_SETTINGS = [
+    ('tau', 'abc', 'not a number'),
+    ('lam', None, 'not a number'),
+    ('lam', 0.0, 'positive'),
+    ('p0_rel', math.inf, 'positive'),
+    ('noise_mode', None, 'use one of fixed'),
+    ('noise_mode', 'Fixed', 'use one of fixed'),
+    ('frame', 3, 'use one of ned, enu'),
+    ('mass_inverse', 'inverse', 'use one of default, exact, mss_literal'),
+    ('max_bridge', -0.1, 'positive'),
+    ('max_gap', 'long', 'not a number'),
+    ('initial_offset', math.nan, 'not -1'),
+    ('initial_offset', 'x', 'not a number'),
+    ('q_state', [math.nan] * 12, 'finite and >= 0'),
+    ('noise_std', [0.01] * 12 + [0.01], 'expected 12 numbers, got 13'),
+    ('noise_std', [0.01] * 6 + [0.0] + [0.01] * 5, 'zero for x'),
+    ('measured', np.ones(11, dtype=bool), 'a mask must have 12 entries'),
+    ('measured', ['u', 'u'], "'u' listed twice"),
+    ('initial', [1.0, 0.0, 1.0, 1.0, 1.0], 'finite and non-zero'),
+    ('initial', ['a'] * 5, 'expected 5 numbers'),
+    ('coefficients', ['Z_w', 'nope'], 'nope'),
+]
+
+
+@pytest.mark.parametrize('name, value, needle', BAD_SETTINGS,
+                         ids=[f'{n}={v!r}'[:40] for n, v, _ in BAD_SETTINGS])
+def test_bad_setting_is_a_parameter_error_naming_it(name, value, needle):
+    with pytest.raises(ParameterError) as info:
+        IdentSession(**{name: value})
+    assert info.value.name == name
+    assert str(info.value).startswith(f'parameter {name!r}: ') and needle in str(info.value)
+
+
+def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
+    from auv_ident.session.estimate_file import write_estimate_json
+    doc = IdentSession().document()
+    write_estimate_json(tmp_path / 'est.json', doc)
+    with pytest.raises(ParameterError, match="parameter 'initial': give either"):
+        IdentSession(warm_start=str(tmp_path / 'est.json'), initial=[1.0] * 5)
+    with pytest.raises(ParameterError, match="parameter 'warm_start': .* for vehicle"):
+        IdentSession(vehicle='remus100', warm_start=str(tmp_path / 'est.json'))
+    with pytest.raises(ParameterError, match="parameter 'warm_start': .* holds"):
+        IdentSession(coefficients=['Z_w'], warm_start=str(tmp_path / 'est.json'))
