@@ -59,7 +59,6 @@ from dataclasses import dataclass, field
 import datetime
 import json
 import math
-import os
 from pathlib import Path
 import shutil
 import sys
