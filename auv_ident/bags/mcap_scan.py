@@ -54,15 +54,23 @@ class ScanStop:
 
     def describe(self):
         """One line saying what was lost."""
+        if not self.lost_bytes:
+            return f'nothing that reached the file ({self.reason})'
         what = {Opcode.CHUNK: 'chunk', Opcode.MESSAGE_INDEX: 'message index',
                 Opcode.MESSAGE: 'message'}.get(self.opcode, 'record')
         text = f'{self.lost_bytes} bytes from byte {self.offset} ({what}: {self.reason})'
         if self.chunk_times is not None:
-            text += (f'; that chunk held messages logged {self.chunk_times[0]} .. '
-                     f'{self.chunk_times[1]} ns')
-            if self.messages_seen is not None:
+            text += (f'; that chunk held the messages logged {stamp_text(self.chunk_times[0])}'
+                     f' .. {stamp_text(self.chunk_times[1])} s')
+            if self.messages_seen:
                 text += f', at least {self.messages_seen} of them'
         return text
+
+
+def stamp_text(t_ns):
+    """Integer ns as exact seconds text, '1704067200.050000000'."""
+    sec, nsec = divmod(int(t_ns), 1_000_000_000)
+    return f'{sec}.{nsec:09d}'
 
 
 def _torn_chunk_details(body):
@@ -118,6 +126,9 @@ class McapScan:
             return
         offset = self.end_offset = len(MCAP_MAGIC)
         while True:
+            if offset == self.size:
+                self._stop(offset, 'the file ends after a complete record, without footer')
+                return
             if offset + _HEAD.size > self.size:
                 self._stop(offset, 'file ends inside a record head')
                 return
@@ -180,3 +191,23 @@ def message_index_counts(fh, start, length):
             index = MessageIndex.read(ReadDataStream(io.BytesIO(body)))
             counts[index.channel_id] += len(index.records)
     return counts
+
+
+def first_chunk_compression(fh, size):
+    """Compression name of the first complete chunk record ('' = none), None if there is none.
+
+    Walks the record heads only (no bodies are read)."""
+    offset = len(MCAP_MAGIC)
+    while offset + _HEAD.size <= size:
+        fh.seek(offset)
+        opcode, length = _HEAD.unpack(fh.read(_HEAD.size))
+        if length > size - offset - _HEAD.size:
+            return None
+        if opcode == Opcode.CHUNK and length >= _CHUNK_HEAD.size:
+            head = fh.read(_CHUNK_HEAD.size)
+            comp_len = _CHUNK_HEAD.unpack(head)[4]
+            return fh.read(comp_len).decode('utf-8', 'replace')
+        if opcode == Opcode.FOOTER:
+            return None
+        offset += _HEAD.size + length
+    return None
