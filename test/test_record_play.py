@@ -22,12 +22,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader as RosbagsReader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.reader import message_counts, read_bag
+from auv_ident.bags.repair import repair_bag
 from auv_ident.session.messages import sec_to_ns, stamp_to_ns
 from auv_ident.bags.sim_bag import (bag_sample_messages, SIM_EPOCH_NS, TOPIC_TYPES,
                                     write_run_bag)
@@ -191,6 +193,12 @@ def test_record_sigkill_keeps_flushed_chunks(tmp_path, ros_env, samples):
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # 'recovered ... from complete chunks'
         _check_recorded(bag, samples, window, allow_truncated=True)
+    # `bag repair` turns it into a complete bag: read without allow_truncated
+    report = repair_bag(bag, out=tmp_path / 'repaired')
+    assert [f.rewritten for f in report.files] == [True]
+    _check_recorded(tmp_path / 'repaired', samples, window)
+    with RosbagsReader(tmp_path / 'repaired') as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {t: N for t in TOPICS}
 
 
 def _probe(ctx, topics):
