@@ -229,6 +229,11 @@ def test_bag_builder_equals_the_rclpy_builder(run):
             for (_, t_ns, _), (_, t2, msg) in zip(live, bag_sample_messages(run, k, frame)):
                 assert t2 == t_ns + SIM_EPOCH_NS
                 assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t2
+            for (_, t_ns, expected), (_, t2, actual) in zip(
+                    sample_messages(run, k, frame, epoch_ns=SIM_EPOCH_NS),
+                    bag_sample_messages(run, k, frame)):
+                assert t_ns == t2
+                assert_msg_equal(expected, actual, f'{frame} epoch[{k}]')
 
 
 def test_simulated_bag_starts_at_the_epoch_and_is_reproducible(sim_bag, run, tmp_path):

@@ -102,6 +102,9 @@ def bag_info(path):
                 lost = mf.stop.describe() if mf.stop is not None else 'nothing'
                 incomplete.append(f'{f.name}: its writer did not finish (no summary); '
                                   f'counted from its complete chunks; lost: {lost}')
+            elif mf.stop is not None:  # finished, unindexed, and unreadable part way
+                incomplete.append(f'{f.name}: corrupted; counted up to the damage; '
+                                  f'unreadable: {mf.stop.describe()}')
         finally:
             mf.close()
     custom = meta.get('custom_data') or {}
