@@ -240,7 +240,7 @@ def build_parser():
                         help="comma-separated names (default: the paper's set for the vehicle)")
         sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                         choices=('fixed', 'paper', 'paper_q', 'matching'),
-                        help='Q/R adaptation (see README); default fixed')
+                        help='Q/R adaptation (docs/method.md); default fixed')
         sp.add_argument('--fixed-noise', action='store_true', help='same as --noise-mode fixed')
         sp.add_argument('--initial-offset', type=float, default=0.5,
                         help='initial guesses = truth * (1 + offset); default 0.5')

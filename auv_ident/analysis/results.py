@@ -9,7 +9,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.identify import FilterConfig
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 
-DEFAULT_NOISE_MODE = 'fixed'  # see README "Noise adaptation": fixed Q/R wins on accuracy
+DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R wins on accuracy
 
 def coefficient_list(vehicle, text):
     """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
@@ -53,7 +53,7 @@ def paper_values(vehicle, name):
     return est, err
 
 def result_dict(vehicle, res, extra=None):
-    """The JSON document of `identify --json` (schema in the README)."""
+    """The JSON document of `identify --json` (schema in docs/report.md)."""
     err = res.error_pct()
     ekf_err = res.error_pct('ekf_estimate')
     coeffs = {}

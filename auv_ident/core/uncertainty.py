@@ -1,0 +1,244 @@
+"""Error bars that hold when the residuals are not white, the noise model read off the
+residuals, and what the data can identify.
+
+The batch refinement minimises ``sum_k r_k^T r_k`` over the whitened innovations
+``r_k = S_k^{-1/2} nu_k`` (12 channels per sample, NaN where a channel is missing). If the
+filter's noise model were right, the r_k would be white with unit variance and the coefficient
+covariance would be ``(J^T J)^-1`` (J: the Jacobian of the stacked r with respect to theta).
+Real sensors are coloured and their level is not what the file says, so:
+
+- :func:`sandwich_covariance`: the covariance of an M-estimator with serially correlated
+  scores, ``A^-1 B A^-1`` with ``A = J^T J`` and B the long-run covariance of the per-sample
+  scores ``g_k = J_k^T r_k`` (Newey & West 1987, Bartlett weights). This is the estimator
+  Morelli & Klein (1995, "Accurate parameter uncertainty estimation from flight data with
+  coloured residuals") use for output-error flight data, written for the filter-error
+  residuals. It covers a wrong noise level and any residual correlation, per channel and
+  across channels, without a model of the noise. Its lag window L comes from the residuals
+  (:func:`bandwidth`).
+- :func:`noise_model`: per channel, the level of the innovations against the filter's
+  prediction, the first-order (AR(1)) correlation and its time constant, and a Ljung-Box test
+  of whiteness: what the report and the diagnosis say about the data.
+- :func:`identifiability`: per coefficient the Cramer-Rao bound from the information the run
+  carries, its largest correlation with another coefficient, and a verdict.
+
+Everything here is plain numpy/scipy on arrays (no filter state), so the refinement, the
+methods comparison and the report share it.
+"""
+import math
+
+import numpy as np
+from scipy.stats import chi2
+
+# Verdicts of :func:`identifiability` (relative 1-sigma = CRB 1-sigma / |estimate|)
+REL_STD_IDENTIFIABLE = 0.05     # below this: 'identifiable'
+REL_STD_WEAK = 0.5              # up to this: 'weak'; above: 'not excited'
+CORRELATION_WEAK = 0.95         # |correlation| with another coefficient above this: 'weak'
+LJUNG_BOX_LAGS = 20             # lags of the whiteness test
+WHITENESS_P = 1e-3              # p-value below which a channel's residuals are not white
+MAX_BANDWIDTH_FRACTION = 0.1    # the sandwich's lag window is at most this fraction of N
+
+
+def _finite_channels(r):
+    """(N, m) residuals with NaN where missing -> same array with NaN set to 0, and mask."""
+    r = np.asarray(r, dtype=float)
+    ok = np.isfinite(r)
+    return np.where(ok, r, 0.0), ok
+
+
+def autocorrelation(x, max_lag):
+    """Sample autocorrelation of one channel for lags 0..max_lag (NaN samples skipped).
+
+    Parameters
+    ----------
+    x : (N,) residuals of one channel (any unit; NaN = missing)
+    max_lag : int, largest lag (samples)
+
+    Returns
+    -------
+    (max_lag + 1,) autocorrelation, rho[0] = 1 (all NaN if the channel has under 3 samples)
+    """
+    x = np.asarray(x, dtype=float)
+    ok = np.isfinite(x)
+    out = np.full(max_lag + 1, np.nan)
+    if ok.sum() < 3:
+        return out
+    z = np.where(ok, x - x[ok].mean(), 0.0)
+    c0 = float(np.dot(z, z)) / ok.sum()
+    if c0 <= 0.0:
+        return out
+    n = len(z)
+    for lag in range(min(max_lag, n - 1) + 1):
+        pairs = np.count_nonzero(ok[lag:] & ok[:n - lag])
+        if pairs == 0:
+            continue
+        out[lag] = float(np.dot(z[lag:], z[:n - lag])) / pairs / c0
+    return out
+
+
+def ljung_box(rho, n):
+    """Ljung-Box statistic and p-value of autocorrelations rho[1..h] from n samples."""
+    h = len(rho) - 1
+    lags = np.arange(1, h + 1)
+    r = np.nan_to_num(rho[1:], nan=0.0)
+    q = float(n * (n + 2) * np.sum(r ** 2 / (n - lags)))
+    return q, float(chi2.sf(q, h))
+
+
+def noise_model(white, dt, names=None):
+    """What the whitened innovations say about the noise model, per channel.
+
+    Parameters
+    ----------
+    white : (N, m) whitened innovations r = nu / sqrt(S_jj) of a filter run (NaN = missing)
+    dt : float, s, the median sample interval (for the correlation time)
+    names : m channel names (default 'c0', 'c1', ...)
+
+    Returns
+    -------
+    dict name -> {'level': RMS of r (1 = the filter's noise model holds the level; above 1 the
+    data are noisier than assumed), 'ar1': lag-1 autocorrelation, 'tau_s': the first-order
+    correlation time -dt / ln(ar1) (0 for white, inf if ar1 >= 1), 'ljung_box': statistic,
+    'p_white': its p-value, 'white': p_white >= WHITENESS_P, 'samples': count}.
+    Channels with fewer than LJUNG_BOX_LAGS + 2 samples are left out.
+    """
+    white = np.asarray(white, dtype=float)
+    m = white.shape[1]
+    names = list(names) if names is not None else [f'c{j}' for j in range(m)]
+    out = {}
+    for j in range(m):
+        x = white[:, j]
+        ok = np.isfinite(x)
+        n = int(ok.sum())
+        if n < LJUNG_BOX_LAGS + 2:
+            continue
+        rho = autocorrelation(x, LJUNG_BOX_LAGS)
+        q, p = ljung_box(rho, n)
+        a1 = float(rho[1]) if np.isfinite(rho[1]) else 0.0
+        if a1 <= 0.0:
+            tau = 0.0
+        elif a1 >= 1.0:
+            tau = math.inf
+        else:
+            tau = -dt / math.log(a1)
+        out[names[j]] = {'level': float(np.sqrt(np.mean(x[ok] ** 2))), 'ar1': a1,
+                         'tau_s': tau, 'ljung_box': q, 'p_white': p,
+                         'white': bool(p >= WHITENESS_P), 'samples': n}
+    return out
+
+
+def bandwidth(white, max_lag=None):
+    """Lag window (samples) for :func:`sandwich_covariance`, from the residuals' correlation.
+
+    Andrews (1991)'s plug-in rule for the Bartlett kernel with an AR(1) fit per channel:
+    L = 1.1447 (alpha N)^(1/3), alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2), taking the
+    largest over the channels (the most correlated channel sets the window), at least 1 and at
+    most MAX_BANDWIDTH_FRACTION * N (or max_lag).
+    """
+    white = np.asarray(white, dtype=float)
+    n = white.shape[0]
+    cap = max(1, int(MAX_BANDWIDTH_FRACTION * n)) if max_lag is None else int(max_lag)
+    best = 1.0
+    for j in range(white.shape[1]):
+        rho = autocorrelation(white[:, j], 1)[1]
+        if not np.isfinite(rho) or rho <= 0.0:
+            continue
+        rho = min(rho, 0.999)
+        alpha = 4.0 * rho ** 2 / ((1.0 - rho) ** 2 * (1.0 + rho) ** 2)
+        best = max(best, 1.1447 * (alpha * n) ** (1.0 / 3.0))
+    return int(min(cap, max(1, math.ceil(best))))
+
+
+def sandwich_covariance(J, white, lags=None):
+    """Coefficient covariance of the least-squares fit, valid under correlated residuals.
+
+    Parameters
+    ----------
+    J : (N * m, p) Jacobian of the stacked residuals r (row k * m + j: sample k, channel j)
+        with respect to the coefficients
+    white : (N, m) the residuals at the solution (NaN = missing; those rows of J count zero)
+    lags : lag window L in samples (default :func:`bandwidth`)
+
+    Returns
+    -------
+    cov : (p, p) ``A^-1 B A^-1``, A = J^T J, B = sum_{|l| <= L} (1 - |l|/(L+1)) Gamma_l,
+        Gamma_l = sum_k g_k g_{k-l}^T, g_k = J_k^T r_k (the score of sample k)
+    info : dict with 'lags', 'naive_cov' (A^-1 times the residual variance), and
+        'inflation' (p,) = sqrt(diag(cov) / diag(A^-1)): how much wider the bars are than
+        those of a white-noise model with the assumed level
+    """
+    white = np.asarray(white, dtype=float)
+    n, m = white.shape
+    p = J.shape[1]
+    r, ok = _finite_channels(white)
+    Jk = np.asarray(J, dtype=float).reshape(n, m, p) * ok[:, :, None]
+    g = np.einsum('kmp,km->kp', Jk, r)              # (N, p) scores
+    A = np.einsum('kmp,kmq->pq', Jk, Jk)
+    if lags is None:
+        lags = bandwidth(white)
+    lags = int(max(0, min(lags, n - 1)))
+    B = g.T @ g
+    for lag in range(1, lags + 1):
+        w = 1.0 - lag / (lags + 1.0)
+        G = g[lag:].T @ g[:-lag]
+        B += w * (G + G.T)
+    A_inv = np.linalg.inv(A)
+    cov = A_inv @ B @ A_inv
+    cov = 0.5 * (cov + cov.T)
+    used = int(ok.sum())
+    s2 = float(np.sum(r ** 2)) / max(1, used - p)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        inflation = np.sqrt(np.diag(cov) / np.diag(A_inv))
+    return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
+
+
+def identifiability(J, estimate, names, cov=None):
+    """Per coefficient: how well the run determines it, from its sensitivities.
+
+    Parameters
+    ----------
+    J : (K, p) Jacobian of whitened residuals w.r.t. the coefficients (its J^T J is the Fisher
+        information of the run under the filter's noise model)
+    estimate : (p,) the coefficients (for relative figures)
+    names : p names
+    cov : (p, p) covariance to report the 1-sigma from (default the Cramer-Rao bound
+        (J^T J)^-1; pass the sandwich covariance for honest figures under coloured residuals)
+
+    Returns
+    -------
+    dict name -> {'crb_std': 1-sigma, 'rel_std': 1-sigma / |estimate|, 'max_correlation':
+    largest |correlation| with another coefficient, 'correlated_with': that coefficient,
+    'verdict': 'identifiable' (rel_std < REL_STD_IDENTIFIABLE and max |correlation| <=
+    CORRELATION_WEAK), 'weak' (rel_std < REL_STD_WEAK, or a correlation above
+    CORRELATION_WEAK) or 'not excited' (rel_std >= REL_STD_WEAK, or no information)}.
+    """
+    J = np.asarray(J, dtype=float)
+    est = np.asarray(estimate, dtype=float)
+    p = len(names)
+    F = J.T @ J
+    if cov is None:
+        try:
+            cov = np.linalg.inv(F)
+        except np.linalg.LinAlgError:
+            cov = np.linalg.pinv(F)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        corr = cov / np.outer(sd, sd)
+    out = {}
+    for i, name in enumerate(names):
+        others = [j for j in range(p) if j != i]
+        if others:
+            j_max = max(others, key=lambda j: abs(np.nan_to_num(corr[i, j])))
+            c_max = float(abs(np.nan_to_num(corr[i, j_max])))
+            partner = names[j_max]
+        else:
+            c_max, partner = 0.0, None
+        rel = float(sd[i] / abs(est[i])) if est[i] != 0 else math.inf
+        if F[i, i] <= 0 or not np.isfinite(rel) or rel >= REL_STD_WEAK:
+            verdict = 'not excited'
+        elif rel < REL_STD_IDENTIFIABLE and c_max <= CORRELATION_WEAK:
+            verdict = 'identifiable'
+        else:
+            verdict = 'weak'
+        out[name] = {'crb_std': float(sd[i]), 'rel_std': rel, 'max_correlation': c_max,
+                     'correlated_with': partner, 'verdict': verdict}
+    return out
