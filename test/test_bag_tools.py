@@ -128,6 +128,22 @@ def test_bag_info_cli_on_foreign_bags(name):
     assert 'Duration:' in r.stdout and 'Start:' in r.stdout and 'End:' in r.stdout
 
 
+def test_bag_info_cli_on_the_shipped_bag():
+    path = REPO / 'bags' / 'nps_auv2_ident'
+    topics, (first, last) = _independent(path)
+    r = _cli('bag', 'info', str(path))
+    assert r.returncode == 0 and not r.stderr, r.stderr
+    assert topics == {'/odom': ('nav_msgs/msg/Odometry', 12001),
+                      '/actuators': ('sensor_msgs/msg/JointState', 12001),
+                      '/simulator/truth': ('nav_msgs/msg/Odometry', 12001)}
+    lines = r.stdout.splitlines()
+    assert 'Messages:          36003' in lines and 'ROS Distro:        jazzy' in lines
+    assert 'Duration:          600.000000000s' in lines and (first, last) == (0, 600 * 10**9)
+    assert ('Topic information: Topic: /actuators | Type: sensor_msgs/msg/JointState | '
+            'Count: 12001 | Serialization Format: cdr') in lines
+    assert 'Custom data:       auv_ident.vehicle: nps_auv2' in lines
+
+
 @pytest.mark.parametrize('name', FOREIGN_BAGS)
 def test_reading_all_topics_of_foreign_bags(name, caplog):
     """Every message of every decodable topic; an undecodable topic: one warning, skipped."""
