@@ -1,4 +1,4 @@
-"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,...}.
+"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,bag,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
 line on stderr and exit with status 2; no traceback.
@@ -146,6 +146,19 @@ def cmd_bench(args):
     return 0
 
 
+def cmd_bag_info(args):
+    from auv_ident.bags.info import bag_info, format_bag_info
+    print('\n'.join(format_bag_info(bag_info(args.path))))
+    return 0
+
+
+def cmd_bag_repair(args):
+    from auv_ident.bags.repair import repair_bag
+    report = repair_bag(args.path, out=args.out)
+    print('\n'.join(report.lines()))
+    return 0
+
+
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
@@ -275,6 +288,19 @@ def build_parser():
     sp.add_argument('--duration', type=float, default=600.0)
     sp.add_argument('--json')
     sp.set_defaults(func=cmd_bench)
+
+    sp = sub.add_parser('bag', help='rosbag2 MCAP bags: info, repair')
+    bag_sub = sp.add_subparsers(dest='bag_cmd', required=True)
+    bp = bag_sub.add_parser('info', help='what `ros2 bag info` prints, for any rosbag2 MCAP bag')
+    bp.add_argument('path', help='bag directory or .mcap file')
+    bp.set_defaults(func=cmd_bag_info)
+    bp = bag_sub.add_parser(
+        'repair', help='make a bag whose recorder was killed complete and indexed again '
+                       '(like `ros2 bag reindex`); says what was lost')
+    bp.add_argument('path', help='bag directory or .mcap file')
+    bp.add_argument('--out', help='write the repaired bag to this new directory '
+                                  '(default: in place, originals kept as <file>.orig)')
+    bp.set_defaults(func=cmd_bag_repair)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)

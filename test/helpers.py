@@ -1,5 +1,6 @@
 """Helpers shared by the test modules: node processes and message comparison."""
 import array
+import dataclasses
 import os
 import signal
 import subprocess
@@ -44,13 +45,29 @@ def stop_process(proc, sig=signal.SIGINT, timeout=10.0):
 
 
 def assert_msg_equal(expected, actual, where='msg'):
-    """Compare an rclpy message with a decoded one (rosbags, rclpy or mcap_ros2) by field."""
+    """Compare an rclpy or rosbags message with a decoded one (rosbags, rclpy or mcap_ros2)
+    by field."""
     if hasattr(expected, 'get_fields_and_field_types'):
         for name in expected.get_fields_and_field_types():
             assert_msg_equal(getattr(expected, name), getattr(actual, name), f'{where}.{name}')
+    elif dataclasses.is_dataclass(expected) and hasattr(expected, '__msgtype__'):  # rosbags
+        for f in dataclasses.fields(expected):
+            if f.name.startswith('__'):  # __msgtype__: rosbags' type name, not a ROS field
+                continue
+            assert_msg_equal(getattr(expected, f.name), getattr(actual, f.name),
+                             f'{where}.{f.name}')
     elif isinstance(expected, (list, tuple, array.array, np.ndarray)):
         assert len(expected) == len(actual), where
         for i, (e, a) in enumerate(zip(expected, actual)):
             assert_msg_equal(e, a, f'{where}[{i}]')
     else:
         assert expected == actual, f'{where}: {expected!r} != {actual!r}'
+
+
+def write_rclpy(writer, topic, t_ns, msg):
+    """Serialize an rclpy message and write it to a BagWriter (which takes bytes only); the
+    topic is added with the default QoS if new (a no-op if known with the same type)."""
+    from rclpy.serialization import serialize_message
+    pkg = type(msg).__module__.split('.')[0]
+    writer.add_topic(topic, f'{pkg}/msg/{type(msg).__name__}')
+    writer.write(topic, t_ns, serialize_message(msg))

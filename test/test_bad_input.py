@@ -51,9 +51,9 @@ from auv_ident.session.session import GUARD_SECONDS, IdentSession
 from auv_ident.session.settings import ParameterError
 from auv_ident.bags.replay import replay_bag, ReplayWarnings
 from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TOPIC_TYPES,
-                                    write_run_bag)
-from helpers import spawn_node, stop_process
+from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, TOPIC_TYPES, write_run_bag
+from auv_ident.ros.sim_messages import sample_messages
+from helpers import spawn_node, stop_process, write_rclpy
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATION = 30.0
@@ -425,7 +425,7 @@ def _write_bag(path, messages):
             if topic != '/simulator/truth':
                 w.add_topic(topic, typ)
         for i, (topic, msg) in enumerate(messages):
-            w.write_msg(topic, (i + 1) * 1_000_000, msg)   # log time = arrival order
+            write_rclpy(w, topic, (i + 1) * 1_000_000, msg)   # log time = arrival order
 
 
 @pytest.fixture(scope='module')
@@ -701,7 +701,7 @@ def _wrong_types_bag(good_bag, tmp_path):
         w.add_topic('/odom', 'sensor_msgs/msg/Imu')
         w.add_topic('/actuators', 'sensor_msgs/msg/JointState')
         for k in range(5):
-            w.write_msg('/odom', k * 50_000_000, Imu())
+            write_rclpy(w, '/odom', k * 50_000_000, Imu())
     return d
 
 
@@ -712,7 +712,7 @@ def _undecodable_bag(run, tmp_path):
         w.add_topic('/actuators', 'sensor_msgs/msg/JointState')
         for k in range(20):
             for topic, t_ns, msg in sample_messages(run, k, with_truth=False):
-                w.write_msg(topic, t_ns, msg)
+                write_rclpy(w, topic, t_ns, msg)
         w.write('/odom', 30 * 50_000_000, b'\x00\x01\x00\x00' + bytes(range(40)))
     return d
 
@@ -727,7 +727,7 @@ def _only_odom_bag(run, tmp_path):
     with BagWriter(d) as w:
         w.add_topic('/odom', 'nav_msgs/msg/Odometry')
         for k in range(5):
-            w.write_msg('/odom', k, _sample(run, k)[1][1])
+            write_rclpy(w, '/odom', k, _sample(run, k)[1][1])
     return d
 
 

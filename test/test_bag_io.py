@@ -1,5 +1,8 @@
-"""Tests of auv_ident.bags (schema, writer, reader): rosbag2-layout MCAP writing, reading, interop and bad input."""
+"""Tests of auv_ident.bags (schema, writer, reader, repair, info): rosbag2-layout MCAP writing,
+reading, interop and bad input."""
+from collections import Counter
 import json
+import logging
 from pathlib import Path
 import shutil
 import signal
@@ -8,7 +11,7 @@ import sys
 import textwrap
 import time
 
-from mcap.reader import make_reader
+from mcap.reader import make_reader, SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -27,7 +30,8 @@ from auv_ident.session import messages as sm
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.writer import BagWriter
 from auv_ident.bags.reader import read_bag
-from helpers import assert_msg_equal
+from auv_ident.bags.repair import repair_bag
+from helpers import assert_msg_equal, write_rclpy
 
 N = 120  # samples per topic
 DT_NS = 5_000_000  # 200 Hz
@@ -66,10 +70,7 @@ def _write_bag(path, compression=None, chunk_size=schema.DEFAULT_CHUNK_SIZE, mes
         writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock', qos={'depth': 1})
         writer.set_custom_data('frame', 'ned')
         for topic, t_ns, msg in (EXPECTED if messages is None else messages):
-            if topic == '/odom':
-                writer.write_msg(topic, t_ns, msg)
-            else:
-                writer.write(topic, t_ns, serialize_message(msg))  # raw bytes, as a recorder
+            writer.write(topic, t_ns, serialize_message(msg))  # raw bytes, as a recorder
     return Path(path)
 
 
@@ -104,6 +105,48 @@ def test_rclpy_joint_state_needs_the_fallback():
     payload = serialize_message(EXPECTED[1][2])
     with pytest.raises(Exception, match='size mismatch'):
         get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(payload, 'sensor_msgs/msg/JointState')
+
+
+def test_padding_is_tolerated_but_not_trailing_junk(tmp_path):
+    """Up to 8 bytes of Fast-CDR padding pass; 16 bytes more are another payload: an error."""
+    joints = EXPECTED[1][2]
+    payload = serialize_message(joints)
+    with BagWriter(tmp_path / 'junk') as writer:
+        writer.add_topic('/actuators', 'sensor_msgs/msg/JointState')
+        writer.write('/actuators', 1, payload)
+        writer.write('/actuators', 2, payload + bytes(16))
+    first = read_bag(tmp_path / 'junk', topics=['/actuators'])
+    assert_msg_equal(joints, next(first)[2])
+    with pytest.raises(BagError, match=r'junk: topic /actuators: undecodable sensor_msgs/msg/'
+                                       r'JointState payload at 2 ns \(2[0-9] bytes left over'):
+        next(first)
+
+
+def test_an_undecodable_topic_is_skipped_with_one_warning(tmp_path, caplog):
+    """Reading all topics: bad payloads of one topic are skipped (one warning naming it and
+    why), every other message keeps coming; asked for by name, the topic is a BagError."""
+    good = serialize_message(EXPECTED[1][2])
+    with BagWriter(tmp_path / 'mixed') as writer:
+        writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
+        writer.add_topic('/actuators', 'sensor_msgs/msg/JointState')
+        for i, (topic, t_ns, msg) in enumerate(EXPECTED[:60]):
+            if topic == '/odom':
+                writer.write(topic, t_ns, serialize_message(msg))
+                bad = good[:len(good) // 2] if i % 2 else good + bytes(32)
+                writer.write('/actuators', t_ns + 1, bad)
+                writer.write('/actuators', t_ns + 2, good)
+    with caplog.at_level(logging.WARNING, logger='auv_ident.bags'):
+        got = list(read_bag(tmp_path / 'mixed'))
+    assert Counter(t for t, _, _ in got) == {'/odom': 20, '/actuators': 20}
+    assert [ns for t, ns, _ in got if t == '/actuators'] == [
+        ns + 2 for t, ns, _ in EXPECTED[:60] if t == '/odom']
+    records = [r for r in caplog.records if r.name == 'auv_ident.bags']
+    assert len(records) == 1
+    text = records[0].getMessage()
+    assert 'mixed: topic /actuators: undecodable sensor_msgs/msg/JointState payload' in text
+    assert 'bytes left over' in text and 'skipping' in text
+    with pytest.raises(BagError, match='topic /actuators: undecodable'):
+        list(read_bag(tmp_path / 'mixed', topics=['/odom', '/actuators']))
 
 
 def test_topic_selection_and_raw(bag):
@@ -318,9 +361,8 @@ def test_writer_errors(tmp_path):
         writer.write('/odom', 0.5, serialize_message(Odometry()))
     with pytest.raises(BagError, match='nanoseconds'):
         writer.write('/odom', -1, serialize_message(Odometry()))
-    with pytest.raises(BagError, match='has type nav_msgs/msg/Odometry'):
-        writer.write_msg('/odom', 0, Clock())
-    writer.write_msg('/odom', 7, Odometry())
+    assert not hasattr(writer, 'write_msg')  # bytes only: serializing is the ROS layer's job
+    writer.write('/odom', 7, serialize_message(Odometry()))
     writer.close()
     writer.close()  # idempotent
     assert writer.closed
@@ -342,7 +384,7 @@ def test_empty_bag_is_valid(tmp_path):
 def test_exception_in_with_block_still_finalises(tmp_path):
     with pytest.raises(RuntimeError):
         with BagWriter(tmp_path / 'x') as writer:
-            writer.write_msg('/clock', 5, Clock())
+            write_rclpy(writer, '/clock', 5, Clock())
             raise RuntimeError('boom')
     assert (tmp_path / 'x' / 'metadata.yaml').is_file()
     assert [ns for _, ns, _ in read_bag(tmp_path / 'x')] == [5]
@@ -350,16 +392,19 @@ def test_exception_in_with_block_still_finalises(tmp_path):
 
 _CHILD = textwrap.dedent('''
     import sys, time
+    from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
     from auv_ident.bags.writer import BagWriter
+    payload = serialize_message(Clock())
     with BagWriter(sys.argv[1], chunk_size=1024) as w:
+        w.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
         for i in range(100):
-            w.write_msg('/clock', i, Clock())
+            w.write('/clock', i, payload)
         w.flush()
         print('ready', flush=True)
         i = 100
         while True:
-            w.write_msg('/clock', i, Clock())
+            w.write('/clock', i, payload)
             i += 1
             time.sleep(0.0005)
 ''')
@@ -409,6 +454,16 @@ def test_sigkill_loses_at_most_the_open_chunk(tmp_path, child):
         got = list(read_bag(path, allow_truncated=True))
     times = [ns for _, ns, _ in got]
     assert len(times) >= 100 and times == list(range(len(times)))
+    # bag repair makes it a complete bag that index-based readers read in time order
+    report = repair_bag(path, out=tmp_path / 'repaired')
+    assert report.files[0].rewritten and report.files[0].messages == len(times)
+    with open(tmp_path / 'repaired' / 'killed_0.mcap', 'rb') as f:
+        reader = make_reader(f)
+        assert isinstance(reader, SeekingReader)
+        assert [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)] == times
+    with RosbagsReader(tmp_path / 'repaired') as reader:
+        assert [t for _, t, _ in reader.messages()] == times
+    assert [ns for _, ns, _ in read_bag(tmp_path / 'repaired')] == times
 
 
 # --- reader errors ----------------------------------------------------------------------------

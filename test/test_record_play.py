@@ -22,14 +22,17 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader as RosbagsReader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.reader import message_counts, read_bag
+from auv_ident.bags.repair import repair_bag
 from auv_ident.session.messages import sec_to_ns, stamp_to_ns
-from auv_ident.bags.sim_bag import sample_messages, TOPIC_TYPES, write_run_bag
+from auv_ident.bags.sim_bag import (bag_sample_messages, SIM_EPOCH_NS, TOPIC_TYPES,
+                                    write_run_bag)
 import ros_pub_helper
 from conftest import require_loopback_dds
 from helpers import assert_msg_equal
@@ -190,6 +193,12 @@ def test_record_sigkill_keeps_flushed_chunks(tmp_path, ros_env, samples):
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')  # 'recovered ... from complete chunks'
         _check_recorded(bag, samples, window, allow_truncated=True)
+    # `bag repair` turns it into a complete bag: read without allow_truncated
+    report = repair_bag(bag, out=tmp_path / 'repaired')
+    assert [f.rewritten for f in report.files] == [True]
+    _check_recorded(tmp_path / 'repaired', samples, window)
+    with RosbagsReader(tmp_path / 'repaired') as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {t: N for t in TOPICS}
 
 
 def _probe(ctx, topics):
@@ -234,11 +243,11 @@ def test_play_publishes_every_message_in_order(tmp_path, ros_env, ctx, sim_run):
     assert {t: len(v) for t, v in got.items()} == {t: n for t in topics}, (
         err, [stamp_to_ns(m.clock) for _, m in got['/clock']])
     for k in range(n):
-        for topic, _, expected in sample_messages(sim_run, k):
+        for topic, _, expected in bag_sample_messages(sim_run, k):
             assert_msg_equal(expected, got[topic][k][1], f'{topic}[{k}]')
-    # /clock = the log times (here the sample times), ascending
+    # /clock = the log times (here the sample times from the simulated bags' epoch), ascending
     clock_ns = [stamp_to_ns(m.clock) for _, m in got['/clock']]
-    assert clock_ns == [sec_to_ns(t) for t in sim_run.t]
+    assert clock_ns == [SIM_EPOCH_NS + sec_to_ns(t) for t in sim_run.t]
     # the recorded spacing divided by rate: 2.0 s of log time in about 0.4 s
     arrival = [t for t, _ in got['/odom']]
     span = arrival[-1] - arrival[0]
@@ -271,8 +280,8 @@ def test_record_play_round_trip(tmp_path, ros_env, sim_run):
         b = [m for t, _, m in recorded if t == topic]
         assert len(a) == len(b) == len(sim_run.t)
         for k in range(len(a)):
-            # rebuild the rclpy messages: the reference for field-by-field comparison
-            expected = dict((t, m) for t, _, m in sample_messages(sim_run, k))[topic]
+            # rebuild the bag's messages: the reference for field-by-field comparison
+            expected = dict((t, m) for t, _, m in bag_sample_messages(sim_run, k))[topic]
             assert_msg_equal(expected, a[k], f'source {topic}[{k}]')
             assert_msg_equal(expected, b[k], f'copy {topic}[{k}]')
     times = [t_ns for t, t_ns, _ in recorded if t == '/odom']

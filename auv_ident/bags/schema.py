@@ -24,10 +24,6 @@ from pathlib import Path
 import re
 import sys
 
-# Why mcap.writer.Writer and not rosbags.rosbag2.Writer: rosbags writes its own comment-less
-# message definitions, no 'topic_type_hash' channel metadata and a fixed 1 MiB chunk held in
-# memory; mcap's Writer takes our rosbag2-exact schema text and channel metadata verbatim, a
-# chunk size of our choosing, and has a public flush() that closes the chunk in progress.
 import yaml
 
 from auv_ident.core.errors import AuvIdentError
@@ -222,6 +218,40 @@ def _qos_list(qos):
     if isinstance(qos, (list, tuple)):
         return [qos_to_dict(q) for q in qos]
     return [qos_to_dict(qos)]
+
+
+# rmw's integer values of the policies, as rosbag2 before Jazzy (metadata version < 9) wrote them.
+_RMW_POLICY_NAMES = {
+    'history': {0: 'system_default', 1: 'keep_last', 2: 'keep_all', 3: 'unknown'},
+    'reliability': {0: 'system_default', 1: 'reliable', 2: 'best_effort', 3: 'unknown',
+                    4: 'best_available'},
+    'durability': {0: 'system_default', 1: 'transient_local', 2: 'volatile', 3: 'unknown',
+                   4: 'best_available'},
+    'liveliness': {0: 'system_default', 1: 'automatic', 3: 'manual_by_topic', 4: 'unknown',
+                   5: 'best_available'},
+}
+
+
+def qos_from_yaml(text):
+    """Return the v9 QoS dicts of a rosbag2 ``offered_qos_profiles`` YAML (a channel's metadata
+    or an older metadata.yaml's string): v9 names, or the integer policies of versions < 9."""
+    try:
+        profiles = yaml.safe_load(text) if text else []
+    except yaml.YAMLError as exc:
+        raise BagError(f'offered_qos_profiles is not YAML ({exc})') from None
+    if profiles is None:
+        return []
+    if not isinstance(profiles, list) or not all(isinstance(p, dict) for p in profiles):
+        raise BagError(f'offered_qos_profiles is not a list of profiles: {text!r}')
+    out = []
+    for profile in profiles:
+        named = {}
+        for key, value in profile.items():
+            if key in _RMW_POLICY_NAMES and isinstance(value, int):
+                value = _RMW_POLICY_NAMES[key].get(value, 'unknown')
+            named[key] = value
+        out.append(qos_to_dict({k: v for k, v in named.items() if k in DEFAULT_QOS}))
+    return out
 
 
 def qos_yaml(profiles):

@@ -35,6 +35,62 @@ from auv_ident.bags.schema import (BagError, DEFAULT_CHUNK_SIZE, message_definit
                                    METADATA_VERSION, normalize_msgtype, _qos_list, qos_yaml,
                                    ROS_DISTRO, type_hash)
 
+_dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
+
+
+def bagfile_information(files, topics, custom_data=None):
+    """Return rosbag2's v9 ``rosbag2_bagfile_information`` dict.
+
+    Parameters
+    ----------
+    files : list of (name, span, message_count)
+        One entry per data file in bag order; span = (first, last) log time (ns), or None for
+        a file without messages.
+    topics : list of dict
+        Keys name, type ('pkg/msg/Type'), qos (list of v9 QoS dicts), hash (RIHS01_... or '')
+        and count.
+    custom_data : dict of str, optional
+    """
+    spans = [span for _, span, _ in files if span is not None]
+    start = min(s[0] for s in spans) if spans else 0
+    duration = (max(s[1] for s in spans) - start) if spans else 0
+    total = sum(n for _, _, n in files)
+    return {
+        'version': METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'duration': {'nanoseconds': duration},
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'message_count': total,
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': t['name'],
+                                'type': t['type'],
+                                'serialization_format': 'cdr',
+                                'offered_qos_profiles': t['qos'],
+                                'type_description_hash': t['hash']},
+             'message_count': t['count']}
+            for t in topics],
+        # Chunk compression is storage-internal: rosbag2 leaves these empty for it too.
+        'compression_format': '',
+        'compression_mode': '',
+        'relative_file_paths': [name for name, _, _ in files],
+        'files': [{'path': name,
+                   'starting_time': {'nanoseconds_since_epoch': span[0] if span else 0},
+                   'duration': {'nanoseconds': (span[1] - span[0]) if span else 0},
+                   'message_count': n}
+                  for name, span, n in files],
+        'custom_data': dict(custom_data or {}) or None,
+        'ros_distro': ROS_DISTRO,
+    }
+
+
+def write_metadata_yaml(bag_dir, info):
+    """Write ``bag_dir/metadata.yaml`` of a bagfile_information dict, atomically."""
+    meta = Path(bag_dir) / 'metadata.yaml'
+    tmp = Path(bag_dir) / 'metadata.yaml.tmp'
+    tmp.write_text(_dump({'rosbag2_bagfile_information': info}), encoding='utf-8')
+    os.replace(tmp, meta)  # a reader never sees a half-written metadata.yaml
+
+
 # ---------------------------------------------------------------------------------------------
 # writer
 
@@ -55,14 +111,6 @@ class _Topic:
         self.qos = qos
         self.hash = hash_string
         self.count = 0
-
-
-def _rclpy_msgtype(msg):
-    """Return 'pkg/msg/Type' of an rclpy message instance."""
-    parts = type(msg).__module__.split('.')
-    if len(parts) < 2 or not hasattr(type(msg), 'get_fields_and_field_types'):
-        raise BagError(f'{type(msg).__name__} is not an rclpy ROS message')
-    return f'{parts[0]}/{parts[1]}/{type(msg).__name__}'
 
 
 class BagWriter:
@@ -186,7 +234,9 @@ class BagWriter:
             self._topics[topic] = _Topic(topic, full, channel_id, profiles, hash_string)
 
     def write(self, topic, t_ns, payload):
-        """Write one CDR payload (bytes as rclpy serialize_message or DDS give them).
+        """Write one CDR payload (bytes as DDS delivers them, rclpy's serialize_message or
+        rosbags' serialize_cdr gives them: the writer does not serialize messages itself, so
+        that this layer needs no ROS).
 
         ``t_ns`` (int ns) is both the MCAP log time (rosbag2: receive time) and publish time.
         """
@@ -218,21 +268,6 @@ class BagWriter:
             # (cheap) while the chunk is still being filled in memory.
             self._fh.flush()
 
-    def write_msg(self, topic, t_ns, msg):
-        """Serialize an rclpy message and write it; adds the topic (default QoS) if new."""
-        from rclpy.serialization import serialize_message
-        try:
-            msgtype = _rclpy_msgtype(msg)
-        except BagError as exc:
-            raise BagError(f'{self.path}: topic {topic}: {exc}') from None
-        known = self._topics.get(topic)
-        if known is None:
-            self.add_topic(topic, msgtype)
-        elif known.msgtype != msgtype:
-            raise BagError(f'{self.path}: topic {topic} has type {known.msgtype}, '
-                           f'got a {msgtype} message')
-        self.write(topic, t_ns, serialize_message(msg))
-
     def flush(self):
         """Close the chunk in progress and hand everything written so far to the OS.
 
@@ -243,34 +278,11 @@ class BagWriter:
                 self._writer.flush()
 
     def _metadata(self):
-        start = self._t_min if self._t_min is not None else 0
-        duration = (self._t_max - self._t_min) if self._t_min is not None else 0
-        name = self.mcap_path.name
-        return {
-            'version': METADATA_VERSION,
-            'storage_identifier': 'mcap',
-            'duration': {'nanoseconds': duration},
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': self._count,
-            'topics_with_message_count': [
-                {'topic_metadata': {'name': t.name,
-                                    'type': t.msgtype,
-                                    'serialization_format': 'cdr',
-                                    'offered_qos_profiles': t.qos,
-                                    'type_description_hash': t.hash},
-                 'message_count': t.count}
-                for t in self._topics.values()],
-            # Chunk compression is storage-internal: rosbag2 leaves these empty for it too.
-            'compression_format': '',
-            'compression_mode': '',
-            'relative_file_paths': [name],
-            'files': [{'path': name,
-                       'starting_time': {'nanoseconds_since_epoch': start},
-                       'duration': {'nanoseconds': duration},
-                       'message_count': self._count}],
-            'custom_data': dict(self._custom_data) or None,
-            'ros_distro': ROS_DISTRO,
-        }
+        span = None if self._t_min is None else (self._t_min, self._t_max)
+        topics = [{'name': t.name, 'type': t.msgtype, 'qos': t.qos, 'hash': t.hash,
+                   'count': t.count} for t in self._topics.values()]
+        return bagfile_information([(self.mcap_path.name, span, self._count)], topics,
+                                   self._custom_data)
 
     def close(self):
         """Finish the MCAP file (summary, statistics) and write metadata.yaml; idempotent."""
@@ -280,15 +292,11 @@ class BagWriter:
             self._closed = True
             atexit.unregister(self._atexit)
             info = self._metadata()
-            dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
             try:
-                self._writer.add_metadata('rosbag2', {'serialized_metadata': dump(info)})
+                self._writer.add_metadata('rosbag2', {'serialized_metadata': _dump(info)})
                 self._writer.finish()
                 self._fh.close()
-                meta = self.path / 'metadata.yaml'
-                tmp = self.path / 'metadata.yaml.tmp'
-                tmp.write_text(dump({'rosbag2_bagfile_information': info}), encoding='utf-8')
-                os.replace(tmp, meta)  # a reader never sees a half-written metadata.yaml
+                write_metadata_yaml(self.path, info)
             except OSError as exc:
                 raise BagError(f'{self.path}: cannot finish bag: {exc}') from None
             finally:

@@ -87,7 +87,7 @@ def _percentiles(values_ms):
 def compute_latency(run, n_samples):
     """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
     from auv_ident.session.session import IdentSession
-    from auv_ident.bags.sim_bag import sample_messages
+    from auv_ident.ros.sim_messages import sample_messages
     s = IdentSession(sample_time=float(run.T))
     s.warm_up()
     out = []
@@ -118,7 +118,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     from auv_ident.core.model import Model
     from auv_ident.core.simulate import simulate
     from auv_ident.vehicles import load_vehicle
-    from auv_ident.bags.sim_bag import sample_messages
+    from auv_ident.ros.sim_messages import sample_messages
 
     if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
         raise ValueError('rate_hz and sim_seconds must be > 0, real_time_factor >= 0')

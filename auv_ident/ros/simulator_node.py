@@ -2,7 +2,7 @@
 
 The whole run is computed at start-up with :func:`auv_ident.core.simulate.simulate`
 (deterministic: same parameters, same messages), then a timer publishes sample k's messages,
-built by :func:`auv_ident.bags.sim_bag.sample_messages` (the same messages a simulated bag holds).
+built by :func:`auv_ident.ros.sim_messages.sample_messages` (the messages a simulated bag holds).
 When the run is over the node logs a summary and exits with status 0.
 
 Publications (relative names: ``-r __ns:=/auv1`` moves them)
@@ -77,7 +77,7 @@ from auv_ident.core.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
 from auv_ident.core.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 from auv_ident.ros.toolkit import declare_read_only, param_or_none, run_node
-from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
+from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
 
 RCLError = _rclpy.RCLError
 NODE_NAME = 'simulator'
