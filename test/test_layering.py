@@ -1,0 +1,183 @@
+"""The package's layers, checked on the source (every import, also inside functions).
+
+    core  <-  session  <-  ros, bags  <-  analysis  <-  cli
+
+- core/: numpy, scipy, numba, yaml and the standard library only; imports nothing else of the
+  package (the library one could publish alone);
+- vehicles.py (vehicle files by name): core only;
+- session/: core, vehicles, session; no ROS, no bag library;
+- bags/: core, vehicles, session, bags; the bag libraries, never rclpy or *_msgs;
+- ros/: the only place rclpy and ROS message packages appear; may use bags/ (record, play);
+- analysis/: everything below but ros/, no rclpy;
+- no import cycles between modules.
+"""
+import ast
+from pathlib import Path
+import sys
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / 'auv_ident'
+STDLIB = set(sys.stdlib_module_names)
+
+# layer -> package layers it may import
+ALLOWED_INTERNAL = {
+    'core': {'core'},
+    'vehicles': {'core', 'vehicles'},
+    'session': {'core', 'vehicles', 'session'},
+    'bags': {'core', 'vehicles', 'session', 'bags'},
+    'ros': {'core', 'vehicles', 'session', 'bags', 'ros'},
+    'analysis': {'core', 'vehicles', 'session', 'bags', 'analysis'},
+    'top': {'core', 'vehicles', 'session', 'bags', 'ros', 'analysis', 'top'},
+}
+ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosgraph_msgs',
+                'std_srvs', 'rosidl_runtime_py', 'rpyutils'}
+# third-party packages each layer may use (besides the standard library)
+ALLOWED_EXTERNAL = {
+    'core': {'numpy', 'scipy', 'numba', 'llvmlite', 'yaml'},
+    'vehicles': {'numpy', 'yaml', 'ament_index_python'},
+    'session': {'numpy', 'scipy', 'yaml'},
+    'bags': {'numpy', 'scipy', 'yaml', 'mcap', 'mcap_ros2', 'rosbags', 'zstandard', 'lz4'},
+    'analysis': {'numpy', 'scipy', 'numba', 'yaml', 'matplotlib', 'filterpy', 'distributed',
+                 'dask', 'mcap', 'rosbags'},
+    'ros': None,    # anything
+    'top': None,
+}
+
+
+def _module_name(path, pkg=PKG):
+    rel = path.relative_to(pkg.parent).with_suffix('')
+    parts = list(rel.parts)
+    if parts[-1] == '__init__':
+        parts.pop()
+    return '.'.join(parts)
+
+
+def _layer(module):
+    parts = module.split('.')
+    if len(parts) == 1:
+        return 'top'
+    if parts[1] in ALLOWED_INTERNAL:
+        return parts[1]
+    return 'top'    # cli, __main__
+
+
+def _sources():
+    return sorted(p for p in PKG.rglob('*.py') if '__pycache__' not in p.parts)
+
+
+def _imports(path, pkg=PKG):
+    """(line, absolute module name) of every import in the file, nested ones included."""
+    module = _module_name(path, pkg)
+    package = module if path.name == '__init__.py' else module.rpartition('.')[0]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split('.')
+                base = base[:len(base) - node.level + 1]
+                target = '.'.join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            out.append((node.lineno, target))
+            # 'from pkg import module' names a module too
+            out += [(node.lineno, f'{target}.{a.name}') for a in node.names
+                    if (pkg.parent / Path(*f'{target}.{a.name}'.split('.'))).with_suffix(
+                        '.py').is_file()]
+    return out
+
+
+def _internal_graph():
+    modules = {_module_name(p): p for p in _sources()}
+    graph = {}
+    for name, path in modules.items():
+        deps = set()
+        for _, target in _imports(path):
+            if target in modules and target != name:
+                deps.add(target)
+        graph[name] = deps
+    return graph
+
+
+def _violations(path, pkg=PKG):
+    module = _module_name(path, pkg)
+    layer = _layer(module)
+    bad = []
+    for line, target in _imports(path, pkg):
+        root = target.split('.')[0]
+        if root == 'auv_ident':
+            if target == 'auv_ident':
+                continue    # the package itself (__version__)
+            if _layer(target) not in ALLOWED_INTERNAL[layer]:
+                bad.append(f'line {line}: {target} ({_layer(target)} layer)')
+            continue
+        if root in STDLIB:
+            continue
+        allowed = ALLOWED_EXTERNAL[layer]
+        is_ros = root in ROS_PACKAGES or root.endswith('_msgs') or root.endswith('_srvs')
+        if allowed is None:
+            continue
+        if is_ros or root not in allowed:
+            bad.append(f'line {line}: {target}')
+    return module, layer, bad
+
+
+@pytest.mark.parametrize('path', _sources(), ids=lambda p: str(p.relative_to(PKG.parent)))
+def test_every_import_respects_the_layers(path):
+    module, layer, bad = _violations(path)
+    assert not bad, f'{module} ({layer} layer) imports what its layer may not: ' + '; '.join(bad)
+
+
+def test_no_import_cycles():
+    graph = _internal_graph()
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert not cycles, f'import cycles: {cycles}'
+
+
+def test_the_checks_see_a_violation(tmp_path):
+    """The import reader finds imports inside functions and resolves relative ones (a check
+    that saw nothing would pass on any code)."""
+    pkg = tmp_path / 'auv_ident'
+    (pkg / 'core').mkdir(parents=True)
+    (pkg / 'ros').mkdir()
+    (pkg / 'ros' / 'conversions.py').write_text('')
+    fake = pkg / 'core' / 'probe.py'
+    fake.write_text('def f():\n    from ..ros import conversions\n    import rclpy\n')
+    found = [t for _, t in _imports(fake, pkg)]
+    assert 'auv_ident.ros.conversions' in found and 'rclpy' in found
+    module, layer, bad = _violations(fake, pkg)
+    assert (module, layer) == ('auv_ident.core.probe', 'core')
+    assert 'line 2: auv_ident.ros.conversions (ros layer)' in bad and 'line 3: rclpy' in bad
+
+
+def test_no_module_is_a_god_module():
+    long = {str(p.relative_to(PKG.parent)): n for p in _sources()
+            if (n := len(p.read_text(encoding='utf-8').splitlines())) > 700}
+    assert not long, f'modules over 700 lines: {long}'
