@@ -85,17 +85,16 @@ def test_rk4_transition_jacobian_matches_finite_differences(name):
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
                          m.theta_true * 1.2])
     ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0])
-    args = (m.c, m.theta_idx, *m.args[:-1])
     n = len(xa)
     x1, Fa = np.empty(n), np.empty((n, n))
-    assert K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa) == K.OK
+    assert K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == K.OK
     for j in range(n):
         h = 1e-6 * max(1.0, abs(xa[j])) if j < 12 else 1e-4 * abs(xa[j])
         e = np.zeros(n)
         e[j] = h
         a, b = np.empty(n), np.empty(n)
-        K.rk4_jacobian_step(xa + e, ui, *args, 0.05, False, a, Fa.copy())
-        K.rk4_jacobian_step(xa - e, ui, *args, 0.05, False, b, Fa.copy())
+        K.rk4_jacobian_step(xa + e, ui, m.compiled, 0.05, False, a, Fa.copy())
+        K.rk4_jacobian_step(xa - e, ui, m.compiled, 0.05, False, b, Fa.copy())
         fd = (a - b) / (2 * h)
         assert np.allclose(Fa[:, j], fd, rtol=1e-6, atol=1e-9 * max(1, np.abs(fd).max())), j
     assert rng is not None
@@ -109,11 +108,10 @@ def test_predict_is_F_P_Ft_plus_Q():
     P = _spd(n, rng) * 1e-4
     Q = np.diag(rng.uniform(1e-8, 1e-6, n))
     ui = np.array([0.1, 0.1, 0, 0, 0, 500.0])
-    args = (m.c, m.theta_idx, *m.args[:-1])
     x1, Fa = np.empty(n), np.empty((n, n))
-    K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa)
+    K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa)
     xo, Po = np.empty(n), np.empty((n, n))
-    assert K.predict(xa, P, ui, Q, *args, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
+    assert K.predict(xa, P, ui, Q, m.compiled, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
     assert np.allclose(xo, x1) and np.allclose(Po, Fa @ P @ Fa.T + Q, rtol=1e-12, atol=1e-18)
 
 

@@ -40,7 +40,6 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
     ekf.R = f0.R0.copy()
     xa_next = np.empty(n)
     Fa = np.empty((n, n))
-    margs = (m.c, m.theta_idx, *m.args[:-1])
 
     def hx(x):
         return x[:12]
@@ -54,10 +53,10 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
         return d
     # compile (or load from numba's cache) the model for these argument types before timing
     # (rk4_jacobian_step, not rk4_step_into: from Python its call is the cheaper of the two)
-    K.rk4_jacobian_step(ekf.x.copy(), U[0], *margs, T, True, xa_next, Fa)
+    K.rk4_jacobian_step(ekf.x.copy(), U[0], m.compiled, T, True, xa_next, Fa)
     t0 = time.perf_counter()
     for k in range(1, n_steps + 1):
-        K.rk4_jacobian_step(ekf.x, U[k - 1], *margs, T, True, xa_next, Fa)
+        K.rk4_jacobian_step(ekf.x, U[k - 1], m.compiled, T, True, xa_next, Fa)
         ekf.F = Fa
         ekf.x = xa_next.copy()           # predict_x: the same RK4 step
         ekf.P = Fa @ ekf.P @ Fa.T + ekf.Q
@@ -67,25 +66,23 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
 
 
 @njit(cache=True)
-def _model_loop(X, U, theta, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
-                M_RB, theta_pos, T):
+def _model_loop(X, U, theta, cm, T):
     n = 12 + theta.shape[0]
     xa = np.empty(n)
     xa[12:] = theta
     x1 = np.empty(n)
     Fa = np.empty((n, n))
-    ws = new_workspace(n, c0.shape[0])
+    ws = new_workspace(n, cm.c0.shape[0])
     for k in range(X.shape[0]):
         xa[:12] = X[k]
-        rk4_step_into(xa, U[k], c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
-                      M_RB, theta_pos, T, True, x1, Fa, ws)
+        rk4_step_into(xa, U[k], cm, T, True, x1, Fa, ws)
     return x1
 
 
 def _model_step_us(m, run, n_steps):
     """Cost of the shared part, one RK4 step with its exact Jacobian (us per step), timed in a
     compiled loop so that no Python call overhead is counted."""
-    args = (m.theta_true, m.c, m.theta_idx, *m.args[:-1], run.T)
+    args = (m.theta_true, m.compiled, run.T)
     _model_loop(run.x[:2], run.u[:2], *args)
     t0 = time.perf_counter()
     _model_loop(run.x[:n_steps], run.u[:n_steps], *args)

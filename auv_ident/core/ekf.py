@@ -44,6 +44,32 @@ MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
 ERR_NOT_PD = 10
 ERR_NAN_STATE = 11
 
+# The noise settings of one filter run (run_filter): measured (12,) bool channels the sensor
+# suite provides; Q0 (n, n), R0 (12, 12) the initial process and measurement noise; mode
+# (MODE_*), gamma, lam, r_bound, q_floor of the adaptation (module docstring); T (s) the nominal
+# sample time (the time step, and omega = dtheta / T of MODE_PAPER).
+FilterSettings = namedtuple('FilterSettings', 'measured Q0 R0 mode gamma lam T r_bound q_floor')
+
+# What run_filter writes (arrays filled in place): theta, std (H, p), nis (H, 2) and rq
+# (H, 12 + p) the histories every hist_every samples (H = 0: none); white (N, 12) the whitened
+# innovations if want_white; xa (n,), P, Q (n, n), R (12, 12) the final estimate, covariance and
+# noise matrices; stats (5,) [status, steps done, sum NIS, sum dof, NIS samples].
+FilterOutputs = namedtuple('FilterOutputs', 'hist_every theta std nis rq want_white white '
+                                            'xa P Q R stats')
+
+
+def new_outputs(n, N, hist_every=0, want_white=False):
+    """FilterOutputs for an augmented state of size n over N samples (histories every
+    hist_every samples, 0: none; the whitened innovations if want_white)."""
+    p = n - 12
+    nh = (N + hist_every - 1) // hist_every if hist_every > 0 else 0
+    return FilterOutputs(hist_every, np.full((nh, p), np.nan), np.full((nh, p), np.nan),
+                         np.full((nh, 2), np.nan), np.full((nh, 12 + p), np.nan),
+                         bool(want_white), np.full((N if want_white else 0, 12), np.nan),
+                         np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((12, 12)),
+                         np.zeros(5))
+
+
 # Scratch arrays of one filter, allocated once and reused at every step (allocating them per
 # step cost about a tenth of the step; a fresh n x n Fa per step made the BLAS products slower).
 Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new Fa M O idx kpg')
@@ -61,19 +87,16 @@ def new_workspace(n, n_coef):
 
 
 @njit(cache=True)
-def rk4_jacobian_step(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                      recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
+def rk4_jacobian_step(xa, ui, cm, T, want_jac, xa_next, Fa):
     """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
-    ws = new_workspace(xa.shape[0], c0.shape[0])
-    return rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                         recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws)
+    ws = new_workspace(xa.shape[0], cm.c0.shape[0])
+    return rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws)
 
 
 @kernel
-def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                  recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws):
-    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)),
-    scratch from the Workspace ws.
+def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):
+    """x*_{k+1} = Phi(x*_k) (one RK4 step of T seconds, inputs ui held) and Fa = dPhi/dx*
+    ((12+p)x(12+p)); cm is the model's CompiledModel, scratch from the Workspace ws.
 
     Chain rule through the stages: k_s = f(x + a_s k_{s-1}) with a_s = (0, T/2, T/2, T), so
     dk_s/dx* = [A_s | B_s] + a_s A_s dk_{s-1}/dx* (A_s = df/dx, B_s = df/dtheta at stage s) and
@@ -81,6 +104,8 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
     not depend on the position x, y, z (no depth effects in the model), so those columns of A_s
     are zero and the product skips them; then Fa[:, 6:9] are identity columns.
     """
+    c0 = cm.c0
+    theta_idx = cm.theta_idx
     p = theta_idx.shape[0]
     n = 12 + p
     c = ws.c
@@ -89,11 +114,12 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
     for j in range(p):
         c[theta_idx[j]] = xa[12 + j]
     Mi = ws.Minv                  # M^-1 for this step's coefficients (fixed over the step)
-    if recompute_minv:
-        st = mass_inverse_into(c, M_RB, am_i, am_s, ws.M6, Mi)
+    if cm.recompute_minv:
+        st = mass_inverse_into(c, cm.M_RB, cm.am_i, cm.am_s, ws.M6, Mi)
         if st != OK:
             return st
     else:
+        Minv = cm.Minv
         for i in range(6):
             for j in range(6):
                 Mi[i, j] = Minv[i, j]
@@ -117,8 +143,7 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
         wt = (1.0, 2.0, 2.0, 1.0)[s]
         for i in range(12):
             xs[i] = xa[i] + a * k[i]
-        st = state_derivative(xs, ui, c, Mi, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
-                              want_jac, k, A, Bt, zz, ws.dprod)
+        st = state_derivative(xs, ui, c, Mi, cm, want_jac, k, A, Bt, zz, ws.dprod)
         if st != OK:
             return st
         for i in range(12):
@@ -220,12 +245,10 @@ def wrap(a):
 # predict, update and adapt are inlined into run_filter (inline='always'): a call from compiled
 # code costs numba two reference-count operations per array argument, some 50 arrays a step.
 @njit(cache=True, inline='always')
-def predict(xa, P, ui, Q, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-            recompute_minv, M_RB, theta_pos, T, xa_out, P_out, ws):
-    """Time update (Eqs. 9-10); ws.Fa holds the transition Jacobian afterwards. Returns a
-    status code."""
-    st = rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                       recompute_minv, M_RB, theta_pos, T, True, xa_out, ws.Fa, ws)
+def predict(xa, P, ui, Q, cm, T, xa_out, P_out, ws):
+    """Time update (Eqs. 9-10) over T seconds with the inputs ui held; ws.Fa holds the
+    transition Jacobian afterwards. Returns a status code."""
+    st = rk4_step_into(xa, ui, cm, T, True, xa_out, ws.Fa, ws)
     if st != OK:
         return st
     propagate_covariance(ws.Fa, P, Q, P_out, ws.M, ws.O)
@@ -462,27 +485,37 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
 
 
 @njit(cache=True)
-def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_floor, c0,
-               theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, recompute_minv, M_RB,
-               theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, rq_hist, want_white,
-               white_out, out_xa, out_P, out_Q, out_R, stats):
+def run_filter(xa0, P0, Y, U, cm, settings, out):
     """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
-    update with Y[k]). Histories every `hist_every` samples (0: none): coefficients, their
-    1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12) and diag(Q_theta) (p)
-    in rq_hist. stats gets
-    [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not grow with N unless a
-    history is asked for. With want_white, white_out (N, 12) gets the whitened innovations
-    (for the batch refinement)."""
+    update with Y[k]).
+
+    xa0 (n,), P0 (n, n): the prior of sample 0; Y (N, 12) measurements (NaN: missing), U (N, 6)
+    inputs; cm: the model's CompiledModel; settings: FilterSettings; out: FilterOutputs, filled
+    in place. Histories every `out.hist_every` samples (0: none): coefficients, their 1-sigma,
+    NIS and its degrees of freedom, and the adapted diag(R) (12) and diag(Q_theta) (p) in
+    out.rq. out.stats gets [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not
+    grow with N unless a history is asked for. With out.want_white, out.white (N, 12) gets the
+    whitened innovations (for the batch refinement). Returns the status code."""
     n = xa0.shape[0]
     p = n - 12
     N = Y.shape[0]
+    measured = settings.measured
+    Q0 = settings.Q0
+    R0 = settings.R0
+    mode = settings.mode
+    T = settings.T
+    th_hist = out.theta
+    sd_hist = out.std
+    nis_hist = out.nis
+    rq_hist = out.rq
+    hist_every = out.hist_every
     xa = xa0.copy()
     P = P0.copy()
     Q = Q0.copy()
     R = R0.copy()
     xa_b = xa0.copy()             # the prior of sample 0
     P_b = P0.copy()
-    ws = new_workspace(n, c0.shape[0])
+    ws = new_workspace(n, cm.c0.shape[0])
     innov = np.empty(12)
     S_diag = np.empty(12)
     white = np.empty(12)
@@ -496,23 +529,22 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
     # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
-            st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, mono_addr, theta_terms, am_i,
-                         am_s, Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b, ws)
+            st = predict(xa, P, U[k - 1], Q, cm, T, xa_b, P_b, ws)
             if st != OK:
                 status = st
                 break
         for i in range(p):
             theta_prev[i] = xa_b[12 + i]
         st, nis, m = update(xa_b, P_b, Y[k], measured, R, xa, P, innov, S_diag, white, ws)
-        if want_white:
-            white_out[k, :] = white
+        if out.want_white:
+            out.white[k, :] = white
         if st != OK:
             xa[:] = xa_b          # report the prior, not a half-updated state
             P[:, :] = P_b
             status = st
             break
-        adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa, innov, S_diag, P_b, Q, R,
-              Q0, R0)
+        adapt(mode, settings.gamma, settings.lam, T, settings.r_bound, settings.q_floor,
+              theta_prev, xa, innov, S_diag, P_b, Q, R, Q0, R0)
         if m > 0:
             sum_nis += nis
             sum_dof += m
@@ -529,10 +561,11 @@ def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_flo
                 rq_hist[h, 12 + i] = Q[12 + i, 12 + i]
             h += 1
         done += 1
-    out_xa[:] = xa
-    out_P[:, :] = P
-    out_Q[:, :] = Q
-    out_R[:, :] = R
+    out.xa[:] = xa
+    out.P[:, :] = P
+    out.Q[:, :] = Q
+    out.R[:, :] = R
+    stats = out.stats
     stats[0] = status
     stats[1] = done
     stats[2] = sum_nis

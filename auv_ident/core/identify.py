@@ -212,8 +212,8 @@ class AugmentedEKF:
         T = self.T if T is None else float(T)
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q, m.c,
-                       m.theta_idx, *m.args[:-1], T, xa_b, P_b, self.ws)
+        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q,
+                       m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
@@ -229,6 +229,12 @@ class AugmentedEKF:
         """Predict over T with the inputs u_prev held, then update with y."""
         self.predict(u_prev, T)
         self._update(y)
+
+    def settings(self):
+        """The FilterSettings of this filter (its initial Q and R, adaptation, sample time)."""
+        c = self.cfg
+        return K.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
+                                self.T, c.r_bound, c.q_floor)
 
     @property
     def theta(self):
@@ -314,12 +320,6 @@ class Result:
         return 100.0 * (est - self.truth) / np.abs(self.truth)
 
 
-def _filter_args(model, theta_idx=None, c0=None):
-    m = model
-    return (m.c if c0 is None else c0, m.theta_idx if theta_idx is None else theta_idx,
-            *m.args[:-1])
-
-
 def run_ekf(f, Y, U, hist_every=0, want_white=False):
     """Run an AugmentedEKF `f` (already started? no: from Y[0]) over Y, U with the compiled loop.
 
@@ -334,23 +334,12 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
     x0, sd0 = f.initial_state(Y[0], U[0, 5])
     xa0 = np.concatenate([x0, f.theta0])
     P0 = np.diag(np.concatenate([sd0, f.cfg.p0_rel * np.abs(f.theta0)]) ** 2)
-    nh = (N + hist_every - 1) // hist_every if hist_every > 0 else 0
-    th_hist = np.full((nh, m.p), np.nan)
-    sd_hist = np.full((nh, m.p), np.nan)
-    nis_hist = np.full((nh, 2), np.nan)
-    rq_hist = np.full((nh, 12 + m.p), np.nan)
-    white = np.full((N if want_white else 0, 12), np.nan)
-    out_xa = np.empty(f.n)
-    out_P = np.empty((f.n, f.n))
-    out_Q = np.empty((f.n, f.n))
-    out_R = np.empty((12, 12))
-    stats = np.zeros(5)
-    K.run_filter(xa0, P0, Y, U, f.measured, f.Q0, f.R0, f.mode, f.gamma, f.cfg.lam,
-                 f.cfg.r_bound, f.cfg.q_floor, *_filter_args(m), f.T, hist_every, th_hist,
-                 sd_hist, nis_hist, rq_hist, want_white, white, out_xa, out_P, out_Q, out_R,
-                 stats)
+    out = K.new_outputs(f.n, N, hist_every, want_white)
+    K.run_filter(xa0, P0, Y, U, m.compiled, f.settings(), out)
+    stats = out.stats
+    nh = out.theta.shape[0]
     st = int(stats[0])
-    f.xa, f.P, f.Q, f.R, f.steps = out_xa, out_P, out_Q, out_R, int(stats[1])
+    f.xa, f.P, f.Q, f.R, f.steps = out.xa, out.P, out.Q, out.R, int(stats[1])
     if st != K.OK:
         k = int(stats[1])
         if st in STATUS_TEXT:
@@ -358,10 +347,10 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
                               f'{STATUS_TEXT[st]}')
         raise DivergenceError(f'EKF diverged at sample {k} (t = {k * f.T:.2f} s): the '
                               'covariance lost positive definiteness (try --noise-mode fixed)')
-    hist = {'t': np.arange(nh) * hist_every * f.T, 'theta': th_hist, 'std': sd_hist,
-            'nis': nis_hist[:, 0], 'dof': nis_hist[:, 1], 'R_diag': rq_hist[:, :12],
-            'Q_theta_diag': rq_hist[:, 12:]} if nh else {}
-    return stats, hist, white
+    hist = {'t': np.arange(nh) * hist_every * f.T, 'theta': out.theta, 'std': out.std,
+            'nis': out.nis[:, 0], 'dof': out.nis[:, 1], 'R_diag': out.rq[:, :12],
+            'Q_theta_diag': out.rq[:, 12:]} if nh else {}
+    return stats, hist, out.white
 
 
 def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
@@ -375,29 +364,23 @@ def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
     state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
                         coefficient_values=model.c)
     f = AugmentedEKF(state_model, fixed_cfg, T)
-    empty = np.zeros(0, dtype=np.int64)
-    # theta enters through c0; M^-1 is recomputed when theta holds added-mass coefficients
-    sa = state_model.args
-    margs = (sa[0], sa[1], sa[2], sa[3], sa[4], sa[5], model.recompute_minv, sa[7], sa[8])
+    settings = f.settings()
     Y = np.ascontiguousarray(Y, dtype=float)
     U = np.ascontiguousarray(U, dtype=float)
     N = Y.shape[0]
     x0, sd0 = f.initial_state(Y[0], U[0, 5])
     P0 = np.diag(sd0 ** 2)
-    white = np.empty((N, 12))
-    buf = (np.empty(12), np.empty((12, 12)), np.empty((12, 12)), np.empty((12, 12)),
-           np.zeros(5))
+    out = K.new_outputs(12, N, want_white=True)
+    white = out.white
     scale = np.abs(theta_start)
 
     def residuals(z):
         if progress is not None:
             progress()
-        c0 = model.coefficients_with(z * scale)
+        # theta enters through the coefficients of a 12-state filter
         white[:] = np.nan
-        K.run_filter(x0, P0, Y, U, f.measured, f.Q0, f.R0, K.MODE_FIXED, 0.0, 0.0, 1.0, 1.0,
-                     c0, empty, *margs, T, 0, np.zeros((0, 0)), np.zeros((0, 0)),
-                     np.zeros((0, 2)), np.zeros((0, 12)), True, white, *buf)
-        if buf[4][0] != K.OK:
+        K.run_filter(x0, P0, Y, U, model.compiled_fixed(z * scale), settings, out)
+        if out.stats[0] != K.OK:
             return np.full(white.size, 1e3)
         r = white.ravel()
         return np.where(np.isfinite(r), r, 0.0)

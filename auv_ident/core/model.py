@@ -17,6 +17,7 @@ thousands of times per second.
 Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -34,6 +35,28 @@ from .vehicle import (COS_THETA_MIN, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
 # compiled function with reference counting costs an atomic increment and decrement per array
 # argument, which perf put at about a fifth of an EKF step (README, Speed).
 kernel = njit(cache=True, _nrt=False)
+
+# Everything the compiled model needs besides the state, the inputs and scratch: built in one
+# place (Model.compiled, Model.compiled_fixed) and handed to the kernels as one argument. A
+# namedtuple is a plain struct in compiled code (reading a field costs nothing) and, unlike a
+# structref, can be read by the kernels compiled without reference counting.
+CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
+                                            'Minv recompute_minv M_RB theta_pos')
+CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
+
+c0 : (n_coef,) coefficient values (the file's units) for the coefficients not in theta
+theta_idx : (p,) int, index in c0 of each identified coefficient (theta's order)
+par : (N_PAR,) the vehicle's float parameters (layout vehicle.P_*)
+mono_addr : int, address of the vehicle's compiled monomial kernel (monomials.kernel_at)
+theta_terms : (p, 2) int, [equation, coefficient index] per identified coefficient (equation -1
+    for added mass, which has no monomial)
+am_i : (na, 3) int, [equation, column, coefficient index] per added-mass coefficient
+am_s : (na,) scale of each added-mass coefficient
+Minv : (6, 6) M^-1 for c0 (used unless recompute_minv)
+recompute_minv : bool, M^-1 is recomputed from the step's coefficients (added mass in theta)
+M_RB : (6, 6) rigid-body mass matrix
+theta_pos : (n_coef,) int, position of each coefficient in theta, or -1
+"""
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {
@@ -346,18 +369,22 @@ def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
 
 
 @kernel
-def state_derivative(x, ui, c, Minv, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
-                     want_jac, xdot, A, Bt, zz, dprod):
+def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
 
-    Minv is M^-1 for these coefficients c (mass_inverse_into). mono_addr is the address of
-    the vehicle's compiled monomial kernel (monomials.kernel_at) and theta_terms (p x 2) its
-    [equation, coefficient] per identified coefficient (equation -1 for added mass; Model).
-    theta_pos[ci] is the position of coefficient ci in theta, or -1. zz (2 NZ,) and dprod
-    (n_coef,) are scratch. Returns a status code (OK = 0).
+    c (n_coef,) are this evaluation's coefficient values and Minv (6x6) M^-1 for them
+    (mass_inverse_into); cm (CompiledModel) gives the vehicle's data and which coefficients
+    are theta (p = len(cm.theta_idx)). zz (2 NZ,) and dprod (n_coef,) are scratch. Returns a
+    status code (OK = 0).
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
     """
+    par = cm.par
+    theta_terms = cm.theta_terms
+    am_i = cm.am_i
+    am_s = cm.am_s
+    theta_pos = cm.theta_pos
+    p = cm.theta_idx.shape[0]
     for i in range(12):
         if not math.isfinite(x[i]):
             return ERR_NONFINITE
@@ -395,7 +422,7 @@ def state_derivative(x, ui, c, Minv, par, mono_addr, theta_terms, am_i, am_s, th
     st = _propulsion(x[0], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
         return st
-    kernel_at(mono_addr)(c, zz, want_jac, xdot, A, dprod)
+    kernel_at(cm.mono_addr)(c, zz, want_jac, xdot, A, dprod)
     if want_jac:
         for j in range(p):
             eq = theta_terms[j, 0]
@@ -472,8 +499,22 @@ class Model:
         self.theta_terms = np.array(
             [[-1 if vehicle.coefficients[ci].is_added_mass else vehicle.coefficients[ci].equation,
               ci] for ci in self.theta_idx], dtype=np.int64).reshape(-1, 2)
-        self.args = (vehicle.par, self.mono_addr, self.theta_terms, vehicle.am_i, vehicle.am_s,
-                     self.Minv, self.recompute_minv, vehicle.M_RB, self.theta_pos, self.p)
+        self.compiled = self._compiled(self.c, self.theta_idx, self.theta_terms,
+                                       self.theta_pos)
+
+    def _compiled(self, c0, theta_idx, theta_terms, theta_pos):
+        v = self.vehicle
+        return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
+                             self.Minv, self.recompute_minv, v.M_RB, theta_pos)
+
+    def compiled_fixed(self, theta):
+        """CompiledModel of a filter over the 12 vehicle states only, with this model's
+        coefficients theta fixed at the given values (p,) (the batch refinement's candidates).
+        M^-1 is recomputed at every step when theta holds added-mass coefficients."""
+        n_coef = len(self.c)
+        return self._compiled(self.coefficients_with(theta), np.zeros(0, dtype=np.int64),
+                              np.zeros((0, 2), dtype=np.int64),
+                              -np.ones(n_coef, dtype=np.int64))
 
     @property
     def theta_true(self):
@@ -505,8 +546,7 @@ class Model:
         xdot = np.empty(12)
         A = np.empty((12, 12))
         Bt = np.empty((12, self.p))
-        st = state_derivative(x, ui, c, Minv, v.par, self.mono_addr, self.theta_terms, v.am_i,
-                              v.am_s, self.theta_pos, self.p, want_jac, xdot, A, Bt,
+        st = state_derivative(x, ui, c, Minv, self.compiled, want_jac, xdot, A, Bt,
                               np.empty(2 * NZ), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
 
