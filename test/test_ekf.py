@@ -234,11 +234,48 @@ def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     ({'mode': 'arma'}, ConfigError, "mode 'arma'"),
     ({'initial': [1.0, 2.0]}, DimensionError, 'expected 5 values'),
     ({'p0_rel': -1.0}, ConfigError, 'p0_rel'),
+    ({'theta_cov0': np.eye(4)}, DimensionError, r'theta_cov0 must have shape \(5, 5\)'),
+    ({'theta_cov0': np.triu(np.ones((5, 5)))}, ConfigError, 'theta_cov0 is not symmetric'),
+    ({'theta_cov0': -np.eye(5)}, ConfigError, 'theta_cov0 is not positive definite'),
 ])
 def test_bad_configuration_is_a_clear_error(kwargs, exc, needle):
     m = Model(NPS, NAMES)
     with pytest.raises(exc, match=needle):
         AugmentedEKF(m, FilterConfig(coefficients=NAMES, **kwargs), 0.05)
+
+
+def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compiled_loop(
+        short_run):
+    """FilterConfig.theta_cov0 (a full covariance, e.g. a warm start) is the coefficient block
+    of P0 in both paths; set_prior replaces estimate and covariance for the next start."""
+    m = Model(NPS, NAMES)
+    rng = np.random.default_rng(8)
+    th0 = m.theta_true * 1.1
+    C = _spd(5, rng) * np.outer(th0, th0) * 1e-3
+    cfg = FilterConfig(coefficients=NAMES, initial=th0, theta_cov0=C)
+    f = AugmentedEKF(m, cfg, short_run.T)
+    xa0, P0 = f.initial_estimate(short_run.y[0], short_run.u[0, 5])
+    assert np.array_equal(P0[12:, 12:], C) and not np.any(P0[:12, 12:])
+    assert np.array_equal(xa0[12:], th0)
+    # the per-message start and the compiled loop start from the same prior
+    g = AugmentedEKF(m, cfg, short_run.T)
+    g.start(short_run.y[0], short_run.u[0, 5])
+    for k in range(1, 50):
+        g.step(short_run.u[k - 1], short_run.y[k])
+    run_ekf(f, short_run.y[:50], short_run.u[:50])
+    np.testing.assert_allclose(g.xa, f.xa, rtol=1e-12)
+    # the default prior differs (diagonal), so the prior did matter
+    d = AugmentedEKF(m, FilterConfig(coefficients=NAMES, initial=th0), short_run.T)
+    run_ekf(d, short_run.y[:50], short_run.u[:50])
+    assert not np.allclose(d.xa[12:], f.xa[12:], rtol=1e-6)
+    h = AugmentedEKF(m, FilterConfig(coefficients=NAMES), short_run.T)
+    h.set_prior(th0, C)
+    h.start(short_run.y[0], short_run.u[0, 5])
+    g.reset()
+    g.start(short_run.y[0], short_run.u[0, 5])
+    assert np.array_equal(h.P, g.P) and np.array_equal(h.xa, g.xa)
+    with pytest.raises(ConfigError, match='prior coefficients must be 5 finite values'):
+        h.set_prior(th0[:3], C)
 
 
 def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():

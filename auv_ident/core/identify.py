@@ -22,6 +22,7 @@ from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
+from .state import COEFFICIENTS, N_STATE, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -50,6 +51,9 @@ class FilterConfig:
     mode : 'fixed', 'paper', 'paper_q' or 'matching' (see ekf.py)
     tau : s, time constant of the forgetting factor gamma = 1 - exp(-T/tau)
     lam : the paper's lambda (2e-3)
+    theta_cov0 : (p, p) initial covariance of the coefficients (symmetric positive definite, the
+        coefficients' units squared), e.g. from a previous run's estimate; None for
+        diag((p0_rel |initial guess|)^2)
     """
 
     coefficients: list = field(default_factory=list)
@@ -65,6 +69,7 @@ class FilterConfig:
     lam: float = 2e-3
     r_bound: float = 4.0
     q_floor: float = 1e-4
+    theta_cov0: object = None
 
     def validate(self, p):
         if self.mode not in K.MODES:
@@ -92,6 +97,43 @@ class FilterConfig:
         if self.initial is not None and np.asarray(self.initial).shape != (p,):
             raise DimensionError(f'initial guesses: expected {p} values, got '
                                  f'{np.asarray(self.initial).shape}')
+        if self.theta_cov0 is not None:
+            check_theta_cov(self.theta_cov0, p)
+
+
+def check_theta_cov(C, p):
+    """C as a (p, p) coefficient covariance (float array, symmetrised), or ConfigError /
+    DimensionError naming what is wrong (shape, non-finite, asymmetric, not positive definite)."""
+    C = np.asarray(C, dtype=float)
+    if C.shape != (p, p):
+        raise DimensionError(f'theta_cov0 must have shape ({p}, {p}), got {C.shape}')
+    if not np.all(np.isfinite(C)):
+        raise ConfigError(f'theta_cov0 has non-finite entries: {C.tolist()}')
+    if not np.allclose(C, C.T, rtol=0.0, atol=1e-12 * np.abs(C).max()):
+        raise ConfigError(f'theta_cov0 is not symmetric: {C.tolist()}')
+    C = 0.5 * (C + C.T)
+    if not is_positive_definite(C):
+        raise ConfigError(f'theta_cov0 is not positive definite: {C.tolist()}')
+    return C
+
+
+def default_theta_cov(theta0, p0_rel):
+    """diag((p0_rel |theta0|)^2) (p, p): the coefficients' initial covariance when none is given
+    (FilterConfig.p0_rel)."""
+    return np.diag((p0_rel * np.abs(np.asarray(theta0, dtype=float))) ** 2)
+
+
+def initial_covariance(sd0, theta_cov):
+    """P0 of the augmented state ((12 + p) x (12 + p)): diag(sd0^2) for the vehicle states
+    (sd0 (12,), their 1-sigma in the states' units), theta_cov (p, p) for the coefficients, no
+    correlation between the two blocks. The one place P0 is assembled."""
+    sd0 = np.asarray(sd0, dtype=float)
+    theta_cov = np.asarray(theta_cov, dtype=float)
+    n = N_STATE + theta_cov.shape[0]
+    P = np.zeros((n, n))
+    P[VEHICLE, VEHICLE] = np.diag(sd0 ** 2)
+    P[COEFFICIENTS, COEFFICIENTS] = theta_cov
+    return P
 
 
 class AugmentedEKF:
@@ -121,6 +163,8 @@ class AugmentedEKF:
             raise ConfigError('an initial guess of exactly 0 gives no scale for its covariance: '
                               f'{dict(zip(self.names, th0))}')
         self.theta0 = th0
+        self.theta_cov0 = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
+                           else check_theta_cov(cfg.theta_cov0, p))
         n = 12 + p
         self.n = n
         self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
@@ -170,10 +214,26 @@ class AugmentedEKF:
         th = self.cfg.p0_rel * np.abs(self.theta0)
         return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
-    def start(self, y0, rpm):
+    def set_prior(self, theta0, theta_cov0):
+        """Start the coefficients (at the next start()) from theta0 (p,) with covariance
+        theta_cov0 (p, p), e.g. a previous estimate; Q_theta keeps its scale."""
+        th0 = np.asarray(theta0, dtype=float)
+        if th0.shape != (self.model.p,) or not np.all(np.isfinite(th0)):
+            raise ConfigError(f'prior coefficients must be {self.model.p} finite values, got '
+                              f'{th0}')
+        self.theta_cov0 = check_theta_cov(theta_cov0, self.model.p)
+        self.theta0 = th0.copy()
+
+    def initial_estimate(self, y0, rpm):
+        """(xa0 (n,), P0 (n, n)): the augmented state and covariance before the first
+        measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
+        theta_cov0)."""
         x0, sd0 = self.initial_state(y0, rpm)
-        self.xa = np.concatenate([x0, self.theta0])
-        self.P = np.diag(np.concatenate([sd0, self.cfg.p0_rel * np.abs(self.theta0)]) ** 2)
+        return np.concatenate([x0, self.theta0]), initial_covariance(sd0, self.theta_cov0)
+
+    def start(self, y0, rpm):
+        """Start the filter from the measurement y0 (12,) at shaft speed rpm (fused)."""
+        self.xa, self.P = self.initial_estimate(y0, rpm)
         self._update(y0)
 
     def _check(self, st, what):
@@ -331,9 +391,7 @@ def run_ekf(f, Y, U, hist_every=0, want_white=False):
         raise DimensionError(f'Y must be (N, 12) and U (N, 6); got {Y.shape} and {U.shape}')
     N = Y.shape[0]
     m = f.model
-    x0, sd0 = f.initial_state(Y[0], U[0, 5])
-    xa0 = np.concatenate([x0, f.theta0])
-    P0 = np.diag(np.concatenate([sd0, f.cfg.p0_rel * np.abs(f.theta0)]) ** 2)
+    xa0, P0 = f.initial_estimate(Y[0], U[0, 5])
     out = K.new_outputs(f.n, N, hist_every, want_white)
     K.run_filter(xa0, P0, Y, U, m.compiled, f.settings(), out)
     stats = out.stats
@@ -368,8 +426,7 @@ def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
     Y = np.ascontiguousarray(Y, dtype=float)
     U = np.ascontiguousarray(U, dtype=float)
     N = Y.shape[0]
-    x0, sd0 = f.initial_state(Y[0], U[0, 5])
-    P0 = np.diag(sd0 ** 2)
+    x0, P0 = f.initial_estimate(Y[0], U[0, 5])
     out = K.new_outputs(12, N, want_white=True)
     white = out.white
     scale = np.abs(theta_start)
