@@ -1,7 +1,16 @@
 """Tier 1: the augmented EKF, noise adaptation, batch refinement and streaming pairing."""
+import ast
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
+import auv_ident.core as core
+from auv_ident.core import compiled_cache
 from auv_ident.core import ekf as K
 from auv_ident.core.errors import ConfigError, DimensionError
 from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
@@ -285,32 +294,95 @@ def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
         Model(NPS, ['Z_wx'])
 
 
-def test_stale_numba_cache_is_dropped_when_any_compiled_source_changes(tmp_path):
-    """A cached ekf function keeps the model code it inlined: editing model.py alone must drop
-    the cached entries of every compiled source (numba checks each file on its own only)."""
-    from auv_ident.core import _COMPILED_SOURCES, _STAMP, _drop_stale_compiled_code
-    pkg = tmp_path / 'auv_ident'
-    for rel in _COMPILED_SOURCES:
-        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
-        (pkg / rel).write_text(f'# {rel}\n')
-    ekf_cache = pkg / 'core' / '__pycache__' / 'ekf.run_filter-1.py311.nbi'
-    bench_cache = pkg / 'analysis' / '__pycache__' / 'bench._model_loop-1.py311.1.nbc'
-    other = pkg / 'core' / '__pycache__' / 'model.cpython-311.pyc'
+def _compiled_core_closure(core):
+    """Core modules with numba code, and every core module they import (transitively)."""
+    compiled, imports = set(), {}
+    for path in core.glob('*.py'):
+        tree = ast.parse(path.read_text())
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+        names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        if names & {'njit', 'jit', 'cfunc', 'intrinsic', 'kernel'}:
+            compiled.add(path.name)
+        imports[path.name] = {f'{n.module}.py' for n in ast.walk(tree)
+                              if isinstance(n, ast.ImportFrom) and n.level == 1 and n.module}
+    todo, seen = list(compiled - {'__init__.py', 'compiled_cache.py'}), set()
+    while todo:
+        name = todo.pop()
+        if name not in seen:
+            seen.add(name)
+            todo.extend(imports.get(name, ()))
+    return seen
 
-    def make_caches():
-        for f in (ekf_cache, bench_cache, other):
-            f.parent.mkdir(parents=True, exist_ok=True)
-            f.write_bytes(b'x')
-    make_caches()
-    _drop_stale_compiled_code(str(pkg))          # first sight: no stamp, caches dropped
-    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
-    assert (pkg / 'core' / '__pycache__' / _STAMP).is_file()
-    make_caches()
-    _drop_stale_compiled_code(str(pkg))          # nothing changed: caches kept
-    assert ekf_cache.exists() and bench_cache.exists()
-    (pkg / 'core' / 'model.py').write_text('# model.py, edited\n')
-    _drop_stale_compiled_code(str(pkg))          # model.py changed: ekf's cache goes too
-    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
+
+def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source():
+    """Every function the core caches is stamped with the digest of all compiled core sources,
+    and that list holds every module with numba code and everything such code imports."""
+    folder = pathlib.Path(core.__file__).parent
+    assert _compiled_core_closure(folder) == set(core.COMPILED_SOURCES)
+    digest = compiled_cache.group_digest(str(folder), core.COMPILED_SOURCES)
+    for fn in (K.run_filter, K.rk4_step_into, K.new_workspace):
+        locator = fn._cache._impl.locator
+        assert isinstance(locator, compiled_cache.GroupStampLocator)
+        assert locator.get_source_stamp() == digest
+
+
+def test_editing_model_py_makes_the_cached_ekf_loop_stale(tmp_path):
+    """The stamp numba checks for ekf.py's functions changes when model.py (which they inline)
+    changes, and not when a file outside the compiled sources does."""
+    folder = tmp_path / 'core'
+    shutil.copytree(pathlib.Path(core.__file__).parent, folder,
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    compiled_cache.register(str(folder), core.COMPILED_SOURCES)
+
+    def stamp():
+        loc = compiled_cache.GroupStampLocator.from_function(K.run_filter.py_func,
+                                                             str(folder / 'ekf.py'))
+        return loc.get_source_stamp()
+    before = stamp()
+    with open(folder / 'stream.py', 'a') as fh:
+        fh.write('# an edit outside the compiled sources\n')
+    assert stamp() == before
+    with open(folder / 'model.py', 'a') as fh:
+        fh.write('# an edit of the model\n')
+    assert stamp() != before
+
+
+_CALLEE = 'from numba import njit\n\n\n@njit(cache=True)\ndef g(x):\n    return x + {}\n'
+_CALLER = ('from numba import njit\n\nfrom .callee import g\n\n\n'
+           '@njit(cache=True)\ndef f(x):\n    return g(x)\n')
+_RUN = ('import sys\n'
+        'from auv_ident.core import compiled_cache\n'
+        'if sys.argv[1] == "group":\n'
+        '    compiled_cache.register(sys.argv[2], ("callee.py", "caller.py"))\n'
+        'from pkg.caller import f\n'
+        'print(f(1), sum(f.stats.cache_hits.values()))\n')
+
+
+def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_path):
+    """End to end in fresh processes: numba alone keeps running a cached caller with its old
+    callee after an edit of the callee's file (the problem); with the file pair registered as a
+    group, the edit is seen, and unchanged code still loads from the cache."""
+    pkg = tmp_path / 'pkg'
+    pkg.mkdir()
+    (pkg / '__init__.py').write_text('')
+    (pkg / 'caller.py').write_text(_CALLER)
+    repo = pathlib.Path(core.__file__).parents[2]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(repo)]))
+
+    def run(mode, increment):
+        (pkg / 'callee.py').write_text(_CALLEE.format(increment))
+        r = subprocess.run([sys.executable, '-c', _RUN, mode, str(pkg)], capture_output=True,
+                           text=True, env=env, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        value, hits = r.stdout.split()
+        return int(value), int(hits)
+    assert run('numba', 1) == (2, 0)
+    assert run('numba', 2)[0] == 2                 # stale: the old callee still runs
+    shutil.rmtree(pkg / '__pycache__')
+    assert run('group', 1) == (2, 0)               # compiled and cached
+    assert run('group', 1) == (2, 1)               # unchanged: from the cache
+    assert run('group', 2) == (3, 0)               # callee edited: recompiled
+    assert run('group', 2) == (3, 1)
 
 
 def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():

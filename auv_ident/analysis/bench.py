@@ -65,7 +65,9 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
     return n_steps / dt, ekf.x[12:]
 
 
-@njit(cache=True)
+# Not cached: it inlines the core's kernels, and a cache of this file would not see an edit of
+# theirs (the core keys its own cache on all its compiled sources, core/compiled_cache.py).
+@njit
 def _model_loop(X, U, theta, cm, T):
     n = 12 + theta.shape[0]
     xa = np.empty(n)
