@@ -13,7 +13,8 @@ import auv_ident.core as core
 from auv_ident.core import compiled_cache
 from auv_ident.core import ekf as K
 from auv_ident.core.errors import ConfigError, DimensionError
-from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.batch import identify, run_ekf
+from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
 from auv_ident.core.stream import StreamIdentifier

@@ -7,7 +7,7 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.identify import Result, refine
+from auv_ident.core.batch import Result, refine
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.vehicles import load_vehicle

@@ -20,7 +20,8 @@ from numba import njit
 
 from auv_ident.core import ekf as K
 from auv_ident.core.ekf import new_workspace, rk4_step_into
-from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.batch import identify, run_ekf
+from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
 from auv_ident.vehicles import load_vehicle

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identify import identify
+from auv_ident.core.batch import identify
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.simulate import simulate

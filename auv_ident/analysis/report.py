@@ -15,7 +15,7 @@ from auv_ident import __version__
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identify import identify
+from auv_ident.core.batch import identify
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.trim import initial_state

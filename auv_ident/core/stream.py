@@ -48,7 +48,7 @@ cannot grow it).
 
 Filter faults (see :meth:`StreamIdentifier._fuse`): a measurement update that fails because
 the covariance is not positive definite is retried once after
-:func:`auv_ident.core.identify.repair_covariance` (symmetrise, floor the scaled eigenvalues);
+:func:`auv_ident.core.filter.repair_covariance` (symmetrise, floor the scaled eigenvalues);
 an update that leaves a covariance without a Cholesky factor is repaired the same way. Both
 are counted in `repairs` and noted in the Outcome (code 'repaired'). What cannot be repaired
 (non-finite state or covariance, a second failure, a state outside the model's domain)
@@ -63,7 +63,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DivergenceError
-from .identify import AugmentedEKF, is_positive_definite, repair_covariance
+from .filter import AugmentedEKF, is_positive_definite, repair_covariance
 
 JUMP_CONFIRM = 5          # messages in a row that confirm a backward time jump
 STALE_COMMAND_S = 1.0     # a command older than this (s, at most max_gap) is stale

@@ -55,7 +55,7 @@ Divergence guard (not in noise mode 'paper', whose adapted R makes the NIS meani
   simulated runs, <= 56 with unmodelled process noise and the default (small) q_state, where
   a tighter gate was measured to reject good data and wreck the estimate;
 - covariance: an update that finds or leaves the covariance non-positive-definite is repaired
-  by symmetrising and flooring the eigenvalues (core.identify.repair_covariance) and counted
+  by symmetrising and flooring the eigenvalues (core.filter.repair_covariance) and counted
   in ``repairs``; the update stands;
 - reset rule: a core error that the repair cannot fix (DomainError; DivergenceError:
   non-finite state or covariance, a second failure after the repair, a coefficient 1-sigma
@@ -102,7 +102,7 @@ import numpy as np
 
 from auv_ident.core.ekf import MODES
 from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.identify import DEFAULT_Q_STATE, FilterConfig, is_positive_definite
+from auv_ident.core.filter import DEFAULT_Q_STATE, FilterConfig, is_positive_definite
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.stream import StreamIdentifier
