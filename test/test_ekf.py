@@ -165,7 +165,7 @@ def test_covariance_stays_symmetric_positive_definite_over_a_long_run():
     m = Model(NPS, NAMES)
     run = simulate(Model(NPS), 'ident', duration=900.0, seed=2)
     f = AugmentedEKF(m, FilterConfig(coefficients=NAMES), run.T)
-    _, hist, _ = run_ekf(f, run.y, run.u, hist_every=100)
+    _, hist, _ = run_ekf(f, run.t, run.y, run.u, hist_every=100)
     assert np.array_equal(f.P, f.P.T)
     assert np.linalg.eigvalsh(f.P).min() > 0
     assert np.all(np.isfinite(hist['std'])) and np.all(hist['std'] > 0)
@@ -175,7 +175,7 @@ def test_short_run_converges_within_a_few_percent(short_run):
     m = Model(NPS, NAMES)
     for offset in (0.5, -0.5):
         cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
-        res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False,
+        res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False,
                        truth=m.theta_true)
         err = np.abs(res.error_pct())
         assert err.max() < 5.0, dict(zip(NAMES, err))
@@ -185,7 +185,7 @@ def test_refinement_is_consistent_and_independent_of_the_start(short_run):
     m = Model(NPS, NAMES)
     ests = []
     for offset in (0.5, -0.5):
-        res = identify(m, short_run.y, short_run.u, short_run.T,
+        res = identify(m, short_run.t, short_run.y, short_run.u,
                        FilterConfig(coefficients=NAMES, initial_offset=offset),
                        truth=m.theta_true)
         assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
@@ -200,14 +200,14 @@ def test_subset_of_channels_and_missing_samples_still_identify(short_run):
     measured = np.ones(12, dtype=bool)
     measured[6:8] = False                      # no USBL x, y
     cfg = FilterConfig(coefficients=NAMES, measured=measured)
-    res = identify(m, y, short_run.u, short_run.T, cfg, refine_pass=False, truth=m.theta_true)
+    res = identify(m, short_run.t, y, short_run.u, cfg, refine_pass=False, truth=m.theta_true)
     assert np.abs(res.error_pct()).max() < 5.0
 
 
 def test_stream_identifier_equals_the_compiled_loop(short_run):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
-    res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False)
+    res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False)
     s = StreamIdentifier(m, cfg, short_run.T)
     # actuator commands arrive with the odometry of the same stamp; order must not matter
     for k, t in enumerate(short_run.t):
@@ -223,7 +223,8 @@ def test_stream_identifier_equals_the_compiled_loop(short_run):
 
 def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     m = Model(NPS, NAMES)
-    s = StreamIdentifier(m, FilterConfig(coefficients=NAMES), short_run.T, max_gap=5.0)
+    s = StreamIdentifier(m, FilterConfig(coefficients=NAMES), short_run.T, max_gap=5.0,
+                         max_bridge=1.0)
     r = s.add_measurement(0.0, short_run.y[0])
     assert not r.accepted and 'no actuator command' in r.reason
     s.add_command(0.0, short_run.u[0])
@@ -231,9 +232,12 @@ def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     assert 'duplicate or out of order' in s.add_measurement(0.0, short_run.y[0]).reason
     s.add_command(0.05, short_run.u[1])
     assert s.add_measurement(0.05, short_run.y[1]).accepted
-    assert s.add_measurement(0.5, short_run.y[10]).accepted       # 9 samples missing: bridged
-    out = s.add_measurement(20.0, short_run.y[400])               # long gap: states restart
-    assert out.accepted and 'restarted' in out.reason
+    out = s.add_measurement(0.5, short_run.y[10])                 # 9 samples missing: bridged
+    assert out.accepted and out.code == ''
+    out = s.add_measurement(2.0, short_run.y[40])                 # 1.5 s > max_bridge: restart
+    assert out.accepted and out.code == 'gap' and 'restarted' in out.reason
+    out = s.add_measurement(20.0, short_run.y[400])               # beyond max_gap too
+    assert out.accepted and out.code == 'gap' and 'restarted' in out.reason
     assert np.all(np.isfinite(s.ekf.theta))
 
 
@@ -272,11 +276,11 @@ def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compile
     g.start(short_run.y[0], short_run.u[0, 5])
     for k in range(1, 50):
         g.step(short_run.u[k - 1], short_run.y[k])
-    run_ekf(f, short_run.y[:50], short_run.u[:50])
+    run_ekf(f, short_run.t[:50], short_run.y[:50], short_run.u[:50])
     np.testing.assert_allclose(g.xa, f.xa, rtol=1e-12)
     # the default prior differs (diagonal), so the prior did matter
     d = AugmentedEKF(m, FilterConfig(coefficients=NAMES, initial=th0), short_run.T)
-    run_ekf(d, short_run.y[:50], short_run.u[:50])
+    run_ekf(d, short_run.t[:50], short_run.y[:50], short_run.u[:50])
     assert not np.allclose(d.xa[12:], f.xa[12:], rtol=1e-6)
     h = AugmentedEKF(m, FilterConfig(coefficients=NAMES), short_run.T)
     h.set_prior(th0, C)
@@ -396,7 +400,7 @@ def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     m = Model(v, names)
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, run.y, run.u)
+    run_ekf(f, run.t, run.y, run.u)
     g = AugmentedEKF(m, cfg, run.T)
     g.start(run.y[0], run.u[0, 5])
     for k in range(1, len(run.t)):

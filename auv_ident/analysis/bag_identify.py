@@ -45,7 +45,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     if refine_pass:
         ok = np.all(np.isfinite(rr.U), axis=1)
         cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise)
-        est, cov, _ = refine(model, cfg, rr.Y[ok], rr.U[ok], rr.T, rr.estimate,
+        est, cov, _ = refine(model, cfg, rr.t[ok], rr.Y[ok], rr.U[ok], rr.estimate, T=rr.T,
                              progress=progress)
     res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
                  ekf_estimate=rr.estimate, ekf_std=rr.std, initial=rr.initial, truth=truth,

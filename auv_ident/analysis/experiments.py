@@ -30,8 +30,8 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
                    noise_std=cfg.noise_std, process_std=process_std)
     m = Model(v, names, mass_inverse=mass_inverse)
-    res = identify(m, run.y, run.u, run.T, cfg, refine_pass=refine_pass, hist_every=hist_every,
-                   truth=m.theta_true, progress=progress)
+    res = identify(m, run.t, run.y, run.u, cfg, T=run.T, refine_pass=refine_pass,
+                   hist_every=hist_every, truth=m.theta_true, progress=progress)
     return res, run, m
 
 

@@ -412,7 +412,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
-    res = identify(Model(v, src.names), src.Y, src.U, src.T, cfg, refine_pass=True,
+    res = identify(Model(v, src.names), src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
                    hist_every=hist_every, truth=src.truth,
                    progress=bar.update if bar else None)
     if bar:

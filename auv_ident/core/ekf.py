@@ -47,8 +47,14 @@ ERR_NAN_STATE = 11
 # The noise settings of one filter run (run_filter): measured (12,) bool channels the sensor
 # suite provides; Q0 (n, n), R0 (12, 12) the initial process and measurement noise; mode
 # (MODE_*), gamma, lam, r_bound, q_floor of the adaptation (module docstring); T (s) the nominal
-# sample time (the time step, and omega = dtheta / T of MODE_PAPER).
+# sample time (of gamma and of omega = dtheta / T in MODE_PAPER).
 FilterSettings = namedtuple('FilterSettings', 'measured Q0 R0 mode gamma lam T r_bound q_floor')
+
+# How run_filter crosses the time from sample k-1 to sample k (timing.py has the rules):
+# n_sub[k] RK4 steps of h[k] seconds with the inputs U[k-1] held, or, where n_sub[k] = 0 (k > 0),
+# a restart of the vehicle states from x0[r], sd0[r] (the r-th restart; rows (R, 12), the
+# states and their 1-sigma before the measurement at k); entry 0 is not used.
+Timeline = namedtuple('Timeline', 'n_sub h x0 sd0')
 
 # What run_filter writes (arrays filled in place): theta, std (H, p), nis (H, 2) and rq
 # (H, 12 + p) the histories every hist_every samples (H = 0: none); white (N, 12) the whitened
@@ -484,16 +490,32 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
             Q[12 + i, 12 + i] = min(max(q, q_floor * q0), q0)
 
 
+@njit(cache=True, inline='always')
+def restart_states(xa, P, x0, sd0):
+    """Restart the vehicle states in place: xa[:12] = x0 (12,), their covariance diag(sd0^2)
+    (sd0 (12,), 1-sigma) uncorrelated with the coefficients, whose estimate and covariance
+    block stay (a gap, timing.py)."""
+    n = xa.shape[0]
+    for i in range(12):
+        xa[i] = x0[i]
+        for j in range(n):
+            P[i, j] = 0.0
+            P[j, i] = 0.0
+    for i in range(12):
+        P[i, i] = sd0[i] * sd0[i]
+
+
 @njit(cache=True)
-def run_filter(xa0, P0, Y, U, cm, settings, out):
-    """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
-    update with Y[k]).
+def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):
+    """Run the filter over samples k = 0..N-1: update with Y[0], then for each k > 0 cross the
+    interval as `timeline` says (time updates with U[k-1] held, or a restart of the vehicle
+    states) and update with Y[k].
 
     xa0 (n,), P0 (n, n): the prior of sample 0; Y (N, 12) measurements (NaN: missing), U (N, 6)
-    inputs; cm: the model's CompiledModel; settings: FilterSettings; out: FilterOutputs, filled
-    in place. Histories every `out.hist_every` samples (0: none): coefficients, their 1-sigma,
-    NIS and its degrees of freedom, and the adapted diag(R) (12) and diag(Q_theta) (p) in
-    out.rq. out.stats gets [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not
+    inputs; cm: the model's CompiledModel; settings: FilterSettings; timeline: Timeline; out:
+    FilterOutputs, filled in place. Histories every `out.hist_every` samples (0: none):
+    coefficients, their 1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12)
+    and diag(Q_theta) (p) in out.rq. out.stats gets [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not
     grow with N unless a history is asked for. With out.want_white, out.white (N, 12) gets the
     whitened innovations (for the batch refinement). Returns the status code."""
     n = xa0.shape[0]
@@ -524,12 +546,27 @@ def run_filter(xa0, P0, Y, U, cm, settings, out):
     sum_dof = 0.0
     cnt = 0
     status = OK
+    n_sub = timeline.n_sub
+    h_sub = timeline.h
     h = 0
+    r = 0
     done = 0
     # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
-            st = predict(xa, P, U[k - 1], Q, cm, T, xa_b, P_b, ws)
+            st = OK
+            if n_sub[k] == 0:
+                xa_b[:] = xa
+                P_b[:, :] = P
+                restart_states(xa_b, P_b, timeline.x0[r], timeline.sd0[r])
+                r += 1
+            for s in range(n_sub[k]):
+                if s > 0:              # the prior so far is the start of the next step
+                    xa, xa_b = xa_b, xa
+                    P, P_b = P_b, P
+                st = predict(xa, P, U[k - 1], Q, cm, h_sub[k], xa_b, P_b, ws)
+                if st != OK:
+                    break
             if st != OK:
                 status = st
                 break

@@ -228,6 +228,16 @@ class AugmentedEKF:
         self.xa, self.P = self.initial_estimate(y0, rpm)
         self._update(y0)
 
+    def restart(self, y0, rpm):
+        """Restart the vehicle states from the measurement y0 (12,) at shaft speed rpm (fused),
+        as start() does, keeping the coefficients' estimate and covariance (after a gap, see
+        timing.py)."""
+        x0, sd0 = self.initial_state(y0, rpm)
+        xa, P = self.xa.copy(), self.P.copy()
+        K.restart_states(xa, P, x0, sd0)
+        self.xa, self.P = xa, P
+        self._update(y0)
+
     def _check(self, st, what):
         if st == K.OK:
             return

@@ -140,6 +140,7 @@ RESET_COV_INFLATION = 4.0   # coefficient covariance factor when a reset restart
 COV_BLOWUP_FACTOR = 100.0   # a coefficient 1-sigma above this x p0_rel |theta0|: divergence
 MAX_SUBSTEPS = 20000        # max_gap / sample_time: the longest bridge of one gap
 MAX_BRIDGE_S = 0.25         # default max_bridge: longest gap bridged by time updates (s)
+MAX_COMMAND_AGE_S = 1.0     # s, a command in force older than this (at most max_gap) is stale
 
 # frame-id tokens that name a convention
 _FRAME_TOKENS = {'ned': 'ned', 'frd': 'ned', 'enu': 'enu', 'flu': 'enu'}
@@ -389,7 +390,8 @@ class IdentSession:
         """A fresh StreamIdentifier: from the start-up configuration, or (start_from, a
         LastGood) from that estimate with its covariance times RESET_COV_INFLATION."""
         s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap, gate=self.gate,
-                             max_bridge=self.max_bridge)
+                             max_bridge=self.max_bridge,
+                             max_command_age=min(MAX_COMMAND_AGE_S, self.max_gap))
         if start_from is not None:
             s.ekf.set_prior(start_from.estimate,
                             RESET_COV_INFLATION * np.asarray(start_from.cov, float))
