@@ -11,12 +11,14 @@ import pytest
 
 import auv_ident.core as core
 from auv_ident.core import compiled_cache
+from auv_ident.core.angles import wrap_angle
 from auv_ident.core import ekf as K
 from auv_ident.core.errors import ConfigError, DimensionError
 from auv_ident.core.batch import identify, run_ekf
 from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
+from auv_ident.core.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
@@ -87,8 +89,9 @@ def test_angle_innovation_is_wrapped():
 
 @pytest.mark.parametrize('name', available_vehicles())
 def test_rk4_transition_jacobian_matches_finite_differences(name):
-    """Also checks, for every vehicle, the sparsity the chain through the stages relies on
-    (rk4_step_into: F depends on neither the position nor psi)."""
+    """Also checks, for every vehicle and at random states, the sparsity the chain through the
+    stages relies on (rk4_step_into: f depends on neither the position nor, in the rows of the
+    body-velocity and Euler-angle rates, psi)."""
     v = load_vehicle(name)
     m = Model(v, list(v.identify_default))
     rng = np.random.default_rng(3)
@@ -107,7 +110,30 @@ def test_rk4_transition_jacobian_matches_finite_differences(name):
         K.rk4_jacobian_step(xa - e, ui, m.compiled, 0.05, False, b, Fa.copy())
         fd = (a - b) / (2 * h)
         assert np.allclose(Fa[:, j], fd, rtol=1e-6, atol=1e-9 * max(1, np.abs(fd).max())), j
-    assert rng is not None
+    spread = np.array([0.1] * 3 + [0.02] * 3 + [50.0] * 3 + [0.1] * 3)
+    for _ in range(5):
+        x = xa[VEHICLE] + rng.normal(0.0, spread)
+        _, A, _ = m.jacobians(x, ui, xa[COEFFICIENTS])
+        assert not np.any(A[:, POSITION]), (name, A[:, POSITION])
+        assert not np.any(A[NU, State.PSI]) and not np.any(A[EULER, State.PSI]), name
+        assert np.any(A[POSITION, State.PSI])          # the position rates do depend on psi
+
+
+def test_the_compiled_angle_wrap_agrees_with_core_angles():
+    """ekf.wrap (the filter's, compiled) and angles.wrap_angle (Python callers') wrap to
+    (-pi, pi] alike: equal outside it; inside it wrap_angle returns the angle itself and the
+    compiled one at most an ulp of pi away (it reduces every angle)."""
+    rng = np.random.default_rng(9)
+    a = np.concatenate([rng.uniform(-20.0, 20.0, 2000), [np.pi, -np.pi, 3 * np.pi, 0.0, 1e-300,
+                                                          -np.pi + 1e-15, 7 * np.pi / 2]])
+    w = wrap_angle(a)
+    assert np.all((w > -np.pi) & (w <= np.pi)) and wrap_angle(-np.pi) == np.pi
+    assert np.array_equal(w, [wrap_angle(float(v)) for v in a])      # arrays as numbers
+    inside = (a > -np.pi) & (a <= np.pi)
+    assert np.array_equal(w[inside], a[inside])
+    c = np.array([K.wrap(float(v)) for v in a])
+    assert np.array_equal(c[~inside], w[~inside])
+    assert np.all(np.abs(c[inside] - a[inside]) <= np.spacing(np.pi))
 
 
 def test_predict_is_F_P_Ft_plus_Q():

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from auv_ident.core import maneuvers
+from auv_ident.core.angles import wrap_angle
 from auv_ident.core.batch import identify, refine, run_ekf
 from auv_ident.core.errors import DataError
 from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate, wrap_angle
-from auv_ident.core.state import Input, State
+from auv_ident.core.simulate import simulate
+from auv_ident.core.state import EULER, Input
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.core.timing import (check_times, commands_at, DEFAULT_MAX_BRIDGE,
                                    nominal_sample_time, time_steps)
@@ -55,7 +56,7 @@ def _record(path, seed, jitter=False, drop=0.0, gap=None):
     assert np.array_equal(run.u[k], U)
     X = run.x[k]
     Y = X + rng.normal(0.0, 1.0, X.shape) * DEFAULT_NOISE_STD
-    Y[:, State.PHI:] = wrap_angle(Y[:, State.PHI:])
+    Y[:, EULER] = wrap_angle(Y[:, EULER])
     return grid[k], Y, U, X
 
 

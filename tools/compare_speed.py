@@ -9,7 +9,11 @@ its best round (us per step). On a shared VM a slow spell then hits both alike, 
 runs of `python -m auv_ident bench` cannot promise: use this to decide whether a change is faster,
 and the bench for the absolute figures. Printed: the RK4 step with its exact Jacobian (the model
 part), the full EKF pass (predict + update), and the filter statistics of both runs (equal when
-the change keeps the numbers).
+the change keeps the numbers). The per-message API (AugmentedEKF.step) is not raced here: with
+two copies of the core in one process, the calls of whichever copy is typed second take numba's
+Python type inference for their namedtuple arguments (Workspace) at every call (0.5 ms a step
+instead of 18 us, measured with cProfile), an artefact of the two copies; compare it with runs
+of the bench.
 """
 import argparse
 import importlib

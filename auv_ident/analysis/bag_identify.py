@@ -10,6 +10,7 @@ from auv_ident.bags.replay import bag_custom_data, replay_bag
 from auv_ident.core.batch import Result, refine
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.state import N_STATE
 from auv_ident.vehicles import load_vehicle
 
 def _bag_truth_and_noise(path, model):
@@ -21,7 +22,7 @@ def _bag_truth_and_noise(path, model):
     if 'auv_ident.noise_std' in meta:
         try:
             vals = np.array([float(v) for v in meta['auv_ident.noise_std'].split()])
-            if vals.shape == (12,) and np.all(vals > 0):
+            if vals.shape == (N_STATE,) and np.all(vals > 0):
                 noise = vals
         except ValueError:
             pass

@@ -24,33 +24,32 @@ from auv_ident.core.batch import identify, run_ekf
 from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
+from auv_ident.core.state import COEFFICIENTS, EULER, Input, N_STATE, VEHICLE
 from auv_ident.vehicles import load_vehicle
 
 
 def _filterpy_rate(m, cfg, Y, U, T, n_steps):
     from filterpy.kalman import ExtendedKalmanFilter
     f0 = AugmentedEKF(m, cfg, T)
-    x0, sd0 = f0.initial_state(Y[0], U[0, 5])
     n = f0.n
-    H = np.zeros((12, n))
-    H[:, :12] = np.eye(12)
-    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=12)
-    ekf.x = np.concatenate([x0, f0.theta0])
-    ekf.P = np.diag(np.concatenate([sd0, cfg.p0_rel * np.abs(f0.theta0)]) ** 2)
+    H = np.zeros((N_STATE, n))
+    H[:, VEHICLE] = np.eye(N_STATE)
+    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=N_STATE)
+    ekf.x, ekf.P = f0.initial_estimate(Y[0], U[0, Input.N_RPM])
     ekf.Q = f0.Q0.copy()
     ekf.R = f0.R0.copy()
     xa_next = np.empty(n)
     Fa = np.empty((n, n))
 
     def hx(x):
-        return x[:12]
+        return x[VEHICLE]
 
     def hjac(x):
         return H
 
     def residual(a, b):
         d = a - b
-        d[9:] = (d[9:] + np.pi) % (2 * np.pi) - np.pi
+        d[EULER] = (d[EULER] + np.pi) % (2 * np.pi) - np.pi
         return d
     # compile (or load from numba's cache) the model for these argument types before timing
     # (rk4_jacobian_step, not rk4_step_into: from Python its call is the cheaper of the two)
@@ -63,21 +62,21 @@ def _filterpy_rate(m, cfg, Y, U, T, n_steps):
         ekf.P = Fa @ ekf.P @ Fa.T + ekf.Q
         ekf.update(Y[k], hjac, hx, R=ekf.R, residual=residual)
     dt = time.perf_counter() - t0
-    return n_steps / dt, ekf.x[12:]
+    return n_steps / dt, ekf.x[COEFFICIENTS]
 
 
 # Not cached: it inlines the core's kernels, and a cache of this file would not see an edit of
 # theirs (the core keys its own cache on all its compiled sources, core/compiled_cache.py).
 @njit
 def _model_loop(X, U, theta, cm, T):
-    n = 12 + theta.shape[0]
+    n = N_STATE + theta.shape[0]
     xa = np.empty(n)
-    xa[12:] = theta
+    xa[N_STATE:] = theta
     x1 = np.empty(n)
     Fa = np.empty((n, n))
     ws = new_workspace(n, cm.c0.shape[0])
     for k in range(X.shape[0]):
-        xa[:12] = X[k]
+        xa[:N_STATE] = X[k]
         rk4_step_into(xa, U[k], cm, T, True, x1, Fa, ws)
     return x1
 
@@ -128,7 +127,7 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
 
     def streaming_api():                  # per message, what the node calls
         f = AugmentedEKF(m, cfg, T)
-        f.start(run.y[0], run.u[0, 5])
+        f.start(run.y[0], run.u[0, Input.N_RPM])
         t0 = time.perf_counter()
         for k in range(1, n_stream + 1):
             f.step(run.u[k - 1], run.y[k])

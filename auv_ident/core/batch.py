@@ -26,7 +26,7 @@ from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .filter import AugmentedEKF, FilterConfig
 from .model import Model, STATUS_TEXT
-from .state import Input, N_STATE
+from .state import Input, N_INPUT, N_STATE
 from .timing import check_times, DEFAULT_MAX_BRIDGE, nominal_sample_time, time_steps
 
 
@@ -62,7 +62,8 @@ def _record(t, Y, U):
     (s), Y (N, 12), U (N, 6)."""
     Y = np.ascontiguousarray(Y, dtype=float)
     U = np.ascontiguousarray(U, dtype=float)
-    if Y.ndim != 2 or Y.shape[1] != 12 or U.shape != (Y.shape[0], 6) or Y.shape[0] == 0:
+    if (Y.ndim != 2 or Y.shape[1] != N_STATE or U.shape != (Y.shape[0], N_INPUT)
+            or Y.shape[0] == 0):
         raise DimensionError(f'Y must be (N, 12) and U (N, 6) with N >= 1; got {Y.shape} and '
                              f'{U.shape}')
     return check_times(t, Y.shape[0]), Y, U

@@ -14,7 +14,7 @@ from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
-from .state import COEFFICIENTS, N_STATE, VEHICLE
+from .state import COEFFICIENTS, N_STATE, State, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -24,7 +24,8 @@ from .trim import trim_speed
 # unmodelled forces (waves, currents, tether).
 DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
                             1e-5, 1e-5, 1e-5, 2e-7, 2e-7, 2e-7])
-# start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state)
+# start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state),
+# in the order of state.State (u v w: m/s, p q r: rad/s, x y z: m, phi theta psi: rad)
 UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
 
 
@@ -55,7 +56,7 @@ class FilterConfig:
     q_theta_rel: float = 1e-5
     q_state: np.ndarray = field(default_factory=lambda: DEFAULT_Q_STATE.copy())
     noise_std: np.ndarray = field(default_factory=lambda: DEFAULT_NOISE_STD.copy())
-    measured: np.ndarray = field(default_factory=lambda: np.ones(12, dtype=bool))
+    measured: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
     mode: str = 'fixed'
     tau: float = 10.0
     lam: float = 2e-3
@@ -67,9 +68,9 @@ class FilterConfig:
         if self.mode not in K.MODES:
             raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
                               + ', '.join(K.MODES))
-        for name, arr, shape in (('q_state', self.q_state, (12,)),
-                                 ('noise_std', self.noise_std, (12,)),
-                                 ('measured', self.measured, (12,))):
+        for name, arr, shape in (('q_state', self.q_state, (N_STATE,)),
+                                 ('noise_std', self.noise_std, (N_STATE,)),
+                                 ('measured', self.measured, (N_STATE,))):
             a = np.asarray(arr)
             if a.shape != shape:
                 raise DimensionError(f'{name} must have shape {shape}, got {a.shape}')
@@ -157,7 +158,7 @@ class AugmentedEKF:
         self.theta0 = th0
         self.theta_cov0 = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
                            else check_theta_cov(cfg.theta_cov0, p))
-        n = 12 + p
+        n = N_STATE + p
         self.n = n
         self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
@@ -180,19 +181,19 @@ class AugmentedEKF:
         self.steps = 0
         self.nis = np.nan
         self.dof = 0
-        self.innov = np.full(12, np.nan)
-        self.S_diag = np.full(12, np.nan)
-        self.white = np.full(12, np.nan)
+        self.innov = np.full(N_STATE, np.nan)
+        self.S_diag = np.full(N_STATE, np.nan)
+        self.white = np.full(N_STATE, np.nan)
 
     def initial_state(self, y0, rpm):
         """x0 from the first measurement; unmeasured channels from a straight, level trim."""
         y0 = np.asarray(y0, dtype=float)
-        x0 = np.zeros(12)
+        x0 = np.zeros(N_STATE)
         sd0 = np.asarray(self.cfg.noise_std, dtype=float).copy()
         ok = self.measured & np.isfinite(y0)
         x0[ok] = y0[ok]
-        if not ok[0]:
-            x0[0] = trim_speed(self.model, rpm)
+        if not ok[State.U]:
+            x0[State.U] = trim_speed(self.model, rpm)
         sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
 
@@ -248,11 +249,11 @@ class AugmentedEKF:
 
     def _update(self, y):
         y = np.ascontiguousarray(y, dtype=float)
-        if y.shape != (12,):
-            raise DimensionError(f'measurement must have 12 entries, got {y.shape}')
+        if y.shape != (N_STATE,):
+            raise DimensionError(f'measurement must have {N_STATE} entries, got {y.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        theta_prev = self.xa[12:].copy()
+        theta_prev = self.xa[COEFFICIENTS].copy()
         st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
                               self.innov, self.S_diag, self.white, self.ws)
         self._check(st, 'measurement update')
@@ -300,15 +301,15 @@ class AugmentedEKF:
 
     @property
     def theta(self):
-        return self.xa[12:].copy()
+        return self.xa[COEFFICIENTS].copy()
 
     @property
     def theta_cov(self):
-        return self.P[12:, 12:].copy()
+        return self.P[COEFFICIENTS, COEFFICIENTS].copy()
 
     @property
     def theta_std(self):
-        return np.sqrt(np.diag(self.P)[12:])
+        return np.sqrt(np.diag(self.P)[COEFFICIENTS])
 
 
 # eigenvalue floor of repair_covariance, in units of the reference variances

@@ -54,6 +54,7 @@ import math
 
 import numpy as np
 
+from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import AuvIdentError
 
 NS_PER_S = 1_000_000_000
@@ -142,13 +143,6 @@ def sec_to_ns(t_sec):
 
 # ---------------------------------------------------------------------------------------------
 # rotations
-
-
-def wrap_angle(a):
-    """Wrap an angle (rad) to (-pi, pi]."""
-    w = math.atan2(math.sin(a), math.cos(a)) if abs(a) > math.pi else float(a)
-    # atan2 returns -pi for a sine of -0.0; the half-open interval wants +pi.
-    return math.pi if w <= -math.pi else w
 
 
 def euler_to_quat(phi, theta, psi):
