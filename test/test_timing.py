@@ -11,7 +11,7 @@ import pytest
 from auv_ident.core import maneuvers
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.batch import identify, refine, run_ekf
-from auv_ident.core.errors import DataError
+from auv_ident.core.errors import ConfigError, DataError
 from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
@@ -111,7 +111,8 @@ def test_a_uniform_grid_takes_the_old_fixed_T_path_bit_for_bit(records):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES, mode='matching')
     f = AugmentedEKF(m, cfg, T)
-    run_ekf(f, t + 1000.0, Y, U)
+    _, hist, _ = run_ekf(f, t + 1000.0, Y, U, hist_every=100)
+    assert np.allclose(hist['t'], t[::100], rtol=0.0, atol=1e-9)      # since the first sample
     g = AugmentedEKF(m, cfg, T)
     g.start(Y[0], U[0, Input.N_RPM])
     for k in range(1, len(t)):
@@ -164,6 +165,8 @@ def test_commands_sent_only_on_change_are_held(records):
     assert np.array_equal(U_held, U)
     _, outs = _stream(t, Y, U, every_sample=False, max_command_age=1.0)
     assert 'stale command' in {o.code for o in outs}
+    with pytest.raises(ConfigError, match='max_command_age = -1'):
+        _stream(t[:2], Y[:2], U[:2], max_command_age=-1.0)
 
 
 def test_refine_uses_the_stamps(records):

@@ -102,8 +102,9 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     max_step : s, longest RK4 step of a time update (None: the filter's sample time f.T)
     max_bridge : s, a longer interval restarts the vehicle states (timing.py)
 
-    Returns (stats, histories, whitened innovations). Raises DomainError/DivergenceError
-    naming the sample.
+    Returns (stats, histories, whitened innovations); the histories' 't' is the time of each
+    recorded sample since the first (s). Raises DomainError/DivergenceError naming the
+    sample.
     """
     t, Y, U = _record(t, Y, U)
     N = Y.shape[0]
@@ -123,7 +124,7 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
                               f'{STATUS_TEXT[st]}')
         raise DivergenceError(f'EKF diverged at sample {k} (t = {t[k]:.2f} s): the '
                               'covariance lost positive definiteness (try --noise-mode fixed)')
-    hist = {'t': t[::hist_every][:nh], 'theta': out.theta, 'std': out.std,
+    hist = {'t': t[::hist_every][:nh] - t[0], 'theta': out.theta, 'std': out.std,
             'nis': out.nis[:, 0], 'dof': out.nis[:, 1], 'R_diag': out.rq[:, :N_STATE],
             'Q_theta_diag': out.rq[:, N_STATE:]} if nh else {}
     return stats, hist, out.white
