@@ -1,12 +1,24 @@
 """Tier 1: the augmented EKF, noise adaptation, batch refinement and streaming pairing."""
+import ast
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
+import auv_ident.core as core
+from auv_ident.core import compiled_cache
+from auv_ident.core.angles import wrap_angle
 from auv_ident.core import ekf as K
 from auv_ident.core.errors import ConfigError, DimensionError
-from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.batch import identify, run_ekf
+from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
+from auv_ident.core.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
@@ -77,28 +89,51 @@ def test_angle_innovation_is_wrapped():
 
 @pytest.mark.parametrize('name', available_vehicles())
 def test_rk4_transition_jacobian_matches_finite_differences(name):
-    """Also checks, for every vehicle, the sparsity the chain through the stages relies on
-    (rk4_step_into: F depends on neither the position nor psi)."""
+    """Also checks, for every vehicle and at random states, the sparsity the chain through the
+    stages relies on (rk4_step_into: f depends on neither the position nor, in the rows of the
+    body-velocity and Euler-angle rates, psi)."""
     v = load_vehicle(name)
     m = Model(v, list(v.identify_default))
     rng = np.random.default_rng(3)
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
                          m.theta_true * 1.2])
     ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0])
-    args = (m.c, m.theta_idx, *m.args[:-1])
     n = len(xa)
     x1, Fa = np.empty(n), np.empty((n, n))
-    assert K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa) == K.OK
+    assert K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == K.OK
     for j in range(n):
         h = 1e-6 * max(1.0, abs(xa[j])) if j < 12 else 1e-4 * abs(xa[j])
         e = np.zeros(n)
         e[j] = h
         a, b = np.empty(n), np.empty(n)
-        K.rk4_jacobian_step(xa + e, ui, *args, 0.05, False, a, Fa.copy())
-        K.rk4_jacobian_step(xa - e, ui, *args, 0.05, False, b, Fa.copy())
+        K.rk4_jacobian_step(xa + e, ui, m.compiled, 0.05, False, a, Fa.copy())
+        K.rk4_jacobian_step(xa - e, ui, m.compiled, 0.05, False, b, Fa.copy())
         fd = (a - b) / (2 * h)
         assert np.allclose(Fa[:, j], fd, rtol=1e-6, atol=1e-9 * max(1, np.abs(fd).max())), j
-    assert rng is not None
+    spread = np.array([0.1] * 3 + [0.02] * 3 + [50.0] * 3 + [0.1] * 3)
+    for _ in range(5):
+        x = xa[VEHICLE] + rng.normal(0.0, spread)
+        _, A, _ = m.jacobians(x, ui, xa[COEFFICIENTS])
+        assert not np.any(A[:, POSITION]), (name, A[:, POSITION])
+        assert not np.any(A[NU, State.PSI]) and not np.any(A[EULER, State.PSI]), name
+        assert np.any(A[POSITION, State.PSI])          # the position rates do depend on psi
+
+
+def test_the_compiled_angle_wrap_agrees_with_core_angles():
+    """ekf.wrap (the filter's, compiled) and angles.wrap_angle (Python callers') wrap to
+    (-pi, pi] alike: equal outside it; inside it wrap_angle returns the angle itself and the
+    compiled one at most an ulp of pi away (it reduces every angle)."""
+    rng = np.random.default_rng(9)
+    a = np.concatenate([rng.uniform(-20.0, 20.0, 2000), [np.pi, -np.pi, 3 * np.pi, 0.0, 1e-300,
+                                                          -np.pi + 1e-15, 7 * np.pi / 2]])
+    w = wrap_angle(a)
+    assert np.all((w > -np.pi) & (w <= np.pi)) and wrap_angle(-np.pi) == np.pi
+    assert np.array_equal(w, [wrap_angle(float(v)) for v in a])      # arrays as numbers
+    inside = (a > -np.pi) & (a <= np.pi)
+    assert np.array_equal(w[inside], a[inside])
+    c = np.array([K.wrap(float(v)) for v in a])
+    assert np.array_equal(c[~inside], w[~inside])
+    assert np.all(np.abs(c[inside] - a[inside]) <= np.spacing(np.pi))
 
 
 def test_predict_is_F_P_Ft_plus_Q():
@@ -109,11 +144,10 @@ def test_predict_is_F_P_Ft_plus_Q():
     P = _spd(n, rng) * 1e-4
     Q = np.diag(rng.uniform(1e-8, 1e-6, n))
     ui = np.array([0.1, 0.1, 0, 0, 0, 500.0])
-    args = (m.c, m.theta_idx, *m.args[:-1])
     x1, Fa = np.empty(n), np.empty((n, n))
-    K.rk4_jacobian_step(xa, ui, *args, 0.05, True, x1, Fa)
+    K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa)
     xo, Po = np.empty(n), np.empty((n, n))
-    assert K.predict(xa, P, ui, Q, *args, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
+    assert K.predict(xa, P, ui, Q, m.compiled, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
     assert np.allclose(xo, x1) and np.allclose(Po, Fa @ P @ Fa.T + Q, rtol=1e-12, atol=1e-18)
 
 
@@ -157,7 +191,7 @@ def test_covariance_stays_symmetric_positive_definite_over_a_long_run():
     m = Model(NPS, NAMES)
     run = simulate(Model(NPS), 'ident', duration=900.0, seed=2)
     f = AugmentedEKF(m, FilterConfig(coefficients=NAMES), run.T)
-    _, hist, _ = run_ekf(f, run.y, run.u, hist_every=100)
+    _, hist, _ = run_ekf(f, run.t, run.y, run.u, hist_every=100)
     assert np.array_equal(f.P, f.P.T)
     assert np.linalg.eigvalsh(f.P).min() > 0
     assert np.all(np.isfinite(hist['std'])) and np.all(hist['std'] > 0)
@@ -167,7 +201,7 @@ def test_short_run_converges_within_a_few_percent(short_run):
     m = Model(NPS, NAMES)
     for offset in (0.5, -0.5):
         cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
-        res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False,
+        res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False,
                        truth=m.theta_true)
         err = np.abs(res.error_pct())
         assert err.max() < 5.0, dict(zip(NAMES, err))
@@ -177,7 +211,7 @@ def test_refinement_is_consistent_and_independent_of_the_start(short_run):
     m = Model(NPS, NAMES)
     ests = []
     for offset in (0.5, -0.5):
-        res = identify(m, short_run.y, short_run.u, short_run.T,
+        res = identify(m, short_run.t, short_run.y, short_run.u,
                        FilterConfig(coefficients=NAMES, initial_offset=offset),
                        truth=m.theta_true)
         assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
@@ -192,14 +226,14 @@ def test_subset_of_channels_and_missing_samples_still_identify(short_run):
     measured = np.ones(12, dtype=bool)
     measured[6:8] = False                      # no USBL x, y
     cfg = FilterConfig(coefficients=NAMES, measured=measured)
-    res = identify(m, y, short_run.u, short_run.T, cfg, refine_pass=False, truth=m.theta_true)
+    res = identify(m, short_run.t, y, short_run.u, cfg, refine_pass=False, truth=m.theta_true)
     assert np.abs(res.error_pct()).max() < 5.0
 
 
 def test_stream_identifier_equals_the_compiled_loop(short_run):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
-    res = identify(m, short_run.y, short_run.u, short_run.T, cfg, refine_pass=False)
+    res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False)
     s = StreamIdentifier(m, cfg, short_run.T)
     # actuator commands arrive with the odometry of the same stamp; order must not matter
     for k, t in enumerate(short_run.t):
@@ -215,7 +249,8 @@ def test_stream_identifier_equals_the_compiled_loop(short_run):
 
 def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     m = Model(NPS, NAMES)
-    s = StreamIdentifier(m, FilterConfig(coefficients=NAMES), short_run.T, max_gap=5.0)
+    s = StreamIdentifier(m, FilterConfig(coefficients=NAMES), short_run.T, max_gap=5.0,
+                         max_bridge=1.0)
     r = s.add_measurement(0.0, short_run.y[0])
     assert not r.accepted and 'no actuator command' in r.reason
     s.add_command(0.0, short_run.u[0])
@@ -223,9 +258,12 @@ def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     assert 'duplicate or out of order' in s.add_measurement(0.0, short_run.y[0]).reason
     s.add_command(0.05, short_run.u[1])
     assert s.add_measurement(0.05, short_run.y[1]).accepted
-    assert s.add_measurement(0.5, short_run.y[10]).accepted       # 9 samples missing: bridged
-    out = s.add_measurement(20.0, short_run.y[400])               # long gap: states restart
-    assert out.accepted and 'restarted' in out.reason
+    out = s.add_measurement(0.5, short_run.y[10])                 # 9 samples missing: bridged
+    assert out.accepted and out.code == ''
+    out = s.add_measurement(2.0, short_run.y[40])                 # 1.5 s > max_bridge: restart
+    assert out.accepted and out.code == 'gap' and 'restarted' in out.reason
+    out = s.add_measurement(20.0, short_run.y[400])               # beyond max_gap too
+    assert out.accepted and out.code == 'gap' and 'restarted' in out.reason
     assert np.all(np.isfinite(s.ekf.theta))
 
 
@@ -236,11 +274,48 @@ def test_stream_rejects_duplicates_and_out_of_order_and_bridges_gaps(short_run):
     ({'mode': 'arma'}, ConfigError, "mode 'arma'"),
     ({'initial': [1.0, 2.0]}, DimensionError, 'expected 5 values'),
     ({'p0_rel': -1.0}, ConfigError, 'p0_rel'),
+    ({'theta_cov0': np.eye(4)}, DimensionError, r'theta_cov0 must have shape \(5, 5\)'),
+    ({'theta_cov0': np.triu(np.ones((5, 5)))}, ConfigError, 'theta_cov0 is not symmetric'),
+    ({'theta_cov0': -np.eye(5)}, ConfigError, 'theta_cov0 is not positive definite'),
 ])
 def test_bad_configuration_is_a_clear_error(kwargs, exc, needle):
     m = Model(NPS, NAMES)
     with pytest.raises(exc, match=needle):
         AugmentedEKF(m, FilterConfig(coefficients=NAMES, **kwargs), 0.05)
+
+
+def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compiled_loop(
+        short_run):
+    """FilterConfig.theta_cov0 (a full covariance, e.g. a warm start) is the coefficient block
+    of P0 in both paths; set_prior replaces estimate and covariance for the next start."""
+    m = Model(NPS, NAMES)
+    rng = np.random.default_rng(8)
+    th0 = m.theta_true * 1.1
+    C = _spd(5, rng) * np.outer(th0, th0) * 1e-3
+    cfg = FilterConfig(coefficients=NAMES, initial=th0, theta_cov0=C)
+    f = AugmentedEKF(m, cfg, short_run.T)
+    xa0, P0 = f.initial_estimate(short_run.y[0], short_run.u[0, 5])
+    assert np.array_equal(P0[12:, 12:], C) and not np.any(P0[:12, 12:])
+    assert np.array_equal(xa0[12:], th0)
+    # the per-message start and the compiled loop start from the same prior
+    g = AugmentedEKF(m, cfg, short_run.T)
+    g.start(short_run.y[0], short_run.u[0, 5])
+    for k in range(1, 50):
+        g.step(short_run.u[k - 1], short_run.y[k])
+    run_ekf(f, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    np.testing.assert_allclose(g.xa, f.xa, rtol=1e-12)
+    # the default prior differs (diagonal), so the prior did matter
+    d = AugmentedEKF(m, FilterConfig(coefficients=NAMES, initial=th0), short_run.T)
+    run_ekf(d, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    assert not np.allclose(d.xa[12:], f.xa[12:], rtol=1e-6)
+    h = AugmentedEKF(m, FilterConfig(coefficients=NAMES), short_run.T)
+    h.set_prior(th0, C)
+    h.start(short_run.y[0], short_run.u[0, 5])
+    g.reset()
+    g.start(short_run.y[0], short_run.u[0, 5])
+    assert np.array_equal(h.P, g.P) and np.array_equal(h.xa, g.xa)
+    with pytest.raises(ConfigError, match='prior coefficients must be 5 finite values'):
+        h.set_prior(th0[:3], C)
 
 
 def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
@@ -250,32 +325,95 @@ def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
         Model(NPS, ['Z_wx'])
 
 
-def test_stale_numba_cache_is_dropped_when_any_compiled_source_changes(tmp_path):
-    """A cached ekf function keeps the model code it inlined: editing model.py alone must drop
-    the cached entries of every compiled source (numba checks each file on its own only)."""
-    from auv_ident.core import _COMPILED_SOURCES, _STAMP, _drop_stale_compiled_code
-    pkg = tmp_path / 'auv_ident'
-    for rel in _COMPILED_SOURCES:
-        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
-        (pkg / rel).write_text(f'# {rel}\n')
-    ekf_cache = pkg / 'core' / '__pycache__' / 'ekf.run_filter-1.py311.nbi'
-    bench_cache = pkg / 'analysis' / '__pycache__' / 'bench._model_loop-1.py311.1.nbc'
-    other = pkg / 'core' / '__pycache__' / 'model.cpython-311.pyc'
+def _compiled_core_closure(core):
+    """Core modules with numba code, and every core module they import (transitively)."""
+    compiled, imports = set(), {}
+    for path in core.glob('*.py'):
+        tree = ast.parse(path.read_text())
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+        names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        if names & {'njit', 'jit', 'cfunc', 'intrinsic', 'kernel'}:
+            compiled.add(path.name)
+        imports[path.name] = {f'{n.module}.py' for n in ast.walk(tree)
+                              if isinstance(n, ast.ImportFrom) and n.level == 1 and n.module}
+    todo, seen = list(compiled - {'__init__.py', 'compiled_cache.py'}), set()
+    while todo:
+        name = todo.pop()
+        if name not in seen:
+            seen.add(name)
+            todo.extend(imports.get(name, ()))
+    return seen
 
-    def make_caches():
-        for f in (ekf_cache, bench_cache, other):
-            f.parent.mkdir(parents=True, exist_ok=True)
-            f.write_bytes(b'x')
-    make_caches()
-    _drop_stale_compiled_code(str(pkg))          # first sight: no stamp, caches dropped
-    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
-    assert (pkg / 'core' / '__pycache__' / _STAMP).is_file()
-    make_caches()
-    _drop_stale_compiled_code(str(pkg))          # nothing changed: caches kept
-    assert ekf_cache.exists() and bench_cache.exists()
-    (pkg / 'core' / 'model.py').write_text('# model.py, edited\n')
-    _drop_stale_compiled_code(str(pkg))          # model.py changed: ekf's cache goes too
-    assert not ekf_cache.exists() and not bench_cache.exists() and other.exists()
+
+def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source():
+    """Every function the core caches is stamped with the digest of all compiled core sources,
+    and that list holds every module with numba code and everything such code imports."""
+    folder = pathlib.Path(core.__file__).parent
+    assert _compiled_core_closure(folder) == set(core.COMPILED_SOURCES)
+    digest = compiled_cache.group_digest(str(folder), core.COMPILED_SOURCES)
+    for fn in (K.run_filter, K.rk4_step_into, K.new_workspace):
+        locator = fn._cache._impl.locator
+        assert isinstance(locator, compiled_cache.GroupStampLocator)
+        assert locator.get_source_stamp() == digest
+
+
+def test_editing_model_py_makes_the_cached_ekf_loop_stale(tmp_path):
+    """The stamp numba checks for ekf.py's functions changes when model.py (which they inline)
+    changes, and not when a file outside the compiled sources does."""
+    folder = tmp_path / 'core'
+    shutil.copytree(pathlib.Path(core.__file__).parent, folder,
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    compiled_cache.register(str(folder), core.COMPILED_SOURCES)
+
+    def stamp():
+        loc = compiled_cache.GroupStampLocator.from_function(K.run_filter.py_func,
+                                                             str(folder / 'ekf.py'))
+        return loc.get_source_stamp()
+    before = stamp()
+    with open(folder / 'stream.py', 'a') as fh:
+        fh.write('# an edit outside the compiled sources\n')
+    assert stamp() == before
+    with open(folder / 'model.py', 'a') as fh:
+        fh.write('# an edit of the model\n')
+    assert stamp() != before
+
+
+_CALLEE = 'from numba import njit\n\n\n@njit(cache=True)\ndef g(x):\n    return x + {}\n'
+_CALLER = ('from numba import njit\n\nfrom .callee import g\n\n\n'
+           '@njit(cache=True)\ndef f(x):\n    return g(x)\n')
+_RUN = ('import sys\n'
+        'from auv_ident.core import compiled_cache\n'
+        'if sys.argv[1] == "group":\n'
+        '    compiled_cache.register(sys.argv[2], ("callee.py", "caller.py"))\n'
+        'from pkg.caller import f\n'
+        'print(f(1), sum(f.stats.cache_hits.values()))\n')
+
+
+def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_path):
+    """End to end in fresh processes: numba alone keeps running a cached caller with its old
+    callee after an edit of the callee's file (the problem); with the file pair registered as a
+    group, the edit is seen, and unchanged code still loads from the cache."""
+    pkg = tmp_path / 'pkg'
+    pkg.mkdir()
+    (pkg / '__init__.py').write_text('')
+    (pkg / 'caller.py').write_text(_CALLER)
+    repo = pathlib.Path(core.__file__).parents[2]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(repo)]))
+
+    def run(mode, increment):
+        (pkg / 'callee.py').write_text(_CALLEE.format(increment))
+        r = subprocess.run([sys.executable, '-c', _RUN, mode, str(pkg)], capture_output=True,
+                           text=True, env=env, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        value, hits = r.stdout.split()
+        return int(value), int(hits)
+    assert run('numba', 1) == (2, 0)
+    assert run('numba', 2)[0] == 2                 # stale: the old callee still runs
+    shutil.rmtree(pkg / '__pycache__')
+    assert run('group', 1) == (2, 0)               # compiled and cached
+    assert run('group', 1) == (2, 1)               # unchanged: from the cache
+    assert run('group', 2) == (3, 0)               # callee edited: recompiled
+    assert run('group', 2) == (3, 1)
 
 
 def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
@@ -288,7 +426,7 @@ def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     m = Model(v, names)
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, run.y, run.u)
+    run_ekf(f, run.t, run.y, run.u)
     g = AugmentedEKF(m, cfg, run.T)
     g.start(run.y[0], run.u[0, 5])
     for k in range(1, len(run.t)):

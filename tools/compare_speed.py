@@ -9,7 +9,11 @@ its best round (us per step). On a shared VM a slow spell then hits both alike, 
 runs of `python -m auv_ident bench` cannot promise: use this to decide whether a change is faster,
 and the bench for the absolute figures. Printed: the RK4 step with its exact Jacobian (the model
 part), the full EKF pass (predict + update), and the filter statistics of both runs (equal when
-the change keeps the numbers).
+the change keeps the numbers). The per-message API (AugmentedEKF.step) is not raced here: with
+two copies of the core in one process, the calls of whichever copy is typed second take numba's
+Python type inference for their namedtuple arguments (Workspace) at every call (0.5 ms a step
+instead of 18 us, measured with cProfile), an artefact of the two copies; compare it with runs
+of the bench.
 """
 import argparse
 import importlib
@@ -35,35 +39,62 @@ def extract_core(rev, dest, package):
     os.rmdir(os.path.join(dest, 'auv_ident'))
 
 
+def _load_nps(package):
+    """NPS AUV II from the revision's own vehicle module (load_vehicle before the layers split
+    it out, vehicle_from_file after)."""
+    veh = importlib.import_module(package + '.vehicle')
+    if hasattr(veh, 'load_vehicle'):
+        return veh.load_vehicle('nps_auv2')
+    return veh.vehicle_from_file(os.path.join(REPO, 'config', 'nps_auv2.yaml'))
+
+
 def runners(package, run, n_steps):
-    """(model, full): callables that time n_steps of the model part and of the EKF pass."""
-    ident = importlib.import_module(package + '.identify')
+    """(model, full): callables that time n_steps of the model part and of the EKF pass.
+
+    Two generations of the core's API are known: the flat kernel arguments and
+    identify.run_ekf(f, Y, U) (up to 6c738cc), and the CompiledModel bundle with
+    batch.run_ekf(f, t, Y, U) (after)."""
     ekf = importlib.import_module(package + '.ekf')
     mod = importlib.import_module(package + '.model')
-    veh = importlib.import_module(package + '.vehicle')
-    m = mod.Model(veh.load_vehicle('nps_auv2'), NAMES)
-    cfg = ident.FilterConfig(coefficients=NAMES, initial_offset=0.5)
-    Y, U, X = run.y[:n_steps], run.u[:n_steps], run.x[:n_steps]
+    try:
+        batch = importlib.import_module(package + '.batch')
+        filt = importlib.import_module(package + '.filter')
+    except ImportError:
+        batch = filt = importlib.import_module(package + '.identify')
+    m = mod.Model(_load_nps(package), NAMES)
+    cfg = filt.FilterConfig(coefficients=NAMES, initial_offset=0.5)
+    t, Y, U, X = run.t[:n_steps], run.y[:n_steps], run.u[:n_steps], run.x[:n_steps]
     step, new_ws = ekf.rk4_step_into, ekf.new_workspace
-
-    @njit
-    def model_loop(X, U, xa, x1, Fa, c0, theta_idx, *margs):
-        ws = new_ws(xa.shape[0], c0.shape[0])
-        for k in range(X.shape[0]):
-            xa[:12] = X[k]
-            step(xa, U[k], c0, theta_idx, *margs, True, x1, Fa, ws)
-        return x1
-
     n = 12 + len(NAMES)
     xa = np.concatenate([X[0], m.theta_true])
     x1, Fa = np.empty(n), np.empty((n, n))
-    margs = (m.c, m.theta_idx, *m.args[:-1], run.T)
+    if hasattr(m, 'compiled'):
+        @njit
+        def model_loop(X, U, xa, x1, Fa, cm, T):
+            ws = new_ws(xa.shape[0], cm.c0.shape[0])
+            for k in range(X.shape[0]):
+                xa[:12] = X[k]
+                step(xa, U[k], cm, T, True, x1, Fa, ws)
+            return x1
+        margs = (m.compiled, run.T)
+
+        def full():
+            return batch.run_ekf(filt.AugmentedEKF(m, cfg, run.T), t, Y, U)[0]
+    else:
+        @njit
+        def model_loop(X, U, xa, x1, Fa, c0, theta_idx, *margs):
+            ws = new_ws(xa.shape[0], c0.shape[0])
+            for k in range(X.shape[0]):
+                xa[:12] = X[k]
+                step(xa, U[k], c0, theta_idx, *margs, True, x1, Fa, ws)
+            return x1
+        margs = (m.c, m.theta_idx, *m.args[:-1], run.T)
+
+        def full():
+            return batch.run_ekf(filt.AugmentedEKF(m, cfg, run.T), Y, U)[0]
 
     def model():
         model_loop(X, U, xa, x1, Fa, *margs)
-
-    def full():
-        return ident.run_ekf(ident.AugmentedEKF(m, cfg, run.T), Y, U)[0]
     return model, full
 
 

@@ -7,9 +7,10 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.identify import Result, refine
+from auv_ident.core.batch import Result, refine
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.state import N_STATE
 from auv_ident.vehicles import load_vehicle
 
 def _bag_truth_and_noise(path, model):
@@ -21,7 +22,7 @@ def _bag_truth_and_noise(path, model):
     if 'auv_ident.noise_std' in meta:
         try:
             vals = np.array([float(v) for v in meta['auv_ident.noise_std'].split()])
-            if vals.shape == (12,) and np.all(vals > 0):
+            if vals.shape == (N_STATE,) and np.all(vals > 0):
                 noise = vals
         except ValueError:
             pass
@@ -45,7 +46,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     if refine_pass:
         ok = np.all(np.isfinite(rr.U), axis=1)
         cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise)
-        est, cov, _ = refine(model, cfg, rr.Y[ok], rr.U[ok], rr.T, rr.estimate,
+        est, cov, _ = refine(model, cfg, rr.t[ok], rr.Y[ok], rr.U[ok], rr.estimate, T=rr.T,
                              progress=progress)
     res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
                  ekf_estimate=rr.estimate, ekf_std=rr.std, initial=rr.initial, truth=truth,

@@ -20,72 +20,71 @@ from numba import njit
 
 from auv_ident.core import ekf as K
 from auv_ident.core.ekf import new_workspace, rk4_step_into
-from auv_ident.core.identify import AugmentedEKF, FilterConfig, identify, run_ekf
+from auv_ident.core.batch import identify, run_ekf
+from auv_ident.core.filter import AugmentedEKF, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
+from auv_ident.core.state import COEFFICIENTS, EULER, Input, N_STATE, VEHICLE
 from auv_ident.vehicles import load_vehicle
 
 
 def _filterpy_rate(m, cfg, Y, U, T, n_steps):
     from filterpy.kalman import ExtendedKalmanFilter
     f0 = AugmentedEKF(m, cfg, T)
-    x0, sd0 = f0.initial_state(Y[0], U[0, 5])
     n = f0.n
-    H = np.zeros((12, n))
-    H[:, :12] = np.eye(12)
-    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=12)
-    ekf.x = np.concatenate([x0, f0.theta0])
-    ekf.P = np.diag(np.concatenate([sd0, cfg.p0_rel * np.abs(f0.theta0)]) ** 2)
+    H = np.zeros((N_STATE, n))
+    H[:, VEHICLE] = np.eye(N_STATE)
+    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=N_STATE)
+    ekf.x, ekf.P = f0.initial_estimate(Y[0], U[0, Input.N_RPM])
     ekf.Q = f0.Q0.copy()
     ekf.R = f0.R0.copy()
     xa_next = np.empty(n)
     Fa = np.empty((n, n))
-    margs = (m.c, m.theta_idx, *m.args[:-1])
 
     def hx(x):
-        return x[:12]
+        return x[VEHICLE]
 
     def hjac(x):
         return H
 
     def residual(a, b):
         d = a - b
-        d[9:] = (d[9:] + np.pi) % (2 * np.pi) - np.pi
+        d[EULER] = (d[EULER] + np.pi) % (2 * np.pi) - np.pi
         return d
     # compile (or load from numba's cache) the model for these argument types before timing
     # (rk4_jacobian_step, not rk4_step_into: from Python its call is the cheaper of the two)
-    K.rk4_jacobian_step(ekf.x.copy(), U[0], *margs, T, True, xa_next, Fa)
+    K.rk4_jacobian_step(ekf.x.copy(), U[0], m.compiled, T, True, xa_next, Fa)
     t0 = time.perf_counter()
     for k in range(1, n_steps + 1):
-        K.rk4_jacobian_step(ekf.x, U[k - 1], *margs, T, True, xa_next, Fa)
+        K.rk4_jacobian_step(ekf.x, U[k - 1], m.compiled, T, True, xa_next, Fa)
         ekf.F = Fa
         ekf.x = xa_next.copy()           # predict_x: the same RK4 step
         ekf.P = Fa @ ekf.P @ Fa.T + ekf.Q
         ekf.update(Y[k], hjac, hx, R=ekf.R, residual=residual)
     dt = time.perf_counter() - t0
-    return n_steps / dt, ekf.x[12:]
+    return n_steps / dt, ekf.x[COEFFICIENTS]
 
 
-@njit(cache=True)
-def _model_loop(X, U, theta, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
-                M_RB, theta_pos, T):
-    n = 12 + theta.shape[0]
+# Not cached: it inlines the core's kernels, and a cache of this file would not see an edit of
+# theirs (the core keys its own cache on all its compiled sources, core/compiled_cache.py).
+@njit
+def _model_loop(X, U, theta, cm, T):
+    n = N_STATE + theta.shape[0]
     xa = np.empty(n)
-    xa[12:] = theta
+    xa[N_STATE:] = theta
     x1 = np.empty(n)
     Fa = np.empty((n, n))
-    ws = new_workspace(n, c0.shape[0])
+    ws = new_workspace(n, cm.c0.shape[0])
     for k in range(X.shape[0]):
-        xa[:12] = X[k]
-        rk4_step_into(xa, U[k], c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, rec,
-                      M_RB, theta_pos, T, True, x1, Fa, ws)
+        xa[:N_STATE] = X[k]
+        rk4_step_into(xa, U[k], cm, T, True, x1, Fa, ws)
     return x1
 
 
 def _model_step_us(m, run, n_steps):
     """Cost of the shared part, one RK4 step with its exact Jacobian (us per step), timed in a
     compiled loop so that no Python call overhead is counted."""
-    args = (m.theta_true, m.c, m.theta_idx, *m.args[:-1], run.T)
+    args = (m.theta_true, m.compiled, run.T)
     _model_loop(run.x[:2], run.u[:2], *args)
     t0 = time.perf_counter()
     _model_loop(run.x[:n_steps], run.u[:n_steps], *args)
@@ -116,19 +115,19 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     T = run.T
     # warm up the compiled code (numba caches it on disk; first call loads it)
-    run_ekf(AugmentedEKF(m, cfg, T), run.y[:50], run.u[:50])
+    run_ekf(AugmentedEKF(m, cfg, T), run.t[:50], run.y[:50], run.u[:50])
 
     def compiled_loop():
         f = AugmentedEKF(m, cfg, T)
         t0 = time.perf_counter()
-        stats, _, _ = run_ekf(f, run.y, run.u)
+        stats, _, _ = run_ekf(f, run.t, run.y, run.u)
         return stats[1] / (time.perf_counter() - t0)
 
     n_stream = min(3000, len(run.t) - 1)
 
     def streaming_api():                  # per message, what the node calls
         f = AugmentedEKF(m, cfg, T)
-        f.start(run.y[0], run.u[0, 5])
+        f.start(run.y[0], run.u[0, Input.N_RPM])
         t0 = time.perf_counter()
         for k in range(1, n_stream + 1):
             f.step(run.u[k - 1], run.y[k])
@@ -141,14 +140,14 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     steps_per_s, stream_rate, fp_rate = rates['ours'], rates['streaming'], rates['filterpy']
     model_us = _model_step_us(m, run, 3000)
     t0 = time.perf_counter()
-    identify(m, run.y, run.u, T, cfg, refine_pass=True)
+    identify(m, run.t, run.y, run.u, cfg, T=T, refine_pass=True)
     full_s = time.perf_counter() - t0
     # memory: a 1-hour run through the same loop must not grow the process
     long = simulate(truth, 'ident', duration=3600.0, seed=2)
     rss0 = _rss_mb()
     f = AugmentedEKF(m, cfg, T)
     t0 = time.perf_counter()
-    run_ekf(f, long.y, long.u)
+    run_ekf(f, long.t, long.y, long.u)
     hour_s = time.perf_counter() - t0
     rss1 = _rss_mb()
     return {

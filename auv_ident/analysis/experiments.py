@@ -9,10 +9,11 @@ import time
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identify import identify
+from auv_ident.core.batch import identify
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.simulate import simulate
+from auv_ident.core.state import Input
 from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.bag_identify import bag_source
 from auv_ident.analysis.results import (coefficient_list, DEFAULT_NOISE_MODE, make_config, Source)
@@ -30,8 +31,8 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
                    noise_std=cfg.noise_std, process_std=process_std)
     m = Model(v, names, mass_inverse=mass_inverse)
-    res = identify(m, run.y, run.u, run.T, cfg, refine_pass=refine_pass, hist_every=hist_every,
-                   truth=m.theta_true, progress=progress)
+    res = identify(m, run.t, run.y, run.u, cfg, T=run.T, refine_pass=refine_pass,
+                   hist_every=hist_every, truth=m.theta_true, progress=progress)
     return res, run, m
 
 
@@ -51,7 +52,7 @@ def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                   noise_std=run.noise_std, X_true=run.x, truth=m.theta_true, seed=seed,
                   maneuver=run.maneuver,
                   description=f'simulated {run.maneuver!r} run of {run.t[-1]:.0f} s at '
-                              f'T = {run.T} s, seed {seed}, {run.u[0, 5]:.0f} rpm')
+                              f'T = {run.T} s, seed {seed}, {run.u[0, Input.N_RPM]:.0f} rpm')
 
 
 def _mc_case(args):

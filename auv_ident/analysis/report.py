@@ -15,12 +15,13 @@ from auv_ident import __version__
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identify import identify
+from auv_ident.core.batch import identify
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.trim import initial_state
-from auv_ident.core.simulate import simulate, wrap_angle
-from auv_ident.core.state import STATE_NAMES
+from auv_ident.core.angles import wrap_angle
+from auv_ident.core.simulate import simulate
+from auv_ident.core.state import EULER, Input, N_STATE, State, STATE_NAMES
 from auv_ident.vehicles import load_vehicle
 
 HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)
@@ -30,8 +31,10 @@ DEG = 180.0 / np.pi
 # Display scale and unit of each state channel (angles and rates in degrees: readable numbers)
 SCALE = np.array([1, 1, 1, DEG, DEG, DEG, 1, 1, 1, DEG, DEG, DEG], dtype=float)
 UNITS = ('m/s',) * 3 + ('deg/s',) * 3 + ('m',) * 3 + ('deg',) * 3
-GROUPS = (('linear speeds', (0, 1, 2)), ('angular rates', (3, 4, 5)),
-          ('positions', (6, 7, 8)), ('attitudes', (9, 10, 11)))
+GROUPS = (('linear speeds', (State.U, State.V, State.W)),
+          ('angular rates', (State.P, State.Q, State.R)),
+          ('positions', (State.X, State.Y, State.Z)),
+          ('attitudes', (State.PHI, State.THETA, State.PSI)))
 LABELS = {'u': 'u (surge)', 'v': 'v (sway)', 'w': 'w (heave)', 'p': 'p (roll rate)',
           'q': 'q (pitch rate)', 'r': 'r (yaw rate)', 'x': 'x (north)', 'y': 'y (east)',
           'z': 'z (depth)', 'phi': 'phi (roll)', 'theta': 'theta (pitch)', 'psi': 'psi (yaw)'}
@@ -95,10 +98,10 @@ def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=10
     rpm = v.cruise_rpm if rpm is None else float(rpm)
     x0 = initial_state(truth, rpm)
     runs = [simulate(m, maneuver, duration=duration, T=T, seed=seed, rpm=rpm,
-                     noise_std=np.zeros(12), process_std=process_std, x0=x0)
+                     noise_std=np.zeros(N_STATE), process_std=process_std, x0=x0)
             for m in (truth, ident)]
     err = runs[1].x - runs[0].x
-    err[:, 9:] = wrap_angle(err[:, 9:])
+    err[:, EULER] = wrap_angle(err[:, EULER])
     rms = {n: float(np.sqrt(np.mean((SCALE[i] * err[:, i]) ** 2)))
            for i, n in enumerate(STATE_NAMES)}
     return Validation(runs[0].t, runs[0].x, runs[1].x, rms, runs[0].maneuver, seed, rpm,
@@ -196,7 +199,7 @@ def _overlay(path, val, rows, title, reference):
         for c, i in enumerate(row):
             ax = axes[r, c]
             a, b = Xt[:, i], Xi[:, i]
-            if i == 11:      # heading: unwrap, or a +-180 deg jump hides the comparison
+            if i == State.PSI:   # heading: unwrap, or a +-180 deg jump hides the comparison
                 a, b = np.unwrap(a), np.unwrap(b)
             n = STATE_NAMES[i]
             ax.plot(t, SCALE[i] * a, color='k', lw=1.4, label=reference)
@@ -204,7 +207,7 @@ def _overlay(path, val, rows, title, reference):
             ax.set_ylabel(f'{n} ({UNITS[i]})')
             ax.set_title(f'{LABELS[n]}: RMS difference {rms[n]:.3g} {UNITS[i]}', fontsize=9)
             ax.grid(alpha=0.3)
-            if i == 8:
+            if i == State.Z:
                 ax.invert_yaxis()    # depth grows downwards
     for ax in axes[-1]:
         ax.set_xlabel('time (s)')
@@ -412,7 +415,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
-    res = identify(Model(v, src.names), src.Y, src.U, src.T, cfg, refine_pass=True,
+    res = identify(Model(v, src.names), src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
                    hist_every=hist_every, truth=src.truth,
                    progress=bar.update if bar else None)
     if bar:
@@ -422,7 +425,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         val_seed = int(src.seed) + 1000
     except (TypeError, ValueError):
         val_seed = seed + 1000
-    rpm = float(np.median(src.U[:, 5]))
+    rpm = float(np.median(src.U[:, Input.N_RPM]))
     val, val_error = None, None
     try:
         val = validate(v, src.names, res.estimate, validation_maneuver, validation_duration,
@@ -454,11 +457,14 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         what = (f'{v.title}\nheld-out {val.maneuver!r} manoeuvre, seed {val_seed}, '
                 'process noise on')
         figures['validation_positions'] = _overlay(
-            j('validation_positions'), val, [[6], [7], [8]], f'{what}: positions', ref)
+            j('validation_positions'), val, [[State.X], [State.Y], [State.Z]],
+            f'{what}: positions', ref)
         figures['validation_attitudes'] = _overlay(
-            j('validation_attitudes'), val, [[9], [10], [11]], f'{what}: attitudes', ref)
+            j('validation_attitudes'), val, [[State.PHI], [State.THETA], [State.PSI]],
+            f'{what}: attitudes', ref)
         figures['validation_speeds'] = _overlay(
-            j('validation_speeds'), val, [[0, 3], [1, 4], [2, 5]], f'{what}: speeds', ref)
+            j('validation_speeds'), val, [[State.U, State.P], [State.V, State.Q],
+                                          [State.W, State.R]], f'{what}: speeds', ref)
     figures['nis'] = fig_nis(j('nis'), res, src.T, hist_every)
     figures['adapted_noise'] = fig_noise(j('adapted_noise'), res, noise_mode)
 

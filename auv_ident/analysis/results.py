@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identify import FilterConfig
+from auv_ident.core.filter import FilterConfig
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 
 DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R wins on accuracy

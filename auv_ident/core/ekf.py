@@ -37,12 +37,52 @@ import numpy as np
 from numba import njit, uint64
 
 from .model import NZ, OK, kernel, mass_inverse_into, state_derivative
+from .state import N_NU, N_STATE, State
 
 MODE_FIXED, MODE_PAPER, MODE_PAPER_Q, MODE_MATCHING = 0, 1, 2, 3
 MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
          'matching': MODE_MATCHING}
 ERR_NOT_PD = 10
 ERR_NAN_STATE = 11
+
+# State indices as plain ints: numba freezes them into the same constants as the literals
+_U, _V, _W, _P, _Q, _R, _X, _Y, _Z, _PHI, _THETA, _PSI = (int(s) for s in State)
+# the columns of df/dx that can be nonzero in the rows of the body-velocity rates (f depends
+# on neither the position nor psi), and in the rows of the position and Euler-angle rates
+_DYNAMICS_COLUMNS = (_U, _V, _W, _P, _Q, _R, _PHI, _THETA)
+_KINEMATICS_COLUMNS = (_U, _V, _W, _P, _Q, _R, _PHI, _THETA, _PSI)
+
+# The noise settings of one filter run (run_filter): measured (12,) bool channels the sensor
+# suite provides; Q0 (n, n), R0 (12, 12) the initial process and measurement noise; mode
+# (MODE_*), gamma, lam, r_bound, q_floor of the adaptation (module docstring); T (s) the nominal
+# sample time (of gamma and of omega = dtheta / T in MODE_PAPER).
+FilterSettings = namedtuple('FilterSettings', 'measured Q0 R0 mode gamma lam T r_bound q_floor')
+
+# How run_filter crosses the time from sample k-1 to sample k (timing.py has the rules):
+# n_sub[k] RK4 steps of h[k] seconds with the inputs U[k-1] held, or, where n_sub[k] = 0 (k > 0),
+# a restart of the vehicle states from x0[r], sd0[r] (the r-th restart; rows (R, 12), the
+# states and their 1-sigma before the measurement at k); entry 0 is not used.
+Timeline = namedtuple('Timeline', 'n_sub h x0 sd0')
+
+# What run_filter writes (arrays filled in place): theta, std (H, p), nis (H, 2) and rq
+# (H, 12 + p) the histories every hist_every samples (H = 0: none); white (N, 12) the whitened
+# innovations if want_white; xa (n,), P, Q (n, n), R (12, 12) the final estimate, covariance and
+# noise matrices; stats (5,) [status, steps done, sum NIS, sum dof, NIS samples].
+FilterOutputs = namedtuple('FilterOutputs', 'hist_every theta std nis rq want_white white '
+                                            'xa P Q R stats')
+
+
+def new_outputs(n, N, hist_every=0, want_white=False):
+    """FilterOutputs for an augmented state of size n over N samples (histories every
+    hist_every samples, 0: none; the whitened innovations if want_white)."""
+    p = n - N_STATE
+    nh = (N + hist_every - 1) // hist_every if hist_every > 0 else 0
+    return FilterOutputs(hist_every, np.full((nh, p), np.nan), np.full((nh, p), np.nan),
+                         np.full((nh, 2), np.nan), np.full((nh, N_STATE + p), np.nan),
+                         bool(want_white), np.full((N if want_white else 0, N_STATE), np.nan),
+                         np.empty(n), np.empty((n, n)), np.empty((n, n)),
+                         np.empty((N_STATE, N_STATE)), np.zeros(5))
+
 
 # Scratch arrays of one filter, allocated once and reused at every step (allocating them per
 # step cost about a tenth of the step; a fresh n x n Fa per step made the BLAS products slower).
@@ -52,56 +92,57 @@ Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new 
 @njit(cache=True)
 def new_workspace(n, n_coef):
     """Workspace for an augmented state of size n and a vehicle with n_coef coefficients."""
-    p = n - 12
-    return Workspace(np.empty(n_coef), np.empty(n_coef), np.empty((6, 6)), np.empty((6, 6)),
-                     np.empty(2 * NZ), np.empty(12), np.empty(12), np.empty(12),
-                     np.empty((12, 12)), np.empty((12, p)),
-                     np.empty((12, n)), np.empty((12, n)), np.empty((n, n)), np.empty((12, n)),
-                     np.empty((12, 12)), np.empty(12, dtype=np.int64), np.empty((3, n)))
+    p = n - N_STATE
+    return Workspace(np.empty(n_coef), np.empty(n_coef), np.empty((N_NU, N_NU)),
+                     np.empty((N_NU, N_NU)), np.empty(2 * NZ), np.empty(N_STATE),
+                     np.empty(N_STATE), np.empty(N_STATE), np.empty((N_STATE, N_STATE)),
+                     np.empty((N_STATE, p)), np.empty((N_STATE, n)), np.empty((N_STATE, n)),
+                     np.empty((n, n)), np.empty((N_STATE, n)), np.empty((N_STATE, N_STATE)),
+                     np.empty(N_STATE, dtype=np.int64), np.empty((3, n)))
 
 
 @njit(cache=True)
-def rk4_jacobian_step(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                      recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa):
+def rk4_jacobian_step(xa, ui, cm, T, want_jac, xa_next, Fa):
     """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
-    ws = new_workspace(xa.shape[0], c0.shape[0])
-    return rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                         recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws)
+    ws = new_workspace(xa.shape[0], cm.c0.shape[0])
+    return rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws)
 
 
 @kernel
-def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                  recompute_minv, M_RB, theta_pos, T, want_jac, xa_next, Fa, ws):
-    """x*_{k+1} = Phi(x*_k) (one RK4 step, inputs held) and Fa = dPhi/dx* ((12+p)x(12+p)),
-    scratch from the Workspace ws.
+def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):
+    """x*_{k+1} = Phi(x*_k) (one RK4 step of T seconds, inputs ui held) and Fa = dPhi/dx*
+    ((12+p)x(12+p)); cm is the model's CompiledModel, scratch from the Workspace ws.
 
     Chain rule through the stages: k_s = f(x + a_s k_{s-1}) with a_s = (0, T/2, T/2, T), so
     dk_s/dx* = [A_s | B_s] + a_s A_s dk_{s-1}/dx* (A_s = df/dx, B_s = df/dtheta at stage s) and
     Fa = I + T/6 sum_s w_s dk_s/dx* on the vehicle rows (the parameter rows are [0 I]). f does
     not depend on the position x, y, z (no depth effects in the model), so those columns of A_s
-    are zero and the product skips them; then Fa[:, 6:9] are identity columns.
+    are zero and the product skips them; then Fa's position columns are identity columns.
     """
+    c0 = cm.c0
+    theta_idx = cm.theta_idx
     p = theta_idx.shape[0]
-    n = 12 + p
+    n = N_STATE + p
     c = ws.c
     for j in range(c0.shape[0]):
         c[j] = c0[j]
     for j in range(p):
-        c[theta_idx[j]] = xa[12 + j]
+        c[theta_idx[j]] = xa[N_STATE + j]
     Mi = ws.Minv                  # M^-1 for this step's coefficients (fixed over the step)
-    if recompute_minv:
-        st = mass_inverse_into(c, M_RB, am_i, am_s, ws.M6, Mi)
+    if cm.recompute_minv:
+        st = mass_inverse_into(c, cm.M_RB, cm.am_i, cm.am_s, ws.M6, Mi)
         if st != OK:
             return st
     else:
-        for i in range(6):
-            for j in range(6):
+        Minv = cm.Minv
+        for i in range(N_NU):
+            for j in range(N_NU):
                 Mi[i, j] = Minv[i, j]
     zz = ws.zz
     xs = ws.xs
     k = ws.k
     acc = ws.acc
-    for i in range(12):
+    for i in range(N_STATE):
         k[i] = 0.0
         acc[i] = 0.0
     A = ws.A
@@ -109,19 +150,18 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
     dk = ws.dk
     dk_new = ws.dk_new
     if want_jac:
-        for i in range(12):
+        for i in range(N_STATE):
             for j in range(n):
                 Fa[i, j] = 0.0
     for s in range(4):
         a = T * (0.0, 0.5, 0.5, 1.0)[s]
         wt = (1.0, 2.0, 2.0, 1.0)[s]
-        for i in range(12):
+        for i in range(N_STATE):
             xs[i] = xa[i] + a * k[i]
-        st = state_derivative(xs, ui, c, Mi, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
-                              want_jac, k, A, Bt, zz, ws.dprod)
+        st = state_derivative(xs, ui, c, Mi, cm, want_jac, k, A, Bt, zz, ws.dprod)
         if st != OK:
             return st
-        for i in range(12):
+        for i in range(N_STATE):
             acc[i] += wt * k[i]
         if want_jac:
             # dk_new = [A | Bt] + a A dk as sums of rows of dk, one pass over a row of dk for
@@ -130,33 +170,34 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
             # F depends on neither the position nor psi (dynamics rows: u..r, phi, theta),
             # the position rates on u, v, w and the Euler angles, the Euler-angle rates on
             # p, q, r, phi, theta (the Jacobian tests check this against finite differences).
-            for i in range(12):
-                for j in range(12):
+            for i in range(N_STATE):
+                for j in range(N_STATE):
                     dk_new[i, j] = A[i, j]
                 for j in range(p):
-                    dk_new[i, 12 + j] = Bt[i, j]
+                    dk_new[i, N_STATE + j] = Bt[i, j]
             if s > 0:
-                # dynamics rows 0..5, all six per pass
-                for kk in (0, 1, 2, 3, 4, 5, 9, 10):
-                    f0 = a * A[0, kk]
-                    f1 = a * A[1, kk]
-                    f2 = a * A[2, kk]
-                    f3 = a * A[3, kk]
-                    f4 = a * A[4, kk]
-                    f5 = a * A[5, kk]
+                # dynamics rows u..r, all six per pass
+                for kk in _DYNAMICS_COLUMNS:
+                    fu = a * A[_U, kk]
+                    fv = a * A[_V, kk]
+                    fw = a * A[_W, kk]
+                    fp = a * A[_P, kk]
+                    fq = a * A[_Q, kk]
+                    fr = a * A[_R, kk]
                     for j in range(n):
                         d = dk[kk, j]
-                        dk_new[0, j] += f0 * d
-                        dk_new[1, j] += f1 * d
-                        dk_new[2, j] += f2 * d
-                        dk_new[3, j] += f3 * d
-                        dk_new[4, j] += f4 * d
-                        dk_new[5, j] += f5 * d
-                # position rows 6..8 and Euler-angle rows 9..11, three per pass (over the
-                # union of their columns: the position rates use u, v, w, phi, theta, psi,
-                # the Euler-angle rates p, q, r, phi, theta; the other terms add exact zeros)
-                for r in (6, 9):
-                    for kk in (0, 1, 2, 3, 4, 5, 9, 10, 11):
+                        dk_new[_U, j] += fu * d
+                        dk_new[_V, j] += fv * d
+                        dk_new[_W, j] += fw * d
+                        dk_new[_P, j] += fp * d
+                        dk_new[_Q, j] += fq * d
+                        dk_new[_R, j] += fr * d
+                # position rows x, y, z and Euler-angle rows phi, theta, psi, three per pass
+                # (over the union of their columns: the position rates use u, v, w, phi,
+                # theta, psi, the Euler-angle rates p, q, r, phi, theta; the other terms add
+                # exact zeros)
+                for r in (_X, _PHI):
+                    for kk in _KINEMATICS_COLUMNS:
                         f0 = a * A[r, kk]
                         f1 = a * A[r + 1, kk]
                         f2 = a * A[r + 2, kk]
@@ -167,17 +208,17 @@ def rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s
                             dk_new[r + 2, j] += f2 * d
             dk, dk_new = dk_new, dk
             w_T = T / 6.0 * wt
-            for i in range(12):
+            for i in range(N_STATE):
                 for j in range(n):
                     Fa[i, j] += w_T * dk[i, j]
-    for i in range(12):
+    for i in range(N_STATE):
         xa_next[i] = xa[i] + T / 6.0 * acc[i]
     for j in range(p):
-        xa_next[12 + j] = xa[12 + j]
+        xa_next[N_STATE + j] = xa[N_STATE + j]
     if want_jac:
-        for i in range(12):
+        for i in range(N_STATE):
             Fa[i, i] += 1.0
-        for i in range(12, n):
+        for i in range(N_STATE, n):
             for j in range(n):
                 Fa[i, j] = 0.0
             Fa[i, i] = 1.0
@@ -193,20 +234,20 @@ def propagate_covariance(Fa, P, Q, P_out, M, O):
     n x n ones. M (12 x n) and O (12 x 12) are scratch.
     """
     n = P.shape[0]
-    F12 = Fa[:12]
+    F12 = Fa[:N_STATE]
     np.dot(F12, P, M)
     np.dot(M, F12.T, O)
-    for i in range(12):
+    for i in range(N_STATE):
         for j in range(i + 1):
             v = 0.5 * (O[i, j] + O[j, i] + Q[i, j] + Q[j, i])
             P_out[i, j] = v
             P_out[j, i] = v
-    for i in range(12, n):
-        for j in range(12):
+    for i in range(N_STATE, n):
+        for j in range(N_STATE):
             v = M[j, i] + 0.5 * (Q[i, j] + Q[j, i])
             P_out[i, j] = v
             P_out[j, i] = v
-        for j in range(12, i + 1):
+        for j in range(N_STATE, i + 1):
             v = 0.5 * (P[i, j] + P[j, i] + Q[i, j] + Q[j, i])
             P_out[i, j] = v
             P_out[j, i] = v
@@ -220,12 +261,10 @@ def wrap(a):
 # predict, update and adapt are inlined into run_filter (inline='always'): a call from compiled
 # code costs numba two reference-count operations per array argument, some 50 arrays a step.
 @njit(cache=True, inline='always')
-def predict(xa, P, ui, Q, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-            recompute_minv, M_RB, theta_pos, T, xa_out, P_out, ws):
-    """Time update (Eqs. 9-10); ws.Fa holds the transition Jacobian afterwards. Returns a
-    status code."""
-    st = rk4_step_into(xa, ui, c0, theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv,
-                       recompute_minv, M_RB, theta_pos, T, True, xa_out, ws.Fa, ws)
+def predict(xa, P, ui, Q, cm, T, xa_out, P_out, ws):
+    """Time update (Eqs. 9-10) over T seconds with the inputs ui held; ws.Fa holds the
+    transition Jacobian afterwards. Returns a status code."""
+    st = rk4_step_into(xa, ui, cm, T, True, xa_out, ws.Fa, ws)
     if st != OK:
         return st
     propagate_covariance(ws.Fa, P, Q, P_out, ws.M, ws.O)
@@ -238,7 +277,7 @@ def _finish_update(xa_out, P_out, nis, m):
     for i in range(xa_out.shape[0]):
         if not (P_out[i, i] > 0.0) or not math.isfinite(xa_out[i]):
             return ERR_NOT_PD, nis, m
-    xa_out[11] = wrap(xa_out[11])
+    xa_out[_PSI] = wrap(xa_out[_PSI])
     return OK, nis, m
 
 
@@ -249,7 +288,7 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white,
     for a in range(m):                   # prior innovations and variances, for adaptation
         ch = uint64(idx[a])              # unsigned: no negative-index test when indexing
         d = y[ch] - xa[ch]
-        innov[ch] = wrap(d) if ch >= 9 else d
+        innov[ch] = wrap(d) if ch >= _PHI else d
         S_diag[ch] = P[ch, ch] + R[ch, ch]
     k = kpg[0]
     pj = kpg[1]
@@ -268,7 +307,7 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white,
         if not (s > 0.0) or not math.isfinite(s):
             return ERR_NOT_PD, np.nan, m
         d = y[ch] - xa_out[ch]
-        if ch >= 9:
+        if ch >= _PHI:
             d = wrap(d)
         inv_s = 1.0 / s
         for i in range(n):
@@ -311,7 +350,7 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):
     n = xa.shape[0]
     idx = ws.idx
     m = 0
-    for j in range(12):
+    for j in range(N_STATE):
         innov[j] = np.nan
         S_diag[j] = np.nan
         white[j] = np.nan
@@ -327,8 +366,8 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):
     # R diagonal on the used channels? A whole-matrix scan (vectorised) settles the usual
     # case; only an R with off-diagonal terms needs the look at the used pairs.
     off = 0
-    for i in range(12):
-        for j in range(12):
+    for i in range(N_STATE):
+        for j in range(N_STATE):
             off += (R[i, j] != 0.0) & (i != j)
     diag_R = True
     for a in range(m if off > 0 else 0):
@@ -344,7 +383,7 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):
     for a in range(m):
         ch = idx[a]
         d = y[ch] - xa[ch]
-        if ch >= 9:
+        if ch >= _PHI:
             d = wrap(d)
         nu[a] = d
         innov[ch] = d
@@ -432,107 +471,151 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
     if mode == MODE_FIXED:
         return
     n = xa_post.shape[0]
-    p = n - 12
+    p = n - N_STATE
     if mode == MODE_PAPER or mode == MODE_PAPER_Q:
         for i in range(p):
-            wi = (xa_post[12 + i] - theta_prev[i]) / T
+            wi = (xa_post[N_STATE + i] - theta_prev[i]) / T
+            ii = N_STATE + i
             for j in range(p):
-                wj = (xa_post[12 + j] - theta_prev[j]) / T
-                Q[12 + i, 12 + j] = (1.0 - gamma) * Q[12 + i, 12 + j] + gamma * lam * lam * wi * wj
+                wj = (xa_post[N_STATE + j] - theta_prev[j]) / T
+                jj = N_STATE + j
+                Q[ii, jj] = (1.0 - gamma) * Q[ii, jj] + gamma * lam * lam * wi * wj
         if mode == MODE_PAPER:
-            for a in range(12):
+            for a in range(N_STATE):
                 if not math.isfinite(innov[a]):
                     continue
-                for b in range(12):
+                for b in range(N_STATE):
                     if not math.isfinite(innov[b]):
                         continue
                     R[a, b] = (1.0 - gamma) * R[a, b] + gamma * lam * lam * innov[a] * innov[b]
     elif mode == MODE_MATCHING:
-        for a in range(12):
+        for a in range(N_STATE):
             if not math.isfinite(innov[a]):
                 continue
             est = innov[a] * innov[a] - P_prior[a, a]
             r = (1.0 - gamma) * R[a, a] + gamma * est
             R[a, a] = min(max(r, R0[a, a] / r_bound), R0[a, a] * r_bound)
         for i in range(p):
-            d = xa_post[12 + i] - theta_prev[i]
-            q = (1.0 - gamma) * Q[12 + i, 12 + i] + gamma * d * d
-            q0 = Q0[12 + i, 12 + i]
-            Q[12 + i, 12 + i] = min(max(q, q_floor * q0), q0)
+            d = xa_post[N_STATE + i] - theta_prev[i]
+            q = (1.0 - gamma) * Q[N_STATE + i, N_STATE + i] + gamma * d * d
+            q0 = Q0[N_STATE + i, N_STATE + i]
+            Q[N_STATE + i, N_STATE + i] = min(max(q, q_floor * q0), q0)
+
+
+@njit(cache=True, inline='always')
+def restart_states(xa, P, x0, sd0):
+    """Restart the vehicle states in place: xa[:12] = x0 (12,), their covariance diag(sd0^2)
+    (sd0 (12,), 1-sigma) uncorrelated with the coefficients, whose estimate and covariance
+    block stay (a gap, timing.py)."""
+    n = xa.shape[0]
+    for i in range(N_STATE):
+        xa[i] = x0[i]
+        for j in range(n):
+            P[i, j] = 0.0
+            P[j, i] = 0.0
+    for i in range(N_STATE):
+        P[i, i] = sd0[i] * sd0[i]
 
 
 @njit(cache=True)
-def run_filter(xa0, P0, Y, U, measured, Q0, R0, mode, gamma, lam, r_bound, q_floor, c0,
-               theta_idx, par, mono_addr, theta_terms, am_i, am_s, Minv, recompute_minv, M_RB,
-               theta_pos, T, hist_every, th_hist, sd_hist, nis_hist, rq_hist, want_white,
-               white_out, out_xa, out_P, out_Q, out_R, stats):
-    """Run the filter over samples k = 0..N-1 (update with Y[0], then predict with U[k-1] and
-    update with Y[k]). Histories every `hist_every` samples (0: none): coefficients, their
-    1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12) and diag(Q_theta) (p)
-    in rq_hist. stats gets
-    [status, steps done, sum NIS, sum dof, NIS samples]. Memory does not grow with N unless a
-    history is asked for. With want_white, white_out (N, 12) gets the whitened innovations
-    (for the batch refinement)."""
+def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):
+    """Run the filter over samples k = 0..N-1: update with Y[0], then for each k > 0 cross the
+    interval as `timeline` says (time updates with U[k-1] held, or a restart of the vehicle
+    states) and update with Y[k].
+
+    xa0 (n,), P0 (n, n): the prior of sample 0; Y (N, 12) measurements (NaN: missing), U (N, 6)
+    inputs; cm: the model's CompiledModel; settings: FilterSettings; timeline: Timeline; out:
+    FilterOutputs, filled in place. Histories every `out.hist_every` samples (0: none):
+    coefficients, their 1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12)
+    and diag(Q_theta) (p) in out.rq. out.stats gets [status, steps done, sum NIS, sum dof, NIS
+    samples]. Memory does not grow with N unless a history is asked for. With out.want_white,
+    out.white (N, 12) gets the whitened innovations (for the batch refinement). Returns the
+    status code."""
     n = xa0.shape[0]
-    p = n - 12
+    p = n - N_STATE
     N = Y.shape[0]
+    measured = settings.measured
+    Q0 = settings.Q0
+    R0 = settings.R0
+    mode = settings.mode
+    T = settings.T
+    th_hist = out.theta
+    sd_hist = out.std
+    nis_hist = out.nis
+    rq_hist = out.rq
+    hist_every = out.hist_every
     xa = xa0.copy()
     P = P0.copy()
     Q = Q0.copy()
     R = R0.copy()
     xa_b = xa0.copy()             # the prior of sample 0
     P_b = P0.copy()
-    ws = new_workspace(n, c0.shape[0])
-    innov = np.empty(12)
-    S_diag = np.empty(12)
-    white = np.empty(12)
-    theta_prev = xa0[12:].copy()
+    ws = new_workspace(n, cm.c0.shape[0])
+    innov = np.empty(N_STATE)
+    S_diag = np.empty(N_STATE)
+    white = np.empty(N_STATE)
+    theta_prev = xa0[N_STATE:].copy()
     sum_nis = 0.0
     sum_dof = 0.0
     cnt = 0
     status = OK
+    n_sub = timeline.n_sub
+    h_sub = timeline.h
     h = 0
+    r = 0
     done = 0
     # ping-pong: predict (xa, P) -> (xa_b, P_b), update (xa_b, P_b) -> (xa, P)
     for k in range(N):
         if k > 0:
-            st = predict(xa, P, U[k - 1], Q, c0, theta_idx, par, mono_addr, theta_terms, am_i,
-                         am_s, Minv, recompute_minv, M_RB, theta_pos, T, xa_b, P_b, ws)
+            st = OK
+            if n_sub[k] == 0:
+                xa_b[:] = xa
+                P_b[:, :] = P
+                restart_states(xa_b, P_b, timeline.x0[r], timeline.sd0[r])
+                r += 1
+            for s in range(n_sub[k]):
+                if s > 0:              # the prior so far is the start of the next step
+                    xa, xa_b = xa_b, xa
+                    P, P_b = P_b, P
+                st = predict(xa, P, U[k - 1], Q, cm, h_sub[k], xa_b, P_b, ws)
+                if st != OK:
+                    break
             if st != OK:
                 status = st
                 break
         for i in range(p):
-            theta_prev[i] = xa_b[12 + i]
+            theta_prev[i] = xa_b[N_STATE + i]
         st, nis, m = update(xa_b, P_b, Y[k], measured, R, xa, P, innov, S_diag, white, ws)
-        if want_white:
-            white_out[k, :] = white
+        if out.want_white:
+            out.white[k, :] = white
         if st != OK:
             xa[:] = xa_b          # report the prior, not a half-updated state
             P[:, :] = P_b
             status = st
             break
-        adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa, innov, S_diag, P_b, Q, R,
-              Q0, R0)
+        adapt(mode, settings.gamma, settings.lam, T, settings.r_bound, settings.q_floor,
+              theta_prev, xa, innov, S_diag, P_b, Q, R, Q0, R0)
         if m > 0:
             sum_nis += nis
             sum_dof += m
             cnt += 1
         if hist_every > 0 and k % hist_every == 0 and h < th_hist.shape[0]:
             for i in range(p):
-                th_hist[h, i] = xa[12 + i]
-                sd_hist[h, i] = math.sqrt(P[12 + i, 12 + i])
+                th_hist[h, i] = xa[N_STATE + i]
+                sd_hist[h, i] = math.sqrt(P[N_STATE + i, N_STATE + i])
             nis_hist[h, 0] = nis
             nis_hist[h, 1] = m
-            for i in range(12):
+            for i in range(N_STATE):
                 rq_hist[h, i] = R[i, i]
             for i in range(p):
-                rq_hist[h, 12 + i] = Q[12 + i, 12 + i]
+                rq_hist[h, N_STATE + i] = Q[N_STATE + i, N_STATE + i]
             h += 1
         done += 1
-    out_xa[:] = xa
-    out_P[:, :] = P
-    out_Q[:, :] = Q
-    out_R[:, :] = R
+    out.xa[:] = xa
+    out.P[:, :] = P
+    out.Q[:, :] = Q
+    out.R[:, :] = R
+    stats = out.stats
     stats[0] = status
     stats[1] = done
     stats[2] = sum_nis

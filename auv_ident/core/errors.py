@@ -20,3 +20,7 @@ class DomainError(AuvIdentError, ArithmeticError):
 
 class DivergenceError(AuvIdentError, ArithmeticError):
     """The filter lost positive definiteness or its estimate became non-finite."""
+
+
+class DataError(AuvIdentError, ValueError):
+    """The data cannot be used as given (sample times not increasing, NaN stamps, ...)."""

@@ -25,6 +25,7 @@ import os
 import numpy as np
 
 from .errors import ConfigError
+from .state import FINS, Input, N_INPUT
 
 DEG = np.pi / 180.0
 MANEUVERS = ('ident', 'zigzag', 'steps', 'prbs', 'roll')
@@ -50,20 +51,20 @@ def _rate_limit(sig, dt, rate):
 def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
     """Commanded inputs on the time grid t (s): array (len(t), 6)."""
     t = np.asarray(t, dtype=float)
-    u = np.zeros((len(t), 6))
-    u[:, 5] = rpm
+    u = np.zeros((len(t), N_INPUT))
+    u[:, Input.N_RPM] = rpm
     if name == 'zigzag':
-        u[:, 0] = _square(t, 40.0, np.array([20.0, 15.0, 20.0, 10.0]) * DEG)
-        u[:, 1] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
+        u[:, Input.DELTA_R] = _square(t, 40.0, np.array([20.0, 15.0, 20.0, 10.0]) * DEG)
+        u[:, Input.DELTA_S] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
     elif name == 'steps':
-        u[:, 0] = np.where((t >= 10) & (t < 60), 15 * DEG, 0.0) \
+        u[:, Input.DELTA_R] = np.where((t >= 10) & (t < 60), 15 * DEG, 0.0) \
             + np.where((t >= 110) & (t < 160), -10 * DEG, 0.0)
-        u[:, 1] = np.where((t >= 30) & (t < 50), 10 * DEG, 0.0) \
+        u[:, Input.DELTA_S] = np.where((t >= 30) & (t < 50), 10 * DEG, 0.0) \
             + np.where((t >= 80) & (t < 100), -10 * DEG, 0.0)
     elif name == 'roll':
         # rudder reversals every 5 s keep roll rate high; planes keep heave/pitch excited
-        u[:, 0] = _square(t, 10.0, np.array([20.0, 20.0, 15.0]) * DEG)
-        u[:, 1] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
+        u[:, Input.DELTA_R] = _square(t, 10.0, np.array([20.0, 20.0, 15.0]) * DEG)
+        u[:, Input.DELTA_S] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
     elif name == 'ident':
         rng = np.random.default_rng(seed)
         dt = t[1] - t[0] if len(t) > 1 else 0.05
@@ -74,9 +75,9 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
             hold = int(round(rng.uniform(20.0, 40.0) / dt))
             rud = np.concatenate([rud, np.full(hold, sign * 20.0 * DEG)])
             sign = -sign
-        u[:, 0] = _rate_limit(rud[:n_total], dt, FIN_RATE)
+        u[:, Input.DELTA_R] = _rate_limit(rud[:n_total], dt, FIN_RATE)
         levels = np.array([-20.0, -15.0, -10.0, 10.0, 15.0, 20.0]) * DEG
-        for ch, hold in ((1, 5.0), (3, 6.0), (4, 6.0)):
+        for ch, hold in ((Input.DELTA_S, 5.0), (Input.DELTA_BP, 6.0), (Input.DELTA_BS, 6.0)):
             n_hold = max(1, int(round(hold / dt)))
             steps = rng.choice(levels, size=n_total // n_hold + 1)
             u[:, ch] = _rate_limit(np.repeat(steps, n_hold)[:n_total], dt, FIN_RATE)
@@ -84,7 +85,8 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
         rng = np.random.default_rng(seed)
         dt = t[1] - t[0] if len(t) > 1 else 0.05
         levels = np.array([-20.0, -12.0, -6.0, 6.0, 12.0, 20.0]) * DEG
-        for ch, hold in ((0, 8.0), (1, 5.0), (3, 6.0), (4, 6.0)):
+        for ch, hold in ((Input.DELTA_R, 8.0), (Input.DELTA_S, 5.0), (Input.DELTA_BP, 6.0),
+                         (Input.DELTA_BS, 6.0)):
             n_hold = max(1, int(round(hold / dt)))
             steps = rng.choice(levels, size=len(t) // n_hold + 1)
             u[:, ch] = _rate_limit(np.repeat(steps, n_hold)[:len(t)], dt, FIN_RATE)
@@ -93,7 +95,7 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
     else:
         raise ConfigError(f'unknown manoeuvre {name!r}: use one of {", ".join(MANEUVERS)} '
                           'or a CSV file path')
-    u[:, :5] = np.clip(u[:, :5], -fin_limit, fin_limit)
+    u[:, FINS] = np.clip(u[:, FINS], -fin_limit, fin_limit)
     return u
 
 

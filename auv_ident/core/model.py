@@ -17,15 +17,25 @@ thousands of times per second.
 Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
 from .errors import DomainError
 from .monomials import NZ, Z_EPS, kernel_at, monomial_kernel
-from .vehicle import (COS_THETA_MIN, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
+from .state import Input, N_FINS, N_INPUT, N_NU, N_STATE, State
+from .vehicle import (COS_THETA_MIN, FACTOR_INDEX, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
                       P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_U_MIN, P_W,
                       P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
+
+# State and input indices, and the places in the factor vector z (vehicle.FACTORS), as plain
+# ints: numba freezes them into the same constants as the literals they replace
+_U, _V, _W, _P, _Q, _R, _X, _Y, _Z, _PHI, _THETA, _PSI = (int(s) for s in State)
+_N_RPM = int(Input.N_RPM)
+_Z_ABS = FACTOR_INDEX['|u|']        # |u| .. |r|
+_Z_FINS = FACTOR_INDEX['dr']        # dr ds db dbp dbs
+_Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX['db2']
 
 
 # The hot kernels are compiled without numba's reference counting (its `_nrt` option; numba is
@@ -34,6 +44,28 @@ from .vehicle import (COS_THETA_MIN, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
 # compiled function with reference counting costs an atomic increment and decrement per array
 # argument, which perf put at about a fifth of an EKF step (README, Speed).
 kernel = njit(cache=True, _nrt=False)
+
+# Everything the compiled model needs besides the state, the inputs and scratch: built in one
+# place (Model.compiled, Model.compiled_fixed) and handed to the kernels as one argument. A
+# namedtuple is a plain struct in compiled code (reading a field costs nothing) and, unlike a
+# structref, can be read by the kernels compiled without reference counting.
+CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
+                                            'Minv recompute_minv M_RB theta_pos')
+CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
+
+c0 : (n_coef,) coefficient values (the file's units) for the coefficients not in theta
+theta_idx : (p,) int, index in c0 of each identified coefficient (theta's order)
+par : (N_PAR,) the vehicle's float parameters (layout vehicle.P_*)
+mono_addr : int, address of the vehicle's compiled monomial kernel (monomials.kernel_at)
+theta_terms : (p, 2) int, [equation, coefficient index] per identified coefficient (equation -1
+    for added mass, which has no monomial)
+am_i : (na, 3) int, [equation, column, coefficient index] per added-mass coefficient
+am_s : (na,) scale of each added-mass coefficient
+Minv : (6, 6) M^-1 for c0 (used unless recompute_minv)
+recompute_minv : bool, M^-1 is recomputed from the step's coefficients (added mass in theta)
+M_RB : (6, 6) rigid-body mass matrix
+theta_pos : (n_coef,) int, position of each coefficient in theta, or -1
+"""
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {
@@ -73,7 +105,7 @@ def _propulsion(u, n_rpm, par, zz, xdot, A, want_jac):
         ee = abs(eta) * eta
         h2 = 0.5 * rho * L * L
         # u^2 Cd0 (|eta| eta - 1) = Cd0 (|a| a sign(u) - u^2): thrust does not depend on u
-        xdot[0] += h2 * u * u * Cd0 * (ee - 1.0)
+        xdot[_U] += h2 * u * u * Cd0 * (ee - 1.0)
         ctg = par[P_PROP_C] * L * L / 2.0
         Ct = ctg * ee
         if Ct + 1.0 < 0.0:
@@ -83,14 +115,14 @@ def _propulsion(u, n_rpm, par, zz, xdot, A, want_jac):
         sq = math.sqrt(Ct + 1.0)
         zz[Z_EPS] = -1.0 + sgn * (sq - 1.0) / den
         if want_jac:
-            A[0, 0] += h2 * Cd0 * (-2.0 * u)
+            A[_U, _U] += h2 * Cd0 * (-2.0 * u)
             au = abs(u)
             dee_du = -2.0 * abs(a) * a / (au * au * au)
             zz[NZ + Z_EPS] = sgn * (0.5 / sq) * ctg * dee_du / den
     elif pm == 2:  # thrust and torque quadratic in n (Prestero's constant Xprop, Kprop at n0)
         s = n_rpm / par[P_PROP_C]
-        xdot[0] += par[P_PROP_A] * s * abs(s)
-        xdot[3] += par[P_PROP_B] * s * abs(s)
+        xdot[_U] += par[P_PROP_A] * s * abs(s)
+        xdot[_P] += par[P_PROP_B] * s * abs(s)
     return OK
 
 
@@ -103,24 +135,24 @@ def _restoring(par, sph, cph, sth, cth, want_jac, xdot, A):
     gx = par[P_XG] * W - par[P_XB] * B
     gy = par[P_YG] * W - par[P_YB] * B
     gz = par[P_ZG] * W - par[P_ZB] * B
-    xdot[0] += -WB * sth
-    xdot[1] += WB * cth * sph
-    xdot[2] += WB * cth * cph
-    xdot[3] += gy * cth * cph - gz * cth * sph
-    xdot[4] += -gz * sth - gx * cth * cph
-    xdot[5] += gx * cth * sph + gy * sth
+    xdot[_U] += -WB * sth
+    xdot[_V] += WB * cth * sph
+    xdot[_W] += WB * cth * cph
+    xdot[_P] += gy * cth * cph - gz * cth * sph
+    xdot[_Q] += -gz * sth - gx * cth * cph
+    xdot[_R] += gx * cth * sph + gy * sth
     if want_jac:
-        A[0, 10] += -WB * cth
-        A[1, 9] += WB * cth * cph
-        A[1, 10] += -WB * sth * sph
-        A[2, 9] += -WB * cth * sph
-        A[2, 10] += -WB * sth * cph
-        A[3, 9] += -gy * cth * sph - gz * cth * cph
-        A[3, 10] += -gy * sth * cph + gz * sth * sph
-        A[4, 9] += gx * cth * sph
-        A[4, 10] += -gz * cth + gx * sth * cph
-        A[5, 9] += gx * cth * cph
-        A[5, 10] += -gx * sth * sph + gy * cth
+        A[_U, _THETA] += -WB * cth
+        A[_V, _PHI] += WB * cth * cph
+        A[_V, _THETA] += -WB * sth * sph
+        A[_W, _PHI] += -WB * cth * sph
+        A[_W, _THETA] += -WB * sth * cph
+        A[_P, _PHI] += -gy * cth * sph - gz * cth * cph
+        A[_P, _THETA] += -gy * sth * cph + gz * sth * sph
+        A[_Q, _PHI] += gx * cth * sph
+        A[_Q, _THETA] += -gz * cth + gx * sth * cph
+        A[_R, _PHI] += gx * cth * cph
+        A[_R, _THETA] += -gx * sth * sph + gy * cth
 
 
 # The strip sum may be reordered (reassoc) and fused (contract): that lets the compiler run four
@@ -184,27 +216,27 @@ def _crossflow(par, v, w, q, r, want_jac, xdot, A):
             Nq -= gb * aa * xl * xl
             Nr += ya * xl * xl
     h = 0.5 * par[P_RHO] * dx
-    xdot[1] -= h * Sy
-    xdot[2] += h * Sz
-    xdot[4] -= h * Sm
-    xdot[5] -= h * Sn
+    xdot[_V] -= h * Sy
+    xdot[_W] += h * Sz
+    xdot[_Q] -= h * Sm
+    xdot[_R] -= h * Sn
     if want_jac:
-        A[1, 1] -= h * Yv
-        A[1, 2] -= h * Yw
-        A[1, 4] -= h * Yq
-        A[1, 5] -= h * Yr
-        A[2, 1] += h * Zv
-        A[2, 2] += h * Zw
-        A[2, 4] += h * Zq
-        A[2, 5] += h * Zr
-        A[4, 1] -= h * Mv
-        A[4, 2] -= h * Mw
-        A[4, 4] -= h * Mq
-        A[4, 5] -= h * Mr
-        A[5, 1] -= h * Nv
-        A[5, 2] -= h * Nw
-        A[5, 4] -= h * Nq
-        A[5, 5] -= h * Nr
+        A[_V, _V] -= h * Yv
+        A[_V, _W] -= h * Yw
+        A[_V, _Q] -= h * Yq
+        A[_V, _R] -= h * Yr
+        A[_W, _V] += h * Zv
+        A[_W, _W] += h * Zw
+        A[_W, _Q] += h * Zq
+        A[_W, _R] += h * Zr
+        A[_Q, _V] -= h * Mv
+        A[_Q, _W] -= h * Mw
+        A[_Q, _Q] -= h * Mq
+        A[_Q, _R] -= h * Mr
+        A[_R, _V] -= h * Nv
+        A[_R, _W] -= h * Nw
+        A[_R, _Q] -= h * Nq
+        A[_R, _R] -= h * Nr
 
 
 @kernel
@@ -217,7 +249,7 @@ def _solve_minv(Mi, X, ncols):
         f3 = X[3, j]
         f4 = X[4, j]
         f5 = X[5, j]
-        for i in range(6):
+        for i in range(N_NU):
             X[i, j] = (Mi[i, 0] * f0 + Mi[i, 1] * f1 + Mi[i, 2] * f2 + Mi[i, 3] * f3
                        + Mi[i, 4] * f4 + Mi[i, 5] * f5)
 
@@ -233,7 +265,7 @@ def _solve_vec(Mi, v):
     f3 = v[3]
     f4 = v[4]
     f5 = v[5]
-    for i in range(6):
+    for i in range(N_NU):
         v[i] = (Mi[i, 0] * f0 + Mi[i, 1] * f1 + Mi[i, 2] * f2 + Mi[i, 3] * f3 + Mi[i, 4] * f4
                 + Mi[i, 5] * f5)
 
@@ -241,13 +273,13 @@ def _solve_vec(Mi, v):
 @kernel
 def _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A):
     """eta_dot = J(eta) nu (Fossen eq. 2.40, ZYX) into xdot[6:12], d/dx into A[6:12]."""
-    u = x[0]
-    v = x[1]
-    w = x[2]
-    p = x[3]
-    q = x[4]
-    r = x[5]
-    psi = x[11]
+    u = x[_U]
+    v = x[_V]
+    w = x[_W]
+    p = x[_P]
+    q = x[_Q]
+    r = x[_R]
+    psi = x[_PSI]
     cp = math.cos(psi)
     sp = math.sin(psi)
     tt = sth / cth
@@ -262,46 +294,46 @@ def _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A):
     R22 = cth * cph
     xd = R00 * u + R01 * v + R02 * w
     yd = R10 * u + R11 * v + R12 * w
-    xdot[6] = xd
-    xdot[7] = yd
-    xdot[8] = R20 * u + R21 * v + R22 * w
-    xdot[9] = p + sph * tt * q + cph * tt * r
-    xdot[10] = cph * q - sph * r
-    xdot[11] = (sph * q + cph * r) / cth
+    xdot[_X] = xd
+    xdot[_Y] = yd
+    xdot[_Z] = R20 * u + R21 * v + R22 * w
+    xdot[_PHI] = p + sph * tt * q + cph * tt * r
+    xdot[_THETA] = cph * q - sph * r
+    xdot[_PSI] = (sph * q + cph * r) / cth
     if want_jac:          # rows 6..11 were zeroed by the caller
-        A[6, 0] = R00
-        A[6, 1] = R01
-        A[6, 2] = R02
-        A[7, 0] = R10
-        A[7, 1] = R11
-        A[7, 2] = R12
-        A[8, 0] = R20
-        A[8, 1] = R21
-        A[8, 2] = R22
+        A[_X, _U] = R00
+        A[_X, _V] = R01
+        A[_X, _W] = R02
+        A[_Y, _U] = R10
+        A[_Y, _V] = R11
+        A[_Y, _W] = R12
+        A[_Z, _U] = R20
+        A[_Z, _V] = R21
+        A[_Z, _W] = R22
         # d/dphi
-        A[6, 9] = (sp * sph + cp * sth * cph) * v + (sp * cph - cp * sph * sth) * w
-        A[7, 9] = (-cp * sph + cph * sth * sp) * v + (-cp * cph - sth * sp * sph) * w
-        A[8, 9] = cth * cph * v - cth * sph * w
+        A[_X, _PHI] = (sp * sph + cp * sth * cph) * v + (sp * cph - cp * sph * sth) * w
+        A[_Y, _PHI] = (-cp * sph + cph * sth * sp) * v + (-cp * cph - sth * sp * sph) * w
+        A[_Z, _PHI] = cth * cph * v - cth * sph * w
         # d/dtheta
-        A[6, 10] = -cp * sth * u + cp * cth * sph * v + cp * cph * cth * w
-        A[7, 10] = -sp * sth * u + sph * cth * sp * v + cth * sp * cph * w
-        A[8, 10] = -cth * u - sth * sph * v - sth * cph * w
+        A[_X, _THETA] = -cp * sth * u + cp * cth * sph * v + cp * cph * cth * w
+        A[_Y, _THETA] = -sp * sth * u + sph * cth * sp * v + cth * sp * cph * w
+        A[_Z, _THETA] = -cth * u - sth * sph * v - sth * cph * w
         # d/dpsi
-        A[6, 11] = -yd
-        A[7, 11] = xd
+        A[_X, _PSI] = -yd
+        A[_Y, _PSI] = xd
         # Euler-angle rates
-        A[9, 3] = 1.0
-        A[9, 4] = sph * tt
-        A[9, 5] = cph * tt
-        A[10, 4] = cph
-        A[10, 5] = -sph
-        A[11, 4] = sph / cth
-        A[11, 5] = cph / cth
-        A[9, 9] = cph * tt * q - sph * tt * r
-        A[10, 9] = -sph * q - cph * r
-        A[11, 9] = (cph * q - sph * r) / cth
-        A[9, 10] = (sph * q + cph * r) / (cth * cth)
-        A[11, 10] = (sph * q + cph * r) * sth / (cth * cth)
+        A[_PHI, _P] = 1.0
+        A[_PHI, _Q] = sph * tt
+        A[_PHI, _R] = cph * tt
+        A[_THETA, _Q] = cph
+        A[_THETA, _R] = -sph
+        A[_PSI, _Q] = sph / cth
+        A[_PSI, _R] = cph / cth
+        A[_PHI, _PHI] = cph * tt * q - sph * tt * r
+        A[_THETA, _PHI] = -sph * q - cph * r
+        A[_PSI, _PHI] = (cph * q - sph * r) / cth
+        A[_PHI, _THETA] = (sph * q + cph * r) / (cth * cth)
+        A[_PSI, _THETA] = (sph * q + cph * r) * sth / (cth * cth)
 
 
 @kernel
@@ -310,102 +342,106 @@ def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
     added-mass coefficients are identified, M changes with theta). M (6x6) is scratch.
     Gauss-Jordan with partial pivoting, written out because a kernel cannot call
     np.linalg.inv (it allocates). Returns OK or ERR_M_SINGULAR."""
-    for i in range(6):
-        for j in range(6):
+    for i in range(N_NU):
+        for j in range(N_NU):
             M[i, j] = M_RB[i, j]
             Minv[i, j] = 1.0 if i == j else 0.0
     for a_ in range(am_i.shape[0]):
         M[am_i[a_, 0], am_i[a_, 1]] -= am_s[a_] * c[am_i[a_, 2]]
     scale = 0.0
-    for i in range(6):
-        for j in range(6):
+    for i in range(N_NU):
+        for j in range(N_NU):
             if not math.isfinite(M[i, j]):
                 return ERR_NONFINITE
             scale = max(scale, abs(M[i, j]))
-    for col in range(6):
+    for col in range(N_NU):
         piv = col
-        for i in range(col + 1, 6):
+        for i in range(col + 1, N_NU):
             if abs(M[i, col]) > abs(M[piv, col]):
                 piv = i
         if not abs(M[piv, col]) > 1e-12 * scale:
             return ERR_M_SINGULAR
-        for j in range(6):
+        for j in range(N_NU):
             M[col, j], M[piv, j] = M[piv, j], M[col, j]
             Minv[col, j], Minv[piv, j] = Minv[piv, j], Minv[col, j]
         d = 1.0 / M[col, col]
-        for j in range(6):
+        for j in range(N_NU):
             M[col, j] *= d
             Minv[col, j] *= d
-        for i in range(6):
+        for i in range(N_NU):
             if i != col:
                 f = M[i, col]
-                for j in range(6):
+                for j in range(N_NU):
                     M[i, j] -= f * M[col, j]
                     Minv[i, j] -= f * Minv[col, j]
     return OK
 
 
 @kernel
-def state_derivative(x, ui, c, Minv, par, mono_addr, theta_terms, am_i, am_s, theta_pos, p,
-                     want_jac, xdot, A, Bt, zz, dprod):
+def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
 
-    Minv is M^-1 for these coefficients c (mass_inverse_into). mono_addr is the address of
-    the vehicle's compiled monomial kernel (monomials.kernel_at) and theta_terms (p x 2) its
-    [equation, coefficient] per identified coefficient (equation -1 for added mass; Model).
-    theta_pos[ci] is the position of coefficient ci in theta, or -1. zz (2 NZ,) and dprod
-    (n_coef,) are scratch. Returns a status code (OK = 0).
+    c (n_coef,) are this evaluation's coefficient values and Minv (6x6) M^-1 for them
+    (mass_inverse_into); cm (CompiledModel) gives the vehicle's data and which coefficients
+    are theta (p = len(cm.theta_idx)). zz (2 NZ,) and dprod (n_coef,) are scratch. Returns a
+    status code (OK = 0).
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
     """
-    for i in range(12):
+    par = cm.par
+    theta_terms = cm.theta_terms
+    am_i = cm.am_i
+    am_s = cm.am_s
+    theta_pos = cm.theta_pos
+    p = cm.theta_idx.shape[0]
+    for i in range(N_STATE):
         if not math.isfinite(x[i]):
             return ERR_NONFINITE
-    for i in range(6):
+    for i in range(N_INPUT):
         if not math.isfinite(ui[i]):
             return ERR_NONFINITE
-    th = x[10]
+    th = x[_THETA]
     cth = math.cos(th)
     if abs(cth) < COS_THETA_MIN:
         return ERR_THETA_90
     sth = math.sin(th)
-    sph = math.sin(x[9])
-    cph = math.cos(x[9])
-    for i in range(6):
+    sph = math.sin(x[_PHI])
+    cph = math.cos(x[_PHI])
+    for i in range(N_NU):
         xdot[i] = 0.0
     if want_jac:
-        for i in range(12):
-            for j in range(12):
+        for i in range(N_STATE):
+            for j in range(N_STATE):
                 A[i, j] = 0.0
             for j in range(p):
                 Bt[i, j] = 0.0
     # factor vector z = zz[:NZ] (vehicle.FACTORS) and zd = zz[NZ:], d z_i / d x_(i mod 6)
-    for i in range(6):
+    for i in range(N_NU):
         zz[i] = x[i]
-        zz[6 + i] = abs(x[i])
+        zz[_Z_ABS + i] = abs(x[i])
         zz[NZ + i] = 1.0
-        zz[NZ + 6 + i] = _sign(x[i])
+        zz[NZ + _Z_ABS + i] = _sign(x[i])
     fl = par[P_FIN]
-    for i in range(5):                       # fins saturated to +-fin limit (rad)
-        zz[12 + i] = min(max(ui[i], -fl), fl)
-        zz[NZ + 12 + i] = 0.0
-    zz[17] = zz[15] + zz[16]
-    zz[NZ + 17] = 0.0
-    n_rpm = min(max(ui[5], -par[P_NMAX]), par[P_NMAX])
-    st = _propulsion(x[0], n_rpm, par, zz, xdot, A, want_jac)
+    for i in range(N_FINS):                  # fins saturated to +-fin limit (rad)
+        zz[_Z_FINS + i] = min(max(ui[i], -fl), fl)
+        zz[NZ + _Z_FINS + i] = 0.0
+    zz[_Z_DB2] = zz[_Z_DBP] + zz[_Z_DBS]
+    zz[NZ + _Z_DB2] = 0.0
+    n_rpm = min(max(ui[_N_RPM], -par[P_NMAX]), par[P_NMAX])
+    st = _propulsion(x[_U], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
         return st
-    kernel_at(mono_addr)(c, zz, want_jac, xdot, A, dprod)
+    kernel_at(cm.mono_addr)(c, zz, want_jac, xdot, A, dprod)
     if want_jac:
         for j in range(p):
             eq = theta_terms[j, 0]
             if eq >= 0:
                 Bt[eq, j] += dprod[theta_terms[j, 1]]
     _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
-    _crossflow(par, x[1], x[2], x[4], x[5], want_jac, xdot, A)
+    _crossflow(par, x[_V], x[_W], x[_Q], x[_R], want_jac, xdot, A)
     _solve_vec(Minv, xdot)
     if want_jac:
-        _solve_minv(Minv, A, 12)
+        _solve_minv(Minv, A, N_STATE)
         _solve_minv(Minv, Bt, p)
         # added-mass coefficients in theta: d(M^-1 F)/da = -M^-1 (dM/da) nu_dot,
         # dM/da = -scale at (equation, column)
@@ -414,9 +450,9 @@ def state_derivative(x, ui, c, Minv, par, mono_addr, theta_terms, am_i, am_s, th
             if theta_pos[ci] >= 0:
                 col = am_i[a_, 1]
                 eq = am_i[a_, 0]
-                for i in range(6):
+                for i in range(N_NU):
                     Bt[i, theta_pos[ci]] += Minv[i, eq] * am_s[a_] * xdot[col]
-    for i in range(6):
+    for i in range(N_NU):
         if not math.isfinite(xdot[i]):
             return ERR_NONFINITE
     _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A)
@@ -472,8 +508,22 @@ class Model:
         self.theta_terms = np.array(
             [[-1 if vehicle.coefficients[ci].is_added_mass else vehicle.coefficients[ci].equation,
               ci] for ci in self.theta_idx], dtype=np.int64).reshape(-1, 2)
-        self.args = (vehicle.par, self.mono_addr, self.theta_terms, vehicle.am_i, vehicle.am_s,
-                     self.Minv, self.recompute_minv, vehicle.M_RB, self.theta_pos, self.p)
+        self.compiled = self._compiled(self.c, self.theta_idx, self.theta_terms,
+                                       self.theta_pos)
+
+    def _compiled(self, c0, theta_idx, theta_terms, theta_pos):
+        v = self.vehicle
+        return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
+                             self.Minv, self.recompute_minv, v.M_RB, theta_pos)
+
+    def compiled_fixed(self, theta):
+        """CompiledModel of a filter over the 12 vehicle states only, with this model's
+        coefficients theta fixed at the given values (p,) (the batch refinement's candidates).
+        M^-1 is recomputed at every step when theta holds added-mass coefficients."""
+        n_coef = len(self.c)
+        return self._compiled(self.coefficients_with(theta), np.zeros(0, dtype=np.int64),
+                              np.zeros((0, 2), dtype=np.int64),
+                              -np.ones(n_coef, dtype=np.int64))
 
     @property
     def theta_true(self):
@@ -498,15 +548,14 @@ class Model:
         v = self.vehicle
         Minv = self.Minv
         if self.recompute_minv:
-            Minv = np.empty((6, 6))
-            st = mass_inverse_into(c, v.M_RB, v.am_i, v.am_s, np.empty((6, 6)), Minv)
+            Minv = np.empty((N_NU, N_NU))
+            st = mass_inverse_into(c, v.M_RB, v.am_i, v.am_s, np.empty((N_NU, N_NU)), Minv)
             if st != OK:
                 return st, x, ui, None, None, None
-        xdot = np.empty(12)
-        A = np.empty((12, 12))
-        Bt = np.empty((12, self.p))
-        st = state_derivative(x, ui, c, Minv, v.par, self.mono_addr, self.theta_terms, v.am_i,
-                              v.am_s, self.theta_pos, self.p, want_jac, xdot, A, Bt,
+        xdot = np.empty(N_STATE)
+        A = np.empty((N_STATE, N_STATE))
+        Bt = np.empty((N_STATE, self.p))
+        st = state_derivative(x, ui, c, Minv, self.compiled, want_jac, xdot, A, Bt,
                               np.empty(2 * NZ), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
 

@@ -7,17 +7,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import maneuvers
+from .angles import wrap_angle
 from .errors import ConfigError
 from .integrators import rk4_step
 from .sensors import DEFAULT_NOISE_STD, DEFAULT_T
+from .state import EULER, INPUT_NAMES, LINEAR, N_NU, N_STATE, NU, State, STATE_NAMES
 from .trim import initial_state
 from .vehicle import P_FIN
-
-
-
-def wrap_angle(a):
-    """Wrap to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a), 2.0 * np.pi)
 
 
 @dataclass
@@ -38,17 +34,16 @@ class Run:
 
     def summary(self):
         x = self.x
-        U = np.linalg.norm(x[:, :3], axis=1)
+        U = np.linalg.norm(x[:, LINEAR], axis=1)
         return {
             'vehicle': self.vehicle, 'maneuver': self.maneuver, 'duration_s': float(self.t[-1]),
             'samples': len(self.t), 'T_s': self.T, 'seed': self.seed,
-            'final_state': {n: float(v) for n, v in zip(
-                ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi'), x[-1])},
+            'final_state': {n: float(v) for n, v in zip(STATE_NAMES, x[-1])},
             'speed_m_s': {'mean': float(U.mean()), 'min': float(U.min()), 'max': float(U.max())},
-            'depth_m': {'min': float(x[:, 8].min()), 'max': float(x[:, 8].max())},
-            'roll_deg_max': float(np.rad2deg(np.abs(x[:, 9]).max())),
-            'std': {'v': float(x[:, 1].std()), 'w': float(x[:, 2].std()),
-                    'p': float(x[:, 3].std())},
+            'depth_m': {'min': float(x[:, State.Z].min()), 'max': float(x[:, State.Z].max())},
+            'roll_deg_max': float(np.rad2deg(np.abs(x[:, State.PHI]).max())),
+            'std': {'v': float(x[:, State.V].std()), 'w': float(x[:, State.W].std()),
+                    'p': float(x[:, State.P].std())},
         }
 
 
@@ -70,14 +65,15 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
         raise ConfigError(f'sample time T = {T!r} s must be positive')
     rpm = model.vehicle.cruise_rpm if rpm is None else float(rpm)
     noise_std = DEFAULT_NOISE_STD.copy() if noise_std is None else np.asarray(noise_std, float)
-    if noise_std.shape != (12,) or np.any(noise_std < 0) or not np.all(np.isfinite(noise_std)):
+    if (noise_std.shape != (N_STATE,) or np.any(noise_std < 0)
+            or not np.all(np.isfinite(noise_std))):
         raise ConfigError(f'noise_std must be 12 non-negative numbers, got {noise_std}')
     rng = np.random.default_rng(seed)
     n = int(round(duration / T)) + 1
     t = np.arange(n) * T
     u = maneuvers.commands(maneuver, t, rpm=rpm, seed=seed,
                            fin_limit=model.vehicle.par[P_FIN])
-    x = np.empty((n, 12))
+    x = np.empty((n, N_STATE))
     x[0] = initial_state(model, rpm) if x0 is None else x0
     h = T / substeps
     f = model.f
@@ -88,18 +84,17 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
         if process_std is not None:
             # white acceleration over one sample: velocity increment ~ N(0, (sigma^2) T)
             xk = xk.copy()
-            xk[:6] += rng.normal(0.0, 1.0, 6) * np.asarray(process_std) * np.sqrt(T)
+            xk[NU] += rng.normal(0.0, 1.0, N_NU) * np.asarray(process_std) * np.sqrt(T)
         x[k + 1] = xk
-    x[:, 11] = wrap_angle(x[:, 11])
+    x[:, State.PSI] = wrap_angle(x[:, State.PSI])
     y = x + rng.normal(0.0, 1.0, x.shape) * noise_std
-    y[:, 9:] = wrap_angle(y[:, 9:])
+    y[:, EULER] = wrap_angle(y[:, EULER])
     return Run(model.vehicle.name, str(maneuver), T, seed, t, x, y, u, noise_std,
                np.zeros(6) if process_std is None else np.asarray(process_std, float))
 
 
 def save_run_csv(run, path):
     """Write a run as CSV: t, true states, measured states (y_*), inputs (documented in README)."""
-    from .state import INPUT_NAMES, STATE_NAMES
     header = (['t'] + list(STATE_NAMES) + ['y_' + s for s in STATE_NAMES] + list(INPUT_NAMES))
     data = np.column_stack([run.t, run.x, run.y, run.u])
     np.savetxt(path, data, delimiter=',', header=','.join(header), comments='', fmt='%.17g')

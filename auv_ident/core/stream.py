@@ -4,23 +4,23 @@ so the same message sequence always gives the same estimates.
 
 Pairing rule (deterministic: the same message sequence always gives the same result, and the
 arrival order between the two topics does not matter as long as the command stamped t_{k-1}
-arrives before the odometry stamped t_k, which a simulator or vehicle publishing both at each
-sample guarantees):
+arrives before the odometry stamped t_k; a command published after the odometry of its own
+stamp t_k is still paired by its stamp, it is first used for the interval after t_k):
 the measurement stamped t_k is fused after a time update from t_{k-1} to t_k with the latest
 actuator command whose stamp is <= t_{k-1} (zero-order hold: the command in force over the
-interval). A gap longer than T is bridged by several time updates of at most T each with the
-same command, up to `max_bridge` (s); a longer gap restarts the vehicle states (below): open
-loop over a long gap the model drifts, and the filter, trusting its small process noise, reads
-the drift as coefficient error (measured on NPS AUV II, 'ident' manoeuvre: 2 s of missing
-odometry bridged left the coefficients 15-50 % off a minute later; restarted, 5 %).
+interval), by the rules of :mod:`auv_ident.core.timing`, which the batch methods follow too:
+the interval at 1 ns resolution, RK4 steps of at most T with the command held, and a restart
+of the vehicle states (below) after an interval longer than `max_bridge` (s).
+Holding the last command is the norm whatever its age: a driver that publishes commands only
+when they change sends nothing while a fin is held. With `max_command_age` (s) set, a
+measurement whose command in force is stamped more than that before t_{k-1} is rejected
+('stale command': for a vehicle that repeats its commands, a silent actuator topic means it
+stopped, and holding its last command would feed the filter a wrong input).
 A measurement whose stamp is not after the previous one (duplicate, out of order) is
-rejected; so is one with no command at or before t_{k-1}, and one whose command in force is
-stamped more than STALE_COMMAND_S (1 s, at most max_gap) before t_{k-1} ('stale command': the
-actuator topic stopped, and holding its last command would feed the filter a wrong input; a
-publisher that sends commands only when they change must repeat them at least once a
-second). A restart after a gap (below) takes only the shaft speed of the latest command,
-whatever its age (no time update uses it). If a command stamped after
-the one in force and at or before t_{k-1} was rejected by the caller
+rejected; so is one with no command at or before t_{k-1}. A restart after a gap (below) takes
+only the shaft speed of the latest command at or before t_k, whatever its age (no time update
+uses it). If a command stamped after the one in force and at or before t_{k-1} was rejected by
+the caller
 (:meth:`StreamIdentifier.command_rejected`), the command over the interval is unknown and the
 measurement is rejected too ('command unknown'): holding the older command would feed the
 filter the wrong input.
@@ -32,7 +32,7 @@ Time rules (t_prev: stamp of the last fused measurement; every rejection has a s
 - t == t_prev: 'duplicate stamp'; t_prev - max_gap <= t < t_prev: 'out of order';
 - t > t_prev + max_bridge (a forward jump, e.g. a link drop-out, or a run of rejected
   messages): the vehicle states restart from this measurement, coefficients and their
-  covariance kept (accepted, code 'gap');
+  covariance kept (accepted, code 'gap'; AugmentedEKF.restart);
 - t < t_prev - max_gap (a backward jump: a bag looped, a clock reset): rejected, code
   'time jump backwards', until JUMP_CONFIRM (5) such messages in a row agree among
   themselves (each after the previous one by at most max_gap); the fifth restarts the
@@ -48,7 +48,7 @@ cannot grow it).
 
 Filter faults (see :meth:`StreamIdentifier._fuse`): a measurement update that fails because
 the covariance is not positive definite is retried once after
-:func:`auv_ident.core.identify.repair_covariance` (symmetrise, floor the scaled eigenvalues);
+:func:`auv_ident.core.filter.repair_covariance` (symmetrise, floor the scaled eigenvalues);
 an update that leaves a covariance without a Cholesky factor is repaired the same way. Both
 are counted in `repairs` and noted in the Outcome (code 'repaired'). What cannot be repaired
 (non-finite state or covariance, a second failure, a state outside the model's domain)
@@ -62,11 +62,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import DivergenceError
-from .identify import AugmentedEKF, is_positive_definite, repair_covariance
+from .errors import ConfigError, DivergenceError
+from .filter import AugmentedEKF, is_positive_definite, repair_covariance
+from .state import Input
+from .timing import DEFAULT_MAX_BRIDGE, interval, time_step
 
 JUMP_CONFIRM = 5          # messages in a row that confirm a backward time jump
-STALE_COMMAND_S = 1.0     # a command older than this (s, at most max_gap) is stale
 CMD_BUFFER_MAX = 4096     # most commands held (each buffer)
 _PRUNE_AT = 64
 
@@ -93,17 +94,23 @@ class StreamIdentifier:
     max_gap : s; a gap longer than this restarts the vehicle states from the new measurement
         (the coefficient estimates and their covariance are kept)
     gate : None, or (13,) largest NIS accepted from an update with m = 0..12 channels
-    max_bridge : s, longest gap bridged by time updates (None: max_gap); a longer one restarts
-        the vehicle states like a gap longer than max_gap
+    max_bridge : s, longest gap bridged by time updates (None: timing.DEFAULT_MAX_BRIDGE,
+        0.25 s; at most max_gap); a longer one restarts the vehicle states
+    max_command_age : s, or None (no limit, the default): a measurement whose command in force
+        is older than this is rejected as 'stale command'
     """
 
-    def __init__(self, model, cfg, T, max_gap=5.0, gate=None, max_bridge=None):
+    def __init__(self, model, cfg, T, max_gap=5.0, gate=None, max_bridge=None,
+                 max_command_age=None):
         self.ekf = AugmentedEKF(model, cfg, T)
         self.ekf.gate = gate
         self.T = float(T)
         self.max_gap = float(max_gap)
-        self.max_bridge = self.max_gap if max_bridge is None else min(float(max_bridge),
-                                                                      self.max_gap)
+        self.max_bridge = min(DEFAULT_MAX_BRIDGE if max_bridge is None else float(max_bridge),
+                              self.max_gap)
+        if max_command_age is not None and not float(max_command_age) >= 0.0:
+            raise ConfigError(f'max_command_age = {max_command_age!r} s must be >= 0 or None')
+        self.max_command_age = None if max_command_age is None else float(max_command_age)
         self.cmd_t = []
         self.cmd_u = []
         self.cmd_latest = None      # largest command stamp seen
@@ -178,16 +185,6 @@ class StreamIdentifier:
         self.rejected += 1
         return Outcome(False, reason, code)
 
-    def _restart_states(self, y12, rpm):
-        """Restart the 12 vehicle states from y12; coefficients and their covariance kept."""
-        f = self.ekf
-        keep_theta, keep_cov = f.xa[12:].copy(), f.P[12:, 12:].copy()
-        f.start(y12, rpm)
-        f.xa[12:] = keep_theta
-        f.P[12:, 12:] = keep_cov
-        f.P[:12, 12:] = 0.0
-        f.P[12:, :12] = 0.0
-
     def add_measurement(self, t, y12):
         """Fuse a measurement stamped t (NaN entries: channel missing). Returns an Outcome."""
         f = self.ekf
@@ -196,7 +193,7 @@ class StreamIdentifier:
             if u is None:
                 return self._reject('no actuator command at or before the first odometry '
                                     f'({t:.9f} s)', 'no command')
-            f.start(y12, u[5])
+            f.start(y12, u[Input.N_RPM])
             self.t_prev = t
             self._jump = []
             self.accepted += 1
@@ -204,14 +201,15 @@ class StreamIdentifier:
         if t == 0.0 and self.t_prev > 0.0:
             return self._reject(f'zero stamp after {self.t_prev:.9f} s (header.stamp not '
                                 'set?)', 'zero stamp')
-        dt = t - self.t_prev
+        dt = interval(self.t_prev, t)
         if dt < -self.max_gap:
             return self._backward_jump(t, y12)
         if not dt > 0.0:
             return self._reject(f'stamp {t:.9f} s is not after the previous one '
                                 f'({self.t_prev:.9f} s): duplicate or out of order',
                                 'duplicate stamp' if dt == 0.0 else 'out of order')
-        restart = dt > self.max_bridge
+        n_sub, h = time_step(dt, self.T, self.max_bridge)
+        restart = n_sub == 0
         # the command in force: at t_prev over the interval, or at t for a restart after a gap
         t_cmd = t if restart else self.t_prev
         i = bisect.bisect_right(self.cmd_t, t_cmd)
@@ -220,10 +218,10 @@ class StreamIdentifier:
                                 'no command')
         u = self.cmd_u[i - 1]
         age = t_cmd - self.cmd_t[i - 1]
-        stale = min(STALE_COMMAND_S, self.max_gap)
-        if age > stale and not restart:     # a restart uses only its rpm
+        limit = self.max_command_age
+        if limit is not None and age > limit and not restart:     # a restart uses only its rpm
             return self._reject(f'stale command: the latest actuator command in force at '
-                                f'{t_cmd:.9f} s is {age:.3f} s old (more than {stale:g} s); '
+                                f'{t_cmd:.9f} s is {age:.3f} s old (more than {limit:g} s); '
                                 'is the actuator topic still published?', 'stale command')
         if not restart and self.cmd_bad:
             j = bisect.bisect_right(self.cmd_bad, self.cmd_t[i - 1])
@@ -234,14 +232,12 @@ class StreamIdentifier:
                                     'command unknown')
         self._jump = []
         if restart:
-            self._restart_states(y12, u[5])
+            f.restart(y12, u[Input.N_RPM])
             if dt > self.max_gap:
                 self.cmd_jump.clear()
             self.t_prev = t
             self.accepted += 1
             return Outcome(True, f'gap of {dt:.3f} s: vehicle states restarted', 'gap')
-        n_sub = max(1, int(np.ceil(dt / self.T - 1e-9)))
-        h = dt / n_sub
         for _ in range(n_sub):
             f.predict(u, h)
         return self._fuse(t, y12)
@@ -273,7 +269,8 @@ class StreamIdentifier:
         self.cmd_t = cmd_t
         self.cmd_u = [held[tc] for tc in cmd_t]
         self.cmd_jump.clear()
-        self._restart_states(y12, u[5])
+        f = self.ekf
+        f.restart(y12, u[Input.N_RPM])
         self.t_prev = t
         self._jump = []
         self.jumps += 1

@@ -3,18 +3,20 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .errors import DomainError
+from .state import Input, N_INPUT, N_STATE, State
 
 DEFAULT_DEPTH = 10.0    # m, initial depth
 
 
 def trim_speed(model, rpm):
     """Steady surge speed (m/s) with fins at zero and shaft speed rpm: X(u) = 0."""
-    ui = np.array([0, 0, 0, 0, 0, rpm], dtype=float)
+    ui = np.zeros(N_INPUT)
+    ui[Input.N_RPM] = rpm
 
     def surge(u):
-        x = np.zeros(12)
-        x[0] = u
-        return model.f(x, ui)[0]
+        x = np.zeros(N_STATE)
+        x[State.U] = u
+        return model.f(x, ui)[State.U]
     lo, hi = 1e-3, 10.0
     if surge(lo) * surge(hi) > 0:
         raise DomainError(f'no steady surge speed in [{lo}, {hi}] m/s at {rpm} rpm')
@@ -22,7 +24,7 @@ def trim_speed(model, rpm):
 
 
 def initial_state(model, rpm, depth=DEFAULT_DEPTH):
-    x0 = np.zeros(12)
-    x0[0] = trim_speed(model, rpm)
-    x0[8] = depth
+    x0 = np.zeros(N_STATE)
+    x0[State.U] = trim_speed(model, rpm)
+    x0[State.Z] = depth
     return x0

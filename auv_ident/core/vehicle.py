@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 
 from .errors import ConfigError
-from .state import NU_NAMES
+from .state import ANGULAR, LINEAR, N_NU, NU_NAMES, State
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
@@ -161,7 +161,7 @@ def rigid_body_terms(mass, r_G, I):
     """
     xg, yg, zg = r_G
     Ix, Iy, Iz, Ixy, Iyz, Ixz = I
-    u, v, w, p, q, r = range(6)
+    u, v, w, p, q, r = (int(s) for s in (State.U, State.V, State.W, State.P, State.Q, State.R))
     m = mass
     t = [
         # X: m (v r - w q) + m (xG (q^2 + r^2) - yG p q - zG p r)
@@ -198,11 +198,11 @@ def rigid_body_mass_matrix(mass, r_G, I):
     xg, yg, zg = r_G
     S = np.array([[0.0, -zg, yg], [zg, 0.0, -xg], [-yg, xg, 0.0]])
     I_g = np.array([[Ix, -Ixy, -Ixz], [-Ixy, Iy, -Iyz], [-Ixz, -Iyz, Iz]])
-    M = np.zeros((6, 6))
-    M[:3, :3] = mass * np.eye(3)
-    M[:3, 3:] = -mass * S
-    M[3:, :3] = mass * S
-    M[3:, 3:] = I_g
+    M = np.zeros((N_NU, N_NU))
+    M[LINEAR, LINEAR] = mass * np.eye(3)
+    M[LINEAR, ANGULAR] = -mass * S
+    M[ANGULAR, LINEAR] = mass * S
+    M[ANGULAR, ANGULAR] = I_g
     return M
 
 

@@ -104,7 +104,7 @@ from std_srvs.srv import Trigger
 
 from auv_ident.ros.conversions import ns_to_stamp
 from auv_ident.core.ekf import MODES
-from auv_ident.core.identify import DEFAULT_Q_STATE
+from auv_ident.core.filter import DEFAULT_Q_STATE
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import STATE_NAMES
 from auv_ident.ros.toolkit import declare_read_only, param_or_none, run_node

@@ -54,6 +54,7 @@ import math
 
 import numpy as np
 
+from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.state import FINS, Input, N_INPUT
 
@@ -147,13 +148,6 @@ def sec_to_ns(t_sec):
 
 # ---------------------------------------------------------------------------------------------
 # rotations
-
-
-def wrap_angle(a):
-    """Wrap an angle (rad) to (-pi, pi]."""
-    w = math.atan2(math.sin(a), math.cos(a)) if abs(a) > math.pi else float(a)
-    # atan2 returns -pi for a sine of -0.0; the half-open interval wants +pi.
-    return math.pi if w <= -math.pi else w
 
 
 def euler_to_quat(phi, theta, psi):

@@ -31,7 +31,7 @@ import operator
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.identify import DEFAULT_Q_STATE, FilterConfig
+from auv_ident.core.filter import DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import Input, N_INPUT, N_STATE
@@ -55,6 +55,7 @@ __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
 
 # codes of StreamIdentifier outcomes for which an update was computed (fused or gated)
 _FUSED_CODES = frozenset(('', 'repaired', 'outlier'))
+MAX_COMMAND_AGE_S = 1.0     # s, a command in force older than this (at most max_gap) is stale
 
 
 class IdentSession:
@@ -115,7 +116,7 @@ class IdentSession:
         self.cfg = FilterConfig(coefficients=canon, initial=init, initial_offset=initial_offset,
                                 p0_rel=p0_rel, q_theta_rel=q_theta_rel, q_state=qs,
                                 noise_std=noise, measured=mask, mode=noise_mode, tau=tau,
-                                lam=lam)
+                                lam=lam, theta_cov0=self.warm_cov)
         self.T = T
         self.max_gap = max_gap
         self.names = canon
@@ -165,12 +166,11 @@ class IdentSession:
         """A fresh StreamIdentifier: from the start-up configuration, or (start_from, a
         LastGood) from that estimate with its covariance times RESET_COV_INFLATION."""
         s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap, gate=self.gate,
-                             max_bridge=self.max_bridge)
+                             max_bridge=self.max_bridge,
+                             max_command_age=min(MAX_COMMAND_AGE_S, self.max_gap))
         if start_from is not None:
-            s.ekf.theta0 = np.array(start_from.estimate, dtype=float)
-            _warm_start_ekf(s.ekf, RESET_COV_INFLATION * np.asarray(start_from.cov, float))
-        elif self.warm_cov is not None:
-            _warm_start_ekf(s.ekf, self.warm_cov)
+            s.ekf.set_prior(start_from.estimate,
+                            RESET_COV_INFLATION * np.asarray(start_from.cov, float))
         if keep_commands_from is not None:
             s.copy_commands_from(keep_commands_from)
         return s
@@ -242,9 +242,7 @@ class IdentSession:
             return f.theta, f.theta_cov
         if self.last_good is not None:
             return self.last_good.estimate.copy(), self.last_good.cov.copy()
-        if self.warm_cov is not None:
-            return self.theta0.copy(), self.warm_cov.copy()
-        return self.theta0.copy(), np.diag((self.cfg.p0_rel * np.abs(self.theta0)) ** 2)
+        return self.theta0.copy(), self.stream.ekf.theta_cov0.copy()
 
     def document(self):
         """The estimate file's dict of the best estimate (the last good one, else the prior)."""
@@ -498,20 +496,3 @@ def _stamp_ns(msg):
         return stamp_to_ns(msg.header.stamp)
     except (AttributeError, TypeError, ValueError):
         return None
-
-
-def _warm_start_ekf(ekf, theta_cov):
-    """Make the EKF's start() use theta_cov for the coefficient block of P (not p0_rel).
-
-    AugmentedEKF has no option for an initial coefficient covariance, so start() is wrapped:
-    the original start builds the state and fuses y0 with the coefficient block diagonal; this
-    version does the same with the full warm-start covariance (cross terms zero)."""
-    def warm_start(y0, rpm):
-        x0, sd0 = ekf.initial_state(y0, rpm)
-        ekf.xa = np.concatenate([x0, ekf.theta0])
-        P = np.zeros((ekf.n, ekf.n))
-        P[:12, :12] = np.diag(sd0 ** 2)
-        P[12:, 12:] = theta_cov
-        ekf.P = P
-        ekf.update(y0)
-    ekf.start = warm_start

@@ -1,27 +1,20 @@
-"""Identification: the augmented EKF over a run (online or offline), then an optional batch
-refinement by the filter-error method.
+"""The augmented EKF for streaming use (one predict + update per message) and its set-up:
+what to identify and how (:class:`FilterConfig`), the initial estimate and covariance
+(:func:`initial_covariance`, the one place P0 is assembled) and the covariance repair used by the
+streaming identifier. The compiled per-step algebra is in ekf.py, the batch methods over a whole
+record in batch.py.
 
-Pass 1, the paper's method: the augmented EKF (ekf.py) runs once over the data, as it would
-online; its final estimate and covariance are the online answer.
-
-Pass 2 (offline, on by default): maximum likelihood over the whole record by the filter-error
-method (Maine & Iliff 1981; Jategaonkar 2015, ch. 5): for a candidate theta, a 12-state EKF with
-theta FIXED produces innovations nu_k and their covariances S_k; theta minimises
-sum_k nu_k^T S_k^-1 nu_k (Gauss-Newton/Levenberg-Marquardt, scipy least_squares, started from
-pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that exceeds 1. Why:
-an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
-shared/method_notes.md); the batch pass uses every sample against one consistent theta.
+Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p coefficients)].
 """
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
+from .state import COEFFICIENTS, N_STATE, State, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -31,7 +24,8 @@ from .trim import trim_speed
 # unmodelled forces (waves, currents, tether).
 DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
                             1e-5, 1e-5, 1e-5, 2e-7, 2e-7, 2e-7])
-# start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state)
+# start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state),
+# in the order of state.State (u v w: m/s, p q r: rad/s, x y z: m, phi theta psi: rad)
 UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
 
 
@@ -50,6 +44,9 @@ class FilterConfig:
     mode : 'fixed', 'paper', 'paper_q' or 'matching' (see ekf.py)
     tau : s, time constant of the forgetting factor gamma = 1 - exp(-T/tau)
     lam : the paper's lambda (2e-3)
+    theta_cov0 : (p, p) initial covariance of the coefficients (symmetric positive definite, the
+        coefficients' units squared), e.g. from a previous run's estimate; None for
+        diag((p0_rel |initial guess|)^2)
     """
 
     coefficients: list = field(default_factory=list)
@@ -59,20 +56,21 @@ class FilterConfig:
     q_theta_rel: float = 1e-5
     q_state: np.ndarray = field(default_factory=lambda: DEFAULT_Q_STATE.copy())
     noise_std: np.ndarray = field(default_factory=lambda: DEFAULT_NOISE_STD.copy())
-    measured: np.ndarray = field(default_factory=lambda: np.ones(12, dtype=bool))
+    measured: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
     mode: str = 'fixed'
     tau: float = 10.0
     lam: float = 2e-3
     r_bound: float = 4.0
     q_floor: float = 1e-4
+    theta_cov0: object = None
 
     def validate(self, p):
         if self.mode not in K.MODES:
             raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
                               + ', '.join(K.MODES))
-        for name, arr, shape in (('q_state', self.q_state, (12,)),
-                                 ('noise_std', self.noise_std, (12,)),
-                                 ('measured', self.measured, (12,))):
+        for name, arr, shape in (('q_state', self.q_state, (N_STATE,)),
+                                 ('noise_std', self.noise_std, (N_STATE,)),
+                                 ('measured', self.measured, (N_STATE,))):
             a = np.asarray(arr)
             if a.shape != shape:
                 raise DimensionError(f'{name} must have shape {shape}, got {a.shape}')
@@ -92,6 +90,43 @@ class FilterConfig:
         if self.initial is not None and np.asarray(self.initial).shape != (p,):
             raise DimensionError(f'initial guesses: expected {p} values, got '
                                  f'{np.asarray(self.initial).shape}')
+        if self.theta_cov0 is not None:
+            check_theta_cov(self.theta_cov0, p)
+
+
+def check_theta_cov(C, p):
+    """C as a (p, p) coefficient covariance (float array, symmetrised), or ConfigError /
+    DimensionError naming what is wrong (shape, non-finite, asymmetric, not positive definite)."""
+    C = np.asarray(C, dtype=float)
+    if C.shape != (p, p):
+        raise DimensionError(f'theta_cov0 must have shape ({p}, {p}), got {C.shape}')
+    if not np.all(np.isfinite(C)):
+        raise ConfigError(f'theta_cov0 has non-finite entries: {C.tolist()}')
+    if not np.allclose(C, C.T, rtol=0.0, atol=1e-12 * np.abs(C).max()):
+        raise ConfigError(f'theta_cov0 is not symmetric: {C.tolist()}')
+    C = 0.5 * (C + C.T)
+    if not is_positive_definite(C):
+        raise ConfigError(f'theta_cov0 is not positive definite: {C.tolist()}')
+    return C
+
+
+def default_theta_cov(theta0, p0_rel):
+    """diag((p0_rel |theta0|)^2) (p, p): the coefficients' initial covariance when none is given
+    (FilterConfig.p0_rel)."""
+    return np.diag((p0_rel * np.abs(np.asarray(theta0, dtype=float))) ** 2)
+
+
+def initial_covariance(sd0, theta_cov):
+    """P0 of the augmented state ((12 + p) x (12 + p)): diag(sd0^2) for the vehicle states
+    (sd0 (12,), their 1-sigma in the states' units), theta_cov (p, p) for the coefficients, no
+    correlation between the two blocks. The one place P0 is assembled."""
+    sd0 = np.asarray(sd0, dtype=float)
+    theta_cov = np.asarray(theta_cov, dtype=float)
+    n = N_STATE + theta_cov.shape[0]
+    P = np.zeros((n, n))
+    P[VEHICLE, VEHICLE] = np.diag(sd0 ** 2)
+    P[COEFFICIENTS, COEFFICIENTS] = theta_cov
+    return P
 
 
 class AugmentedEKF:
@@ -121,7 +156,9 @@ class AugmentedEKF:
             raise ConfigError('an initial guess of exactly 0 gives no scale for its covariance: '
                               f'{dict(zip(self.names, th0))}')
         self.theta0 = th0
-        n = 12 + p
+        self.theta_cov0 = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
+                           else check_theta_cov(cfg.theta_cov0, p))
+        n = N_STATE + p
         self.n = n
         self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
@@ -144,19 +181,19 @@ class AugmentedEKF:
         self.steps = 0
         self.nis = np.nan
         self.dof = 0
-        self.innov = np.full(12, np.nan)
-        self.S_diag = np.full(12, np.nan)
-        self.white = np.full(12, np.nan)
+        self.innov = np.full(N_STATE, np.nan)
+        self.S_diag = np.full(N_STATE, np.nan)
+        self.white = np.full(N_STATE, np.nan)
 
     def initial_state(self, y0, rpm):
         """x0 from the first measurement; unmeasured channels from a straight, level trim."""
         y0 = np.asarray(y0, dtype=float)
-        x0 = np.zeros(12)
+        x0 = np.zeros(N_STATE)
         sd0 = np.asarray(self.cfg.noise_std, dtype=float).copy()
         ok = self.measured & np.isfinite(y0)
         x0[ok] = y0[ok]
-        if not ok[0]:
-            x0[0] = trim_speed(self.model, rpm)
+        if not ok[State.U]:
+            x0[State.U] = trim_speed(self.model, rpm)
         sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
 
@@ -170,10 +207,36 @@ class AugmentedEKF:
         th = self.cfg.p0_rel * np.abs(self.theta0)
         return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
-    def start(self, y0, rpm):
+    def set_prior(self, theta0, theta_cov0):
+        """Start the coefficients (at the next start()) from theta0 (p,) with covariance
+        theta_cov0 (p, p), e.g. a previous estimate; Q_theta keeps its scale."""
+        th0 = np.asarray(theta0, dtype=float)
+        if th0.shape != (self.model.p,) or not np.all(np.isfinite(th0)):
+            raise ConfigError(f'prior coefficients must be {self.model.p} finite values, got '
+                              f'{th0}')
+        self.theta_cov0 = check_theta_cov(theta_cov0, self.model.p)
+        self.theta0 = th0.copy()
+
+    def initial_estimate(self, y0, rpm):
+        """(xa0 (n,), P0 (n, n)): the augmented state and covariance before the first
+        measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
+        theta_cov0)."""
         x0, sd0 = self.initial_state(y0, rpm)
-        self.xa = np.concatenate([x0, self.theta0])
-        self.P = np.diag(np.concatenate([sd0, self.cfg.p0_rel * np.abs(self.theta0)]) ** 2)
+        return np.concatenate([x0, self.theta0]), initial_covariance(sd0, self.theta_cov0)
+
+    def start(self, y0, rpm):
+        """Start the filter from the measurement y0 (12,) at shaft speed rpm (fused)."""
+        self.xa, self.P = self.initial_estimate(y0, rpm)
+        self._update(y0)
+
+    def restart(self, y0, rpm):
+        """Restart the vehicle states from the measurement y0 (12,) at shaft speed rpm (fused),
+        as start() does, keeping the coefficients' estimate and covariance (after a gap, see
+        timing.py)."""
+        x0, sd0 = self.initial_state(y0, rpm)
+        xa, P = self.xa.copy(), self.P.copy()
+        K.restart_states(xa, P, x0, sd0)
+        self.xa, self.P = xa, P
         self._update(y0)
 
     def _check(self, st, what):
@@ -186,11 +249,11 @@ class AugmentedEKF:
 
     def _update(self, y):
         y = np.ascontiguousarray(y, dtype=float)
-        if y.shape != (12,):
-            raise DimensionError(f'measurement must have 12 entries, got {y.shape}')
+        if y.shape != (N_STATE,):
+            raise DimensionError(f'measurement must have {N_STATE} entries, got {y.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        theta_prev = self.xa[12:].copy()
+        theta_prev = self.xa[COEFFICIENTS].copy()
         st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
                               self.innov, self.S_diag, self.white, self.ws)
         self._check(st, 'measurement update')
@@ -212,8 +275,8 @@ class AugmentedEKF:
         T = self.T if T is None else float(T)
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q, m.c,
-                       m.theta_idx, *m.args[:-1], T, xa_b, P_b, self.ws)
+        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q,
+                       m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
@@ -230,17 +293,23 @@ class AugmentedEKF:
         self.predict(u_prev, T)
         self._update(y)
 
+    def settings(self):
+        """The FilterSettings of this filter (its initial Q and R, adaptation, sample time)."""
+        c = self.cfg
+        return K.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
+                                self.T, c.r_bound, c.q_floor)
+
     @property
     def theta(self):
-        return self.xa[12:].copy()
+        return self.xa[COEFFICIENTS].copy()
 
     @property
     def theta_cov(self):
-        return self.P[12:, 12:].copy()
+        return self.P[COEFFICIENTS, COEFFICIENTS].copy()
 
     @property
     def theta_std(self):
-        return np.sqrt(np.diag(self.P)[12:])
+        return np.sqrt(np.diag(self.P)[COEFFICIENTS])
 
 
 # eigenvalue floor of repair_covariance, in units of the reference variances
@@ -285,152 +354,3 @@ def is_positive_definite(P):
     except np.linalg.LinAlgError:
         return False
     return True
-
-
-@dataclass
-class Result:
-    """Outcome of identify(): final estimates with 1-sigma and covariance."""
-
-    names: list
-    estimate: np.ndarray
-    std: np.ndarray
-    cov: np.ndarray
-    ekf_estimate: np.ndarray
-    ekf_std: np.ndarray
-    initial: np.ndarray
-    truth: object          # array or None
-    steps: int
-    wall_s: float
-    mean_nis_per_dof: float
-    refined: bool
-    history: dict = field(default_factory=dict)
-    R_final: object = None
-    Q_final: object = None
-
-    def error_pct(self, which='estimate'):
-        if self.truth is None:
-            return None
-        est = getattr(self, which)
-        return 100.0 * (est - self.truth) / np.abs(self.truth)
-
-
-def _filter_args(model, theta_idx=None, c0=None):
-    m = model
-    return (m.c if c0 is None else c0, m.theta_idx if theta_idx is None else theta_idx,
-            *m.args[:-1])
-
-
-def run_ekf(f, Y, U, hist_every=0, want_white=False):
-    """Run an AugmentedEKF `f` (already started? no: from Y[0]) over Y, U with the compiled loop.
-
-    Returns (stats, histories). Raises DomainError/DivergenceError naming the sample.
-    """
-    Y = np.ascontiguousarray(Y, dtype=float)
-    U = np.ascontiguousarray(U, dtype=float)
-    if Y.ndim != 2 or Y.shape[1] != 12 or U.shape != (Y.shape[0], 6):
-        raise DimensionError(f'Y must be (N, 12) and U (N, 6); got {Y.shape} and {U.shape}')
-    N = Y.shape[0]
-    m = f.model
-    x0, sd0 = f.initial_state(Y[0], U[0, 5])
-    xa0 = np.concatenate([x0, f.theta0])
-    P0 = np.diag(np.concatenate([sd0, f.cfg.p0_rel * np.abs(f.theta0)]) ** 2)
-    nh = (N + hist_every - 1) // hist_every if hist_every > 0 else 0
-    th_hist = np.full((nh, m.p), np.nan)
-    sd_hist = np.full((nh, m.p), np.nan)
-    nis_hist = np.full((nh, 2), np.nan)
-    rq_hist = np.full((nh, 12 + m.p), np.nan)
-    white = np.full((N if want_white else 0, 12), np.nan)
-    out_xa = np.empty(f.n)
-    out_P = np.empty((f.n, f.n))
-    out_Q = np.empty((f.n, f.n))
-    out_R = np.empty((12, 12))
-    stats = np.zeros(5)
-    K.run_filter(xa0, P0, Y, U, f.measured, f.Q0, f.R0, f.mode, f.gamma, f.cfg.lam,
-                 f.cfg.r_bound, f.cfg.q_floor, *_filter_args(m), f.T, hist_every, th_hist,
-                 sd_hist, nis_hist, rq_hist, want_white, white, out_xa, out_P, out_Q, out_R,
-                 stats)
-    st = int(stats[0])
-    f.xa, f.P, f.Q, f.R, f.steps = out_xa, out_P, out_Q, out_R, int(stats[1])
-    if st != K.OK:
-        k = int(stats[1])
-        if st in STATUS_TEXT:
-            raise DomainError(f'EKF stopped at sample {k} (t = {k * f.T:.2f} s): '
-                              f'{STATUS_TEXT[st]}')
-        raise DivergenceError(f'EKF diverged at sample {k} (t = {k * f.T:.2f} s): the '
-                              'covariance lost positive definiteness (try --noise-mode fixed)')
-    hist = {'t': np.arange(nh) * hist_every * f.T, 'theta': th_hist, 'std': sd_hist,
-            'nis': nis_hist[:, 0], 'dof': nis_hist[:, 1], 'R_diag': rq_hist[:, :12],
-            'Q_theta_diag': rq_hist[:, 12:]} if nh else {}
-    return stats, hist, white
-
-
-def refine(model, cfg, Y, U, T, theta_start, max_nfev=60, progress=None):
-    """Pass 2: filter-error maximum likelihood for theta, started at theta_start.
-
-    Returns (theta, cov, cost per residual)."""
-    p = model.p
-    fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
-                             noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
-    from .model import Model
-    state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
-                        coefficient_values=model.c)
-    f = AugmentedEKF(state_model, fixed_cfg, T)
-    empty = np.zeros(0, dtype=np.int64)
-    # theta enters through c0; M^-1 is recomputed when theta holds added-mass coefficients
-    sa = state_model.args
-    margs = (sa[0], sa[1], sa[2], sa[3], sa[4], sa[5], model.recompute_minv, sa[7], sa[8])
-    Y = np.ascontiguousarray(Y, dtype=float)
-    U = np.ascontiguousarray(U, dtype=float)
-    N = Y.shape[0]
-    x0, sd0 = f.initial_state(Y[0], U[0, 5])
-    P0 = np.diag(sd0 ** 2)
-    white = np.empty((N, 12))
-    buf = (np.empty(12), np.empty((12, 12)), np.empty((12, 12)), np.empty((12, 12)),
-           np.zeros(5))
-    scale = np.abs(theta_start)
-
-    def residuals(z):
-        if progress is not None:
-            progress()
-        c0 = model.coefficients_with(z * scale)
-        white[:] = np.nan
-        K.run_filter(x0, P0, Y, U, f.measured, f.Q0, f.R0, K.MODE_FIXED, 0.0, 0.0, 1.0, 1.0,
-                     c0, empty, *margs, T, 0, np.zeros((0, 0)), np.zeros((0, 0)),
-                     np.zeros((0, 2)), np.zeros((0, 12)), True, white, *buf)
-        if buf[4][0] != K.OK:
-            return np.full(white.size, 1e3)
-        r = white.ravel()
-        return np.where(np.isfinite(r), r, 0.0)
-
-    z0 = theta_start / scale
-    sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p), max_nfev=max_nfev * p,
-                        diff_step=1e-5)
-    J = sol.jac / scale[None, :]
-    n_res = np.count_nonzero(sol.fun)
-    s2 = 2.0 * sol.cost / max(1, n_res - p)
-    try:
-        cov = np.linalg.inv(J.T @ J) * max(1.0, s2)
-    except np.linalg.LinAlgError:
-        raise DivergenceError('batch refinement: the coefficients are not identifiable from '
-                              'this run (singular information matrix)') from None
-    return sol.x * scale, cov, s2
-
-
-def identify(model, Y, U, T, cfg, refine_pass=True, hist_every=0, truth=None, progress=None):
-    """Identify model.theta_names from measurements Y (N, 12) and inputs U (N, 6) at T.
-
-    U[k] is the command held over [t_k, t_k+1). Returns a Result."""
-    t0 = time.perf_counter()
-    f = AugmentedEKF(model, cfg, T)
-    stats, hist, _ = run_ekf(f, Y, U, hist_every=hist_every)
-    ekf_est, ekf_std = f.theta, f.theta_std
-    est, cov = ekf_est, f.theta_cov
-    if refine_pass and model.p > 0:
-        est, cov, _ = refine(model, cfg, Y, U, T, ekf_est, progress=progress)
-    wall = time.perf_counter() - t0
-    return Result(names=list(model.theta_names), estimate=est, std=np.sqrt(np.diag(cov)),
-                  cov=cov, ekf_estimate=ekf_est, ekf_std=ekf_std, initial=f.theta0.copy(),
-                  truth=None if truth is None else np.asarray(truth, float),
-                  steps=int(stats[1]), wall_s=wall,
-                  mean_nis_per_dof=float(stats[2] / max(1.0, stats[3])), refined=refine_pass,
-                  history=hist, R_final=f.R.copy(), Q_final=f.Q.copy())

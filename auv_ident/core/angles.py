@@ -1,0 +1,24 @@
+"""Angle wrapping for Python callers (the simulator, message conversion, reports).
+
+The filter's compiled loop has its own (ekf.wrap, inlined into the measurement update, which
+reduces every angle it is given); test_ekf checks the two agree.
+"""
+import math
+
+import numpy as np
+
+
+def wrap_angle(a):
+    """Angle(s) a (rad, a number or an array) wrapped to (-pi, pi].
+
+    Angles already in (-pi, pi] come back unchanged, bit for bit (a conversion round trip
+    does not move them); others are reduced modulo 2 pi. A number gives a float, an array an
+    array.
+    """
+    if np.ndim(a) == 0:
+        a = float(a)
+        if -math.pi < a <= math.pi:
+            return a
+        return math.pi - ((math.pi - a) % (2.0 * math.pi))
+    a = np.asarray(a, dtype=float)
+    return np.where((a > -np.pi) & (a <= np.pi), a, np.pi - np.mod(np.pi - a, 2.0 * np.pi))
