@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, sample_messages
+from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, sample_messages
 from auv_ident.core.ekf import MODES
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate

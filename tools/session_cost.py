@@ -41,7 +41,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
 from auv_ident.analysis.bench import best_interleaved  # noqa: E402
-from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, sample_messages  # noqa: E402
+from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, sample_messages  # noqa: E402
 from auv_ident.core.model import Model  # noqa: E402
 from auv_ident.core.simulate import simulate  # noqa: E402
 from auv_ident.core.state import Input  # noqa: E402

@@ -8,7 +8,7 @@ Divergence guard (not in noise mode 'paper', whose adapted R makes the NIS meani
   NIS/dof <= 4 on simulated runs, <= 56 with unmodelled process noise and the default (small)
   q_state, where a tighter gate was measured to reject good data and wreck the estimate;
 - covariance: an update that finds or leaves the covariance non-positive-definite is repaired
-  by symmetrising and flooring the eigenvalues (core.identify.repair_covariance) and counted
+  by symmetrising and flooring the eigenvalues (core.filter.repair_covariance) and counted
   in ``repairs``; the update stands;
 - reset rule: a core error that the repair cannot fix (DomainError; DivergenceError:
   non-finite state or covariance, a second failure after the repair, a coefficient 1-sigma
@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from auv_ident.core.identify import is_positive_definite
+from auv_ident.core.filter import is_positive_definite
 from auv_ident.core.state import N_STATE
 
 # Divergence guard

@@ -417,7 +417,7 @@ class IdentSession:
         DivergenceError if they are unusable (non-finite, not positive definite, blown up).
 
         Per message, so on lists where numpy's per-call overhead would dominate; the decisions
-        are those of the numpy forms (core.identify.is_positive_definite and so on)."""
+        are those of the numpy forms (core.filter.is_positive_definite and so on)."""
         est, cov = f.theta, f.theta_cov
         var = cov.diagonal()
         isfinite = math.isfinite
@@ -474,7 +474,7 @@ class IdentSession:
 
 def _has_cholesky(P):
     """True if the finite matrix P has a Cholesky factor (numpy's, as
-    core.identify.is_positive_definite, whose finiteness check the caller did)."""
+    core.filter.is_positive_definite, whose finiteness check the caller did)."""
     try:
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
