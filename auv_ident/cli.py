@@ -60,7 +60,9 @@ def cmd_identify(args):
         from auv_ident.analysis.bag_identify import identify_bag
         doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
                                   noise_mode=mode, initial_offset=args.initial_offset,
-                                  refine_pass=not args.no_refine)
+                                  refine_pass=not args.no_refine,
+                                  noise_source=args.noise_source,
+                                  max_command_age=args.max_command_age)
         print(table)
     else:
         v = load_vehicle(args.vehicle or 'nps_auv2')
@@ -258,6 +260,14 @@ def build_parser():
     sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
+    sp.add_argument('--noise-source', dest='noise_source', default='message',
+                    choices=('message', 'parameter'),
+                    help='bags: measurement noise from the Odometry covariances where they are '
+                         'finite and positive (message, default) or the documented sensor '
+                         'noise (parameter)')
+    sp.add_argument('--max-command-age', dest='max_command_age', type=float, default=0.0,
+                    help='bags: s, odometry whose command in force is older is rejected as '
+                         "'stale command' (default 0: no limit, commands are held)")
     ident_args(sp)
     sp.set_defaults(func=cmd_identify)
 

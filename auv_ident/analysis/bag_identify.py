@@ -11,6 +11,7 @@ from auv_ident.core.batch import Result, refine
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import N_STATE
+from auv_ident.core.timing import with_command_changes
 from auv_ident.vehicles import load_vehicle
 
 def _bag_truth_and_noise(path, model):
@@ -26,28 +27,46 @@ def _bag_truth_and_noise(path, model):
                 noise = vals
         except ValueError:
             pass
-    return (model.theta_true if simulated else None), noise, meta
+    truth = model.theta_true if simulated and model is not None else None
+    return truth, noise, meta
+
+
+def _exact_hold(rr):
+    """(t, Y, U) of a replay for the batch methods: the samples with a command, and the
+    command changes between them as samples without a measurement (timing.with_command_changes:
+    the exact zero-order hold the EKF pass followed)."""
+    ok = np.all(np.isfinite(rr.U), axis=1)
+    t, Y, U, _ = with_command_changes(rr.t[ok], rr.Y[ok], rr.U[ok], rr.t_cmd, rr.U_cmd)
+    return t, Y, U
+
+
 
 def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
-                 refine_pass=True, progress=None):
+                 refine_pass=True, progress=None, noise_source='message', max_command_age=None):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag), then the
-    batch refinement on the paired arrays. Returns (JSON document, printable table)."""
+    batch refinement on the paired arrays at their stamps. Returns (JSON document, printable
+    table).
+
+    noise_source, max_command_age : as IdentSession (the message covariances are the noise
+    where they are usable; a held command stays in force however old)"""
     t0 = time.perf_counter()
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    meta_noise = _bag_truth_and_noise(path, None)[1]
     rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
-                    initial_offset=initial_offset)
+                    initial_offset=initial_offset, noise_std=meta_noise,
+                    noise_source=noise_source, max_command_age=max_command_age)
     v = load_vehicle(rr.vehicle)
     model = Model(v, rr.names)
-    truth, noise, meta = _bag_truth_and_noise(path, model)
+    truth, _, meta = _bag_truth_and_noise(path, model)
+    noise = rr.noise_std
     if rr.accepted < 2:
         raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
                        f'(rejected: {dict(rr.reasons)})')
     est, cov = rr.estimate, rr.cov
     if refine_pass:
-        ok = np.all(np.isfinite(rr.U), axis=1)
+        t, Y, U = _exact_hold(rr)
         cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise)
-        est, cov, _ = refine(model, cfg, rr.t[ok], rr.Y[ok], rr.U[ok], rr.estimate, T=rr.T,
-                             progress=progress)
+        est, cov, _ = refine(model, cfg, t, Y, U, rr.estimate, T=rr.T, progress=progress)
     res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
                  ekf_estimate=rr.estimate, ekf_std=rr.std, initial=rr.initial, truth=truth,
                  steps=rr.accepted, wall_s=time.perf_counter() - t0,
@@ -62,21 +81,27 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
              f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                               if refine_pass else 'EKF pass only'))
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
-                                  'noise_mode': noise_mode,
+                                  'noise_mode': noise_mode, 'noise_source': noise_source,
+                                  'noise_std': [float(x) for x in noise],
+                                  'time_origin_ns': rr.time_origin_ns,
                                   'rejection_reasons': dict(rr.reasons)})
     table = (head + '\n' + ex.result_table(v, res) + f'\n{res.steps} EKF steps, mean NIS/dof '
              f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')
     return doc, table
 
+
 def bag_source(path, vehicle=None, coefficients=''):
-    """experiments.Source of a bag: the paired arrays (U[k] = command in force at t_k)."""
+    """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
+    command changes between samples inserted as rows without a measurement)."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names)
+    rr = replay_bag(path, vehicle=vehicle, coefficients=names,
+                    noise_std=_bag_truth_and_noise(path, None)[1])
     v = load_vehicle(rr.vehicle)
     names = coefficient_list(v, ','.join(rr.names))
-    truth, noise, meta = _bag_truth_and_noise(path, Model(v, names))
-    ok = np.all(np.isfinite(rr.U), axis=1)
-    return Source(vehicle=v, names=names, t=rr.t[ok], Y=rr.Y[ok], U=rr.U[ok], T=rr.T,
-                  noise_std=noise, description=f'bag {path} ({int(ok.sum())} samples)',
+    truth, _, meta = _bag_truth_and_noise(path, Model(v, names))
+    noise = rr.noise_std
+    t, Y, U = _exact_hold(rr)
+    return Source(vehicle=v, names=names, t=t, Y=Y, U=U, T=rr.T,
+                  noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
                   maneuver=meta.get('auv_ident.maneuver', ''))

@@ -34,6 +34,12 @@ class ReplayResult:
     t, Y, U : (N,), (N, 12), (N, 6) of the accepted measurements (NaN: unmeasured channel) and
         U[k] = the command in force at t[k] (latest stamp <= t[k]), for identify.refine
     mean_nis_per_dof : over the last NIS window; health : the node's health verdict at the end
+    noise_std : (12,) the measurement 1-sigma the EKF pass used, per channel (the median over
+        the accepted updates: the message covariances with noise_source 'message')
+    time_origin_ns : t = 0 of t and of the session's time line (int ns; 0 for stamps that
+        start near 0)
+    t_cmd, U_cmd : (M,), (M, 6) the accepted commands by stamp (a later message with the same
+        stamp wins), on the same time line
     """
 
     names: list
@@ -57,6 +63,10 @@ class ReplayResult:
     health: Health
     T: float = 0.05
     settings: dict = field(default_factory=dict)
+    noise_std: np.ndarray = None
+    time_origin_ns: int = 0
+    t_cmd: np.ndarray = None
+    U_cmd: np.ndarray = None
 
     def document(self, stamp_ns=None):
         """The estimate file's dict of the final estimate."""
@@ -108,7 +118,8 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
     """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
-    Returns the list of (stamp_ns, estimate, std) of the accepted updates."""
+    Returns the list of (stamp_ns, estimate, std) of the accepted updates. The session's
+    one-time notices (e.g. message covariances not usable) are logged as warnings."""
     updates = []
     for topic, _, msg in messages:
         if topic == actuator_topic:
@@ -121,11 +132,18 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
             continue
         if warn is not None and ev.kind in ('rejected', 'error'):
             warn(ev)
+        if session.notices:
+            for text in session.notices:
+                log.warning(text)
+            session.notices.clear()
     return updates
 
 def session_result(session, updates, settings=None):
     """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
     cmd = sorted(session.commands, key=lambda c: c[0])   # stable: later same-stamp one last
+    by_stamp = {}
+    for tc, uc in cmd:
+        by_stamp[tc] = uc
     cmd_t = [c[0] for c in cmd]
     t = np.array([m[0] for m in session.measurements], dtype=float)
     Y = (np.array([m[1] for m in session.measurements], dtype=float)
@@ -145,7 +163,13 @@ def session_result(session, updates, settings=None):
         accepted=session.odom_accepted, rejected=session.odom_rejected,
         commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
         t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),
-        T=session.T, settings=dict(settings or {}))
+        T=session.T, settings=dict(settings or {}),
+        noise_std=(np.sqrt(np.median(np.array(session.variances), axis=0)) if session.variances
+                   else np.sqrt(session.noise_default)),
+        time_origin_ns=int(session.time_origin_ns or 0),
+        t_cmd=np.array(sorted(by_stamp), dtype=float),
+        U_cmd=(np.array([by_stamp[tc] for tc in sorted(by_stamp)], dtype=float) if by_stamp
+               else np.zeros((0, 6))))
 
 def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
                actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
@@ -167,7 +191,8 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
         then a count), or False
     **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
         noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
-        warm_start); defaults are the node's parameter defaults
+        warm_start, max_command_age, noise_source); defaults are the node's parameter
+        defaults (max_command_age: none, noise_source: 'message')
 
     Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
     not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad

@@ -162,6 +162,9 @@ class AugmentedEKF:
         self.n = n
         self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
+        # measurement 1-sigma the start-up covariance of the measured states is taken from
+        # (a caller with per-message noise, e.g. the session's message covariances, updates it)
+        self.noise_std = np.asarray(cfg.noise_std, dtype=float).copy()
         q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0)])
         self.Q0 = np.diag(q ** 2)
         self.measured = np.asarray(cfg.measured, dtype=bool).copy()
@@ -189,7 +192,7 @@ class AugmentedEKF:
         """x0 from the first measurement; unmeasured channels from a straight, level trim."""
         y0 = np.asarray(y0, dtype=float)
         x0 = np.zeros(N_STATE)
-        sd0 = np.asarray(self.cfg.noise_std, dtype=float).copy()
+        sd0 = self.noise_std.copy()
         ok = self.measured & np.isfinite(y0)
         x0[ok] = y0[ok]
         if not ok[State.U]:

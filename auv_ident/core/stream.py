@@ -6,9 +6,11 @@ Pairing rule (deterministic: the same message sequence always gives the same res
 arrival order between the two topics does not matter as long as the command stamped t_{k-1}
 arrives before the odometry stamped t_k; a command published after the odometry of its own
 stamp t_k is still paired by its stamp, it is first used for the interval after t_k):
-the measurement stamped t_k is fused after a time update from t_{k-1} to t_k with the latest
-actuator command whose stamp is <= t_{k-1} (zero-order hold: the command in force over the
-interval), by the rules of :mod:`auv_ident.core.timing`, which the batch methods follow too:
+the measurement stamped t_k is fused after a time update from t_{k-1} to t_k with the
+commands in force over the interval (zero-order hold): the latest command stamped <= t_{k-1},
+and every command stamped inside (t_{k-1}, t_k) from its stamp on (the interval is crossed in
+pieces; commands that arrived before the odometry t_k), by the rules of
+:mod:`auv_ident.core.timing`, which the batch methods follow too:
 the interval at 1 ns resolution, RK4 steps of at most T with the command held, and a restart
 of the vehicle states (below) after an interval longer than `max_bridge` (s).
 Holding the last command is the norm whatever its age: a driver that publishes commands only
@@ -19,7 +21,7 @@ stopped, and holding its last command would feed the filter a wrong input).
 A measurement whose stamp is not after the previous one (duplicate, out of order) is
 rejected; so is one with no command at or before t_{k-1}. A restart after a gap (below) takes
 only the shaft speed of the latest command at or before t_k, whatever its age (no time update
-uses it). If a command stamped after the one in force and at or before t_{k-1} was rejected by
+uses it). If a command stamped after the one in force and before t_k was rejected by
 the caller
 (:meth:`StreamIdentifier.command_rejected`), the command over the interval is unknown and the
 measurement is rejected too ('command unknown'): holding the older command would feed the
@@ -57,6 +59,7 @@ raises DivergenceError / DomainError for the caller's reset rule. With an innova
 stamp stands.
 """
 import bisect
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -224,8 +227,10 @@ class StreamIdentifier:
                                 f'{t_cmd:.9f} s is {age:.3f} s old (more than {limit:g} s); '
                                 'is the actuator topic still published?', 'stale command')
         if not restart and self.cmd_bad:
+            # a rejected command stamped while the interval is crossed (after the one in force,
+            # before t) leaves the input of part of the interval unknown
             j = bisect.bisect_right(self.cmd_bad, self.cmd_t[i - 1])
-            if j < len(self.cmd_bad) and self.cmd_bad[j] <= t_cmd:
+            if j < len(self.cmd_bad) and self.cmd_bad[j] < t:
                 return self._reject(f'command unknown: the actuator command stamped '
                                     f'{self.cmd_bad[j]:.9f} s (after the one in force, '
                                     f'{self.cmd_t[i - 1]:.9f} s) was rejected',
@@ -238,9 +243,28 @@ class StreamIdentifier:
             self.t_prev = t
             self.accepted += 1
             return Outcome(True, f'gap of {dt:.3f} s: vehicle states restarted', 'gap')
-        for _ in range(n_sub):
-            f.predict(u, h)
+        # zero-order hold: a command stamped inside (t_prev, t) takes over at its stamp, so the
+        # interval is crossed in pieces, each with the command in force over it
+        k = bisect.bisect_right(self.cmd_t, self.t_prev)
+        if k < len(self.cmd_t) and self.cmd_t[k] < t:
+            a = self.t_prev
+            while k < len(self.cmd_t) and self.cmd_t[k] < t:
+                self._cross(a, self.cmd_t[k], u)
+                a, u = self.cmd_t[k], self.cmd_u[k]
+                k += 1
+            self._cross(a, t, u)
+        else:
+            for _ in range(n_sub):
+                f.predict(u, h)
         return self._fuse(t, y12)
+
+    def _cross(self, a, b, u):
+        """Time update from a to b (s) with the command u held, in steps of at most T."""
+        dt = interval(a, b)
+        if dt > 0.0:
+            n, h = time_step(dt, self.T, math.inf)
+            for _ in range(n):
+                self.ekf.predict(u, h)
 
     def _backward_jump(self, t, y12):
         gap = self.t_prev - t

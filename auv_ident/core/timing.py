@@ -99,3 +99,47 @@ def commands_at(t_cmd, U_cmd, t):
     U = np.full((i.shape[0], U_cmd.shape[1]), np.nan)
     U[i >= 0] = U_cmd[i[i >= 0]]
     return U
+
+
+def with_command_changes(t, Y, U, t_cmd, U_cmd, max_bridge=DEFAULT_MAX_BRIDGE):
+    """Insert the command changes between samples as samples without a measurement.
+
+    The batch filter holds U[k-1] over [t_{k-1}, t_k]; a command stamped inside that interval
+    would then act only from t_k on (up to one sample period late, a bias in the control
+    derivatives when odometry and commands are not stamped together). A row at the command's
+    stamp with every channel missing (NaN: no measurement update) and that command as its input
+    makes the time update follow the exact zero-order hold, as the streaming identifier does.
+    Intervals longer than max_bridge are left alone (the vehicle states restart there).
+
+    Parameters
+    ----------
+    t, Y, U : (N,), (N, m), (N, 6): samples, measurements (NaN = missing) and the command in
+        force at each sample
+    t_cmd, U_cmd : (M,), (M, 6): command stamps (increasing) and commands
+
+    Returns
+    -------
+    t2, Y2, U2 : the merged record (N + inserted rows), and measured (N + inserted,) bool: True
+        for the original samples
+    """
+    t = check_times(t)
+    Y = np.asarray(Y, dtype=float)
+    U = np.asarray(U, dtype=float)
+    t_cmd = np.asarray(t_cmd, dtype=float)
+    U_cmd = np.asarray(U_cmd, dtype=float)
+    k = np.searchsorted(t, t_cmd, side='left')      # t[k-1] < c <= t[k]
+    inside = (k > 0) & (k < t.shape[0])
+    inside[inside] &= t_cmd[inside] < t[k[inside]]  # strictly inside (t_{k-1}, t_k)
+    dt = np.zeros_like(t_cmd)
+    dt[inside] = t[k[inside]] - t[k[inside] - 1]
+    inside &= dt <= max_bridge
+    if not np.any(inside):
+        return t, Y, U, np.ones(t.shape[0], dtype=bool)
+    t_new = t_cmd[inside]
+    t2 = np.concatenate([t, t_new])
+    order = np.argsort(t2, kind='stable')
+    Y2 = np.concatenate([Y, np.full((t_new.shape[0], Y.shape[1]), np.nan)])[order]
+    U2 = np.concatenate([U, U_cmd[inside]])[order]
+    measured = np.concatenate([np.ones(t.shape[0], dtype=bool),
+                               np.zeros(t_new.shape[0], dtype=bool)])[order]
+    return t2[order], Y2, U2, measured

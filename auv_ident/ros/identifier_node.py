@@ -160,6 +160,12 @@ _PARAMETERS = (
                         'one restarts the vehicle states (coefficients kept); 0 = 0.25 s [s]'),
     ('mass_inverse', 'default', "M^-1: 'default' (vehicle file's choice), 'exact' or "
                                 "'mss_literal'"),
+    ('max_command_age', 0.0, "odometry whose command in force is older than this is rejected "
+                             "as 'stale command'; 0 = no limit (a held command stays in force: "
+                             'drivers publish on change) [s]'),
+    ('noise_source', 'message', "measurement noise: 'message' (the Odometry covariance "
+                                'diagonals where finite and positive, noise_std elsewhere) or '
+                                "'parameter' (noise_std)"),
     ('save_path', '', 'estimate JSON written on ~/save and on shutdown; empty = none'),
     ('warm_start', '', 'estimate JSON to start from (estimate and covariance); empty = none'),
 )
@@ -281,6 +287,10 @@ class IdentifierNode(Node):
         if ev.kind == 'update' and ev.good:
             self.publish_estimate(ev)
         self._report(ev)
+        if self.session.notices:
+            for text in self.session.notices:
+                self._emit('warning', text)
+            self.session.notices.clear()
         if ev.kind == 'error' and self.context.ok():
             self.publish_diagnostics()
         return ev

@@ -384,6 +384,33 @@ def odometry_state(msg, frame='ned'):
     return t_sec, _state(pos, quat, lin, ang)
 
 
+_POSE_DIAG = (0, 7, 14, 21, 28, 35)   # row-major 6x6 diagonal
+
+
+def odometry_variances(msg, frame='ned'):
+    """The 12 variances an Odometry states for ``[u v w p q r x y z phi theta psi]``.
+
+    The diagonals of twist.covariance (u v w p q r) and pose.covariance (x y z, and the
+    rotation block read as phi theta psi), in NED/FRD order: for 'enu' x and y swap (variances
+    do not change sign). Entries are returned as found (0, -1 or NaN mean 'not stated'); a
+    message without covariance arrays of 36 entries gives all NaN.
+    """
+    _check_frame(frame)
+    out = np.full(12, np.nan)
+    try:
+        tcov = msg.twist.covariance
+        pcov = msg.pose.covariance
+        if len(tcov) == 36 and len(pcov) == 36:
+            out[0:6] = [float(tcov[i]) for i in _POSE_DIAG]
+            pose = [float(pcov[i]) for i in _POSE_DIAG]
+            if frame == 'enu':
+                pose[0], pose[1] = pose[1], pose[0]
+            out[6:12] = pose
+    except (AttributeError, TypeError, ValueError):
+        pass
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # JointState
 

@@ -34,7 +34,7 @@ from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, D
 from auv_ident.core.filter import DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import Input, N_INPUT, N_STATE
+from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.core.vehicle import P_FIN, P_NMAX
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
@@ -43,11 +43,13 @@ from auv_ident.session.guard import (COV_BLOWUP_FACTOR, Event, GUARD_FACTOR, GUA
                                      GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
                                      LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
 from auv_ident.session.messages import (_as_vector, ConversionError, joint_state_to_actuators,
-                                        NS_PER_S, odometry_state, stamp_to_ns)
+                                        NS_PER_S, odometry_state, odometry_variances,
+                                        stamp_to_ns)
 from auv_ident.session.screening import (command_problem, frame_problem,
                                          implausible_states, nonfinite_states)
 from auv_ident.session.settings import (choice, coefficient_list, FRAMES, MASS_INVERSES,
-                                        noise_model, NOISE_MODES, ParameterError, positive,
+                                        max_command_age as command_age_limit, noise_model,
+                                        NOISE_MODES, NOISE_SOURCES, ParameterError, positive,
                                         relative_offset, timing, vehicle_named)
 
 # The records and the guard constants callers use come with the session.
@@ -55,7 +57,9 @@ __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
 
 # codes of StreamIdentifier outcomes for which an update was computed (fused or gated)
 _FUSED_CODES = frozenset(('', 'repaired', 'outlier'))
-MAX_COMMAND_AGE_S = 1.0     # s, a command in force older than this (at most max_gap) is stale
+# stamps from this on (~11.6 days after 1970) are wall-clock times: the session then counts
+# time from the whole second of the first stamp (IdentSession docstring)
+TIME_ORIGIN_MIN_NS = 10 ** 15
 
 
 class IdentSession:
@@ -87,18 +91,32 @@ class IdentSession:
     mass_inverse : one of settings.MASS_INVERSES ('default', 'exact', 'mss_literal')
     warm_start : '' or an estimate JSON path (start from its estimate and covariance)
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
+    max_command_age : s, a command in force older than this makes the odometry 'stale command'
+        (None or 0, the default: no limit, a held command stays in force: drivers that publish
+        only on change send nothing while a fin is held)
+    noise_source : 'message' (default): the Odometry covariance diagonals are the measurement
+        variances of each message where they are finite and positive, noise_std for the other
+        channels (one notice names them); 'parameter': noise_std always
+
+    Time: stamps are integer ns; the session works in seconds since a time origin, the whole
+    second of the first stamp when stamps are wall-clock times (>= TIME_ORIGIN_MIN_NS), else 0,
+    so that float seconds keep the stamps' ns resolution (an epoch-scale float second resolves
+    only ~0.2 us). A zero stamp after stamps on a wall-clock origin is rejected as
+    'zero stamp' (an unset header.stamp).
     """
 
     def __init__(self, vehicle='nps_auv2', coefficients=(), initial=(), initial_offset=0.5,
                  noise_mode='fixed', tau=10.0, lam=2e-3, noise_std=None, q_state=None,
                  p0_rel=1.0, q_theta_rel=1e-5, measured=(), frame='ned', sample_time=0.05,
                  max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
-                 max_bridge=None):
+                 max_bridge=None, max_command_age=None, noise_source='message'):
         self.vehicle = vehicle_named(vehicle)
         self.frame = choice('frame', frame, FRAMES)
         choice('mass_inverse', mass_inverse, MASS_INVERSES)
         choice('noise_mode', noise_mode, NOISE_MODES)
         T, max_gap, self.max_bridge = timing(sample_time, max_gap, max_bridge)
+        self.max_command_age = command_age_limit(max_command_age, max_gap)
+        self.noise_source = choice('noise_source', noise_source, NOISE_SOURCES)
         tau, lam, p0_rel = (positive(name, v) for name, v in
                             (('tau', tau), ('lam', lam), ('p0_rel', p0_rel)))
         q_theta_rel = positive('q_theta_rel', q_theta_rel, allow_zero=True)
@@ -126,6 +144,12 @@ class IdentSession:
         self.keep_arrays = keep_arrays
         self.commands = []          # (t, u6) in arrival order, if keep_arrays
         self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
+        self.variances = []         # (12,) R diagonal used by each accepted update, if kept
+        self.time_origin_ns = None  # stamps are taken relative to this (class docstring)
+        self.notices = []           # one-time notes for the caller to log (then clear)
+        self._fallback_noted = set()
+        self.noise_default = np.asarray(noise, dtype=float) ** 2    # R diagonal of noise_std
+        self._R_now = self.noise_default.copy()
         self.guard_on = noise_mode != 'paper'   # the divergence guard (session/guard.py)
         self.gate = innovation_gate() if self.guard_on else None
         try:
@@ -166,8 +190,7 @@ class IdentSession:
         """A fresh StreamIdentifier: from the start-up configuration, or (start_from, a
         LastGood) from that estimate with its covariance times RESET_COV_INFLATION."""
         s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap, gate=self.gate,
-                             max_bridge=self.max_bridge,
-                             max_command_age=min(MAX_COMMAND_AGE_S, self.max_gap))
+                             max_bridge=self.max_bridge, max_command_age=self.max_command_age)
         if start_from is not None:
             s.ekf.set_prior(start_from.estimate,
                             RESET_COV_INFLATION * np.asarray(start_from.cov, float))
@@ -269,7 +292,7 @@ class IdentSession:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
         return self._command(stamp_ns, u6)
 
-    def add_odometry(self, stamp_ns, x12, frame_id='', child_frame_id=''):
+    def add_odometry(self, stamp_ns, x12, frame_id='', child_frame_id='', variances=None):
         """Fuse an odometry sample. Returns an Event.
 
         stamp_ns : int, header stamp (ns)
@@ -277,8 +300,9 @@ class IdentSession:
             as :func:`auv_ident.session.messages.odometry_to_state` returns it; only the
             measured channels are read (the rest may be NaN); copied
         frame_id, child_frame_id : the message's frame ids, for the frame-id rule ('': none)
-
-        The message covariances are not taken: ``noise_std`` is the noise model.
+        variances : (12,) the variances the message states for x12's channels (state units
+            squared; :func:`auv_ident.session.messages.odometry_variances`), or None; used with
+            noise_source 'message' where finite and positive
         """
         try:
             stamp_ns = _integer_stamp(stamp_ns)
@@ -288,7 +312,12 @@ class IdentSession:
             x12 = _as_vector(x12, N_STATE, 'x12').copy()
         except ConversionError as err:
             return self._reject('odom', 'conversion', str(err), stamp_ns)
-        return self._odometry(stamp_ns, x12, str(frame_id), str(child_frame_id))
+        if variances is not None:
+            try:
+                variances = _as_vector(variances, N_STATE, 'variances')
+            except ConversionError as err:
+                return self._reject('odom', 'conversion', str(err), stamp_ns)
+        return self._odometry(stamp_ns, x12, str(frame_id), str(child_frame_id), variances)
 
     # -- the message adapters --
 
@@ -308,8 +337,10 @@ class IdentSession:
             _, x12 = odometry_state(msg, self.frame)
         except ConversionError as err:
             return self._reject('odom', 'conversion', str(err), stamp_ns)
+        variances = (odometry_variances(msg, self.frame) if self.noise_source == 'message'
+                     else None)
         return self._odometry(stamp_ns, x12, str(getattr(msg.header, 'frame_id', '')),
-                              str(getattr(msg, 'child_frame_id', '')))
+                              str(getattr(msg, 'child_frame_id', '')), variances)
 
     # -- what one message does --
 
@@ -319,13 +350,57 @@ class IdentSession:
         else:
             self.cmd_rejected += 1
             if stamp_ns is not None and code != 'zero stamp':
-                self.stream.command_rejected(stamp_ns / NS_PER_S)
+                self.stream.command_rejected(self._time(stamp_ns))
         self.reasons[f'{what}: {code}'] += 1
         return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
+    def _time(self, stamp_ns):
+        """A stamp (int ns) in seconds on the session's time line (class docstring)."""
+        origin = self.time_origin_ns
+        if origin is None:
+            origin = (stamp_ns // NS_PER_S) * NS_PER_S if stamp_ns >= TIME_ORIGIN_MIN_NS else 0
+            self.time_origin_ns = origin
+        return (stamp_ns - origin) / NS_PER_S
+
+    def _zero_stamp(self, what, stamp_ns):
+        """The rejection of an unset stamp on a wall-clock time line, else None."""
+        if stamp_ns == 0 and self.time_origin_ns:
+            return self._reject(what, 'zero stamp', f'zero stamp after stamps from '
+                                f'{self.time_origin_ns / NS_PER_S:.0f} s on (header.stamp '
+                                'not set?)', stamp_ns)
+        return None
+
+    def _measurement_variances(self, variances):
+        """The R diagonal for this message (noise_source 'message'): the message's variances
+        where finite and positive, noise_std's elsewhere (noted once per channel)."""
+        ok = np.isfinite(variances) & (variances > 0.0)
+        missing = [STATE_NAMES[i] for i in self._measured_states
+                   if not ok[i] and i not in self._fallback_noted]
+        if missing:
+            self._fallback_noted.update(STATE_NAMES.index(n) for n in missing)
+            self.notices.append('odom: the message states no usable covariance (zero, -1 or '
+                                f'not finite) for {", ".join(missing)}: noise_std used for '
+                                'them (noise_source message)')
+        return np.where(ok, variances, self.noise_default)
+
+    def _use_variances(self, f, r):
+        """Make r the measurement noise of filter f (fixed mode: R; adaptive modes: R0, the
+        reference the adaptation starts from and is bounded by), and of its start-up
+        covariance."""
+        if f is getattr(self, '_R_filter', None) and np.array_equal(r, self._R_now):
+            return
+        if self.cfg.mode == 'fixed':
+            np.fill_diagonal(f.R, r)
+        np.fill_diagonal(f.R0, r)
+        f.noise_std = np.sqrt(r)
+        self._R_filter, self._R_now = f, r
+
     def _command(self, stamp_ns, u6):
         """add_command after reading: stamp_ns int, u6 a (6,) float array of our own."""
-        t = stamp_ns / NS_PER_S
+        zero = self._zero_stamp('actuators', stamp_ns)
+        if zero is not None:
+            return zero
+        t = self._time(stamp_ns)
         problem = command_problem(u6.tolist(), t, self.fin_limit, self.shaft_limit)
         if problem is not None:
             return self._reject('actuators', problem[0], problem[1], stamp_ns)
@@ -337,9 +412,12 @@ class IdentSession:
         self.cmd_accepted += 1
         return Event('command', '', stamp_ns)
 
-    def _odometry(self, stamp_ns, x12, frame_id, child_frame_id):
+    def _odometry(self, stamp_ns, x12, frame_id, child_frame_id, variances=None):
         """add_odometry after reading: stamp_ns int, x12 a (12,) float array of our own."""
-        t = stamp_ns / NS_PER_S
+        zero = self._zero_stamp('odom', stamp_ns)
+        if zero is not None:
+            return zero
+        t = self._time(stamp_ns)
         problem = frame_problem(frame_id, child_frame_id, self.frame, self._frame_ids)
         if problem is not None:
             return self._reject('odom', problem[0], f'{problem[1]} at {t:.9f} s', stamp_ns)
@@ -354,6 +432,10 @@ class IdentSession:
         y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
         stream = self.stream
         f = stream.ekf
+        r = None
+        if variances is not None:
+            r = self._measurement_variances(variances)
+            self._use_variances(f, r)
         try:
             out = stream.add_measurement(t, y)
             if out.accepted:
@@ -384,6 +466,7 @@ class IdentSession:
             self._since_error += 1
         if self.keep_arrays:
             self.measurements.append((t, y))
+            self.variances.append(self.noise_default if r is None else r)
         if sustained:
             return self._guard_reset(t, stamp_ns)
         if (self._after_reset and len(window) >= GUARD_WINDOW

@@ -20,13 +20,15 @@ from auv_ident.vehicles import load_vehicle
 
 NOISE_MODES = tuple(MODES)
 MASS_INVERSES = ('default', 'exact', 'mss_literal')
+NOISE_SOURCES = ('message', 'parameter')   # where R comes from (IdentSession noise_source)
 
 MAX_SAMPLE_TIME = 1.0   # s: one RK4 step of the model over a longer one is not faithful
 MAX_SUBSTEPS = 20000    # max_gap / sample_time: the longest bridge of one gap
 MAX_BRIDGE_S = 0.25     # s, default max_bridge: longest gap bridged by time updates
 
 __all__ = ['choice', 'coefficient_list', 'FRAMES', 'MASS_INVERSES', 'MAX_BRIDGE_S',
-           'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'measured_mask', 'noise_model', 'NOISE_MODES',
+           'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'max_command_age', 'measured_mask', 'noise_model', 'NOISE_MODES',
+           'NOISE_SOURCES',
            'number', 'ParameterError', 'positive', 'relative_offset', 'sigmas', 'timing',
            'vector', 'vehicle_named']
 
@@ -116,6 +118,18 @@ def timing(sample_time, max_gap, max_bridge):
                                         f'times ({T!r} s): one gap would take that many time '
                                         'updates')
     return T, gap, min(max(bridge, T), gap)
+
+
+def max_command_age(value, max_gap):
+    """The command staleness limit in s, or None (no limit: a held command is in force however
+    old it is). None, 0 or a negative value mean no limit; a positive one is at most max_gap."""
+    if value is None:
+        return None
+    v = number('max_command_age', value)
+    if not math.isfinite(v):
+        raise ParameterError('max_command_age', f'{value!r} must be a finite number of s '
+                                                '(0 or less: no limit)')
+    return None if v <= 0.0 else min(v, max_gap)
 
 
 def noise_model(noise_std, q_state, measured, noise_default, q_default):
