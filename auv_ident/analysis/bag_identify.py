@@ -7,8 +7,9 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.batch import Result, refine
+from auv_ident.core.batch import Result
 from auv_ident.core.model import Model
+from auv_ident.core.noise_fit import identify_with_noise_model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import N_STATE
 from auv_ident.core.timing import with_command_changes
@@ -62,13 +63,17 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     if rr.accepted < 2:
         raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
                        f'(rejected: {dict(rr.reasons)})')
-    est, cov = rr.estimate, rr.cov
-    if refine_pass:
-        t, Y, U = _exact_hold(rr)
-        cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise)
-        est, cov, _ = refine(model, cfg, t, Y, U, rr.estimate, T=rr.T, progress=progress)
+    # the noise model from the data (core/noise_fit.py): with the configured noise right, the
+    # EKF pass is the replay's (the live node's) and the refinement starts from it
+    t, Y, U = _exact_hold(rr)
+    cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise,
+                         initial_offset=initial_offset)
+    ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
+        model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
+        ekf_pass=(rr.estimate, rr.cov))
     res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-                 ekf_estimate=rr.estimate, ekf_std=rr.std, initial=rr.initial, truth=truth,
+                 ekf_estimate=ekf_est, ekf_std=np.sqrt(np.diag(ekf_cov)), initial=rr.initial,
+                 truth=truth,
                  steps=rr.accepted, wall_s=time.perf_counter() - t0,
                  mean_nis_per_dof=rr.mean_nis_per_dof, refined=refine_pass)
     head = (f'{v.title}: identified {", ".join(rr.names)} from bag {path} '
@@ -84,6 +89,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                                   'noise_mode': noise_mode, 'noise_source': noise_source,
                                   'noise_std': [float(x) for x in noise],
                                   'time_origin_ns': rr.time_origin_ns,
+                                  'noise_model': fit.document(),
                                   'rejection_reasons': dict(rr.reasons)})
     table = (head + '\n' + ex.result_table(v, res) + f'\n{res.steps} EKF steps, mean NIS/dof '
              f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')

@@ -131,11 +131,16 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
 
 
 def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
-           max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None):
+           max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
     """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p,).
 
     t, Y, U, max_step, max_bridge as for run_ekf; T (s) the nominal sample time (None: the
-    median interval of t). Returns (theta, cov, cost per residual)."""
+    median interval of t). Returns (theta, cov, cost per residual), and with details=True a
+    fourth item, a dict: 'J' (N * 12, p) the Jacobian of the whitened innovations with respect
+    to theta, 'white' (N, 12) those innovations at the solution (NaN: no measurement),
+    'converged' (bool), 'message' (the optimiser's), 'nfev'. cov is (J^T J)^-1 times the cost
+    per residual when that exceeds 1 (the white-noise covariance; core/uncertainty.py has the
+    one for coloured residuals)."""
     t, Y, U = _record(t, Y, U)
     T = nominal_sample_time(t) if T is None else T
     p = model.p
@@ -174,7 +179,11 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
     except np.linalg.LinAlgError:
         raise DivergenceError('batch refinement: the coefficients are not identifiable from '
                               'this run (singular information matrix)') from None
-    return sol.x * scale, cov, s2
+    if not details:
+        return sol.x * scale, cov, s2
+    residuals(sol.x)            # the innovations at the solution (the last call may differ)
+    return sol.x * scale, cov, s2, {'J': J, 'white': white.copy(), 'converged': sol.status > 0,
+                                    'message': sol.message, 'nfev': sol.nfev}
 
 
 def identify(model, t, Y, U, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
