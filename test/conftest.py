@@ -1,4 +1,12 @@
-"""Test-run isolation for every test that may start a ROS node.
+"""Test-run isolation for every test that may start a ROS node, and the shared helpers' path.
+
+The tests live in folders that mirror the package (core/, session/, ros/, bags/, analysis/;
+test_layering.py, which checks the whole package, at the top). The shared helpers stay here in
+test/ (conftest.py, helpers.py, ros_pub_helper.py, independent_data.py) and are imported by
+plain name (`from helpers import ...`): pytest's default prepend import mode puts each test
+file's own folder on sys.path, so this file puts test/ there too, for every folder. The folders
+have no __init__.py (test/ as a package would be named `test`, the standard library's test
+package), so every test file's basename must be unique across the folders.
 
 DDS stays on loopback: each pytest run gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own
 ROS_DOMAIN_ID (1-101) and its own ROS_LOG_DIR, set here before any test imports rclpy, and
@@ -13,6 +21,10 @@ import sys
 import tempfile
 
 import pytest
+
+TEST_DIR = os.path.dirname(os.path.abspath(__file__))
+if TEST_DIR not in sys.path:
+    sys.path.insert(0, TEST_DIR)
 
 _LOG_DIR = tempfile.mkdtemp(prefix='auv_ident_roslog_')
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

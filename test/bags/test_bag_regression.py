@@ -5,8 +5,9 @@ import os
 import numpy as np
 
 from auv_ident.analysis.bag_identify import identify_bag
+from helpers import REPO
 
-BAG = os.path.join(os.path.dirname(__file__), '..', 'bags', 'nps_auv2_ident')
+BAG = os.path.join(REPO, 'bags', 'nps_auv2_ident')
 # python -m auv_ident identify --bag bags/nps_auv2_ident --json out.json  (2026-11-22)
 EXPECTED = {'Z_ds': -0.0729665, 'Z_q': -0.139586, 'Z_w': -0.300093, 'M_ds': -0.0410185,
             'K_v': 0.00307345}

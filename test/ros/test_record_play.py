@@ -37,7 +37,7 @@ import ros_pub_helper
 from conftest import require_loopback_dds
 from helpers import assert_msg_equal
 
-HELPER = Path(__file__).with_name('ros_pub_helper.py')
+HELPER = Path(ros_pub_helper.__file__)
 N = 60            # samples the helper publishes (x 3 topics)
 PUB_RATE = 100.0  # samples per second
 TOPICS = ('/odom', '/actuators', '/clock')

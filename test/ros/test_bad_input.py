@@ -53,9 +53,8 @@ from auv_ident.bags.replay import replay_bag, ReplayWarnings
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, TOPIC_TYPES, write_run_bag
 from auv_ident.ros.sim_messages import sample_messages
-from helpers import spawn_node, stop_process, write_rclpy
+from helpers import REPO, spawn_node, stop_process, write_rclpy
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATION = 30.0
 T = 0.05
 SEG = (200, 240)          # bad segment: samples 200..239 (t = 10.0 .. 11.95 s)

@@ -13,8 +13,9 @@ import sys
 import pytest
 
 from conftest import require_loopback_dds
+import helpers
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(helpers.REPO)
 VENV_BIN = Path(sys.executable).parent
 PKG = 'auv_ident'
 EXECUTABLES = ('simulator', 'identifier', 'record', 'play')

@@ -35,9 +35,10 @@ from auv_ident.core.simulate import simulate
 from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.session.messages import sec_to_ns
 from auv_ident.vehicles import load_vehicle
+import helpers
 from helpers import assert_msg_equal
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(helpers.REPO)
 FOREIGN = Path(os.environ.get('AUV_IDENT_FOREIGN_BAGS', '/work/shared/foreign_bags'))
 FOREIGN_BAGS = ('bag_with_topics_and_service_events', 'cdr_test', 'rewriter_b', 'talker',
                 'test_bag_for_seek', 'test_bag_mcap', 'wbag')

@@ -25,7 +25,6 @@ from auv_ident.core.model import Model
 from auv_ident.vehicles import load_vehicle
 from helpers import spawn_node, stop_process
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DURATION = 40.0
 RATE = 20.0
 N_SAMPLES = int(round(DURATION * RATE)) + 1

@@ -40,9 +40,9 @@ from auv_ident.bags.replay import replay_bag, replay_messages
 from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, bag_sample_messages, ODOM_TOPIC, TOPIC_TYPES,
                                     write_run_bag)
 from auv_ident.ros.sim_messages import sample_messages
-from helpers import write_rclpy
+from helpers import REPO, write_rclpy
 
-CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
+CONFIG = os.path.join(REPO, 'config')
 LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
