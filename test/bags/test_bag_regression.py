@@ -3,9 +3,12 @@ import json
 import os
 
 import numpy as np
+import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from helpers import REPO
+
+pytestmark = pytest.mark.slow     # a 600 s identification (EKF pass + refinement)
 
 BAG = os.path.join(REPO, 'bags', 'nps_auv2_ident')
 # python -m auv_ident identify --bag bags/nps_auv2_ident --json out.json  (2026-11-22)

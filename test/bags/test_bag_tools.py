@@ -272,15 +272,19 @@ def test_simulated_bag_starts_at_the_epoch_and_is_reproducible(sim_bag, run, tmp
 
 
 def test_replay_does_not_depend_on_the_epoch(run, tmp_path):
-    """The same run stamped from 0 and from 2024 identifies alike: the replay uses stamp
-    differences (float seconds at 2024 keep ~2e-7 s, so not bit for bit)."""
+    """The same run stamped from 0 and from 2024 identifies bit for bit: the replay's time line
+    starts at a time origin (0 for stamps near 0, the first stamp's whole second for wall-clock
+    stamps), so its float seconds are the same small numbers for both."""
     from auv_ident.bags.replay import replay_bag
     at_zero = replay_bag(write_run_bag(run, tmp_path / 'zero', epoch_ns=0), warn=False)
     at_epoch = replay_bag(write_run_bag(run, tmp_path / 'epoch'), warn=False)
     assert at_zero.accepted == at_epoch.accepted == len(run.t) and at_epoch.rejected == 0
     assert [u[0] - SIM_EPOCH_NS for u in at_epoch.updates] == [u[0] for u in at_zero.updates]
-    assert np.all(np.abs(at_epoch.estimate - at_zero.estimate) < 0.05 * at_zero.std)
-    np.testing.assert_allclose(at_epoch.t - SIM_EPOCH_NS / 1e9, at_zero.t, atol=1e-6)
+    assert at_zero.time_origin_ns == 0 and at_epoch.time_origin_ns == SIM_EPOCH_NS
+    assert np.array_equal(at_epoch.t, at_zero.t) and np.array_equal(at_epoch.t_cmd, at_zero.t_cmd)
+    np.testing.assert_allclose(at_zero.t, run.t, rtol=0, atol=1e-9)
+    assert np.array_equal(at_epoch.estimate, at_zero.estimate)
+    assert np.array_equal(at_epoch.cov, at_zero.cov)
 
 
 # --- repair ------------------------------------------------------------------------------------

@@ -389,6 +389,7 @@ _RUN = ('import sys\n'
         'print(f(1), sum(f.stats.cache_hits.values()))\n')
 
 
+@pytest.mark.slow      # six fresh processes, each compiling with numba
 def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_path):
     """End to end in fresh processes: numba alone keeps running a cached caller with its old
     callee after an edit of the callee's file (the problem); with the file pair registered as a

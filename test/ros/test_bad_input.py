@@ -849,6 +849,7 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
     (['-p', 'noise_std:=[0.01,0.01,0.01,0.001,0.001,0.001,0.5,0.5,0.05,0.002,0.002,-0.005]'],
      'noise_std'),
 ])
+@pytest.mark.slow
 def test_node_process_exits_2_with_one_line_on_an_absurd_parameter(args, name, ros_env,
                                                                    tmp_path):
     proc = spawn_node('identifier', args, ros_env, str(tmp_path))
@@ -862,6 +863,7 @@ def test_node_process_exits_2_with_one_line_on_an_absurd_parameter(args, name, r
     assert 'Traceback' not in err
 
 
+@pytest.mark.slow
 def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_path):
     """A real identifier process over DDS: good data, then NaN odometry, degrees on the fins,
     duplicate stamps, an absurd burst, then good data; SIGTERM. Each problem is one named
@@ -949,6 +951,7 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
 # --- legitimate data are untouched; persistence ------------------------------------------------
 
 
+@pytest.mark.slow      # replays the 600 s shipped bag
 def test_legitimate_data_pass_untouched():
     """The rules reject nothing legitimate: the shipped bag and simulated runs of the three
     vehicles (200 Hz, ENU, process noise, matching noise mode) give 0 rejections, 0 outliers,

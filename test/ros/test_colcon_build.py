@@ -15,6 +15,8 @@ import pytest
 from conftest import require_loopback_dds
 import helpers
 
+pytestmark = pytest.mark.slow     # a colcon build and the installed executables
+
 REPO = Path(helpers.REPO)
 VENV_BIN = Path(sys.executable).parent
 PKG = 'auv_ident'

@@ -11,9 +11,12 @@ update and warm-start a later session.
 import math
 
 import numpy as np
+import pytest
 
 from auv_ident.ros.loadtest import format_loadtest, run_loadtest
 from auv_ident.session.session import IdentSession
+
+pytestmark = pytest.mark.slow     # a real identifier process for ~40 s
 
 RATE_HZ = 200.0
 SIM_SECONDS = 120.0

@@ -25,6 +25,8 @@ from auv_ident.core.model import Model
 from auv_ident.vehicles import load_vehicle
 from helpers import spawn_node, stop_process
 
+pytestmark = pytest.mark.slow     # node processes over DDS
+
 DURATION = 40.0
 RATE = 20.0
 N_SAMPLES = int(round(DURATION * RATE)) + 1

@@ -37,6 +37,8 @@ import ros_pub_helper
 from conftest import require_loopback_dds
 from helpers import assert_msg_equal
 
+pytestmark = pytest.mark.slow     # record, play and publisher processes over DDS
+
 HELPER = Path(ros_pub_helper.__file__)
 N = 60            # samples the helper publishes (x 3 topics)
 PUB_RATE = 100.0  # samples per second
