@@ -5,6 +5,7 @@ import os
 import matplotlib.image
 import numpy as np
 import pytest
+import yaml
 
 from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
@@ -14,6 +15,7 @@ from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.experiments import load_source
 from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.report import make_report, validate
+from independent_data import DataConfig, generate
 
 FIGURES = ('convergence', 'validation_positions', 'validation_attitudes', 'validation_speeds',
            'nis', 'adapted_noise')
@@ -143,17 +145,27 @@ def test_validating_on_the_identification_manoeuvre_is_refused(nps, tmp_path):
     assert not os.listdir(tmp_path)
 
 
-def test_unknown_truth_validates_against_the_vehicle_file_prior(tmp_path, monkeypatch):
-    from auv_ident.analysis import experiments
-    src = load_source('nps_auv2', 'zigzag', seed=5, duration=30.0)
-    src.truth, src.maneuver, src.description = None, '', 'a bag with unknown truth'
-    monkeypatch.setattr(experiments, 'load_source', lambda **kw: src)
-    r = make_report(str(tmp_path), bag='unused.mcap', progress=False)
+def test_unknown_truth_validates_against_the_vehicle_file_prior(tmp_path):
+    """A bag whose metadata claims no simulated truth (the independent generator's: wall-clock
+    stamps, no auv_ident custom_data) goes through the real bag path (bag_source: replay, exact
+    hold) and is validated against the vehicle file's prior model."""
+    data = generate(DataConfig(seed=5, duration=30.0, odom_rate=20.0), tmp_path / 'gen')
+    meta = yaml.safe_load((data.bag / 'metadata.yaml').read_text())
+    assert not meta['rosbag2_bagfile_information'].get('custom_data')
+    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), validation_duration=40.0,
+                    progress=False)
     doc = r['result']
+    assert doc['source'] == f'bag {data.bag} ({len(data.odom_stamp_ns)} samples)'
+    assert doc['seed'] is None and doc['validation']['seed'] == 1000
     assert all(c['truth'] is None and c['error_pct'] is None
                for c in doc['coefficients'].values())
     assert doc['validation']['reference'].startswith("vehicle file's prior")
+    assert doc['validation']['error'] is None
     assert set(r['figures']) == set(FIGURES)
+    # the identification ran on the bag's data: near the generator's truth (the file values)
+    truth = json.loads(data.truth_json.read_text())['coefficients']
+    for n, c in doc['coefficients'].items():
+        assert abs(c['estimate'] - truth[n]) < 0.2 * abs(truth[n]), (n, c['estimate'], truth[n])
     with open(r['report'], encoding='utf-8') as fh:
         md = fh.read()
     assert "the 'true' model below is the vehicle file's prior model" in md
