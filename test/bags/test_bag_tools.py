@@ -7,6 +7,7 @@ from independent readers (mcap's own reader, mcap_ros2, rosbags) or from the met
 that rosbag2 wrote, never from our reader.
 """
 from collections import Counter
+import datetime
 import logging
 import os
 from pathlib import Path
@@ -239,6 +240,9 @@ def test_bag_builder_equals_the_rclpy_builder(run):
     for frame in ('ned', 'enu'):
         for k in (0, 17, len(run.t) - 1):
             live = sample_messages(run, k, frame)
+            # one message per topic from each builder (so the zips below compare them all)
+            assert sorted(t for t, _, _ in live) == sorted(TOPIC_TYPES)
+            assert len(list(bag_sample_messages(run, k, frame))) == len(TOPIC_TYPES)
             for (topic, t_ns, expected), (topic2, t2, actual) in zip(
                     live, bag_sample_messages(run, k, frame, epoch_ns=0)):
                 assert (topic, t_ns) == (topic2, t2)
@@ -254,7 +258,10 @@ def test_bag_builder_equals_the_rclpy_builder(run):
 
 
 def test_simulated_bag_starts_at_the_epoch_and_is_reproducible(sim_bag, run, tmp_path):
-    assert SIM_EPOCH_NS == 1704067200 * 10**9 and SIM_EPOCH == '2024-01-01T00:00:00Z'
+    # the two spellings of the epoch agree (the metadata stores both)
+    epoch = datetime.datetime.fromisoformat(SIM_EPOCH.replace('Z', '+00:00'))
+    assert epoch.utcoffset() == datetime.timedelta(0)
+    assert int(epoch.timestamp()) * 10**9 == SIM_EPOCH_NS
     meta = yaml.safe_load((sim_bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert meta['starting_time'] == {'nanoseconds_since_epoch': SIM_EPOCH_NS}
     assert meta['custom_data']['auv_ident.stamp_epoch_ns'] == str(SIM_EPOCH_NS)

@@ -184,7 +184,9 @@ def test_added_mass_identification_needs_exact_inverse():
     v = load_vehicle('nps_auv2')
     with pytest.raises(ConfigError, match='mass-inverse exact'):
         Model(v, ['Z_wdot'])
-    Model(v, ['Z_wdot'], mass_inverse='exact')
+    m = Model(v, ['Z_wdot'], mass_inverse='exact')
+    assert m.theta_names == ['Z_wdot'] and m.mass_inverse == 'exact'
+    assert m.theta_true.tolist() == [v.coefficients[v.index('Z_wdot')].value] == [-0.24]
 
 
 def test_importing_the_core_does_not_import_rclpy():

@@ -170,6 +170,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
                 assert conn.msgtype == 'sensor_msgs/msg/JointState'
                 msg = deserialize_message(bytes(raw), JointState)
             got[conn.topic].append(msg)
+    assert {t: len(v) for t, v in got.items()} == {t: N for t in TOPICS}
     for j, topic in enumerate(TOPICS):
         for k, msg in enumerate(got[topic]):
             assert_msg_equal(samples[k][j][1], msg, f'AnyReader {topic}[{k}]')

@@ -300,13 +300,18 @@ def test_nis_band_brackets_one_and_narrows_with_dof():
 
 
 def test_choice_lists_are_defined_once():
+    """The session's choice lists are the core's, and every choice takes effect."""
     assert NOISE_MODES == tuple(MODES)
-    assert FRAMES == ('ned', 'enu')
-    assert MASS_INVERSES == ('default', 'exact', 'mss_literal')
     for mode in NOISE_MODES:
         assert IdentSession(noise_mode=mode).cfg.mode == mode
-    for mi in ('default', 'exact'):
-        IdentSession(mass_inverse=mi)
+    for frame in FRAMES:
+        assert IdentSession(frame=frame).frame == frame
+    file_choice = load_vehicle('nps_auv2').mass_inverse     # what 'default' means for it
+    assert file_choice in MASS_INVERSES and file_choice != 'default'
+    for mi in MASS_INVERSES:
+        model = IdentSession(mass_inverse=mi).model
+        assert model.mass_inverse == (file_choice if mi == 'default' else mi)
+        assert model.mass_inverse == Model(load_vehicle('nps_auv2'), mass_inverse=mi).mass_inverse
 
 
 BAD_SETTINGS = [
