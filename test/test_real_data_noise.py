@@ -72,3 +72,20 @@ def test_diagnosis_rules():
     assert bad['messages'][0].startswith('NOT consistent: the model is inadequate: the v '
                                          'residuals follow delta_r')
     assert bad['checks']['residual_input_correlation']['lag_s'] == pytest.approx(2.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('vehicle,seed,level,tau', [('remus100', 1, 2.0, 1.0),
+                                                     ('isimi', 3, 2.0, 1.0)])
+def test_the_other_vehicles_get_honest_bars_on_coloured_noise(tmp_path, vehicle, seed, level,
+                                                               tau):
+    """REMUS 100 and the ISIMI reconstruction, their default sets, 1500 rpm, fins within their
+    +-13.6 deg: coloured noise of an unstated level gives honest bars, consistent."""
+    cfg = DataConfig(vehicle=vehicle, seed=seed, odom_rate=20.0, rpm=1500.0, noise='ar1',
+                     noise_level=level, noise_tau=tau, rudder_deg=13.0)
+    data = generate(cfg, tmp_path / vehicle)
+    doc, _ = identify_bag(data.bag, vehicle=vehicle)
+    assert doc['diagnosis']['consistent'] is True
+    for which, std in (('estimate', 'std'), ('ekf_estimate', 'ekf_std')):
+        z, err = _z_and_err(doc, data.truth_json, which, std)
+        assert np.all(z < 3.0) and np.all(err < 3.0), (which, z, err)
