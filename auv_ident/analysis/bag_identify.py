@@ -8,6 +8,7 @@ from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
 from auv_ident.core.batch import Result
+from auv_ident.core.diagnosis import assess
 from auv_ident.core.model import Model
 from auv_ident.core.noise_fit import identify_with_noise_model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
@@ -71,6 +72,8 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
         model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
         ekf_pass=(rr.estimate, rr.cov))
+    verdicts, diagnosis = assess(v, rr.names, est, cov, fit, U, rr.T, rr.mean_nis_per_dof,
+                                 refined=refine_pass)
     res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
                  ekf_estimate=ekf_est, ekf_std=np.sqrt(np.diag(ekf_cov)), initial=rr.initial,
                  truth=truth,
@@ -90,9 +93,12 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                                   'noise_std': [float(x) for x in noise],
                                   'time_origin_ns': rr.time_origin_ns,
                                   'noise_model': fit.document(),
+                                  'diagnosis': diagnosis, 'identifiability': verdicts,
                                   'rejection_reasons': dict(rr.reasons)})
+    head = diagnosis['messages'][0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res) + f'\n{res.steps} EKF steps, mean NIS/dof '
-             f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')
+             f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
+             + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
     return doc, table
 
 

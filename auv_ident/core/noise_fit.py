@@ -66,6 +66,8 @@ class NoiseFit:
     refine_converged: bool = True
     refine_message: str = ''
     notes: list = field(default_factory=list)
+    white: np.ndarray = None        # (N, 12) whitened innovations at the refined solution
+    jacobian: np.ndarray = None     # (N * 12, p) their Jacobian w.r.t. the coefficients
 
     def document(self):
         """JSON-ready dict (the result's `noise_model`)."""
@@ -141,6 +143,7 @@ def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max
     est, cov, _, info = refine(model, cfg_eff, t, Y, U, ekf_est, T=T, max_step=max_step,
                                max_bridge=max_bridge, progress=progress, details=True)
     fit.refine_converged = bool(info['converged'])
+    fit.white, fit.jacobian = info['white'], info['J']
     fit.refine_message = str(info['message'])
     try:
         sand, sinfo = sandwich_covariance(info['J'], info['white'])

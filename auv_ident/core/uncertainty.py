@@ -242,3 +242,66 @@ def identifiability(J, estimate, names, cov=None):
         out[name] = {'crb_std': float(sd[i]), 'rel_std': rel, 'max_correlation': c_max,
                      'correlated_with': partner, 'verdict': verdict}
     return out
+
+
+def input_correlation(white, U, max_lag, names=None, input_names=None):
+    """Cross-correlation of the residuals with the inputs: does the model leave out something
+    the inputs drive? (the residual test of system identification, e.g. MATLAB's `resid`).
+
+    For every measured channel j and every input i that varies, r_ji(l) = corr(white_j[k],
+    U_i[k - l]) for l = 0..max_lag, standardised by Bartlett's large-sample variance
+    var r(l) ~ (1/n) sum_m rho_jj(m) rho_ii(m), which accounts for the autocorrelation of both
+    (coloured sensor noise does not correlate with the inputs, however slow it is; a missing or
+    wrong term does).
+
+    Parameters
+    ----------
+    white : (N, m) residuals (NaN = missing); U : (N, q) inputs on the same samples
+    max_lag : largest lag (samples) of the input before the residual
+
+    Returns
+    -------
+    list of (z, channel name, input name, lag) sorted by |z|, largest first: z = r / sd(r)
+    """
+    white = np.asarray(white, dtype=float)
+    U = np.asarray(U, dtype=float)
+    n, m = white.shape
+    names = list(names) if names is not None else [f'c{j}' for j in range(m)]
+    input_names = (list(input_names) if input_names is not None
+                   else [f'u{i}' for i in range(U.shape[1])])
+    out = []
+    acf_lags = max(max_lag, LJUNG_BOX_LAGS) * 4
+    acf_u = {}
+    for i in range(U.shape[1]):
+        ui = U[:, i]
+        if np.nanstd(ui) <= 0:
+            continue
+        acf_u[i] = autocorrelation(ui, acf_lags)
+    for j in range(m):
+        x = white[:, j]
+        ok = np.isfinite(x)
+        if ok.sum() < 10 * max(1, max_lag):
+            continue
+        acf_x = autocorrelation(x, acf_lags)
+        z_x = np.where(ok, x - x[ok].mean(), 0.0)
+        sx = math.sqrt(float(np.mean(z_x[ok] ** 2)))
+        if sx <= 0:
+            continue
+        for i, acf_ui in acf_u.items():
+            ui = U[:, i]
+            good = ok & np.isfinite(ui)
+            zu = np.where(good, ui - ui[good].mean(), 0.0)
+            su = math.sqrt(float(np.mean(zu[good] ** 2)))
+            if su <= 0:
+                continue
+            cnt = int(good.sum())
+            band = np.nan_to_num(acf_x) * np.nan_to_num(acf_u[i])
+            var = (1.0 + 2.0 * float(np.sum(band[1:]))) / cnt
+            sd = math.sqrt(max(var, 1.0 / cnt))
+            for lag in range(max_lag + 1):
+                a = z_x[lag:] * np.where(good[lag:], 1.0, 0.0)
+                b = zu[:n - lag] if lag else zu
+                r = float(np.dot(a, b)) / cnt / (sx * su)
+                out.append((r / sd, names[j], input_names[i], lag))
+    out.sort(key=lambda e: -abs(e[0]))
+    return out
