@@ -35,10 +35,11 @@ def test_irregular_stamps_dropouts_and_commands_on_change(tmp_path):
     truth within 3 sigma in >= 90 % of cases, error bars not inflated (median |err|/sigma >=
     0.25)."""
     errs, zs = [], []
-    for seed, rate in ((1, 5.0), (2, 10.0), (3, 20.0)):
+    # two bags per rate: errors within one bag move together, so the statistics need bags
+    for seed, rate in ((1, 5.0), (2, 10.0), (3, 20.0), (4, 5.0), (5, 10.0), (6, 20.0)):
         cfg = DataConfig(seed=seed, odom_rate=rate, odom_jitter=0.1, dropout=0.05,
                          commands='on_change')
-        data = generate(cfg, tmp_path / f'r{rate:g}')
+        data = generate(cfg, tmp_path / f'r{rate:g}_{seed}')
         doc, _ = identify_bag(data.bag, vehicle='nps_auv2', coefficients=','.join(PAPER_SET))
         assert doc['rejected'] == 0, doc['rejection_reasons']
         assert doc['steps'] == len(data.odom_stamp_ns)
