@@ -86,6 +86,8 @@ def actuators_to_joint_state(t_sec, u6):
     msg.name = list(JOINT_NAMES)
     msg.position = [float(v) for v in u[:5]] + [0.0]
     msg.velocity = [0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]
-    msg.effort = []
+    # zeros, not []: rclpy/Fast-CDR pads a message that ends with an empty float64 sequence
+    # and rosbags' strict reader then refuses every recorded command (ros_stack.md section 3)
+    msg.effort = [0.0] * len(msg.name)
     return msg
 

@@ -24,11 +24,7 @@ def sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=0):
     t = float(run.t[k])
     t_ns = int(epoch_ns) + sec_to_ns(t)
     pose_cov, twist_cov = noise_covariances(run.noise_std)
-    joints = actuators_to_joint_state(t, run.u[k])
-    if not len(joints.effort):
-        # An empty float64 sequence at the end is what rclpy pads and rosbags rejects (see
-        # bags.sim_bag.joint_state_msg); zeros keep these equal to the bag's messages.
-        joints.effort = [0.0] * len(joints.name)
+    joints = actuators_to_joint_state(t, run.u[k])     # effort zeros, as the bag's messages
     # the command first: a replay in log-time order then pairs the first odometry with it
     out = [(ACTUATOR_TOPIC, t_ns, joints),
            (ODOM_TOPIC, t_ns, state_to_odometry(t, run.y[k], frame, pose_cov, twist_cov))]

@@ -45,7 +45,8 @@ permutations, so the transforms are exact and their own inverses (T^-1 = T^T).
 
 JointState layout for actuator commands: ``name = JOINT_NAMES``; ``position`` = fin angles (rad),
 propeller entry 0.0 (meaningless); ``velocity = [0, 0, 0, 0, 0, shaft speed (rad/s)]``;
-``effort`` empty. Readers match joints by name, in any order.
+``effort`` zeros (an empty last float64 sequence makes rclpy's padding unreadable for rosbags'
+strict reader). Readers match joints by name, in any order.
 
 Non-finite values pass through unchanged: the caller decides (see :func:`is_finite_state`).
 Bad input raises :class:`ConversionError` naming the field.

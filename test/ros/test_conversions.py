@@ -295,7 +295,7 @@ def test_joint_state_layout_and_round_trip():
     assert list(msg.position) == [0.1, -0.2, 0.05, -0.03, 0.04, 0.0]
     assert list(msg.velocity)[:5] == [0.0] * 5
     assert math.isclose(msg.velocity[5], 1200.0 * 2 * math.pi / 60, rel_tol=1e-15)
-    assert len(msg.effort) == 0
+    assert list(msg.effort) == [0.0] * 6      # not empty: rosbags must read it strictly
     t, u2 = sm.joint_state_to_actuators(msg)
     assert t == 3.25
     np.testing.assert_allclose(u2, u6, rtol=1e-14, atol=0)
