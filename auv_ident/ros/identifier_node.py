@@ -101,6 +101,7 @@ import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
@@ -109,6 +110,7 @@ from auv_ident.core.ekf import MODES
 from auv_ident.core.identify import DEFAULT_Q_STATE
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import STATE_NAMES
+from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (declare_parameters, DIAGNOSTICS_QOS, LATCHED_QOS,
                                    optional_list, Param, run_node, spin, STREAM_QOS)
 from auv_ident.session.estimate_file import write_estimate_json
@@ -204,7 +206,10 @@ class IdentifierNode(Node):
                                                      DIAGNOSTICS_QOS)
         self.sub_actuators = self.create_subscription(JointState, 'actuators',
                                                       self.on_actuators, STREAM_QOS)
-        self.sub_odom = self.create_subscription(Odometry, 'odom', self.on_odom, STREAM_QOS)
+        # raw: the odometry is read from its CDR bytes into one reused view (ros/cdr.py)
+        self._odom_view = OdometryView()
+        self.sub_odom = self.create_subscription(Odometry, 'odom', self.on_odom_payload,
+                                                 STREAM_QOS, raw=True)
         self.srv_reset = self.create_service(Trigger, '~/reset', self.on_reset)
         self.srv_save = self.create_service(Trigger, '~/save', self.on_save)
         self.diagnostics_timer = self.create_timer(
@@ -279,6 +284,16 @@ class IdentifierNode(Node):
         if ev.kind == 'error' and self.context.ok():
             self.publish_diagnostics()
         return ev
+
+    def on_odom_payload(self, payload):
+        """The odom subscription's callback: serialized Odometry -> :meth:`on_odom`."""
+        if self._odom_view.read(payload):
+            return self.on_odom(self._odom_view)
+        try:    # not XCDR1 (another DDS, XCDR2): rclpy decodes it
+            msg = deserialize_message(payload, Odometry)
+        except Exception as err:                 # noqa: BLE001 - undecodable bytes
+            msg = UndecodableMessage(f'{type(err).__name__}: {err}')
+        return self.on_odom(msg)
 
     def publish_estimate(self, ev):
         """Publish ~/estimate and ~/covariance of an update Event (finite by construction:

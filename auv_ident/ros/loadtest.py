@@ -11,13 +11,23 @@ Figures:
   on SIGINT at the end); every message must be processed (accepted + rejected = published);
 - latency per message, end to end: from just before ``publish(odom)`` here to the arrival
   here of the ``~/estimate`` with that odometry's stamp (DDS to the identifier, its callback,
-  DDS back), p50 / p99 / max over the estimates received (~/estimate is KEEP_LAST depth 1, so
-  a few can be overwritten before they are read; the count is reported);
+  DDS back, our executor to our callback), p50 / p99 / max over the estimates received
+  (~/estimate is KEEP_LAST depth 1, so a few can be overwritten before they are read; the
+  count is reported). The estimates are received on rclpy's EventsExecutor, as the
+  identifier runs. With ``--split`` they are received with their MessageInfo instead (on the
+  SingleThreadedExecutor: Jazzy's EventsExecutor cannot pass it), and the same path is split
+  at the estimate's DDS timestamps (system clock): publish(odom) -> the identifier publishes
+  the estimate (source timestamp), -> DDS delivers it here (received timestamp), -> our
+  callback runs. The slower receiver adds to the end-to-end figure of such a run;
 - compute per message: the identifier's per-odometry work alone (IdentSession.on_odom, no
   ROS), timed in this process over the first compute_samples samples;
 - memory: resident set size (VmRSS of /proc/<pid>/status) of the identifier process, sampled
   every 0.25 s: at the first estimate (after start-up and warm-up), once 10 % of the samples
   are out ("start", steady state), at the end, and the maximum; growth = end - start.
+
+Publishing: every message is serialized before the clock starts, so the timed loop only
+publishes bytes (building messages would delay publishes and compete with our receiver for
+the GIL); the actuator command of sample k goes out just before its odometry.
 
 Pacing: sample k is published at k / (rate_hz * real_time_factor) s of wall time (0: as fast
 as possible), but never more than max_backlog samples ahead of the last estimate received,
@@ -76,6 +86,19 @@ def _rss_kb(pid):
     except (OSError, ValueError, IndexError):
         return None
     return None
+
+
+def _cpu_s(pid=None):
+    """CPU time (user + system, s) of process ``pid`` (None: this one), all threads."""
+    if pid is None:
+        t = os.times()
+        return t.user + t.system
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as fh:
+            fields = fh.read().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    except (OSError, ValueError, IndexError):
+        return math.nan
 
 
 def _percentiles(values_ms):
@@ -231,6 +254,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                                    + _tail(os.path.join(log_dir, 'identifier.err')))
             time.sleep(0.02)
         t_start = time.perf_counter()
+        cpu_start = (_cpu_s(proc.pid), _cpu_s())
         t_first_est = None
         k_steady = max(1, n // 10)
         rss_steady_t = None
@@ -273,6 +297,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                 break
             time.sleep(0.05)
         t_drained = time.perf_counter()
+        cpu_end = (_cpu_s(proc.pid), _cpu_s())
         time.sleep(2 * RSS_PERIOD_S)
         rss_end_t = time.perf_counter()
         proc.send_signal(signal.SIGINT)
@@ -325,6 +350,10 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
             'latency_ms': _percentiles(lat),
             'latency_parts_ms': {k: _percentiles(v) for k, v in parts.items()},
             'compute_ms': compute,
+            # CPU per sample while publishing and draining: a figure the other processes on
+            # the machine hardly disturb, unlike the latency tail
+            'cpu_us_per_sample': {'identifier': (cpu_end[0] - cpu_start[0]) / n * 1e6,
+                                  'loadtest': (cpu_end[1] - cpu_start[1]) / n * 1e6},
             'rss_mb': {'first_estimate': rss_at(t_first_est), 'start': steady, 'end': end,
                        'max': float(rss_mb.max()) if rss_mb.size else math.nan,
                        'growth': end - steady,
@@ -404,6 +433,11 @@ def format_loadtest(d):
         lines.append(f"compute per odometry message (IdentSession.on_odom, no ROS), ms: p50 "
                      f"{c['p50']:.3f}, p99 {c['p99']:.3f}, max {c['max']:.3f} "
                      f"(n = {c['n']})")
+    cpu = d.get('cpu_us_per_sample')
+    if cpu:
+        lines.append(f"CPU per sample (odometry + command, all threads), us: identifier "
+                     f"{cpu['identifier']:.0f}, this process (publisher + receiver) "
+                     f"{cpu['loadtest']:.0f}")
     lines.append(f"identifier RSS, MB: {rss['first_estimate']:.1f} at the first estimate, "
                  f"{rss['start']:.1f} at 10 % of the samples, {rss['end']:.1f} at the end, "
                  f"max {rss['max']:.1f}; growth {rss['growth']:+.2f} MB (max "
