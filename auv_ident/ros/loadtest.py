@@ -11,13 +11,23 @@ Figures:
   on SIGINT at the end); every message must be processed (accepted + rejected = published);
 - latency per message, end to end: from just before ``publish(odom)`` here to the arrival
   here of the ``~/estimate`` with that odometry's stamp (DDS to the identifier, its callback,
-  DDS back), p50 / p99 / max over the estimates received (~/estimate is KEEP_LAST depth 1, so
-  a few can be overwritten before they are read; the count is reported);
+  DDS back, our executor to our callback), p50 / p99 / max over the estimates received
+  (~/estimate is KEEP_LAST depth 1, so a few can be overwritten before they are read; the
+  count is reported). The estimates are received on rclpy's EventsExecutor, as the
+  identifier runs. With ``--split`` they are received with their MessageInfo instead (on the
+  SingleThreadedExecutor: Jazzy's EventsExecutor cannot pass it), and the same path is split
+  at the estimate's DDS timestamps (system clock): publish(odom) -> the identifier publishes
+  the estimate (source timestamp), -> DDS delivers it here (received timestamp), -> our
+  callback runs. The slower receiver adds to the end-to-end figure of such a run;
 - compute per message: the identifier's per-odometry work alone (IdentSession.on_odom, no
   ROS), timed in this process over the first compute_samples samples;
 - memory: resident set size (VmRSS of /proc/<pid>/status) of the identifier process, sampled
   every 0.25 s: at the first estimate (after start-up and warm-up), once 10 % of the samples
   are out ("start", steady state), at the end, and the maximum; growth = end - start.
+
+Publishing: every message is serialized before the clock starts, so the timed loop only
+publishes bytes (building messages would delay publishes and compete with our receiver for
+the GIL); the actuator command of sample k goes out just before its odometry.
 
 Pacing: sample k is published at k / (rate_hz * real_time_factor) s of wall time (0: as fast
 as possible), but never more than max_backlog samples ahead of the last estimate received,
@@ -44,6 +54,8 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RSS_PERIOD_S = 0.25
 ESTIMATE_TOPIC = '/identifier/estimate'
+PART_LABELS = {'to_estimate_publish': 'publish(odom) -> identifier publishes the estimate',
+               'estimate_transfer': 'DDS back', 'receiver': 'our executor to the callback'}
 
 
 def loopback_env(env=None):
@@ -76,6 +88,19 @@ def _rss_kb(pid):
     return None
 
 
+def _cpu_s(pid=None):
+    """CPU time (user + system, s) of process ``pid`` (None: this one), all threads."""
+    if pid is None:
+        t = os.times()
+        return t.user + t.system
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as fh:
+            fields = fh.read().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    except (OSError, ValueError, IndexError):
+        return math.nan
+
+
 def _percentiles(values_ms):
     a = np.asarray(values_ms, dtype=float)
     if a.size == 0:
@@ -104,13 +129,17 @@ def compute_latency(run, n_samples):
 
 def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle='nps_auv2',
                  seed=0, max_backlog=600, compute_samples=5000, env=None, log_dir=None,
-                 start_timeout=90.0, drain_timeout=60.0, progress=None):
+                 start_timeout=90.0, drain_timeout=60.0, progress=None, split=False,
+                 samples_path=None):
     """Run the load test (module docstring); returns a dict of figures (format_loadtest).
 
+    ``split``: receive the estimates with their MessageInfo, to split the latency at the DDS
+    timestamps (module docstring). ``samples_path``: write the per-message times there (.npz).
     Raises RuntimeError if the identifier does not start or dies."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.experimental import EventsExecutor
+    from rclpy.serialization import serialize_message
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import JointState
@@ -119,6 +148,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     from auv_ident.core.simulate import simulate
     from auv_ident.vehicles import load_vehicle
     from auv_ident.ros.sim_messages import sample_messages
+    from auv_ident.ros.toolkit import STREAM_QOS, SubscriberWait
 
     if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
         raise ValueError('rate_hz and sim_seconds must be > 0, real_time_factor >= 0')
@@ -142,8 +172,19 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
          '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}'],
         env=env, cwd=REPO, stdout=out, stderr=err)
 
+    # Every message serialized before the clock starts: the timed loop only publishes bytes,
+    # so building messages neither delays a publish nor competes with our receiver.
+    payloads = [tuple(serialize_message(m) for tp, _, m in
+                      sorted(sample_messages(run, k, with_truth=False),
+                             key=lambda item: item[0] != '/actuators'))
+                for k in range(n)]
     pub_t = np.full(n, np.nan)
     recv_t = np.full(n, np.nan)
+    # the same path on the system clock, split at the DDS timestamps of the estimate
+    pub_wall = np.zeros(n, dtype=np.int64)
+    est_source = np.zeros(n, dtype=np.int64)
+    est_received = np.zeros(n, dtype=np.int64)
+    cb_wall = np.zeros(n, dtype=np.int64)
     state = {'last_k': -1, 'estimates': 0, 'diag': None, 'bad_estimates': 0}
     rss = []                    # (perf_counter, kB)
     stop = threading.Event()
@@ -151,17 +192,22 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('auv_ident_loadtest', context=ctx)
-    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
-    def on_estimate(msg):
+    def on_estimate(msg, info=None):
         now = time.perf_counter()
+        now_wall = time.time_ns()
         s_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         k = int(round(s_ns / T_ns))
         state['estimates'] += 1
-        if not (np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))):
+        # math on the array.array values: no numpy conversion per estimate in the receiver
+        if not (all(map(math.isfinite, msg.position)) and all(map(math.isfinite, msg.velocity))):
             state['bad_estimates'] += 1
         if 0 <= k < n and math.isnan(recv_t[k]):
             recv_t[k] = now
+            cb_wall[k] = now_wall
+            if info is not None:
+                est_source[k] = info['source_timestamp']
+                est_received[k] = info['received_timestamp']
             state['last_k'] = max(state['last_k'], k)
 
     def on_diag(msg):
@@ -169,11 +215,17 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
             if st.name == 'auv_ident identifier':
                 state['diag'] = {v.key: v.value for v in st.values}
 
-    node.create_subscription(JointState, ESTIMATE_TOPIC, on_estimate, qos)
+    if split:
+        # the SingleThreadedExecutor: Jazzy's EventsExecutor cannot pass the MessageInfo
+        node.create_subscription(JointState, ESTIMATE_TOPIC,
+                                 lambda msg, info: on_estimate(msg, info), STREAM_QOS)
+        ex = SingleThreadedExecutor(context=ctx)
+    else:
+        node.create_subscription(JointState, ESTIMATE_TOPIC, on_estimate, STREAM_QOS)
+        ex = EventsExecutor(context=ctx)
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 100)
-    pub_act = node.create_publisher(JointState, '/actuators', qos)
-    pub_odom = node.create_publisher(Odometry, '/odom', qos)
-    ex = SingleThreadedExecutor(context=ctx)
+    pub_act = node.create_publisher(JointState, '/actuators', STREAM_QOS)
+    pub_odom = node.create_publisher(Odometry, '/odom', STREAM_QOS)
     ex.add_node(node)
     spin_thread = threading.Thread(target=lambda: _spin(ex, stop), daemon=True)
     spin_thread.start()
@@ -190,21 +242,25 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     result = {}
     waits = 0
     try:
-        deadline = time.monotonic() + start_timeout
-        while not (pub_act.get_subscription_count() and pub_odom.get_subscription_count()
-                   and node.count_publishers(ESTIMATE_TOPIC)):
-            if proc.poll() is not None or time.monotonic() > deadline:
+        # the identifier subscribed to both topics and matched; 0.5 s for its side of the match
+        wait = SubscriberWait(node, [pub_act, pub_odom], nodes=['identifier'],
+                              topics=[pub_act.topic_name, pub_odom.topic_name],
+                              timeout=start_timeout, settle=0.5)
+        while True:
+            ready = wait.poll()
+            if ready and node.count_publishers(ESTIMATE_TOPIC):
+                break
+            if proc.poll() is not None or ready is False:
                 raise RuntimeError('identifier did not start: '
                                    + _tail(os.path.join(log_dir, 'identifier.err')))
             time.sleep(0.02)
-        time.sleep(0.5)          # the identifier's side of the match may lag ours
         t_start = time.perf_counter()
+        cpu_start = (_cpu_s(proc.pid), _cpu_s())
         t_first_est = None
         k_steady = max(1, n // 10)
         rss_steady_t = None
         period = 0.0 if real_time_factor == 0 else T / real_time_factor
         for k in range(n):
-            msgs = sample_messages(run, k, with_truth=False)
             due = t_start + k * period
             while True:
                 now = time.perf_counter()
@@ -219,10 +275,10 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                     time.sleep(min(due - now, 0.002))
                     continue
                 break
-            act = next(m for tp, _, m in msgs if tp == '/actuators')
-            odom = next(m for tp, _, m in msgs if tp == '/odom')
+            act, odom = payloads[k]
             pub_act.publish(act)
             pub_t[k] = time.perf_counter()
+            pub_wall[k] = time.time_ns()
             pub_odom.publish(odom)
             if t_first_est is None and state['last_k'] >= 0:
                 t_first_est = time.perf_counter()
@@ -242,6 +298,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                 break
             time.sleep(0.05)
         t_drained = time.perf_counter()
+        cpu_end = (_cpu_s(proc.pid), _cpu_s())
         time.sleep(2 * RSS_PERIOD_S)
         rss_end_t = time.perf_counter()
         proc.send_signal(signal.SIGINT)
@@ -252,7 +309,16 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
             rc = proc.wait()
         d = state['diag'] or {}
         lat = (recv_t - pub_t) * 1e3
-        lat = lat[np.isfinite(lat)]
+        got = np.isfinite(lat)
+        lat = lat[got]
+        parts = {}
+        if split:
+            parts = {'to_estimate_publish': (est_source - pub_wall)[got] * 1e-6,
+                     'estimate_transfer': (est_received - est_source)[got] * 1e-6,
+                     'receiver': (cb_wall - est_received)[got] * 1e-6}
+        if samples_path:
+            np.savez(samples_path, pub_t=pub_t, recv_t=recv_t, pub_wall=pub_wall,
+                     est_source=est_source, est_received=est_received, cb_wall=cb_wall)
         saved = None
         try:
             with open(save, encoding='utf-8') as fh:
@@ -283,7 +349,12 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
             'estimates_received': int(state['estimates']),
             'non_finite_estimates': int(state['bad_estimates']),
             'latency_ms': _percentiles(lat),
+            'latency_parts_ms': {k: _percentiles(v) for k, v in parts.items()},
             'compute_ms': compute,
+            # CPU per sample while publishing and draining: a figure the other processes on
+            # the machine hardly disturb, unlike the latency tail
+            'cpu_us_per_sample': {'identifier': (cpu_end[0] - cpu_start[0]) / n * 1e6,
+                                  'loadtest': (cpu_end[1] - cpu_start[1]) / n * 1e6},
             'rss_mb': {'first_estimate': rss_at(t_first_est), 'start': steady, 'end': end,
                        'max': float(rss_mb.max()) if rss_mb.size else math.nan,
                        'growth': end - steady,
@@ -353,11 +424,21 @@ def format_loadtest(d):
         f"latency publish(odom) -> estimate received, ms: p50 {lat['p50']:.3f}, p99 "
         f"{lat['p99']:.3f}, max {lat['max']:.3f} (n = {lat['n']})",
     ]
+    parts = d.get('latency_parts_ms')
+    if parts:
+        lines.append('  split at the DDS timestamps of the estimate (system clock), ms p50/p99: '
+                     + '; '.join(f"{PART_LABELS[k]} {v['p50']:.3f}/{v['p99']:.3f}"
+                                 for k, v in parts.items()))
     c = d.get('compute_ms')
     if c:
         lines.append(f"compute per odometry message (IdentSession.on_odom, no ROS), ms: p50 "
                      f"{c['p50']:.3f}, p99 {c['p99']:.3f}, max {c['max']:.3f} "
                      f"(n = {c['n']})")
+    cpu = d.get('cpu_us_per_sample')
+    if cpu:
+        lines.append(f"CPU per sample (odometry + command, all threads), us: identifier "
+                     f"{cpu['identifier']:.0f}, this process (publisher + receiver) "
+                     f"{cpu['loadtest']:.0f}")
     lines.append(f"identifier RSS, MB: {rss['first_estimate']:.1f} at the first estimate, "
                  f"{rss['start']:.1f} at 10 % of the samples, {rss['end']:.1f} at the end, "
                  f"max {rss['max']:.1f}; growth {rss['growth']:+.2f} MB (max "
@@ -378,9 +459,14 @@ def main(argv=None):
                          'identifier keeps up)')
     ap.add_argument('--vehicle', default='nps_auv2')
     ap.add_argument('--json', help='write the figures as JSON')
+    ap.add_argument('--split', action='store_true',
+                    help='also split the latency at the DDS timestamps of the estimate (receives '
+                         'on the SingleThreadedExecutor, which adds to the end-to-end figure)')
+    ap.add_argument('--samples', help='write the per-message times as .npz (profiling)')
     args = ap.parse_args(argv)
     d = run_loadtest(rate_hz=args.rate, sim_seconds=args.seconds,
-                     real_time_factor=args.rtf, vehicle=args.vehicle)
+                     real_time_factor=args.rtf, vehicle=args.vehicle, split=args.split,
+                     samples_path=args.samples)
     print(format_loadtest(d))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as fh:

@@ -57,39 +57,36 @@ import time
 from mcap.reader import make_reader
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 import yaml
 
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.ros.conversions import ns_to_stamp
-from auv_ident.ros.toolkit import declare_described, parameter_values
-from auv_ident.ros.record_node import (message_class, number_param, param_error,
-                                       run_with_stop_flag, string_list_param)
+from auv_ident.ros.toolkit import (CLOCK_QOS, declare_parameters, message_class, number, Param,
+                                   required_string, resolve_topics, run_node, stream_qos,
+                                   strings, SubscriberWait)
+from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'player'
 CLOCK_TOPIC = '/clock'
-PUBLISHER_DEPTH = 1000
-SETTLE_S = 0.25       # after the publisher sees its subscribers (their side may lag)
 
 _PARAMETERS = (
-    ('bag', None, 'bag directory or .mcap file to play (required)'),
-    ('rate', 1.0, 'playback speed factor (> 0)'),
-    ('publish_clock', False, 'publish /clock from the log times'),
-    ('topics', None, 'topics to play (string array; empty = all)'),
-    ('wait_for_subscribers', None, 'topics that need a subscriber before playback starts'),
-    ('wait_for_subscribers_s', 5.0, 'how long to wait for those subscribers [s]'),
-    ('start_delay_s', 0.0, 'delay before the first message [s]'),
-    ('loop', False, 'play again from the start at the end'),
-    ('allow_truncated', False, 'play the complete chunks of an unfinished bag'),
-    ('wait_for_all_acked_s', 5.0, 'wait this long at the end for acknowledgements [s]'),
+    Param('bag', '', 'bag directory or .mcap file to play (required)',
+          required_string('bags/run1')),
+    Param('rate', 1.0, 'playback speed factor (> 0)', number(above=0.0)),
+    Param('publish_clock', False, 'publish /clock from the log times'),
+    Param('topics', Parameter.Type.STRING_ARRAY, 'topics to play; empty = all', strings()),
+    Param('wait_for_subscribers', Parameter.Type.STRING_ARRAY,
+          'topics that need a subscriber before playback starts', strings()),
+    Param('wait_for_subscribers_s', 5.0, 'how long to wait for those subscribers [s]',
+          number(minimum=0.0)),
+    Param('start_delay_s', 0.0, 'delay before the first message [s]', number(minimum=0.0)),
+    Param('loop', False, 'play again from the start at the end'),
+    Param('allow_truncated', False, 'play the complete chunks of an unfinished bag'),
+    Param('wait_for_all_acked_s', 5.0, 'wait this long at the end for acknowledgements [s]',
+          number(minimum=0.0)),
 )
-
-
-def _bool(name, value):
-    if not isinstance(value, bool):
-        raise param_error(name, f'must be true or false, got {value!r}')
-    return value
 
 
 def recorded_qos(path):
@@ -119,46 +116,25 @@ class PlayNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
         self._read_parameters()
         self.played = 0
         self._open_bag()
 
     # --- parameters ---
 
-    def _declare_parameters(self):
-        declare_described(self, _PARAMETERS, dynamic_typing=True)
-
     def _read_parameters(self):
-        value = parameter_values(self, _PARAMETERS)
-        bag = value['bag']
-        if not isinstance(bag, str) or not bag.strip():
-            raise param_error('bag', 'required: a bag directory or .mcap file, e.g. '
-                               '-p bag:=bags/run1')
-        self.bag = Path(bag.strip()).expanduser()
-        self.rate = number_param('rate', value['rate'], 0.0, strict=True)
-        self.publish_clock = _bool('publish_clock', value['publish_clock'])
-        self.loop = _bool('loop', value['loop'])
-        self.allow_truncated = _bool('allow_truncated', value['allow_truncated'])
-        self.start_delay_s = number_param('start_delay_s', value['start_delay_s'], 0.0,
-                                     strict=False)
-        self.wait_for_subscribers_s = number_param(
-            'wait_for_subscribers_s', value['wait_for_subscribers_s'], 0.0, strict=False)
-        self.wait_for_all_acked_s = number_param(
-            'wait_for_all_acked_s', value['wait_for_all_acked_s'], 0.0, strict=False)
-        self.requested_topics = self._resolve('topics', value['topics'])
-        self.wait_topics = self._resolve('wait_for_subscribers', value['wait_for_subscribers'])
-
-    def _resolve(self, name, value):
-        out = []
-        for t in string_list_param(name, value, required=False):
-            try:
-                resolved = self.resolve_topic_name(t)
-            except Exception:  # rclpy raises several types for invalid names
-                raise param_error(name, f'invalid topic name {t!r}') from None
-            if resolved not in out:
-                out.append(resolved)
-        return out
+        value = declare_parameters(self, _PARAMETERS)
+        self.bag = Path(value['bag']).expanduser()
+        self.rate = value['rate']
+        self.publish_clock = value['publish_clock']
+        self.loop = value['loop']
+        self.allow_truncated = value['allow_truncated']
+        self.start_delay_s = value['start_delay_s']
+        self.wait_for_subscribers_s = value['wait_for_subscribers_s']
+        self.wait_for_all_acked_s = value['wait_for_all_acked_s']
+        self.requested_topics = resolve_topics(self, 'topics', value['topics'])
+        self.wait_topics = resolve_topics(self, 'wait_for_subscribers',
+                                          value['wait_for_subscribers'])
 
     # --- bag and publishers ---
 
@@ -167,7 +143,7 @@ class PlayNode(Node):
         if self.requested_topics:
             absent = [t for t in self.requested_topics if t not in present]
             if absent:
-                raise param_error('topics', f'{", ".join(absent)} not in {self.bag} (it has '
+                raise ParameterError('topics', f'{", ".join(absent)} not in {self.bag} (it has '
                                    f'{", ".join(sorted(present)) or "no topics"})')
             selected = list(self.requested_topics)
         else:
@@ -177,7 +153,7 @@ class PlayNode(Node):
             self.get_logger().warning(f'{self.bag} has {CLOCK_TOPIC}: not played, '
                                       'publish_clock generates it from the log times')
         if not selected:
-            raise param_error('topics', f'nothing to play in {self.bag}')
+            raise ParameterError('topics', f'nothing to play in {self.bag}')
         self.selected = selected
         self.types = {t: present[t] for t in selected}
         qos_by_topic = recorded_qos(self.bag)
@@ -187,21 +163,14 @@ class PlayNode(Node):
             offered = qos_by_topic.get(topic) or []
             latched = bool(offered) and all(q.get('durability') == 'transient_local'
                                             for q in offered)
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=PUBLISHER_DEPTH,
-                reliability=ReliabilityPolicy.RELIABLE,
-                durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
-                            else DurabilityPolicy.VOLATILE))
-            self.pubs[topic] = self.create_publisher(cls, topic, qos)
+            self.pubs[topic] = self.create_publisher(cls, topic, stream_qos(latched=latched))
         self.clock_pub = None
         if self.publish_clock:
-            self.clock_pub = self.create_publisher(
-                Clock, CLOCK_TOPIC, QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                                               reliability=ReliabilityPolicy.RELIABLE))
+            self.clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS)
         waitable = set(self.pubs) | ({CLOCK_TOPIC} if self.publish_clock else set())
         unknown = [t for t in self.wait_topics if t not in waitable]
         if unknown:
-            raise param_error('wait_for_subscribers', f'{", ".join(unknown)} not played '
+            raise ParameterError('wait_for_subscribers', f'{", ".join(unknown)} not played '
                                f'(played: {", ".join(sorted(waitable))})')
 
     def _publisher(self, topic):
@@ -213,20 +182,12 @@ class PlayNode(Node):
         """Wait (<= wait_for_subscribers_s) for a subscriber on each wait_for_subscribers."""
         if not self.wait_topics:
             return
-        deadline = time.monotonic() + self.wait_for_subscribers_s
-        while True:
-            missing = [t for t in self.wait_topics
-                       if self._publisher(t).get_subscription_count() == 0]
-            if not missing:
-                stop.event.wait(SETTLE_S)
-                return
-            if time.monotonic() >= deadline:
-                self.get_logger().warning(
-                    f'no subscriber on {", ".join(missing)} after '
-                    f'{self.wait_for_subscribers_s:g} s; playing anyway')
-                return
-            if stop.event.wait(0.02):
-                return
+        wait = SubscriberWait(self, [self._publisher(t) for t in self.wait_topics],
+                              topics=self.wait_topics, timeout=self.wait_for_subscribers_s)
+        if wait.wait(stop.event) is False:
+            self.get_logger().warning(
+                f'no subscriber on {", ".join(wait.missing)} after '
+                f'{self.wait_for_subscribers_s:g} s; playing anyway')
 
     def play(self, stop):
         """Play the bag (again and again with ``loop``) until done or stopped."""
@@ -283,8 +244,8 @@ class PlayNode(Node):
 
 def main(args=None):
     """Entry point of ``play``; returns the exit status (0, or 2 on a bad bag/parameter)."""
-    return run_with_stop_flag('play', args, __doc__, '-p bag:=run1', PlayNode,
-                              lambda node, stop: node.play(stop))
+    return run_node('play', args, __doc__, '-p bag:=run1', PlayNode,
+                    lambda node, stop: node.play(stop))
 
 
 if __name__ == '__main__':

@@ -50,117 +50,42 @@ Stopping
     complete chunks ``read_bag(..., allow_truncated=True)`` recovers (flushed every
     ``flush_period_s``). Bad parameters print one line naming the parameter and exit with 2.
 """
-import importlib
 import os
-import signal
 import sys
-import threading
 import time
 
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from auv_ident.bags.schema import BagError, normalize_msgtype
 from auv_ident.bags.writer import BagWriter
 from auv_ident.core.errors import ConfigError
-from auv_ident.ros.toolkit import declare_described, parameter_values
+from auv_ident.ros.toolkit import (choice, declare_parameters, message_class, number, Param,
+                                   POLL_S, required_string, resolve_topics, run_node, spin,
+                                   stream_qos, strings)
+from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'recorder'
-SUBSCRIPTION_DEPTH = 1000
 DRAIN_IDLE_S = 0.1   # stop draining after this long without a new message
 DRAIN_MAX_S = 2.0    # and never drain for longer than this
-POLL_S = 0.1         # discovery polling / spin_once timeout (signal latency)
 
 _PARAMETERS = (
-    # name, default, description
-    ('topics', None, 'topics to record (string array, required)'),
-    ('output', None, 'bag directory to create; must not exist (required)'),
-    ('compression', 'zstd', "MCAP chunk compression: 'zstd' or 'none'"),
-    ('wait_for_topics_s', 5.0, 'time to wait for the topic types to be discovered [s]'),
-    ('types', None, "'topic=pkg/msg/Type' entries that skip discovery (string array)"),
-    ('flush_period_s', 0.5, 'wall-clock period of closing the MCAP chunk in progress [s]'),
+    Param('topics', Parameter.Type.STRING_ARRAY, 'topics to record (required)',
+          strings(required=True, example='[/odom,/actuators]')),
+    Param('output', '', 'bag directory to create; must not exist (required)',
+          required_string('bags/run1')),
+    Param('compression', 'zstd', "MCAP chunk compression: 'zstd' or 'none'",
+          choice(('zstd', 'none'))),
+    Param('wait_for_topics_s', 5.0, 'time to wait for the topic types to be discovered [s]',
+          number(minimum=0.0)),
+    Param('types', Parameter.Type.STRING_ARRAY,
+          "'topic=pkg/msg/Type' entries that skip discovery", strings()),
+    Param('flush_period_s', 0.5, 'wall-clock period of closing the MCAP chunk in progress [s]',
+          number(above=0.0)),
 )
-
-
-def param_error(name, text):
-    return ConfigError(f"parameter '{name}': {text}")
-
-
-def string_list_param(name, value, required):
-    """Return a list of non-empty strings from a string or string-array parameter value."""
-    if value is None or (isinstance(value, (list, tuple)) and len(value) == 0):
-        if required:
-            raise param_error(name, 'required, e.g. -p ' + name + ':=[/odom,/actuators]')
-        return []
-    if isinstance(value, str):
-        value = [value]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v.strip()
-                                                       for v in value):
-        raise param_error(name, f'must be an array of non-empty strings, got {value!r}')
-    return [v.strip() for v in value]
-
-
-def number_param(name, value, minimum, strict):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise param_error(name, f'must be a number, got {value!r}')
-    value = float(value)
-    if not value == value or value == float('inf') or value < minimum or (
-            strict and value == minimum):
-        relation = '>' if strict else '>='
-        raise param_error(name, f'must be finite and {relation} {minimum:g}, got {value!r}')
-    return value
-
-
-def message_class(msgtype, topic):
-    """Import the rclpy class of 'pkg/msg/Type'; ConfigError naming the topic if impossible."""
-    try:
-        pkg, ns, name = normalize_msgtype(msgtype).split('/')
-        return getattr(importlib.import_module(f'{pkg}.{ns}'), name)
-    except (BagError, ImportError, AttributeError):
-        raise ConfigError(f'topic {topic}: message type {msgtype!r} is not installed '
-                          '(no importable rclpy class)') from None
-
-
-class StopFlag:
-    """SIGINT/SIGTERM handlers that request a clean stop; a second signal interrupts.
-
-    rclpy's own handlers shut the context down at once, which would drop the samples already
-    received but not yet taken from the DDS reader queues; with this flag the node drains
-    them before closing the bag.
-    """
-
-    def __init__(self):
-        self.event = threading.Event()
-        self.signum = None
-        self.holding = False
-        self._previous = {}
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._previous[sig] = signal.signal(sig, self._handle)
-
-    def _handle(self, signum, frame):
-        if self.holding:
-            return  # closing the bag: let it finish
-        if self.event.is_set():
-            raise KeyboardInterrupt  # second signal: stop now (finally blocks still run)
-        self.signum = signum
-        self.event.set()
-
-    def is_set(self):
-        return self.event.is_set()
-
-    def hold(self):
-        """Ignore further signals (while the bag is being closed)."""
-        self.holding = True
-
-    def restore(self):
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
 
 
 class RecordNode(Node):
@@ -168,7 +93,6 @@ class RecordNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
         self._read_parameters()
         self.writer = None
         self.counts = {}
@@ -179,54 +103,28 @@ class RecordNode(Node):
 
     # --- parameters ---
 
-    def _declare_parameters(self):
-        declare_described(self, _PARAMETERS, dynamic_typing=True)
-
     def _read_parameters(self):
-        value = parameter_values(self, _PARAMETERS)
-        topics = []
-        for t in string_list_param('topics', value['topics'], required=True):
-            try:
-                resolved = self.resolve_topic_name(t)
-            except Exception:  # rclpy raises several types for invalid names
-                raise param_error('topics', f'invalid topic name {t!r}') from None
-            if resolved not in topics:
-                topics.append(resolved)
-        self.topics = topics
-
-        output = value['output']
-        if not isinstance(output, str) or not output.strip():
-            raise param_error('output', 'required: the bag directory to create, e.g. '
-                               '-p output:=bags/run1')
-        output = os.path.abspath(os.path.expanduser(output.strip()))
+        value = declare_parameters(self, _PARAMETERS)
+        self.topics = resolve_topics(self, 'topics', value['topics'])
+        output = os.path.abspath(os.path.expanduser(value['output']))
         if os.path.lexists(output):
-            raise param_error('output', f'{output} exists already (not overwriting a bag)')
+            raise ParameterError('output', f'{output} exists already (not overwriting a bag)')
         self.output = output
-
-        compression = value['compression']
-        if compression not in ('zstd', 'none'):
-            raise param_error('compression', f"must be 'zstd' or 'none', got {compression!r}")
-        self.compression = None if compression == 'none' else 'zstd'
-
-        self.wait_for_topics_s = number_param('wait_for_topics_s', value['wait_for_topics_s'],
-                                         0.0, strict=False)
-        self.flush_period_s = number_param('flush_period_s', value['flush_period_s'], 0.0,
-                                      strict=True)
-
+        self.compression = None if value['compression'] == 'none' else 'zstd'
+        self.wait_for_topics_s = value['wait_for_topics_s']
+        self.flush_period_s = value['flush_period_s']
         self.given_types = {}
-        for entry in string_list_param('types', value['types'], required=False):
+        for entry in value['types']:
             topic, sep, msgtype = entry.partition('=')
             if not sep or not topic.strip() or not msgtype.strip():
-                raise param_error('types', f"entry {entry!r} is not 'topic=pkg/msg/Type'")
+                raise ParameterError('types', f"entry {entry!r} is not 'topic=pkg/msg/Type'")
             try:
-                topic = self.resolve_topic_name(topic.strip())
                 msgtype = normalize_msgtype(msgtype.strip())
             except BagError as exc:
-                raise param_error('types', f'entry {entry!r}: {exc}') from None
-            except Exception:
-                raise param_error('types', f'entry {entry!r}: invalid topic name') from None
+                raise ParameterError('types', f'entry {entry!r}: {exc}') from None
+            topic = resolve_topics(self, 'types', [topic.strip()])[0]
             if topic not in self.topics:
-                raise param_error('types', f'topic {topic} is not in topics {self.topics}')
+                raise ParameterError('types', f'topic {topic} is not in topics {self.topics}')
             self.given_types[topic] = msgtype
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
 
@@ -257,7 +155,7 @@ class RecordNode(Node):
             if stop is not None and stop.is_set():
                 return None
             if time.monotonic() >= deadline:
-                raise param_error('topics', f'type of {", ".join(missing)} not discovered '
+                raise ParameterError('topics', f'type of {", ".join(missing)} not discovered '
                                    f'within {self.wait_for_topics_s:g} s (no publisher?); '
                                    'start the publisher first, raise wait_for_topics_s, or '
                                    'give it with -p types:=[topic=pkg/msg/Type]')
@@ -265,18 +163,11 @@ class RecordNode(Node):
 
     def _qos(self, topic):
         """Return (subscription QoSProfile, offered profiles for the bag or None)."""
-        publishers = self.get_publishers_info_by_topic(topic)
-        offered = [p.qos_profile for p in publishers]
+        offered = [p.qos_profile for p in self.get_publishers_info_by_topic(topic)]
         best_effort = any(q.reliability == ReliabilityPolicy.BEST_EFFORT for q in offered)
         latched = bool(offered) and all(
             q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
-        qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=SUBSCRIPTION_DEPTH,
-            reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
-                         else ReliabilityPolicy.RELIABLE),
-            durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
-                        else DurabilityPolicy.VOLATILE))
-        return qos, (offered or None)
+        return stream_qos(reliable=not best_effort, latched=latched), (offered or None)
 
     def start(self, stop=None):
         """Discover types, create the bag and subscribe; False if stopped while waiting."""
@@ -359,72 +250,13 @@ class RecordNode(Node):
                                    f'messages ({per_topic})')
 
 
-def check_command_line(args, prog, doc, example):
-    """Handle the non-ROS command line of a node executable before rclpy.init.
-
-    Returns None to go on, or an exit status: 0 after printing ``doc`` for -h/--help, 2 after
-    one error line for malformed --ros-args or stray arguments.
-    """
-    argv = sys.argv if args is None else list(args)
-    try:
-        extra = remove_ros_args(argv)[1:]
-    except _rclpy.RCLError as exc:
-        print(f'[{prog}] error: bad --ros-args: {str(exc).splitlines()[0]}', file=sys.stderr)
-        return 2
-    if not extra:
-        return None
-    if extra[0] in ('-h', '--help'):
-        print(doc)
-        return 0
-    print(f'[{prog}] error: unexpected argument(s) {extra}; parameters go after --ros-args, '
-          f'e.g. --ros-args {example}', file=sys.stderr)
-    return 2
-
-
-def run_with_stop_flag(prog, args, doc, example, make_node, work, finish=None):
-    """Entry-point shape shared by record and play: our own signal flag (so queued samples can
-    still be handled after SIGINT/SIGTERM), one error line and exit 2 for bad parameters or
-    bags. work(node, stop) does the job; finish(node), if given, runs before the node is
-    destroyed and returns False on failure (exit 2)."""
-    status = check_command_line(args, prog, doc, example)
-    if status is not None:
-        return status
-    stop = StopFlag()
-    rc = 0
-    node = None
-    try:
-        try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        except _rclpy.RCLError as exc:
-            print(f'[{prog}] error: bad --ros-args: {str(exc).splitlines()[0]}',
-                  file=sys.stderr)
-            return 2
-        try:
-            node = make_node()
-            work(node, stop)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        except (ConfigError, BagError) as exc:
-            print(f'[{prog}] error: {exc}', file=sys.stderr)
-            rc = 2
-        finally:
-            stop.hold()
-            if node is not None:
-                if finish is not None and finish(node) is False:
-                    rc = 2
-                node.destroy_node()
-            rclpy.try_shutdown()
-    finally:
-        stop.restore()
-    return rc
-
-
 def _record(node, stop):
     if node.start(stop):
-        executor = SingleThreadedExecutor()
+        # The SingleThreadedExecutor: the callbacks take the MessageInfo (receive time), which
+        # rclpy's EventsExecutor cannot pass in Jazzy (ros/toolkit.py).
+        executor = SingleThreadedExecutor(context=node.context)
+        spin(node, stop, executor=executor)
         executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=POLL_S)
         node.drain(executor)
 
 
@@ -439,8 +271,8 @@ def _close(node):
 
 def main(args=None):
     """Entry point of ``record``; returns the exit status (0, or 2 on bad parameters)."""
-    return run_with_stop_flag('record', args, __doc__, '-p topics:=[/odom] -p output:=run1',
-                              RecordNode, _record, _close)
+    return run_node('record', args, __doc__, '-p topics:=[/odom] -p output:=run1', RecordNode,
+                    _record, _close)
 
 
 if __name__ == '__main__':

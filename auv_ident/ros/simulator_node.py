@@ -25,8 +25,8 @@ QoS
     is full. Measured on this stack (shared/ros_stack.md section 2): depth 1 lost 1-3 % at
     200 Hz and depth 10 lost the first samples after matching, depth 100+ lost nothing. Depth
     1000 absorbs 5 s of a 200 Hz stream (10x real time at 20 Hz) while a subscriber is busy,
-    e.g. loading its compiled EKF. /clock: RELIABLE depth 10 (rclpy's time source subscribes
-    BEST_EFFORT depth 1, which a RELIABLE writer serves).
+    e.g. loading its compiled EKF. /clock: RELIABLE depth 100 (rclpy's time source subscribes
+    BEST_EFFORT depth 1, which a RELIABLE writer serves). Profiles: ros/toolkit.py.
 
 Parameters (``config/simulator.yaml``; read once at start-up, declared read-only)
     ``vehicle`` (str, 'nps_auv2')  vehicle name or YAML path.
@@ -49,7 +49,8 @@ Parameters (``config/simulator.yaml``; read once at start-up, declared read-only
         match us.
     ``wait_timeout`` (float, 5.0 s)  give up waiting after this long (a warning) and start.
 
-Bad parameter values print one line naming the parameter and exit with status 2.
+Bad parameter values (or types) print one line naming the parameter and exit with status 2;
+SIGINT/SIGTERM stop publishing, exit 0 (ros/toolkit.py run_node).
 """
 import math
 import os
@@ -57,68 +58,79 @@ import sys
 import time
 
 from nav_msgs.msg import Odometry
-import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
-from auv_ident.ros.conversions import clock_msg
-from auv_ident.session.messages import FRAMES
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.maneuvers import MANEUVERS
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
 from auv_ident.core.simulate import simulate
-from auv_ident.vehicles import load_vehicle
-from auv_ident.ros.toolkit import declare_read_only, param_or_none, run_node
+from auv_ident.ros.conversions import clock_msg
 from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
+from auv_ident.ros.toolkit import (choice, CLOCK_QOS, declare_parameters, number, Param,
+                                   run_node, spin, STREAM_QOS, strings, SubscriberWait)
+from auv_ident.session.messages import FRAMES
+from auv_ident.session.settings import ParameterError
+from auv_ident.vehicles import load_vehicle
 
-RCLError = _rclpy.RCLError
 NODE_NAME = 'simulator'
-STREAM_DEPTH = 1000
 MIN_PERIOD_S = 1e-3       # timer period floor; faster rates publish several samples per tick
 BURST = 10                # samples per tick when real_time_factor = 0
-SETTLE_S = 0.25           # after the wait: time for the readers to match our writers
-GRAPH_POLL_S = 0.05       # how often the wait re-reads the graph
 ACK_TIMEOUT_S = 2.0       # at the end: wait this long for reliable readers to acknowledge
 MAX_SAMPLES = 10_000_000
 
-STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                       reliability=ReliabilityPolicy.RELIABLE)
+
+def _vehicle(name, value):
+    try:
+        return load_vehicle(value)
+    except ConfigError as err:
+        raise ParameterError(name, str(err)) from None
+
+
+def _maneuver(name, value):
+    if value not in MANEUVERS and not os.path.isfile(value):
+        raise ParameterError(name, f'{value!r} is neither one of {", ".join(MANEUVERS)} nor an '
+                                   'existing CSV file')
+    return value
+
+
+def _noise_std(name, value):
+    noise = [float(v) for v in (DEFAULT_NOISE_STD if value is None else value)]
+    if len(noise) != 12 or not all(math.isfinite(v) and v >= 0 for v in noise):
+        raise ParameterError(name, f'expected 12 finite non-negative 1-sigmas, got {noise}')
+    return noise
+
 
 _PARAMETERS = (
-    # name, default (or type when unset by default), description
-    ('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path'),
-    ('maneuver', 'ident', 'manoeuvre: ' + ', '.join(MANEUVERS) + ', or a CSV path'),
-    ('duration', 600.0, 'length of the run [s]'),
-    ('rate_hz', 20.0, 'sample rate [Hz]; sample time = 1/rate_hz'),
-    ('seed', 0, 'seed of the manoeuvre and the noise [-]'),
-    ('rpm', 0.0, "shaft speed [rpm]; 0 = the vehicle's cruise rpm"),
-    ('frame', 'ned', "convention of the published Odometry: 'ned' (NED/FRD) or 'enu' (REP-103)"),
-    ('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
-     'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi [rad]'),
-    ('process_noise', False, 'add white acceleration noise (unmodelled forces) [-]'),
-    ('real_time_factor', 1.0, 'simulated s per wall s; >1 faster than real time, '
-                              '0 = as fast as possible [-]'),
-    ('publish_clock', Parameter.Type.BOOL,
-     'publish /clock; unset = true when real_time_factor != 1 [-]'),
-    ('wait_for_subscribers', Parameter.Type.STRING_ARRAY,
-     'node names to wait for (subscribed and matched) before sample 0; empty = none'),
-    ('wait_timeout', 5.0, 'longest wait for wait_for_subscribers [s]'),
+    Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
+          _vehicle),
+    Param('maneuver', 'ident', 'manoeuvre: ' + ', '.join(MANEUVERS) + ', or a CSV path',
+          _maneuver),
+    Param('duration', 600.0, 'length of the run [s]', number(above=0.0)),
+    Param('rate_hz', 20.0, 'sample rate [Hz]; sample time = 1/rate_hz', number(above=0.0)),
+    Param('seed', 0, 'seed of the manoeuvre and the noise [-]', number(minimum=0)),
+    Param('rpm', 0.0, "shaft speed [rpm]; 0 = the vehicle's cruise rpm", number(minimum=0.0)),
+    Param('frame', 'ned', "convention of the published Odometry: 'ned' (NED/FRD) or 'enu' "
+                          '(REP-103)', choice(FRAMES)),
+    Param('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
+          'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi '
+          '[rad]', _noise_std),
+    Param('process_noise', False, 'add white acceleration noise (unmodelled forces) [-]'),
+    Param('real_time_factor', 1.0, 'simulated s per wall s; >1 faster than real time, 0 = as '
+                                   'fast as possible [-]', number(minimum=0.0)),
+    Param('publish_clock', Parameter.Type.BOOL,
+          'publish /clock; unset = true when real_time_factor != 1 [-]'),
+    Param('wait_for_subscribers', Parameter.Type.STRING_ARRAY,
+          'node names to wait for (subscribed and matched) before sample 0; empty = none',
+          strings()),
+    Param('wait_timeout', 5.0, 'longest wait for wait_for_subscribers [s]', number(minimum=0.0)),
 )
-
-
-def _bad(name, message):
-    return ConfigError(f'parameter {name!r}: {message}')
 
 
 class SimulatorNode(Node):
@@ -126,7 +138,6 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
         self._read_parameters()
         model = Model(self.vehicle)
         try:
@@ -135,7 +146,7 @@ class SimulatorNode(Node):
                                 process_std=DEFAULT_PROCESS_STD if self.process_noise else None)
         except AuvIdentError as err:
             name = 'rpm' if 'surge' in str(err) else 'maneuver'
-            raise _bad(name, str(err)) from None
+            raise ParameterError(name, str(err)) from None
         self.n = len(self.run.t)
         self.k = 0
         self.finished = Future()
@@ -148,11 +159,12 @@ class SimulatorNode(Node):
         self._routes = {ACTUATOR_TOPIC: self.pub_actuators, ODOM_TOPIC: self.pub_odom,
                         TRUTH_TOPIC: self.pub_truth}
         self._stream_pubs = (self.pub_actuators, self.pub_odom, self.pub_truth)
-        self._waiting = bool(self.wait_for)
-        self._wait_t0 = time.monotonic()
-        self._wait_ready_at = None
-        self._next_graph_poll = 0.0
-        self._t0 = None if self._waiting else time.monotonic()
+        # every subscription on our topics (/clock included) must be matched before sample 0
+        self._wait = (SubscriberWait(self, self._stream_pubs + ((self.pub_clock,)
+                                                                if self.pub_clock else ()),
+                                     nodes=self.wait_for, timeout=self.wait_timeout)
+                      if self.wait_for else None)
+        self._t0 = None if self._wait else time.monotonic()
         rtf = self.real_time_factor
         period = MIN_PERIOD_S if rtf == 0 else max(MIN_PERIOD_S, self.T / rtf)
         # Steady clock: the publishing pace is wall time even if use_sim_time is set.
@@ -162,64 +174,26 @@ class SimulatorNode(Node):
             f'{self.vehicle.title}: manoeuvre {self.maneuver}, {self.run.t[-1]:.1f} s at '
             f'{self.rate_hz:g} Hz ({self.n} samples), seed {self.seed}, frame {self.frame}, '
             f'real-time factor {rtf:g}' + (', publishing /clock' if self.pub_clock else '')
-            + (f'; waiting for {", ".join(self.wait_for)}' if self._waiting else ''))
+            + (f'; waiting for {", ".join(self.wait_for)}' if self._wait else ''))
 
     # -- parameters --
 
-    def _declare_parameters(self):
-        declare_read_only(self, _PARAMETERS)
-
-    def _param(self, name):
-        return param_or_none(self, name)
-
     def _read_parameters(self):
-        """Validate every parameter once; ConfigError naming the parameter if one is bad."""
-        p = self._param
-        try:
-            self.vehicle = load_vehicle(p('vehicle'))
-        except ConfigError as err:
-            raise _bad('vehicle', str(err)) from None
-        self.maneuver = p('maneuver')
-        if self.maneuver not in MANEUVERS and not os.path.isfile(self.maneuver):
-            raise _bad('maneuver', f'{self.maneuver!r} is neither one of '
-                                   f'{", ".join(MANEUVERS)} nor an existing CSV file')
-        for name in ('duration', 'rate_hz'):
-            v = p(name)
-            if not math.isfinite(v) or v <= 0:
-                raise _bad(name, f'{v!r} must be a positive number')
-        self.duration, self.rate_hz = p('duration'), p('rate_hz')
+        """Declare, read and check every parameter once (ParameterError names a bad one)."""
+        p = declare_parameters(self, _PARAMETERS)
+        self.vehicle, self.maneuver, self.frame = p['vehicle'], p['maneuver'], p['frame']
+        self.duration, self.rate_hz, self.seed = p['duration'], p['rate_hz'], p['seed']
         self.T = 1.0 / self.rate_hz
         if self.duration * self.rate_hz > MAX_SAMPLES:
-            raise _bad('duration', f'{self.duration} s at {self.rate_hz} Hz is more than '
-                                   f'{MAX_SAMPLES} samples')
-        self.seed = p('seed')
-        if self.seed < 0:
-            raise _bad('seed', f'{self.seed} must be >= 0')
-        rpm = p('rpm')
-        if not math.isfinite(rpm) or rpm < 0:
-            raise _bad('rpm', f'{rpm!r} must be >= 0 (0 = cruise rpm)')
-        self.rpm = None if rpm == 0 else rpm
-        self.frame = p('frame')
-        if self.frame not in FRAMES:
-            raise _bad('frame', f'{self.frame!r}; use one of {", ".join(FRAMES)}')
-        noise = p('noise_std')
-        noise = DEFAULT_NOISE_STD.copy() if noise is None or len(noise) == 0 else noise
-        noise = [float(v) for v in noise]
-        if len(noise) != 12 or not all(math.isfinite(v) and v >= 0 for v in noise):
-            raise _bad('noise_std', f'expected 12 finite non-negative 1-sigmas, got {noise}')
-        self.noise_std = noise
-        self.process_noise = p('process_noise')
-        rtf = p('real_time_factor')
-        if not math.isfinite(rtf) or rtf < 0:
-            raise _bad('real_time_factor', f'{rtf!r} must be >= 0 (0 = as fast as possible)')
-        self.real_time_factor = rtf
-        clk = p('publish_clock')
-        self.publish_clock = (rtf != 1.0) if clk is None else clk
-        self.wait_for = [w for w in (p('wait_for_subscribers') or []) if w]
-        wt = p('wait_timeout')
-        if not math.isfinite(wt) or wt < 0:
-            raise _bad('wait_timeout', f'{wt!r} must be >= 0')
-        self.wait_timeout = wt
+            raise ParameterError('duration', f'{self.duration} s at {self.rate_hz} Hz is more '
+                                              f'than {MAX_SAMPLES} samples')
+        self.rpm = None if p['rpm'] == 0 else p['rpm']
+        self.noise_std, self.process_noise = p['noise_std'], p['process_noise']
+        self.real_time_factor = p['real_time_factor']
+        clk = p['publish_clock']
+        self.publish_clock = (self.real_time_factor != 1.0) if clk is None else clk
+        self.wait_for = p['wait_for_subscribers']
+        self.wait_timeout = p['wait_timeout']
 
     # -- publishing --
 
@@ -235,51 +209,24 @@ class SimulatorNode(Node):
         for topic, _, msg in msgs:
             self._routes[topic].publish(msg)
 
-    def _subscribers_ready(self):
-        """True when every node in wait_for_subscribers is subscribed and matched."""
-        missing = set(self.wait_for)
-        pubs = self._stream_pubs + ((self.pub_clock,) if self.pub_clock else ())
-        for pub in pubs:
-            infos = self.get_subscriptions_info_by_topic(pub.topic_name)
-            for info in infos:
-                fq = info.node_namespace.rstrip('/') + '/' + info.node_name
-                missing.discard(info.node_name)
-                missing.discard(fq)
-            if pub.get_subscription_count() < len(infos):
-                return False, missing or {'(writer matching)'}
-        return not missing, missing
-
-    def _wait_step(self):
-        now = time.monotonic()
-        if self._wait_ready_at is not None:
-            if now - self._wait_ready_at >= SETTLE_S:
-                self._start(now)
-            return
-        if now < self._next_graph_poll:
-            return
-        self._next_graph_poll = now + GRAPH_POLL_S
-        ready, missing = self._subscribers_ready()
-        if ready:
-            self._wait_ready_at = now
-        elif now - self._wait_t0 > self.wait_timeout:
-            self.get_logger().warning(
-                f'still no subscription from {", ".join(sorted(missing))} after '
-                f'{self.wait_timeout:g} s: starting anyway')
-            self._start(now)
-
-    def _start(self, now):
-        self._waiting = False
-        self._t0 = now
+    def _start(self):
+        self._wait = None
+        self._t0 = time.monotonic()
         self.get_logger().info(f'publishing {self.n} samples')
 
     def step(self):
         """Timer callback: wait for subscribers, then publish the samples that are due."""
         if self.finished.done():
             return
-        if self._waiting:
-            self._wait_step()
-            if self._waiting:
+        if self._wait is not None:
+            ready = self._wait.poll()
+            if ready is None:
                 return
+            if not ready:
+                self.get_logger().warning(
+                    f'still no subscription from {", ".join(self._wait.missing)} after '
+                    f'{self.wait_timeout:g} s: starting anyway')
+            self._start()
         if self.real_time_factor == 0:
             due = min(self.n, self.k + BURST)
         else:
@@ -312,8 +259,8 @@ class SimulatorNode(Node):
 
 def main(args=None):
     """Entry point: run the simulation, exit 0 when it is over (2 on a bad parameter)."""
-    return run_node('simulator', args, SimulatorNode,
-                    lambda node: rclpy.spin_until_future_complete(node, node.finished))
+    return run_node('simulator', args, __doc__, '-p duration:=60.0', SimulatorNode,
+                    lambda node, stop: spin(node, stop, done=node.finished.done))
 
 
 if __name__ == '__main__':

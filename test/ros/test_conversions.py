@@ -377,3 +377,96 @@ def test_time_errors():
 def test_clock_msg():
     msg = rc.clock_msg(12.000000001)
     assert (msg.clock.sec, msg.clock.nanosec) == (12, 1)
+
+
+# --- raw Odometry: ros/cdr.py ----------------------------------------------------------------
+
+
+def _random_odometry(rng, i):
+    from auv_ident.ros.conversions import state_to_odometry
+    frame = ('ned', 'enu')[i % 2]
+    ids = ['', 'odom', 'odom_ned', 'base_link_frd', 'b\u00f6dy', 'x' * (i % 13)]
+    x = rng.normal(size=12)
+    if i % 7 == 0:
+        x[rng.integers(9)] = (math.nan, math.inf, -math.inf)[i % 3]   # not an angle
+    pose_cov = rng.normal(size=(6, 6))
+    pose_cov[0, 1] = math.nan if i % 5 == 0 else pose_cov[0, 1]
+    return state_to_odometry(rng.uniform(0, 2e9), x, frame=frame, frame_id=ids[i % 6],
+                             child_frame_id=ids[(i + 3) % 6], pose_cov=pose_cov,
+                             twist_cov=rng.normal(size=36))
+
+
+def _assert_view_equals(view, msg):
+    assert (view.header.stamp.sec, view.header.stamp.nanosec) == (msg.header.stamp.sec,
+                                                                 msg.header.stamp.nanosec)
+    assert view.header.frame_id == msg.header.frame_id
+    assert view.child_frame_id == msg.child_frame_id
+    for path in ('pose.pose.position', 'pose.pose.orientation', 'twist.twist.linear',
+                 'twist.twist.angular'):
+        for axis in ('x', 'y', 'z', 'w') if 'orientation' in path else ('x', 'y', 'z'):
+            a, b = sm._field(view, f'{path}.{axis}'), sm._field(msg, f'{path}.{axis}')
+            assert a == b or (math.isnan(a) and math.isnan(b)), (path, axis)
+    for path in ('pose.covariance', 'twist.covariance'):
+        np.testing.assert_array_equal(sm._field(view, path), sm._field(msg, path))
+
+
+def test_raw_odometry_view_reads_what_rclpy_reads():
+    from rclpy.serialization import deserialize_message, serialize_message
+    from nav_msgs.msg import Odometry
+    from auv_ident.ros.cdr import OdometryView
+    rng = np.random.default_rng(5)
+    view = OdometryView()
+    for i in range(300):
+        payload = serialize_message(_random_odometry(rng, i))
+        assert view.read(payload), i
+        msg = deserialize_message(payload, Odometry)
+        _assert_view_equals(view, msg)
+        for frame in ('ned', 'enu'):        # what the session computes from either
+            try:
+                expected = sm.odometry_to_state(msg, frame)
+            except ConversionError:
+                with pytest.raises(ConversionError):
+                    sm.odometry_to_state(view, frame)
+                continue
+            for a, b in zip(sm.odometry_to_state(view, frame), expected):
+                np.testing.assert_array_equal(a, b)
+
+
+def _big_endian(payload):
+    """The same Odometry as big-endian XCDR1 (every field re-encoded, alignment unchanged)."""
+    import struct
+    out = bytearray(payload)
+    out[1] = 0
+    sec, nsec, n = struct.unpack_from('<iiI', payload, 4)
+    struct.pack_into('>iiI', out, 4, sec, nsec, n)
+    o = 16 + n
+    o += -(o - 4) % 4
+    (n2,) = struct.unpack_from('<I', payload, o)
+    struct.pack_into('>I', out, o, n2)
+    o += 4 + n2
+    o += -(o - 4) % 8
+    values = struct.unpack_from('<85d', payload, o)
+    struct.pack_into('>85d', out, o, *values)
+    return bytes(out)
+
+
+def test_raw_odometry_view_reads_big_endian_and_refuses_what_it_cannot_read():
+    from rclpy.serialization import serialize_message
+    from auv_ident.ros.cdr import OdometryView
+    rng = np.random.default_rng(6)
+    msg = _random_odometry(rng, 1)
+    payload = serialize_message(msg)
+    view = OdometryView()
+    assert view.read(_big_endian(payload))
+    _assert_view_equals(view, msg)
+    # XCDR2 or unknown encapsulations, truncations, a string running past the end: False,
+    # never an exception (the node then asks rclpy)
+    assert not view.read(b'\x00\x07' + payload[2:])
+    assert not view.read(b'\x01\x01' + payload[2:])
+    for cut in range(0, len(payload), 7):
+        assert not view.read(payload[:cut]), cut
+    import struct
+    long_string = bytearray(payload)
+    struct.pack_into('<I', long_string, 12, 10_000)
+    assert not view.read(bytes(long_string))
+    _assert_view_equals(view, msg)          # a refused payload leaves the view as it was

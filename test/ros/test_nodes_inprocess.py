@@ -284,6 +284,30 @@ def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_
     assert max(np.max(np.abs(u[1] - e.estimate)) for u, e in zip(ups, updates)) <= 1e-9
 
 
+def test_identifier_reads_odometry_bytes_as_the_messages(ctx, nodes, run):
+    """The odom subscription is raw (ros/cdr.py): its callback gives the events that the same
+    messages give IdentSession; bytes nobody can decode are one rejected conversion."""
+    from rclpy.serialization import serialize_message
+    ident = IdentifierNode(context=ctx)
+    nodes.append(ident)
+    assert ident.sub_odom.raw
+    session = IdentSession()
+    for topic, _, msg in _ordered_messages(run)[:3 * 60]:
+        if topic == ACTUATOR_TOPIC:
+            ident.on_actuators(msg)
+            session.on_actuators(msg)
+        elif topic == ODOM_TOPIC:
+            got = ident.on_odom_payload(serialize_message(msg))
+            expected = session.on_odom(msg)
+            assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
+                                                            expected.reason)
+            assert np.array_equal(got.estimate, expected.estimate)
+    assert ident.session.odom_accepted == 60
+    ev = ident.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
+    assert ev.kind == 'rejected' and ev.code == 'conversion' and 'Undecodable' in ev.reason
+    assert ident.session.odom_rejected == 1 and ident.internal_errors == 0
+
+
 def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypatch):
     ident = IdentifierNode(context=ctx)
     nodes.append(ident)
