@@ -190,6 +190,8 @@ class IdentifierNode(Node):
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
+        self.actuator_publishers = 0        # publishers on the actuator topic (1 Hz check)
+        self._odom_at_last_check = 0
         self._saved_steps = 0
         self._last_autosave = time.monotonic()
         self.names = list(self.session.names)
@@ -344,6 +346,7 @@ class IdentifierNode(Node):
                   ('errors', str(s.errors)), ('guard_resets', str(s.guard_resets)),
                   ('outliers', str(s.outliers)), ('repairs', str(s.repairs)),
                   ('time_jumps', str(s.time_jumps)),
+                  ('actuator_publishers', str(self.actuator_publishers)),
                   ('internal_errors', str(self.internal_errors)),
                   ('last_error', s.last_error),
                   ('mean_nis_per_dof', num(h.mean_nis_per_dof)),
@@ -361,8 +364,27 @@ class IdentifierNode(Node):
                                 hardware_id=s.vehicle.name,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
 
+    def check_actuator_publisher(self):
+        """Live staleness rule: a held command is the norm (drivers publish on change), so
+        odometry is not dropped for an old command (unless max_command_age is set); what tells
+        that the actuator topic stopped is that no publisher is left. Then warn (rate-limited)
+        while odometry still arrives. Returns the number of publishers."""
+        count = self.sub_actuators.get_publisher_count()
+        accepted = self.session.odom_accepted
+        if count == 0 and accepted > self._odom_at_last_check:
+            line = self._warn_limit(('actuators', 'no publisher'),
+                                    'actuators: no publisher left on the actuator topic while '
+                                    'odometry arrives: the last command is held (set '
+                                    'max_command_age to reject odometry instead)')
+            if line:
+                self._emit('warning', line)
+        self._odom_at_last_check = accepted
+        return count
+
     def on_timer(self):
-        """1 Hz: /diagnostics, and the autosave of the estimate file."""
+        """1 Hz: /diagnostics, the actuator topic's publisher check, and the autosave of the
+        estimate file."""
+        self.actuator_publishers = self.check_actuator_publisher()
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S

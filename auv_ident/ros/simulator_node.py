@@ -71,11 +71,12 @@ from auv_ident.core.maneuvers import MANEUVERS
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
 from auv_ident.core.simulate import simulate
-from auv_ident.ros.conversions import clock_msg
+from auv_ident.bags.sim_bag import SIM_EPOCH_NS
+from auv_ident.ros.conversions import ns_to_stamp
 from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
 from auv_ident.ros.toolkit import (choice, CLOCK_QOS, declare_parameters, number, Param,
                                    run_node, spin, STREAM_QOS, strings, SubscriberWait)
-from auv_ident.session.messages import FRAMES
+from auv_ident.session.messages import FRAMES, sec_to_ns
 from auv_ident.session.settings import ParameterError
 from auv_ident.vehicles import load_vehicle
 
@@ -202,8 +203,10 @@ class SimulatorNode(Node):
         if not self.context.ok():   # shutting down (SIGINT during the timer callback)
             return
         if self.pub_clock is not None:
-            self.pub_clock.publish(clock_msg(float(self.run.t[k])))
-        msgs = sample_messages(self.run, k, self.frame)
+            # simulated time is a date, as in a simulated bag (bags/sim_bag.py SIM_EPOCH)
+            self.pub_clock.publish(ClockMsg(clock=ns_to_stamp(
+                SIM_EPOCH_NS + sec_to_ns(float(self.run.t[k])))))
+        msgs = sample_messages(self.run, k, self.frame, epoch_ns=SIM_EPOCH_NS)
         # the command first: a subscriber then has u_k before y_k of the same stamp
         msgs.sort(key=lambda m: m[0] != ACTUATOR_TOPIC)
         for topic, _, msg in msgs:

@@ -448,3 +448,26 @@ def test_replay_bag_reads_metadata_and_names_a_missing_topic(run, tmp_path):
         replay_bag(only_odom)
     assert "'/actuators'" in str(info.value) and '/odom (nav_msgs/msg/Odometry)' in str(
         info.value)
+
+
+def test_a_silent_actuator_topic_is_warned_about_not_dropped(ctx, nodes, run):
+    """Live staleness rule: with no publisher left on the actuator topic while odometry
+    arrives, the identifier warns (the last command is held) instead of rejecting odometry;
+    /diagnostics counts the publishers."""
+    ident = IdentifierNode(context=ctx)
+    nodes.append(ident)
+    lines = []
+    ident._emit = lambda level, text: lines.append((level, text))
+    messages = _ordered_messages(run)
+    first = [m for m in messages if m[0] == ACTUATOR_TOPIC][:1]
+    odom = [m for m in messages if m[0] == ODOM_TOPIC][:100]
+    events = _feed(ident, first + odom)         # one command, then 5 s of odometry
+    assert all(e.kind == 'update' for e in events)
+    assert ident.check_actuator_publisher() == 0
+    warned = [t for lv, t in lines if lv == 'warning' and 'no publisher' in t]
+    assert len(warned) == 1 and 'last command is held' in warned[0]
+    ident.check_actuator_publisher()            # no odometry since: nothing more to say
+    assert len([t for _, t in lines if 'no publisher' in t]) == 1
+    ident.on_timer()
+    values = {v.key: v.value for v in ident.diagnostic_status().values}
+    assert values['actuator_publishers'] == '0'

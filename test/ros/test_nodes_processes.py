@@ -21,6 +21,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from auv_ident.bags.sim_bag import SIM_EPOCH_NS
 from auv_ident.core.model import Model
 from auv_ident.vehicles import load_vehicle
 from helpers import spawn_node, stop_process
@@ -119,7 +120,7 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
     cov = np.array(doc['covariance'])
     assert cov.shape == (p, p) and np.allclose(cov, cov.T)
     assert np.allclose(doc['std'], np.sqrt(np.diag(cov)))
-    assert doc['stamp'] == pytest.approx(DURATION, abs=0.5)
+    assert doc['stamp'] == pytest.approx(SIM_EPOCH_NS / 1e9 + DURATION, abs=0.5)  # dated sim time
     truth = Model(load_vehicle('nps_auv2'), names).theta_true
     rel = np.abs(np.array(doc['estimate']) - truth) / np.abs(truth)
     assert np.all(rel < MAX_REL_ERROR), dict(zip(names, rel))
