@@ -7,7 +7,8 @@ Entry point
     so SIGINT/SIGTERM *request* a stop: the node's work function returns, ``finish(node)``
     runs with the context still valid (files written, final lines logged), the node is
     destroyed, exit 0. A second signal interrupts at once (KeyboardInterrupt, ``finish`` still
-    runs). A bad parameter (or bag) is one line ``[prog] error: parameter 'name': ...``, exit 2.
+    runs), and so does a signal while the node is still being built (exit 0, nothing to
+    finish). A bad parameter (or bag) is one line ``[prog] error: parameter 'name': ...``, exit 2.
 
 Parameters
     One style for every node: a table of :class:`Param` (name, default or type, description,
@@ -300,6 +301,7 @@ class StopFlag:
     def __init__(self):
         self.event = threading.Event()
         self.signum = None
+        self.armed = False      # until the node's work starts, a signal interrupts at once
         self.holding = False
         self._previous = {}
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -308,8 +310,10 @@ class StopFlag:
     def _handle(self, signum, frame):
         if self.holding:
             return  # finishing (files being closed): let it finish
-        if self.event.is_set():
-            raise KeyboardInterrupt  # second signal: stop now (finally blocks still run)
+        if self.event.is_set() or not self.armed:
+            # a second signal, or one while the node is still being built (nothing to finish
+            # yet; the identifier may be compiling its EKF): stop now, finally blocks still run
+            raise KeyboardInterrupt
         self.signum = signum
         self.event.set()
 
@@ -371,6 +375,7 @@ def run_node(prog, args, doc, example, make_node, work, finish=None):
         node = None
         try:
             node = make_node()
+            stop.armed = True
             work(node, stop)
         except KeyboardInterrupt:
             pass

@@ -127,6 +127,11 @@ def test_stop_flag_first_signal_requests_second_interrupts():
     before = signal.getsignal(signal.SIGTERM)
     flag = StopFlag()
     try:
+        with pytest.raises(KeyboardInterrupt):  # not armed yet: the node is being built
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1.0)
+        assert not flag.is_set()
+        flag.armed = True
         os.kill(os.getpid(), signal.SIGTERM)
         assert flag.wait(2.0) and flag.signum == signal.SIGTERM
         with pytest.raises(KeyboardInterrupt):
