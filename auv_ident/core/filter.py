@@ -4,7 +4,8 @@ what to identify and how (:class:`FilterConfig`), the initial estimate and covar
 streaming identifier. The compiled per-step algebra is in ekf.py, the batch methods over a whole
 record in batch.py.
 
-Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p coefficients)].
+Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p parameters: the
+coefficients, then any water-current components the model identifies, core/model.py)].
 """
 from dataclasses import dataclass, field
 
@@ -14,7 +15,7 @@ from . import ekf as K
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
-from .state import COEFFICIENTS, N_STATE, State, VEHICLE
+from .state import COEFFICIENTS, CURRENT_NAMES, N_CURRENT, N_STATE, State, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -27,6 +28,9 @@ DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
 # start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state),
 # in the order of state.State (u v w: m/s, p q r: rad/s, x y z: m, phi theta psi: rad)
 UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
+# m/s, initial 1-sigma of an identified water-current component: currents of 0.05-0.5 m/s are
+# common (shared/real_data.md), so 0.5 m/s covers them without claiming to know the direction
+DEFAULT_CURRENT_SD0 = 0.5
 
 
 @dataclass
@@ -47,6 +51,17 @@ class FilterConfig:
     theta_cov0 : (p, p) initial covariance of the coefficients (symmetric positive definite, the
         coefficients' units squared), e.g. from a previous run's estimate; None for
         diag((p0_rel |initial guess|)^2)
+    current_initial : (3,) m/s NED, initial guess of the identified current components (the
+        model's theta holds which; the others are the model's fixed current)
+    current_sd0 : m/s, initial 1-sigma of each identified current component
+    current_walk : m/s/sqrt(s), random-walk intensity of the identified current: 0 (default)
+        for a constant current; otherwise the current may wander by current_walk sqrt(t) over
+        t seconds (per time update of h s the walk adds current_walk^2 h to its variance), i.e.
+        by its prior 1-sigma within the time constant (current_sd0 / current_walk)^2
+        (1e-3 m/s/sqrt(s): 0.06 m/s per hour, tidal; time constant 2.5e5 s at 0.5 m/s)
+
+    In this config "coefficients" (initial, theta_cov0, p) are the model's coefficients only
+    (model.p_coef); the current components have their own settings.
     """
 
     coefficients: list = field(default_factory=list)
@@ -63,6 +78,9 @@ class FilterConfig:
     r_bound: float = 4.0
     q_floor: float = 1e-4
     theta_cov0: object = None
+    current_initial: object = None
+    current_sd0: float = DEFAULT_CURRENT_SD0
+    current_walk: float = 0.0
 
     def validate(self, p):
         if self.mode not in K.MODES:
@@ -92,6 +110,15 @@ class FilterConfig:
                                  f'{np.asarray(self.initial).shape}')
         if self.theta_cov0 is not None:
             check_theta_cov(self.theta_cov0, p)
+        if not np.isfinite(self.current_sd0) or self.current_sd0 <= 0:
+            raise ConfigError(f'current_sd0 = {self.current_sd0!r} m/s must be a positive number')
+        if not np.isfinite(self.current_walk) or self.current_walk < 0:
+            raise ConfigError(f'current_walk = {self.current_walk!r} m/s/sqrt(s) must be >= 0')
+        if self.current_initial is not None:
+            c = np.asarray(self.current_initial, dtype=float)
+            if c.shape != (N_CURRENT,) or not np.all(np.isfinite(c)):
+                raise ConfigError(f'current_initial must be 3 finite numbers (north, east, down '
+                                  f'm/s), got {self.current_initial!r}')
 
 
 def check_theta_cov(C, p):
@@ -145,27 +172,40 @@ class AugmentedEKF:
         self.model = model
         self.cfg = cfg
         self.T = float(T)
-        p = model.p
-        cfg.validate(p)
+        pc = model.p_coef
+        cfg.validate(pc)
         self.names = list(model.theta_names)
-        th0 = (model.theta_true * (1.0 + cfg.initial_offset) if cfg.initial is None
+        th0 = (model.theta_true[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
                else np.asarray(cfg.initial, dtype=float).copy())
         if not np.all(np.isfinite(th0)):
             raise ConfigError(f'initial guesses must be finite, got {th0}')
         if np.any(th0 == 0):
             raise ConfigError('an initial guess of exactly 0 gives no scale for its covariance: '
                               f'{dict(zip(self.names, th0))}')
-        self.theta0 = th0
-        self.theta_cov0 = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
-                           else check_theta_cov(cfg.theta_cov0, p))
+        cov_c = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
+                 else check_theta_cov(cfg.theta_cov0, pc))
+        # the identified current components: their own prior and random walk (absolute, m/s)
+        cur = [CURRENT_NAMES.index(n) for n in model.current_names]
+        vc0 = (np.zeros(N_CURRENT) if cfg.current_initial is None
+               else np.asarray(cfg.current_initial, dtype=float))
+        self.theta0 = np.concatenate([th0, vc0[cur]])
+        self.theta_cov0 = np.zeros((model.p, model.p))
+        self.theta_cov0[:pc, :pc] = cov_c
+        self.theta_cov0[pc:, pc:] = np.eye(len(cur)) * cfg.current_sd0 ** 2
+        # the parameters' 1-sigma scale (the unit of repair_covariance, the guard's blow-up
+        # limit): p0_rel |initial guess| for coefficients, current_sd0 for the current
+        self.prior_scale = np.concatenate([cfg.p0_rel * np.abs(th0),
+                                           np.full(len(cur), float(cfg.current_sd0))])
+        p = model.p
         n = N_STATE + p
         self.n = n
-        self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
+        self.ws = K.new_workspace(n, model.n_coef)   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
         self.noise_std = np.asarray(cfg.noise_std, dtype=float).copy()
-        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0)])
+        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0),
+                            np.full(len(cur), cfg.current_walk * np.sqrt(self.T))])
         self.Q0 = np.diag(q ** 2)
         self.measured = np.asarray(cfg.measured, dtype=bool).copy()
         self.mode = K.MODES[cfg.mode]
@@ -202,12 +242,13 @@ class AugmentedEKF:
 
     def reference_std(self):
         """(n,) 1-sigma scale of each augmented state: noise_std on measured channels, the
-        start-up 1-sigma of unmeasured ones, p0_rel |theta0| for the coefficients. The unit in
+        start-up 1-sigma of unmeasured ones, the parameters' prior scale (p0_rel |theta0| for
+        the coefficients, current_sd0 for the current). The unit in
         which :func:`repair_covariance` floors eigenvalues."""
         sd = np.asarray(self.cfg.noise_std, dtype=float).copy()
         use = ~self.measured | ~(sd > 0)
         sd[use] = UNMEASURED_SD0[use]
-        th = self.cfg.p0_rel * np.abs(self.theta0)
+        th = self.prior_scale
         return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
     def set_prior(self, theta0, theta_cov0):
