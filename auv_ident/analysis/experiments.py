@@ -10,6 +10,7 @@ import numpy as np
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.batch import identify
+from auv_ident.core.current import parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.simulate import simulate
@@ -24,15 +25,22 @@ DEFAULT_MANEUVER = 'ident'
 
 def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
                        duration=DEFAULT_DURATION, rpm=None, refine_pass=True, hist_every=0,
-                       mass_inverse='default', progress=None, process_std=None):
-    """Simulate the truth (vehicle file values), then identify. Returns (Result, Run, Model)."""
+                       mass_inverse='default', progress=None, process_std=None, current='none',
+                       sim_current=None, velocity_reference='ground'):
+    """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
+    if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
+    core/current.py) and the velocity reference of the simulated sensor. Returns (Result, Run,
+    Model)."""
     v = load_vehicle(vehicle_name)
     truth = Model(v, mass_inverse=mass_inverse)
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
-                   noise_std=cfg.noise_std, process_std=process_std)
-    m = Model(v, names, mass_inverse=mass_inverse)
+                   noise_std=cfg.noise_std, process_std=process_std, current=sim_current,
+                   velocity_reference=velocity_reference)
+    opt = parse_current(current)
+    m = Model(v, list(names) + opt.names, mass_inverse=mass_inverse, current=opt.fixed,
+              velocity_reference=velocity_reference)
     res = identify(m, run.t, run.y, run.u, cfg, T=run.T, refine_pass=refine_pass,
-                   hist_every=hist_every, truth=m.theta_true, progress=progress)
+                   hist_every=hist_every, truth=m.theta_true[:m.p_coef], progress=progress)
     return res, run, m
 
 
