@@ -25,14 +25,16 @@ from .state import CURRENT_NAMES, N_CURRENT
 CURRENT_OPTIONS = ('estimate', 'none')     # or 'N,E[,D]': a known current (m/s)
 DEFAULT_CURRENT = 'estimate'
 # headings covered (deg, the arc the run's headings span) below which the current is called
-# not separable: a quarter turn turns the body-frame current by 90 deg
-MIN_HEADING_SPAN_DEG = 90.0
+# not separable (a zig-zag of +-20 deg rudder sweeps 70-80 deg of heading; on one heading only a
+# model exact in every other coefficient holds the current apart, real ones are not)
+MIN_HEADING_SPAN_DEG = 30.0
 # an identified current component's 1-sigma above this (m/s) is reported as weak
 MAX_CURRENT_STD = 0.05
 # |correlation| of a current component with a coefficient above this is reported as weak
 MAX_CURRENT_CORRELATION = 0.95
 ADVICE = ('turns: the current is separable from the coefficients only through heading changes; '
-          'fly legs on several headings (a zig-zag of +-45 deg or more, or a full circle)')
+          'fly legs on several headings (a rudder zig-zag that swings the heading by 30 deg or '
+          'more, or a full circle)')
 
 
 @dataclass
