@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from auv_ident.core.current import (ADVICE, current_identifiability, heading_span_deg,
-                                    parse_current)
+from auv_ident.core.current import (ADVICE, body_current, current_identifiability,
+                                    heading_span_deg, parse_current)
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import (CURRENT_GROUND, CURRENT_NONE, CURRENT_WATER, Model)
-from auv_ident.core.simulate import body_current, simulate
+from auv_ident.core.model import CURRENT_GROUND, CURRENT_NONE, CURRENT_WATER, Model
+from auv_ident.core.simulate import simulate
 from auv_ident.core.state import CURRENT_NAMES, LINEAR, State
 from auv_ident.vehicles import load_vehicle
 import independent_data as gen

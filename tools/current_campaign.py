@@ -5,7 +5,8 @@ own integrator, kinematics, noise and rosbags writer; the vehicle flies in a con
 current, the DVL measures over ground or through the water), then identified as
 ``python -m auv_ident identify --bag BAG --json OUT`` does (analysis.bag_identify.identify_bag,
 in-process), with the current estimated (the default) and, for the still-water bags, with
-``--current none`` too (the identifier as it was). Errors are against the bag's truth.json. These are measurements, not assertions.
+``--current none`` too (the identifier as it was). Errors are against the bag's truth.json.
+These are measurements, not assertions.
 
 Goals (the issue "Real data, part 3"): every coefficient's median |error| < 2 %; honest error
 bars (truth within 3 sigma in >= 90 % of (seed, coefficient) cases, median |error|/sigma >=

@@ -108,8 +108,10 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     head += (f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
              f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                               if refine_pass else 'EKF pass only'))
+    over = ('ground (DVL bottom lock)' if velocity_reference == 'ground'
+            else 'water (water-track DVL)')
     head += (f'\nwater current: {parse_current(current, current_down).describe()}; velocity '
-             f'over {"ground (DVL bottom lock)" if velocity_reference == "ground" else "water (water-track DVL)"}')
+             f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
                                   'noise_mode': noise_mode, 'noise_source': noise_source,
                                   'noise_std': [float(x) for x in noise],

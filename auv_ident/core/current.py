@@ -91,6 +91,30 @@ def parse_current(text, estimate_down=False, what='current'):
     return CurrentOption(False, False, fixed)
 
 
+def body_current(current, phi, theta, psi):
+    """R(Theta)^T v_c: the current (3,) m/s NED in the body frame, shape (..., 3) for angles of
+    shape (...,) rad (Fossen 2021 eq. 2.18, ZYX)."""
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    n, e, d = (float(v) for v in current)
+    a = cp * n + sp * e
+    b = -sp * n + cp * e
+    return np.stack([ct * a - st * d, cf * b + sf * (st * a + ct * d),
+                     -sf * b + cf * (st * a + ct * d)], axis=-1)
+
+
+def ned_current(v_body, phi, theta, psi):
+    """R(Theta) v_b: a body-frame velocity (3,) in NED (the inverse of body_current)."""
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    R = np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
+                  [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
+                  [-st, ct * sf, ct * cf]])
+    return R @ np.asarray(v_body, dtype=float)
+
+
 def heading_span_deg(psi):
     """The arc of headings a run covers (deg, 0..360): 360 minus the largest gap between the
     sorted headings on the circle. psi (N,) rad, NaN skipped."""

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import ekf as K
+from .current import ned_current
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
@@ -192,6 +193,10 @@ class AugmentedEKF:
         self.theta_cov0 = np.zeros((model.p, model.p))
         self.theta_cov0[:pc, :pc] = cov_c
         self.theta_cov0[pc:, pc:] = np.eye(len(cur)) * cfg.current_sd0 ** 2
+        # the identified current's start: the prior (current_initial), or, when none is given
+        # and the velocities are over ground, a guess from the first measurement (start_current)
+        self.guess_current = bool(cur) and (cfg.current_initial is None
+                                            and model.velocity_reference == 'ground')
         # the parameters' 1-sigma scale (the unit of repair_covariance, the guard's blow-up
         # limit): p0_rel |initial guess| for coefficients, current_sd0 for the current
         self.prior_scale = np.concatenate([cfg.p0_rel * np.abs(th0),
@@ -260,13 +265,47 @@ class AugmentedEKF:
                               f'{th0}')
         self.theta_cov0 = check_theta_cov(theta_cov0, self.model.p)
         self.theta0 = th0.copy()
+        self.guess_current = False
 
     def initial_estimate(self, y0, rpm):
         """(xa0 (n,), P0 (n, n)): the augmented state and covariance before the first
         measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
         theta_cov0)."""
         x0, sd0 = self.initial_state(y0, rpm)
-        return np.concatenate([x0, self.theta0]), initial_covariance(sd0, self.theta_cov0)
+        theta0 = self.theta0
+        if self.guess_current:
+            theta0 = theta0.copy()
+            theta0[self.model.p_coef:] = self.start_current(y0, rpm)
+        return np.concatenate([x0, theta0]), initial_covariance(sd0, self.theta_cov0)
+
+    def start_current(self, y0, rpm):
+        """The identified current components' start guess (m/s) from the first measurement y0
+        over ground at shaft speed rpm: the vehicle taken to be in its straight, level trim
+        through the water, so the current in the body frame is (u - u_trim(rpm), v, w [down
+        only when identified, else 0]), turned to NED with y0's attitude. Why: the first
+        updates see the current only through one step of the dynamics, so its Kalman gain is
+        large while its prior (current_sd0) is wide; started at 0 in a 0.3 m/s current, those
+        steps can throw the estimate far enough for the relative surge to change sign (outside
+        the propeller model's domain). The prior (theta0) is kept when u or v is not measured,
+        no trim exists at rpm, or the guess lies beyond 3 current_sd0."""
+        pc = self.model.p_coef
+        prior = self.theta0[pc:].copy()
+        y0 = np.asarray(y0, dtype=float)
+        ok = self.measured & np.isfinite(y0)
+        if not (ok[State.U] and ok[State.V]):
+            return prior
+        try:
+            u_trim = trim_speed(self.model, rpm)
+        except DomainError:
+            return prior
+        names = self.model.current_names
+        w = y0[State.W] if ('current_d' in names and ok[State.W]) else 0.0
+        ang = [y0[i] if ok[i] else 0.0 for i in (State.PHI, State.THETA, State.PSI)]
+        vc = ned_current((y0[State.U] - u_trim, y0[State.V], w), *ang)
+        guess = vc[[CURRENT_NAMES.index(n) for n in names]]
+        if not np.all(np.abs(guess) <= 3.0 * self.cfg.current_sd0):
+            return prior
+        return guess
 
     def start(self, y0, rpm):
         """Start the filter from the measurement y0 (12,) at shaft speed rpm (fused)."""

@@ -42,6 +42,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from .current_terms import (current_ground, current_in_body, CURRENT_GROUND, CURRENT_NONE,
+                            CURRENT_WATER, ZZ_LEN, ZZ_VCB, ZZ_XR)
 from .errors import DomainError
 from .monomials import NZ, Z_EPS, kernel_at, monomial_kernel
 from .state import (CURRENT_NAMES, Input, N_CURRENT, N_FINS, N_INPUT, N_NU, N_STATE,
@@ -58,16 +60,6 @@ _Z_ABS = FACTOR_INDEX['|u|']        # |u| .. |r|
 _Z_FINS = FACTOR_INDEX['dr']        # dr ds db dbp dbs
 _Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX['db2']
 
-# How the water current enters f (CompiledModel.current): not at all (still water, nothing
-# identified), with the state's velocities over ground, or through the water (module docstring)
-CURRENT_NONE, CURRENT_GROUND, CURRENT_WATER = 0, 1, 2
-# Scratch zz (ZZ_LEN,): [z (NZ), dz/dx (NZ), x_r (12), v_cb (3), d v_cb / d(phi, theta, psi)
-# (3 x 3, column per angle), R^T (3 x 3, row-major)]
-_ZR = 2 * NZ
-_ZVCB = _ZR + N_STATE
-_ZDV = _ZVCB + 3
-_ZRT = _ZDV + 9
-ZZ_LEN = _ZRT + 9
 
 
 # The hot kernels are compiled without numba's reference counting (its `_nrt` option; numba is
@@ -373,102 +365,6 @@ def _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A):
 
 
 @kernel
-def _current_in_body(vc, sph, cph, sth, cth, psi, zz):
-    """v_cb = R(Theta)^T v_c (the current in the body frame, m/s) into zz[_ZVCB:], its
-    derivatives by phi, theta, psi into zz[_ZDV:] (3 per angle) and R^T into zz[_ZRT:]
-    (row-major). R^T = Rx(phi)^T Ry(theta)^T Rz(psi)^T (Fossen eq. 2.18) applied in three
-    steps, each differentiated by its own angle."""
-    spsi = math.sin(psi)
-    cpsi = math.cos(psi)
-    n = vc[0]
-    e = vc[1]
-    d = vc[2]
-    v1x = cpsi * n + spsi * e          # Rz^T v_c
-    v1y = -spsi * n + cpsi * e
-    v2x = cth * v1x - sth * d          # Ry^T (.)
-    v2z = sth * v1x + cth * d
-    v3y = cph * v1y + sph * v2z        # Rx^T (.)
-    v3z = -sph * v1y + cph * v2z
-    zz[_ZVCB] = v2x
-    zz[_ZVCB + 1] = v3y
-    zz[_ZVCB + 2] = v3z
-    # d/dphi
-    zz[_ZDV] = 0.0
-    zz[_ZDV + 1] = v3z
-    zz[_ZDV + 2] = -v3y
-    # d/dtheta: d(Ry^T v1) = (-v2z, 0, v2x), then Rx^T
-    zz[_ZDV + 3] = -v2z
-    zz[_ZDV + 4] = sph * v2x
-    zz[_ZDV + 5] = cph * v2x
-    # d/dpsi: d(Rz^T v_c) = (v1y, -v1x, 0), then Ry^T and Rx^T
-    ax = cth * v1y
-    az = sth * v1y
-    zz[_ZDV + 6] = ax
-    zz[_ZDV + 7] = -cph * v1x + sph * az
-    zz[_ZDV + 8] = sph * v1x + cph * az
-    # R^T[i, j] = R[j, i] (R as in _kinematics)
-    zz[_ZRT] = cpsi * cth
-    zz[_ZRT + 1] = spsi * cth
-    zz[_ZRT + 2] = -sth
-    zz[_ZRT + 3] = -spsi * cph + cpsi * sth * sph
-    zz[_ZRT + 4] = cpsi * cph + sph * sth * spsi
-    zz[_ZRT + 5] = cth * sph
-    zz[_ZRT + 6] = spsi * sph + cpsi * cph * sth
-    zz[_ZRT + 7] = -cpsi * sph + sth * spsi * cph
-    zz[_ZRT + 8] = cth * cph
-
-
-@kernel
-def _current_ground(x, cm, want_jac, xdot, A, Bt, zz):
-    """The current's terms for a state over ground (module docstring), after the dynamics
-    were evaluated at nu_r: xdot[0:6] = nu_r_dot and A[0:6] = d nu_r_dot / d x_r on entry.
-    Adds v_cb x omega to the linear rates and the chain rule through nu_r = nu - [v_cb; 0]:
-    d/d(phi, theta, psi) gains -G dv_cb/dangle (G = A[0:6, u:w]) and, in the linear rows,
-    dv_cb/dangle x omega; d/d(p, q, r) gains S(v_cb) in the linear rows; d/dv_c (Bt, for an
-    identified component k) is -G R^T e_k plus R^T e_k x omega."""
-    p = x[_P]
-    q = x[_Q]
-    r = x[_R]
-    vx = zz[_ZVCB]
-    vy = zz[_ZVCB + 1]
-    vz = zz[_ZVCB + 2]
-    xdot[_U] += vy * r - vz * q
-    xdot[_V] += vz * p - vx * r
-    xdot[_W] += vx * q - vy * p
-    if not want_jac:
-        return
-    for a in range(3):                     # phi, theta, psi
-        col = _PHI + a
-        dx = zz[_ZDV + 3 * a]
-        dy = zz[_ZDV + 3 * a + 1]
-        dz = zz[_ZDV + 3 * a + 2]
-        for i in range(N_NU):
-            A[i, col] -= A[i, _U] * dx + A[i, _V] * dy + A[i, _W] * dz
-        A[_U, col] += dy * r - dz * q
-        A[_V, col] += dz * p - dx * r
-        A[_W, col] += dx * q - dy * p
-    A[_U, _Q] -= vz
-    A[_U, _R] += vy
-    A[_V, _P] += vz
-    A[_V, _R] -= vx
-    A[_W, _P] -= vy
-    A[_W, _Q] += vx
-    nc = cm.n_coef
-    for k in range(N_CURRENT):
-        j = cm.theta_pos[nc + k]
-        if j < 0:
-            continue
-        ex = zz[_ZRT + k]                  # column k of R^T
-        ey = zz[_ZRT + 3 + k]
-        ez = zz[_ZRT + 6 + k]
-        for i in range(N_NU):
-            Bt[i, j] -= A[i, _U] * ex + A[i, _V] * ey + A[i, _W] * ez
-        Bt[_U, j] += ey * r - ez * q
-        Bt[_V, j] += ez * p - ex * r
-        Bt[_W, j] += ex * q - ey * p
-
-
-@kernel
 def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
     """Minv <- M(c)^-1 with M = M_RB + M_A and the added-mass coefficients taken from c (when
     added-mass coefficients are identified, M changes with theta). M (6x6) is scratch.
@@ -521,7 +417,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
     With a current over ground the dynamics are evaluated at x_r = [nu_r, eta] (in zz) and
-    _current_ground adds the rest.
+    current_terms.current_ground adds the rest.
     """
     par = cm.par
     theta_terms = cm.theta_terms
@@ -549,12 +445,12 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
         for i in range(N_CURRENT):
             if not math.isfinite(vc[i]):
                 return ERR_NONFINITE
-        _current_in_body(vc, sph, cph, sth, cth, x[_PSI], zz)
-        xv = zz[_ZR:_ZR + N_STATE]
+        current_in_body(vc, sph, cph, sth, cth, x[_PSI], zz)
+        xv = zz[ZZ_XR:ZZ_XR + N_STATE]
         for i in range(N_STATE):
             xv[i] = x[i]
         for i in range(3):
-            xv[i] -= zz[_ZVCB + i]
+            xv[i] -= zz[ZZ_VCB + i]
     for i in range(N_NU):
         xdot[i] = 0.0
     if want_jac:
@@ -601,7 +497,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
                 for i in range(N_NU):
                     Bt[i, theta_pos[ci]] += Minv[i, eq] * am_s[a_] * xdot[col]
     if current == CURRENT_GROUND:
-        _current_ground(x, cm, want_jac, xdot, A, Bt, zz)
+        current_ground(x, cm, want_jac, xdot, A, Bt, zz)
     for i in range(N_NU):
         if not math.isfinite(xdot[i]):
             return ERR_NONFINITE

@@ -11,6 +11,7 @@ import numpy as np
 
 from . import maneuvers
 from .angles import wrap_angle
+from .current import body_current
 from .errors import ConfigError
 from .integrators import rk4_step
 from .model import Model
@@ -52,18 +53,6 @@ class Run:
             'std': {'v': float(x[:, State.V].std()), 'w': float(x[:, State.W].std()),
                     'p': float(x[:, State.P].std())},
         }
-
-
-def body_current(current, phi, theta, psi):
-    """R(Theta)^T v_c: the current in the body frame (..., 3), m/s; angles (...,) rad."""
-    cf, sf = np.cos(phi), np.sin(phi)
-    ct, st = np.cos(theta), np.sin(theta)
-    cp, sp = np.cos(psi), np.sin(psi)
-    n, e, d = (float(v) for v in current)
-    a = cp * n + sp * e
-    b = -sp * n + cp * e
-    return np.stack([ct * a - st * d, cf * b + sf * (st * a + ct * d),
-                     -sf * b + cf * (st * a + ct * d)], axis=-1)
 
 
 def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=None,
