@@ -151,7 +151,10 @@ def cmd_report(args):
     out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
                       bag=args.bag, seed=args.seed, duration=args.duration,
                       coefficients=args.coefficients, noise_mode=args.noise_mode,
-                      command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+                      command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
+                      current=args.current, current_down=args.current_down,
+                      sim_current=_sim_current(args.sim_current),
+                      velocity_reference=args.velocity_reference)
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
@@ -341,6 +344,9 @@ def build_parser():
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
+                    help='with --simulate: fly the run in this water current, m/s NED')
+    current_args(sp)
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')

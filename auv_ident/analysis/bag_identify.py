@@ -124,12 +124,16 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     return doc, table
 
 
-def bag_source(path, vehicle=None, coefficients=''):
+def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
-    command changes between samples inserted as rows without a measurement)."""
+    command changes between samples inserted as rows without a measurement). The replay that
+    pairs them estimates the current (so that its innovation gate judges samples with it); the
+    caller's model says what to do with the current."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    meta = bag_custom_data(path)
+    vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
     rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=_bag_truth_and_noise(path, None)[1])
+                    noise_std=_bag_truth_and_noise(path, None)[1], velocity_reference=vr)
     v = load_vehicle(rr.vehicle)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth, _, meta = _bag_truth_and_noise(path, Model(v, names))
@@ -138,4 +142,5 @@ def bag_source(path, vehicle=None, coefficients=''):
     return Source(vehicle=v, names=names, t=t, Y=Y, U=U, T=rr.T,
                   noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
-                  maneuver=meta.get('auv_ident.maneuver', ''))
+                  maneuver=meta.get('auv_ident.maneuver', ''),
+                  current_truth=_bag_current_truth(meta), velocity_reference=vr)

@@ -45,22 +45,32 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
 
 
 def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
-                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None):
-    """A Source from --simulate MANEUVER (in memory) or --bag PATH."""
+                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None,
+                sim_current=None, velocity_reference=None):
+    """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
+    NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
+    or what a bag of our simulator says)."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
     if bag:
-        return bag_source(bag, vehicle=vehicle, coefficients=coefficients)
+        return bag_source(bag, vehicle=vehicle, coefficients=coefficients,
+                          velocity_reference=velocity_reference)
     v = load_vehicle(vehicle or 'nps_auv2')
     names = coefficient_list(v, coefficients)
+    vr = velocity_reference or 'ground'
     run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,
-                   process_std=process_std)
+                   process_std=process_std, current=sim_current, velocity_reference=vr)
     m = Model(v, names)
+    where = ('' if run.current is None else ', in a current of '
+             + ', '.join(f'{c:g}' for c in run.current) + ' m/s (N, E, D)')
     return Source(vehicle=v, names=names, t=run.t, Y=run.y, U=run.u, T=run.T,
                   noise_std=run.noise_std, X_true=run.x, truth=m.theta_true, seed=seed,
                   maneuver=run.maneuver,
+                  current_truth=np.zeros(3) if run.current is None else run.current,
+                  velocity_reference=vr,
                   description=f'simulated {run.maneuver!r} run of {run.t[-1]:.0f} s at '
-                              f'T = {run.T} s, seed {seed}, {run.u[0, Input.N_RPM]:.0f} rpm')
+                              f'T = {run.T} s, seed {seed}, {run.u[0, Input.N_RPM]:.0f} rpm'
+                              + where)
 
 
 def _mc_case(args):

@@ -30,7 +30,7 @@ class Source:
     """Data to identify from: a simulated run or a bag, as arrays on the sample grid.
 
     U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/stream.py);
-    X_true and truth are known only for simulated data."""
+    X_true, truth and current_truth are known only for simulated data."""
 
     vehicle: object
     names: list
@@ -44,6 +44,8 @@ class Source:
     truth: object = None
     seed: object = None
     maneuver: str = ''
+    current_truth: object = None        # (3,) m/s NED the run flew in, if known
+    velocity_reference: str = 'ground'  # what Y's u v w are (ground or water)
 
 def paper_values(vehicle, name):
     """(paper's estimate, paper's error % text) or (None, None)."""
