@@ -32,6 +32,14 @@ UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0
 # m/s, initial 1-sigma of an identified water-current component: currents of 0.05-0.5 m/s are
 # common (shared/real_data.md), so 0.5 m/s covers them without claiming to know the direction
 DEFAULT_CURRENT_SD0 = 0.5
+# m/s, initial 1-sigma of an identified DOWN component: vertical currents are small (mm/s to a
+# few cm/s outside upwelling and internal waves), and a wide prior lets the start of the run
+# trade it against the heave coefficients (Z_w 50 % off drove it to 0.2 m/s and the relative
+# surge negative within 0.3 s on a 10 Hz independent bag)
+DEFAULT_CURRENT_DOWN_SD0 = 0.05
+# m/s, 1-sigma of the current guessed from the first measurement (AugmentedEKF.start_current):
+# how far from its straight trim through the water a cruising vehicle typically starts a log
+CURRENT_GUESS_SD = 0.1
 
 
 @dataclass
@@ -54,7 +62,8 @@ class FilterConfig:
         diag((p0_rel |initial guess|)^2)
     current_initial : (3,) m/s NED, initial guess of the identified current components (the
         model's theta holds which; the others are the model's fixed current)
-    current_sd0 : m/s, initial 1-sigma of each identified current component
+    current_sd0 : m/s, initial 1-sigma of each identified horizontal current component
+    current_down_sd0 : m/s, initial 1-sigma of the down component (when identified)
     current_walk : m/s/sqrt(s), random-walk intensity of the identified current: 0 (default)
         for a constant current; otherwise the current may wander by current_walk sqrt(t) over
         t seconds (per time update of h s the walk adds current_walk^2 h to its variance), i.e.
@@ -81,6 +90,7 @@ class FilterConfig:
     theta_cov0: object = None
     current_initial: object = None
     current_sd0: float = DEFAULT_CURRENT_SD0
+    current_down_sd0: float = DEFAULT_CURRENT_DOWN_SD0
     current_walk: float = 0.0
 
     def validate(self, p):
@@ -111,8 +121,10 @@ class FilterConfig:
                                  f'{np.asarray(self.initial).shape}')
         if self.theta_cov0 is not None:
             check_theta_cov(self.theta_cov0, p)
-        if not np.isfinite(self.current_sd0) or self.current_sd0 <= 0:
-            raise ConfigError(f'current_sd0 = {self.current_sd0!r} m/s must be a positive number')
+        for name in ('current_sd0', 'current_down_sd0'):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ConfigError(f'{name} = {v!r} m/s must be a positive number')
         if not np.isfinite(self.current_walk) or self.current_walk < 0:
             raise ConfigError(f'current_walk = {self.current_walk!r} m/s/sqrt(s) must be >= 0')
         if self.current_initial is not None:
@@ -192,7 +204,8 @@ class AugmentedEKF:
         self.theta0 = np.concatenate([th0, vc0[cur]])
         self.theta_cov0 = np.zeros((model.p, model.p))
         self.theta_cov0[:pc, :pc] = cov_c
-        self.theta_cov0[pc:, pc:] = np.eye(len(cur)) * cfg.current_sd0 ** 2
+        cur_sd0 = np.array([cfg.current_down_sd0 if i == 2 else cfg.current_sd0 for i in cur])
+        self.theta_cov0[pc:, pc:] = np.diag(cur_sd0 ** 2)
         # the identified current's start: the prior (current_initial), or, when none is given
         # and the velocities are over ground, a guess from the first measurement (start_current)
         self.guess_current = bool(cur) and (cfg.current_initial is None
@@ -200,7 +213,7 @@ class AugmentedEKF:
         # the parameters' 1-sigma scale (the unit of repair_covariance, the guard's blow-up
         # limit): p0_rel |initial guess| for coefficients, current_sd0 for the current
         self.prior_scale = np.concatenate([cfg.p0_rel * np.abs(th0),
-                                           np.full(len(cur), float(cfg.current_sd0))])
+                                           cur_sd0])
         p = model.p
         n = N_STATE + p
         self.n = n
@@ -272,39 +285,51 @@ class AugmentedEKF:
         measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
         theta_cov0)."""
         x0, sd0 = self.initial_state(y0, rpm)
-        theta0 = self.theta0
+        theta0, cov0 = self.theta0, self.theta_cov0
         if self.guess_current:
-            theta0 = theta0.copy()
-            theta0[self.model.p_coef:] = self.start_current(y0, rpm)
-        return np.concatenate([x0, theta0]), initial_covariance(sd0, self.theta_cov0)
+            guess = self.start_current(y0, rpm)
+            if guess is not None:
+                pc = self.model.p_coef
+                theta0, cov0 = theta0.copy(), cov0.copy()
+                theta0[pc:] = guess
+                # the guess is as good as the trim assumption: CURRENT_GUESS_SD
+                var = np.minimum(np.diag(cov0)[pc:], CURRENT_GUESS_SD ** 2)
+                cov0[pc:, :] = 0.0
+                cov0[:, pc:] = 0.0
+                cov0[pc:, pc:] = np.diag(var)
+        return np.concatenate([x0, theta0]), initial_covariance(sd0, cov0)
 
     def start_current(self, y0, rpm):
         """The identified current components' start guess (m/s) from the first measurement y0
-        over ground at shaft speed rpm: the vehicle taken to be in its straight, level trim
-        through the water, so the current in the body frame is (u - u_trim(rpm), v, w [down
-        only when identified, else 0]), turned to NED with y0's attitude. Why: the first
-        updates see the current only through one step of the dynamics, so its Kalman gain is
-        large while its prior (current_sd0) is wide; started at 0 in a 0.3 m/s current, those
-        steps can throw the estimate far enough for the relative surge to change sign (outside
-        the propeller model's domain). The prior (theta0) is kept when u or v is not measured,
-        no trim exists at rpm, or the guess lies beyond 3 current_sd0."""
+        over ground at shaft speed rpm, or None (keep the prior theta0).
+
+        The vehicle is taken to be in its straight, level trim through the water, so the
+        current in the body frame is (u - u_trim(rpm), v, w [down only when identified, else
+        0]), turned to NED with y0's attitude; initial_estimate gives it the 1-sigma
+        CURRENT_GUESS_SD. Why: at the start the current is seen only through a few steps of the
+        dynamics, while the coefficients are still far off (50 % at the default start); with
+        the wide prior (current_sd0) the filter explains their error by the current (a heave
+        coefficient 50 % off and an unknown current leave the relative speed as a free scale of
+        the heave and pitch forces), and within a second the relative surge can reach zero,
+        outside the propeller model's domain (seen on independent 10 Hz bags: the along-track
+        current estimate ran from 0.2 to 0.8 m/s in 1.2 s). None when u or v is not measured,
+        no trim exists at rpm, or the guess lies beyond 3 prior 1-sigma."""
         pc = self.model.p_coef
-        prior = self.theta0[pc:].copy()
         y0 = np.asarray(y0, dtype=float)
         ok = self.measured & np.isfinite(y0)
         if not (ok[State.U] and ok[State.V]):
-            return prior
+            return None
         try:
             u_trim = trim_speed(self.model, rpm)
         except DomainError:
-            return prior
+            return None
         names = self.model.current_names
         w = y0[State.W] if ('current_d' in names and ok[State.W]) else 0.0
         ang = [y0[i] if ok[i] else 0.0 for i in (State.PHI, State.THETA, State.PSI)]
         vc = ned_current((y0[State.U] - u_trim, y0[State.V], w), *ang)
         guess = vc[[CURRENT_NAMES.index(n) for n in names]]
-        if not np.all(np.abs(guess) <= 3.0 * self.cfg.current_sd0):
-            return prior
+        if not np.all(np.abs(guess) <= 3.0 * self.prior_scale[pc:]):
+            return None
         return guess
 
     def start(self, y0, rpm):
