@@ -145,11 +145,33 @@ def test_identifier_parameter_overrides(ctx, nodes):
     (IdentifierNode, 'frame', 'nwu'),
     (IdentifierNode, 'noise_mode', 'magic'),
     (IdentifierNode, 'initial', [1.0, 2.0]),
+    (IdentifierNode, 'current', 'sideways'),
+    (IdentifierNode, 'velocity_reference', 'bottom'),
+    (SimulatorNode, 'current', [0.1]),
+    (SimulatorNode, 'velocity_reference', 'bottom'),
 ])
 def test_bad_parameter_raises_naming_it(ctx, cls, name, value):
     with pytest.raises(ConfigError) as info:
         cls(context=ctx, parameter_overrides=_params(**{name: value}))
     assert f"parameter '{name}'" in str(info.value)
+
+
+def test_current_parameters_reach_the_simulator_and_the_identifier(ctx, nodes):
+    sim = SimulatorNode(context=ctx, parameter_overrides=_params(
+        duration=5.0, current=[0.1, -0.2], velocity_reference='water'))
+    nodes.append(sim)
+    assert list(sim.run.current) == [0.1, -0.2, 0.0] and sim.run.velocity_reference == 'water'
+    still = SimulatorNode(context=ctx, parameter_overrides=_params(duration=5.0))
+    nodes.append(still)
+    assert still.run.current is None
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
+    nodes.append(ident)
+    assert ident.names == list(load_vehicle('nps_auv2').identify_default)
+    given = IdentifierNode(context=ctx, parameter_overrides=_params(
+        current='estimate', current_down=True, velocity_reference='water', current_walk=1e-3))
+    nodes.append(given)
+    assert given.names[-3:] == ['current_n', 'current_e', 'current_d']
+    assert given.session.model.velocity_reference == 'water'
 
 
 def test_config_files_hold_the_defaults(ctx, nodes):

@@ -57,11 +57,13 @@ SAMPLING = {
 
 
 def case_config(vehicle, speed, direction_deg, seed, dvl, duration, sampling='a'):
-    """The generator's configuration of one case (sampling: a key of SAMPLING)."""
+    """The generator's configuration of one case (sampling: a key of SAMPLING), at the
+    vehicle's cruise shaft speed."""
+    from auv_ident.vehicles import load_vehicle
     a = math.radians(direction_deg)
     vc = (speed * math.cos(a), speed * math.sin(a), 0.0)
     return DataConfig(vehicle=vehicle, duration=duration, seed=seed, current_ned=vc, dvl=dvl,
-                      **SAMPLING[sampling][1])
+                      rpm=float(load_vehicle(vehicle).cruise_rpm), **SAMPLING[sampling][1])
 
 
 def run_case(job):

@@ -39,6 +39,10 @@ Parameters (``config/simulator.yaml``; read once at start-up, declared read-only
     ``noise_std`` (12 floats)  measurement 1-sigma of u v w (m/s), p q r (rad/s), x y z (m),
         phi theta psi (rad); default core.simulate.DEFAULT_NOISE_STD.
     ``process_noise`` (bool, false)  add white accelerations (core.simulate.DEFAULT_PROCESS_STD).
+    ``current`` (2 or 3 floats, [0, 0, 0] m/s)  a constant water current, NED (north, east[,
+        down]; where the water goes); zeros = still water (docs/current.md).
+    ``velocity_reference`` ('ground' | 'water', 'ground')  what the published twist.linear is:
+        over ground (DVL in bottom lock) or through the water (water-track DVL).
     ``real_time_factor`` (float, 1.0)  >1 publishes faster than real time; 0 = as fast as
         possible (may outrun a subscriber, see QoS).
     ``publish_clock`` (bool, unset)  publish /clock; unset = true when real_time_factor != 1.
@@ -107,6 +111,10 @@ _PARAMETERS = (
     ('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
      'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi [rad]'),
     ('process_noise', False, 'add white acceleration noise (unmodelled forces) [-]'),
+    ('current', [0.0, 0.0, 0.0], 'constant water current north, east[, down], where the water '
+                                 'goes (NED); zeros = still water [m/s]'),
+    ('velocity_reference', 'ground', "published twist.linear: 'ground' (DVL bottom lock) or "
+                                     "'water' (water-track DVL)"),
     ('real_time_factor', 1.0, 'simulated s per wall s; >1 faster than real time, '
                               '0 = as fast as possible [-]'),
     ('publish_clock', Parameter.Type.BOOL,
@@ -132,7 +140,9 @@ class SimulatorNode(Node):
         try:
             self.run = simulate(model, self.maneuver, duration=self.duration, T=self.T,
                                 seed=self.seed, rpm=self.rpm, noise_std=self.noise_std,
-                                process_std=DEFAULT_PROCESS_STD if self.process_noise else None)
+                                process_std=DEFAULT_PROCESS_STD if self.process_noise else None,
+                                current=self.current,
+                                velocity_reference=self.velocity_reference)
         except AuvIdentError as err:
             name = 'rpm' if 'surge' in str(err) else 'maneuver'
             raise _bad(name, str(err)) from None
@@ -209,6 +219,13 @@ class SimulatorNode(Node):
             raise _bad('noise_std', f'expected 12 finite non-negative 1-sigmas, got {noise}')
         self.noise_std = noise
         self.process_noise = p('process_noise')
+        current = [float(v) for v in (p('current') or [])]
+        if len(current) not in (0, 2, 3) or not all(math.isfinite(v) for v in current):
+            raise _bad('current', f'expected north, east[, down] in m/s, got {current}')
+        self.current = (current + [0.0] * 3)[:3] if current else None
+        self.velocity_reference = p('velocity_reference')
+        if self.velocity_reference not in ('ground', 'water'):
+            raise _bad('velocity_reference', f'{self.velocity_reference!r}; use ground or water')
         rtf = p('real_time_factor')
         if not math.isfinite(rtf) or rtf < 0:
             raise _bad('real_time_factor', f'{rtf!r} must be >= 0 (0 = as fast as possible)')
