@@ -19,12 +19,26 @@ def _model(args, theta_names=()):
                  mass_inverse=getattr(args, 'mass_inverse', 'default'))
 
 
+def _sim_current(text):
+    """--current N,E[,D] of simulate: (3,) m/s NED, or None."""
+    from auv_ident.core.current import parse_current
+    if text is None:
+        return None
+    opt = parse_current(text, what='--current')
+    if opt.estimate:
+        raise AuvIdentError('simulate --current takes N,E[,D] in m/s (the water\'s velocity, '
+                            'NED), not "estimate"')
+    return opt.fixed
+
+
 def cmd_simulate(args):
     from auv_ident.core.sensors import DEFAULT_PROCESS_STD
     from auv_ident.core.simulate import save_run_csv, simulate
     m = _model(args)
     run = simulate(m, args.maneuver, duration=args.duration, T=args.dt, seed=args.seed,
-                   rpm=args.rpm, process_std=DEFAULT_PROCESS_STD if args.process_noise else None)
+                   rpm=args.rpm, process_std=DEFAULT_PROCESS_STD if args.process_noise else None,
+                   current=_sim_current(args.current),
+                   velocity_reference=args.velocity_reference)
     s = run.summary()
     fs = s['final_state']
     print(f"{m.vehicle.title}: manoeuvre {run.maneuver}, {s['duration_s']:.1f} s at "
@@ -33,6 +47,9 @@ def cmd_simulate(args):
     print(f"speed: mean {s['speed_m_s']['mean']:.3f} m/s (min {s['speed_m_s']['min']:.3f}, "
           f"max {s['speed_m_s']['max']:.3f}); depth {s['depth_m']['min']:.2f} .. "
           f"{s['depth_m']['max']:.2f} m; max |roll| {s['roll_deg_max']:.2f} deg")
+    if run.current is not None:
+        print('water current ' + ', '.join(f'{v:g}' for v in run.current) + ' m/s (N, E, D); '
+              f'velocity measured over {run.velocity_reference}')
     if args.out:
         if args.out.endswith('.csv'):
             save_run_csv(run, args.out)
@@ -52,6 +69,7 @@ def _progress(label, total):
 def cmd_identify(args):
     from auv_ident.analysis import experiments as ex
     from auv_ident.analysis import results
+    from auv_ident.core.current import parse_current
     from auv_ident.vehicles import load_vehicle
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
@@ -62,7 +80,9 @@ def cmd_identify(args):
                                   noise_mode=mode, initial_offset=args.initial_offset,
                                   refine_pass=not args.no_refine,
                                   noise_source=args.noise_source,
-                                  max_command_age=args.max_command_age)
+                                  max_command_age=args.max_command_age, current=args.current,
+                                  current_down=args.current_down,
+                                  velocity_reference=args.velocity_reference)
         print(table)
     else:
         v = load_vehicle(args.vehicle or 'nps_auv2')
@@ -70,10 +90,13 @@ def cmd_identify(args):
         cfg = results.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
                              tau=args.tau)
         pr = _progress('batch refinement', 40 * len(names))
+        opt = parse_current(args.current, args.current_down)
         res, run, _ = ex.identify_simulated(
             v.name, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
             duration=args.duration, rpm=args.rpm, refine_pass=not args.no_refine,
-            mass_inverse=args.mass_inverse, progress=pr.update)
+            mass_inverse=args.mass_inverse, progress=pr.update, current=opt,
+            sim_current=_sim_current(args.sim_current),
+            velocity_reference=args.velocity_reference or 'ground')
         pr.close()
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
@@ -82,11 +105,16 @@ def cmd_identify(args):
         print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
               f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                          if not args.no_refine else 'EKF pass only'))
-        print(results.result_table(v, res))
+        print(f'water current: {opt.describe()}'
+              + ('' if run.current is None else '; simulated in '
+                 + ', '.join(f'{c:g}' for c in run.current) + ' m/s (N, E, D)'))
+        doc = results.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
+                                           'duration_s': float(run.t[-1]), 'noise_mode': mode},
+                                  current_truth=run.current if run.current is not None
+                                  else np.zeros(3))
+        print(results.doc_table(doc))
         print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
               f'wall {res.wall_s:.2f} s')
-        doc = results.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
-                                      'duration_s': float(run.t[-1]), 'noise_mode': mode})
     if args.json:
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
@@ -123,7 +151,10 @@ def cmd_report(args):
     out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
                       bag=args.bag, seed=args.seed, duration=args.duration,
                       coefficients=args.coefficients, noise_mode=args.noise_mode,
-                      command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+                      command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
+                      current=args.current, current_down=args.current_down,
+                      sim_current=_sim_current(args.sim_current),
+                      velocity_reference=args.velocity_reference)
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
@@ -234,6 +265,12 @@ def build_parser():
     sp.add_argument('--rpm', type=float, default=None, help="shaft speed (vehicle's cruise rpm)")
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--process-noise', action='store_true')
+    sp.add_argument('--current', metavar='N,E[,D]',
+                    help='fly in a constant water current, m/s NED (where the water goes)')
+    sp.add_argument('--velocity-reference', dest='velocity_reference', default='ground',
+                    choices=('ground', 'water'),
+                    help='what the simulated DVL measures: ground (bottom lock, default) or '
+                         'water (water track)')
     sp.add_argument('--out', help='write the run: FILE.csv, or a bag directory')
     sp.set_defaults(func=cmd_simulate)
 
@@ -253,6 +290,18 @@ def build_parser():
         sp.add_argument('--tau', type=float, default=10.0,
                         help='s, time constant of the adaptation forgetting factor')
 
+    def current_args(sp):
+        sp.add_argument('--current', default='estimate', metavar='estimate|none|N,E[,D]',
+                        help='the water current: estimate it with the coefficients (default: '
+                             'every AUV runs in one, and 0.1 m/s left out wrecks the '
+                             'coefficients), none (still water), or a known current in m/s NED')
+        sp.add_argument('--current-down', dest='current_down', action='store_true',
+                        help='estimate the down component of the current too')
+        sp.add_argument('--velocity-reference', dest='velocity_reference', default=None,
+                        choices=('ground', 'water'),
+                        help='what twist.linear is: ground (DVL bottom lock, default) or water '
+                             '(water-track DVL)')
+
     sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag')
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
@@ -268,7 +317,10 @@ def build_parser():
     sp.add_argument('--max-command-age', dest='max_command_age', type=float, default=0.0,
                     help='bags: s, odometry whose command in force is older is rejected as '
                          "'stale command' (default 0: no limit, commands are held)")
+    sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
+                    help='with --simulate: fly the run in this water current, m/s NED')
     ident_args(sp)
+    current_args(sp)
     sp.set_defaults(func=cmd_identify)
 
     sp = sub.add_parser('montecarlo', help='accuracy and consistency over seeds and starts')
@@ -292,6 +344,9 @@ def build_parser():
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
+                    help='with --simulate: fly the run in this water current, m/s NED')
+    current_args(sp)
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')

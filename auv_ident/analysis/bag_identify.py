@@ -9,16 +9,17 @@ from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
 from auv_ident.core.batch import Result
 from auv_ident.core.diagnosis import assess
+from auv_ident.core.current import DEFAULT_CURRENT, parse_current, split_current
 from auv_ident.core.model import Model
 from auv_ident.core.noise_fit import identify_with_noise_model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import N_STATE
+from auv_ident.core.state import N_CURRENT, N_STATE, State
 from auv_ident.core.timing import with_command_changes
 from auv_ident.vehicles import load_vehicle
 
 def _bag_truth_and_noise(path, model):
-    """Truth (the vehicle file's values) only for bags our simulator wrote; the noise 1-sigma
-    stored with them, else the default sensor suite."""
+    """Truth (the vehicle file's values, and the current it flew in) only for bags our
+    simulator wrote; the noise 1-sigma stored with them, else the default sensor suite."""
     meta = bag_custom_data(path)
     simulated = meta.get('auv_ident.simulated') == 'true'
     noise = DEFAULT_NOISE_STD.copy()
@@ -29,8 +30,19 @@ def _bag_truth_and_noise(path, model):
                 noise = vals
         except ValueError:
             pass
-    truth = model.theta_true if simulated and model is not None else None
+    truth = (model.theta_true[:model.p_coef] if simulated and model is not None else None)
     return truth, noise, meta
+
+
+def _bag_current_truth(meta):
+    """(3,) the current a simulated bag flew in (zeros: still water), or None if not ours."""
+    if meta.get('auv_ident.simulated') != 'true':
+        return None
+    try:
+        vals = np.array([float(v) for v in meta.get('auv_ident.current', '0 0 0').split()])
+    except ValueError:
+        return None
+    return vals if vals.shape == (N_CURRENT,) else None
 
 
 def _exact_hold(rr):
@@ -42,23 +54,32 @@ def _exact_hold(rr):
     return t, Y, U
 
 
-
 def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
-                 refine_pass=True, progress=None, noise_source='message', max_command_age=None):
+                 refine_pass=True, progress=None, noise_source='message', max_command_age=None,
+                 current=DEFAULT_CURRENT, current_down=False, velocity_reference=None):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag), then the
     batch refinement on the paired arrays at their stamps. Returns (JSON document, printable
     table).
 
     noise_source, max_command_age : as IdentSession (the message covariances are the noise
-    where they are usable; a held command stays in force however old)"""
+    where they are usable; a held command stays in force however old)
+    current, current_down : the water current (IdentSession's settings of the same names:
+    'estimate' by default, 'none', or a known 'N,E[,D]' in m/s)
+    velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
+    'ground')"""
     t0 = time.perf_counter()
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
     meta_noise = _bag_truth_and_noise(path, None)[1]
+    meta = bag_custom_data(path)
+    if velocity_reference is None:
+        velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
     rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
                     initial_offset=initial_offset, noise_std=meta_noise,
-                    noise_source=noise_source, max_command_age=max_command_age)
+                    noise_source=noise_source, max_command_age=max_command_age,
+                    current=current, current_down=current_down,
+                    velocity_reference=velocity_reference)
     v = load_vehicle(rr.vehicle)
-    model = Model(v, rr.names)
+    model = rr.model
     truth, _, meta = _bag_truth_and_noise(path, model)
     noise = rr.noise_std
     if rr.accepted < 2:
@@ -67,19 +88,21 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     # the noise model from the data (core/noise_fit.py): with the configured noise right, the
     # EKF pass is the replay's (the live node's) and the refinement starts from it
     t, Y, U = _exact_hold(rr)
-    cfg = ex.make_config(rr.names, noise_mode='fixed', noise_std=noise,
+    cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
                          initial_offset=initial_offset)
     ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
         model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
         ekf_pass=(rr.estimate, rr.cov))
-    verdicts, diagnosis = assess(v, rr.names, est, cov, fit, U, rr.T, rr.mean_nis_per_dof,
-                                 refined=refine_pass)
-    res = Result(names=rr.names, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-                 ekf_estimate=ekf_est, ekf_std=np.sqrt(np.diag(ekf_cov)), initial=rr.initial,
-                 truth=truth,
-                 steps=rr.accepted, wall_s=time.perf_counter() - t0,
-                 mean_nis_per_dof=rr.mean_nis_per_dof, refined=refine_pass)
-    head = (f'{v.title}: identified {", ".join(rr.names)} from bag {path} '
+    verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T,
+                                 rr.mean_nis_per_dof, refined=refine_pass)
+    est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov,
+                                                        Y[:, State.PSI])
+    res = Result(names=model.theta_names[:model.p_coef], estimate=est_c,
+                 std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
+                 ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=rr.initial[:model.p_coef],
+                 truth=truth, steps=rr.accepted, wall_s=time.perf_counter() - t0,
+                 mean_nis_per_dof=rr.mean_nis_per_dof, refined=refine_pass, current=cur)
+    head = (f'{v.title}: identified {", ".join(res.names)} from bag {path} '
             f'({rr.accepted} odometry samples used, {rr.rejected} rejected, {rr.commands} '
             f'actuator commands; frame {rr.frame})')
     if meta.get('auv_ident.simulated') == 'true':
@@ -88,32 +111,42 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     head += (f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
              f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                               if refine_pass else 'EKF pass only'))
+    over = ('ground (DVL bottom lock)' if velocity_reference == 'ground'
+            else 'water (water-track DVL)')
+    head += (f'\nwater current: {parse_current(current, current_down).describe()}; velocity '
+             f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
                                   'noise_mode': noise_mode, 'noise_source': noise_source,
                                   'noise_std': [float(x) for x in noise],
                                   'time_origin_ns': rr.time_origin_ns,
                                   'noise_model': fit.document(),
                                   'diagnosis': diagnosis, 'identifiability': verdicts,
-                                  'rejection_reasons': dict(rr.reasons)})
+                                  'rejection_reasons': dict(rr.reasons)},
+                         current_truth=_bag_current_truth(meta))
     head = diagnosis['messages'][0] + '\n' + head
-    table = (head + '\n' + ex.result_table(v, res) + f'\n{res.steps} EKF steps, mean NIS/dof '
-             f'{res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
+    table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
+             f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
              + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
     return doc, table
 
 
-def bag_source(path, vehicle=None, coefficients=''):
+def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
-    command changes between samples inserted as rows without a measurement)."""
+    command changes between samples inserted as rows without a measurement). The replay that
+    pairs them estimates the current (so that its innovation gate judges samples with it); the
+    caller's model says what to do with the current."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    meta = bag_custom_data(path)
+    vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
     rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=_bag_truth_and_noise(path, None)[1])
+                    noise_std=_bag_truth_and_noise(path, None)[1], velocity_reference=vr)
     v = load_vehicle(rr.vehicle)
-    names = coefficient_list(v, ','.join(rr.names))
+    names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth, _, meta = _bag_truth_and_noise(path, Model(v, names))
     noise = rr.noise_std
     t, Y, U = _exact_hold(rr)
     return Source(vehicle=v, names=names, t=t, Y=Y, U=U, T=rr.T,
                   noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
-                  maneuver=meta.get('auv_ident.maneuver', ''))
+                  maneuver=meta.get('auv_ident.maneuver', ''),
+                  current_truth=_bag_current_truth(meta), velocity_reference=vr)

@@ -10,6 +10,7 @@ import numpy as np
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.batch import identify
+from auv_ident.core.current import parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.simulate import simulate
@@ -24,35 +25,52 @@ DEFAULT_MANEUVER = 'ident'
 
 def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
                        duration=DEFAULT_DURATION, rpm=None, refine_pass=True, hist_every=0,
-                       mass_inverse='default', progress=None, process_std=None):
-    """Simulate the truth (vehicle file values), then identify. Returns (Result, Run, Model)."""
+                       mass_inverse='default', progress=None, process_std=None, current='none',
+                       sim_current=None, velocity_reference='ground'):
+    """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
+    if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
+    core/current.py) and the velocity reference of the simulated sensor. Returns (Result, Run,
+    Model)."""
     v = load_vehicle(vehicle_name)
     truth = Model(v, mass_inverse=mass_inverse)
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
-                   noise_std=cfg.noise_std, process_std=process_std)
-    m = Model(v, names, mass_inverse=mass_inverse)
+                   noise_std=cfg.noise_std, process_std=process_std, current=sim_current,
+                   velocity_reference=velocity_reference)
+    opt = parse_current(current)
+    m = Model(v, list(names) + opt.names, mass_inverse=mass_inverse, current=opt.fixed,
+              velocity_reference=velocity_reference)
     res = identify(m, run.t, run.y, run.u, cfg, T=run.T, refine_pass=refine_pass,
-                   hist_every=hist_every, truth=m.theta_true, progress=progress)
+                   hist_every=hist_every, truth=m.theta_true[:m.p_coef], progress=progress)
     return res, run, m
 
 
 def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
-                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None):
-    """A Source from --simulate MANEUVER (in memory) or --bag PATH."""
+                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None,
+                sim_current=None, velocity_reference=None):
+    """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
+    NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
+    or what a bag of our simulator says)."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
     if bag:
-        return bag_source(bag, vehicle=vehicle, coefficients=coefficients)
+        return bag_source(bag, vehicle=vehicle, coefficients=coefficients,
+                          velocity_reference=velocity_reference)
     v = load_vehicle(vehicle or 'nps_auv2')
     names = coefficient_list(v, coefficients)
+    vr = velocity_reference or 'ground'
     run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,
-                   process_std=process_std)
+                   process_std=process_std, current=sim_current, velocity_reference=vr)
     m = Model(v, names)
+    where = ('' if run.current is None else ', in a current of '
+             + ', '.join(f'{c:g}' for c in run.current) + ' m/s (N, E, D)')
     return Source(vehicle=v, names=names, t=run.t, Y=run.y, U=run.u, T=run.T,
                   noise_std=run.noise_std, X_true=run.x, truth=m.theta_true, seed=seed,
                   maneuver=run.maneuver,
+                  current_truth=np.zeros(3) if run.current is None else run.current,
+                  velocity_reference=vr,
                   description=f'simulated {run.maneuver!r} run of {run.t[-1]:.0f} s at '
-                              f'T = {run.T} s, seed {seed}, {run.u[0, Input.N_RPM]:.0f} rpm')
+                              f'T = {run.T} s, seed {seed}, {run.u[0, Input.N_RPM]:.0f} rpm'
+                              + where)
 
 
 def _mc_case(args):

@@ -16,6 +16,7 @@ from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.batch import identify
+from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.trim import initial_state
@@ -270,7 +271,8 @@ def fig_noise(path, res, noise_mode):
         ax.set_ylabel(f'R 1-sigma ({UNITS[idx[0]]})')
         ax.set_title(f'measurement noise 1-sigma, {group}', fontsize=9)
         _log_axis(ax, SCALE[list(idx)] * sd[:, idx])
-    qrel = np.sqrt(h['Q_theta_diag']) / np.abs(res.initial)[None, :]
+    p = len(res.names)       # the coefficients (any current components follow them)
+    qrel = np.sqrt(h['Q_theta_diag'][:, :p]) / np.abs(res.initial)[None, :]
     for i, n in enumerate(res.names):
         axes[4].plot(t, qrel[:, i], lw=2.4 - 0.3 * (i % 5), ls=styles[i % 5], label=n)
     axes[4].set_ylabel('Q 1-sigma / |initial guess|')
@@ -322,6 +324,8 @@ def _markdown(doc, src, cfg, val_error, figures, command):
          f'- source: {src.description}',
          f'- seed: {doc["seed"]}',
          f'- coefficients ({doc["units"]}): {", ".join(co)}',
+         f'- water current: {doc["current_option"]}; velocities over '
+         f'{doc["velocity_reference"]}',
          f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
          '(filter-error maximum likelihood)',
          '- sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi rad): '
@@ -346,6 +350,7 @@ def _markdown(doc, src, cfg, val_error, figures, command):
                     [[n, _num(c['initial']), _num(c['ekf_estimate']), _num(c['ekf_std']),
                       _num(c['ekf_error_pct']), _num(c['estimate']), _num(c['error_pct'])]
                      for n, c in co.items()]))
+    L += _current_markdown(doc)
     vd = doc['validation']
     L += ['', '## Validation on a held-out manoeuvre', '',
           f'Manoeuvre {vd["maneuver"]!r} (not used for identification, which used '
@@ -378,11 +383,41 @@ def _markdown(doc, src, cfg, val_error, figures, command):
     return '\n'.join(L)
 
 
+def _current_markdown(doc):
+    """The report's water-current section (lines), empty when no current was identified or
+    given."""
+    cur = doc.get('current')
+    if not cur:
+        return []
+    L = ['', '## Water current', '',
+         'Estimated with the coefficients (m/s, NED: where the water goes); components not '
+         'estimated are held at the value shown. Velocities measured over '
+         f'{cur["velocity_reference"]}.', '']
+    rows = []
+    for i, key in enumerate(('north', 'east', 'down')):
+        est = f'current_{key[0]}' in cur['estimated']
+        rows.append([key, _num(cur['truth'][i]) if cur.get('truth') else '-', _num(cur[key]),
+                     _num(cur['std'][i]) if est else 'given',
+                     _num(cur['ekf'][key]) if est else '-'])
+    L.append(_table(['component', 'truth', 'estimate', '1-sigma', 'EKF pass'], rows))
+    L += ['', f'Speed {cur["speed"]:.4g} m/s towards {cur["direction_deg"]:.1f} deg (clockwise '
+              'from north).']
+    ident = cur.get('identifiability')
+    if ident:
+        L += ['', f'Headings covered: {ident["heading_span_deg"]:.0f} deg; largest correlation '
+                  f'of a current component with a coefficient: {ident["max_correlation"]:.2f} '
+                  f'({ident["correlated_with"]}).']
+    for w in doc.get('warnings') or []:
+        L += ['', f'**{w}**']
+    return L
+
+
 # ------------------------------------------------------------------------------------ driver
 
 def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
-                validation_duration=200.0, progress=True):
+                validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
+                current_down=False, sim_current=None, velocity_reference=None):
     """Identify (EKF + batch refinement), validate on a held-out manoeuvre, write the report.
 
     Parameters
@@ -395,6 +430,11 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         seed is seed + 1000 (the bag's recorded seed + 1000 when it has one) and its process
         noise is DEFAULT_PROCESS_STD
     progress : show progress bars (only when stderr is a terminal)
+    current, current_down : the water current ('estimate', 'none' or 'N,E[,D]' m/s NED; and
+        whether its down component is estimated), core/current.py
+    sim_current : (3,) m/s NED, the current a simulated run flies in (None: still water)
+    velocity_reference : 'ground' or 'water', what the velocities are (None: 'ground', or what
+        a bag of our simulator says)
 
     Returns
     -------
@@ -402,8 +442,10 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     """
     from auv_ident.analysis.progress import Progress
     os.makedirs(out_dir, exist_ok=True)
+    opt = parse_current(current, current_down)
     src = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                         seed=seed, duration=duration, coefficients=coefficients)
+                         seed=seed, duration=duration, coefficients=coefficients,
+                         sim_current=sim_current, velocity_reference=velocity_reference)
     # fail before the long identification if the validation would not be held out
     if _same_maneuver(validation_maneuver, src.maneuver):
         raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
@@ -415,7 +457,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
-    res = identify(Model(v, src.names), src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
+    model = Model(v, list(src.names) + opt.names, current=opt.fixed,
+                  velocity_reference=src.velocity_reference)
+    res = identify(model, src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
                    hist_every=hist_every, truth=src.truth,
                    progress=bar.update if bar else None)
     if bar:
@@ -435,6 +479,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     extra = {'maneuver': src.maneuver, 'seed': src.seed,
              'duration_s': float(src.t[-1] - src.t[0]),
              'noise_mode': noise_mode, 'source': src.description,
+             'current_option': opt.describe(), 'velocity_reference': src.velocity_reference,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': _versions(), 'command': command,
              'validation': {'maneuver': validation_maneuver, 'seed': val_seed,
@@ -444,7 +489,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                                           else "vehicle file's prior model (truth unknown)"),
                             'rms': None if val is None else val.rms,
                             'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}}
-    doc = results.result_dict(v, res, extra)
+    doc = results.result_dict(v, res, extra, current_truth=src.current_truth)
     json_path = os.path.join(out_dir, 'result.json')
     results.write_json(json_path, doc)
 

@@ -30,7 +30,7 @@ class Source:
     """Data to identify from: a simulated run or a bag, as arrays on the sample grid.
 
     U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/stream.py);
-    X_true and truth are known only for simulated data."""
+    X_true, truth and current_truth are known only for simulated data."""
 
     vehicle: object
     names: list
@@ -44,6 +44,8 @@ class Source:
     truth: object = None
     seed: object = None
     maneuver: str = ''
+    current_truth: object = None        # (3,) m/s NED the run flew in, if known
+    velocity_reference: str = 'ground'  # what Y's u v w are (ground or water)
 
 def paper_values(vehicle, name):
     """(paper's estimate, paper's error % text) or (None, None)."""
@@ -52,7 +54,38 @@ def paper_values(vehicle, name):
     err = (p.get('error_pct') or {}).get(name)
     return est, err
 
-def result_dict(vehicle, res, extra=None):
+def current_dict(cur, truth=None):
+    """The JSON `current` of a result (schema in docs/report.md): the estimate in m/s NED and
+    its 1-sigma, the EKF pass's, what was estimated, and whether the run separates it from the
+    coefficients. cur: core.current.CurrentEstimate; truth: (3,) if known."""
+    if cur is None:
+        return None
+    d = {'north': float(cur.estimate[0]), 'east': float(cur.estimate[1]),
+         'down': float(cur.estimate[2]), 'std': [float(v) for v in cur.std],
+         'estimated': list(cur.names), 'velocity_reference': cur.velocity_reference,
+         'speed': cur.speed, 'direction_deg': cur.direction_deg,
+         'ekf': {'north': float(cur.ekf_estimate[0]), 'east': float(cur.ekf_estimate[1]),
+                 'down': float(cur.ekf_estimate[2]), 'std': [float(v) for v in cur.ekf_std]},
+         'truth': None, 'error': None}
+    if truth is not None:
+        tr = np.asarray(truth, dtype=float)
+        d['truth'] = [float(v) for v in tr]
+        d['error'] = [float(v) for v in cur.estimate - tr]
+    if cur.identifiability:
+        d['identifiability'] = dict(cur.identifiability)
+    return d
+
+
+def current_warnings(cur):
+    """Warning lines about the current (empty if it is well determined or not estimated)."""
+    if cur is None or not cur.identifiability or cur.identifiability.get('separable', True):
+        return []
+    ident = cur.identifiability
+    return ['warning: the water current is not separable from the coefficients in this run ('
+            + '; '.join(ident['reasons']) + '). ' + ident['advice']]
+
+
+def result_dict(vehicle, res, extra=None, current_truth=None):
     """The JSON document of `identify --json` (schema in docs/report.md)."""
     err = res.error_pct()
     ekf_err = res.error_pct('ekf_estimate')
@@ -73,20 +106,50 @@ def result_dict(vehicle, res, extra=None):
          'mean_nis_per_dof': res.mean_nis_per_dof,
          'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
          + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
-            else 'dimensional SI') + ')'}
+            else 'dimensional SI') + ')',
+         'current': current_dict(getattr(res, 'current', None), current_truth),
+         'warnings': current_warnings(getattr(res, 'current', None))}
     if extra:
         d.update(extra)
     return d
 
+
 def _fmt(v, width=12):
     return f'{v:>{width}.6g}' if v is not None else f'{"-":>{width}}'
 
-def result_table(vehicle, res):
-    """The coefficient table: truth, estimate, 1-sigma, error %, and the paper's figures."""
-    return doc_table(result_dict(vehicle, res))
+
+def result_table(vehicle, res, doc=None):
+    """The coefficient table: truth, estimate, 1-sigma, error %, and the paper's figures; then
+    the water current and any warning."""
+    return doc_table(result_dict(vehicle, res) if doc is None else doc)
+
+
+def current_table(cur):
+    """Lines of the water current (a result document's `current`), '' if none."""
+    if not cur:
+        return ''
+    lines = [f'{"current (m/s)":<14}{"truth":>10}{"estimate":>12}{"1-sigma":>12}{"EKF pass":>12}']
+    for i, (name, key) in enumerate((('north', 'north'), ('east', 'east'), ('down', 'down'))):
+        est = cur[key]
+        est_txt = f'{est:>12.5f}' if f'current_{name[0]}' in cur['estimated'] else \
+            f'{"(given) " + format(est, ".3g"):>12}'
+        truth = cur['truth'][i] if cur.get('truth') else None
+        lines.append(f'{name:<14}' + (f'{truth:>10.4f}' if truth is not None else f'{"-":>10}')
+                     + est_txt + f'{cur["std"][i]:>12.2g}' + f'{cur["ekf"][key]:>12.5f}')
+    lines.append(f'current speed {cur["speed"]:.4f} m/s towards {cur["direction_deg"]:.1f} deg '
+                 f'(where the water goes, clockwise from north); velocity reference '
+                 f'{cur["velocity_reference"]}')
+    ident = cur.get('identifiability')
+    if ident:
+        lines.append(f'headings covered {ident["heading_span_deg"]:.0f} deg; largest correlation '
+                     f'with a coefficient {ident["max_correlation"]:.2f} '
+                     f'({ident["correlated_with"]})')
+    return '\n'.join(lines)
+
 
 def doc_table(doc):
-    """The coefficient table of a result document (result_dict / identify --json)."""
+    """The coefficient table of a result document (result_dict / identify --json), with the
+    water current and the warnings after it."""
     lines = [f'{"coefficient":<12}{"truth":>12}{"estimate":>12}{"1-sigma":>12}{"error %":>10}'
              f'{"paper est.":>12}{"paper err %":>12}']
     for n, c in doc['coefficients'].items():
@@ -95,7 +158,12 @@ def doc_table(doc):
         lines.append(f'{n:<12}{_fmt(c["truth"])}{_fmt(c["estimate"])}{_fmt(c["std"])}'
                      + (f'{err:>+10.3f}' if err is not None else f'{"-":>10}')
                      + _fmt(c['paper_estimate']) + f'{perr if perr is not None else "-":>12}')
+    cur = current_table(doc.get('current'))
+    if cur:
+        lines.append(cur)
+    lines += list(doc.get('warnings') or [])
     return '\n'.join(lines)
+
 
 def write_json(path, doc):
     with open(path, 'w', encoding='utf-8') as fh:

@@ -23,7 +23,8 @@ log = logging.getLogger('auv_ident.replay')
 class ReplayResult:
     """Identification over a bag.
 
-    names : coefficient names; vehicle, frame : what was used
+    names : parameter names (coefficients, then any estimated current components);
+        vehicle, frame : what was used
     updates : list of (stamp_ns, estimate (p,), std (p,)), one per accepted odometry update
     estimate, std, cov : final (last good) estimate, 1-sigma, covariance (p,), (p,), (p, p)
     initial : the initial guesses; truth : the vehicle file's values (the truth of a simulated
@@ -67,6 +68,7 @@ class ReplayResult:
     time_origin_ns: int = 0
     t_cmd: np.ndarray = None
     U_cmd: np.ndarray = None
+    model: object = None        # the session's core.model.Model (coefficients, then current)
 
     def document(self, stamp_ns=None):
         """The estimate file's dict of the final estimate."""
@@ -169,7 +171,7 @@ def session_result(session, updates, settings=None):
         time_origin_ns=int(session.time_origin_ns or 0),
         t_cmd=np.array(sorted(by_stamp), dtype=float),
         U_cmd=(np.array([by_stamp[tc] for tc in sorted(by_stamp)], dtype=float) if by_stamp
-               else np.zeros((0, 6))))
+               else np.zeros((0, 6))), model=session.model)
 
 def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
                actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
@@ -191,8 +193,9 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
         then a count), or False
     **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
         noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
-        warm_start, max_command_age, noise_source); defaults are the node's parameter
-        defaults (max_command_age: none, noise_source: 'message')
+        warm_start, max_command_age, noise_source, current, current_down, velocity_reference,
+        current_sd0, current_walk); defaults are the node's parameter defaults (max_command_age:
+        none, noise_source: 'message', current: 'estimate', velocity_reference: 'ground')
 
     Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
     not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad

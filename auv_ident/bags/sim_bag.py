@@ -134,6 +134,10 @@ def run_metadata(run, frame='ned', command='', epoch_ns=SIM_EPOCH_NS):
             'auv_ident.noise_std': ' '.join(repr(float(v)) for v in run.noise_std),
             'auv_ident.command': command,
             'auv_ident.stamp_epoch_ns': str(int(epoch_ns))}
+    if getattr(run, 'current', None) is not None:
+        # the truth of a run in a current: m/s NED, and what the DVL measured
+        meta['auv_ident.current'] = ' '.join(repr(float(v)) for v in run.current)
+        meta['auv_ident.velocity_reference'] = run.velocity_reference
     if int(epoch_ns) == SIM_EPOCH_NS:
         meta['auv_ident.stamp_epoch'] = SIM_EPOCH
     return meta

@@ -12,6 +12,10 @@ pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that 
 an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
 shared/method_notes.md); the batch pass uses every sample against one consistent theta.
 
+The water current's identified components (core/current.py) are parameters of both passes
+like the coefficients: random-walk states of the augmented EKF, and constants of the
+maximum-likelihood fit (scaled in m/s, where the coefficients are scaled by their size).
+
 Time is what the stamps say: both passes take the sample times t and cross each interval by
 the rules of timing.py (RK4 steps of at most max_step with the command held, a restart of the
 vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
@@ -23,10 +27,11 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from . import ekf as K
+from .current import split_current
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .filter import AugmentedEKF, FilterConfig
 from .model import Model, STATUS_TEXT
-from .state import Input, N_INPUT, N_STATE
+from .state import Input, N_INPUT, N_STATE, State
 from .timing import check_times, DEFAULT_MAX_BRIDGE, nominal_sample_time, time_steps
 
 
@@ -49,6 +54,7 @@ class Result:
     history: dict = field(default_factory=dict)
     R_final: object = None
     Q_final: object = None
+    current: object = None   # core.current.CurrentEstimate, or None (still water, not asked)
 
     def error_pct(self, which='estimate'):
         if self.truth is None:
@@ -147,7 +153,8 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
     fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
                              noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
     state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
-                        coefficient_values=model.c)
+                        coefficient_values=model.c, current=model.current,
+                        velocity_reference=model.velocity_reference)
     f = AugmentedEKF(state_model, fixed_cfg, T)
     settings = f.settings()
     timeline = _timeline(f, t, Y, U, max_step, max_bridge)
@@ -155,7 +162,7 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
     x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
     out = K.new_outputs(N_STATE, N, want_white=True)
     white = out.white
-    scale = np.abs(theta_start)
+    scale = parameter_scale(model, theta_start)
 
     def residuals(z):
         if progress is not None:
@@ -186,28 +193,41 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
                                     'message': sol.message, 'nfev': sol.nfev}
 
 
+def parameter_scale(model, theta):
+    """Scale of each parameter in the fit (p,): |theta| for a coefficient (a relative step),
+    1 m/s for a current component (which may well be 0)."""
+    scale = np.abs(np.asarray(theta, dtype=float)).copy()
+    scale[model.p_coef:] = 1.0
+    return scale
+
+
 def identify(model, t, Y, U, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
              progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
     """Identify model.theta_names from measurements Y (N, 12) stamped t (N,) (s) and inputs
     U (N, 6), U[k] the command held over [t_k, t_k+1).
 
     T (s): the nominal sample time (None: the median interval of t); max_step, max_bridge: as
-    for run_ekf. Returns a Result."""
+    for run_ekf; truth: the true coefficients (p_coef,), if known. Returns a Result: the
+    coefficients in names/estimate/std/cov, the water current (if the model identifies or
+    is given one) in Result.current."""
     t0 = time.perf_counter()
     t, Y, U = _record(t, Y, U)
     T = nominal_sample_time(t) if T is None else T
     f = AugmentedEKF(model, cfg, T)
     stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
                              max_bridge=max_bridge)
-    ekf_est, ekf_std = f.theta, f.theta_std
-    est, cov = ekf_est, f.theta_cov
+    ekf_est, ekf_cov = f.theta, f.theta_cov
+    est, cov = ekf_est, ekf_cov
     if refine_pass and model.p > 0:
         est, cov, _ = refine(model, cfg, t, Y, U, ekf_est, T=T, max_step=max_step,
                              max_bridge=max_bridge, progress=progress)
+    est_c, cov_c, ekf_c, ekf_cov_c, current = split_current(model, est, cov, ekf_est, ekf_cov,
+                                                            Y[:, State.PSI])
     wall = time.perf_counter() - t0
-    return Result(names=list(model.theta_names), estimate=est, std=np.sqrt(np.diag(cov)),
-                  cov=cov, ekf_estimate=ekf_est, ekf_std=ekf_std, initial=f.theta0.copy(),
+    return Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
+                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
+                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=f.theta0[:model.p_coef].copy(),
                   truth=None if truth is None else np.asarray(truth, float),
                   steps=int(stats[1]), wall_s=wall,
                   mean_nis_per_dof=float(stats[2] / max(1.0, stats[3])), refined=refine_pass,
-                  history=hist, R_final=f.R.copy(), Q_final=f.Q.copy())
+                  history=hist, R_final=f.R.copy(), Q_final=f.Q.copy(), current=current)

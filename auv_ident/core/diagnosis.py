@@ -43,8 +43,15 @@ EXCITATION = {
 ADDED_MASS_EXCITATION = 'quick fin reversals at the rate limit (accelerations)'
 
 
+CURRENT_EXCITATION = ('turns: the current is separable from the coefficients only through '
+                      'heading changes')
+
+
 def excitation_advice(vehicle, name):
-    """The manoeuvre that would excite coefficient `name` of `vehicle`, in words."""
+    """The manoeuvre that would excite coefficient `name` of `vehicle` (or a water-current
+    component, 'current_*'), in words."""
+    if name.startswith('current_'):
+        return CURRENT_EXCITATION
     c = vehicle.coefficients[vehicle.index(name)]
     if c.is_added_mass:
         return ADDED_MASS_EXCITATION

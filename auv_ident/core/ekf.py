@@ -36,8 +36,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, uint64
 
-from .model import NZ, OK, kernel, mass_inverse_into, state_derivative
-from .state import N_NU, N_STATE, State
+from .model import (CURRENT_GROUND, kernel, mass_inverse_into, OK, state_derivative,
+                    ZZ_LEN)
+from .state import N_CURRENT, N_NU, N_STATE, State
 
 MODE_FIXED, MODE_PAPER, MODE_PAPER_Q, MODE_MATCHING = 0, 1, 2, 3
 MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
@@ -48,7 +49,8 @@ ERR_NAN_STATE = 11
 # State indices as plain ints: numba freezes them into the same constants as the literals
 _U, _V, _W, _P, _Q, _R, _X, _Y, _Z, _PHI, _THETA, _PSI = (int(s) for s in State)
 # the columns of df/dx that can be nonzero in the rows of the body-velocity rates (f depends
-# on neither the position nor psi), and in the rows of the position and Euler-angle rates
+# on neither the position nor psi; psi too with a current over ground, added apart), and in
+# the rows of the position and Euler-angle rates
 _DYNAMICS_COLUMNS = (_U, _V, _W, _P, _Q, _R, _PHI, _THETA)
 _KINEMATICS_COLUMNS = (_U, _V, _W, _P, _Q, _R, _PHI, _THETA, _PSI)
 
@@ -91,10 +93,12 @@ Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new 
 
 @njit(cache=True)
 def new_workspace(n, n_coef):
-    """Workspace for an augmented state of size n and a vehicle with n_coef coefficients."""
+    """Workspace for an augmented state of size n and a vehicle with n_coef coefficients (the
+    coefficient arrays hold the water current after them; a caller may pass n_coef + 3)."""
     p = n - N_STATE
-    return Workspace(np.empty(n_coef), np.empty(n_coef), np.empty((N_NU, N_NU)),
-                     np.empty((N_NU, N_NU)), np.empty(2 * NZ), np.empty(N_STATE),
+    return Workspace(np.empty(n_coef + N_CURRENT), np.empty(n_coef + N_CURRENT),
+                     np.empty((N_NU, N_NU)), np.empty((N_NU, N_NU)), np.empty(ZZ_LEN),
+                     np.empty(N_STATE),
                      np.empty(N_STATE), np.empty(N_STATE), np.empty((N_STATE, N_STATE)),
                      np.empty((N_STATE, p)), np.empty((N_STATE, n)), np.empty((N_STATE, n)),
                      np.empty((n, n)), np.empty((N_STATE, n)), np.empty((N_STATE, N_STATE)),
@@ -186,6 +190,22 @@ def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):
                     fr = a * A[_R, kk]
                     for j in range(n):
                         d = dk[kk, j]
+                        dk_new[_U, j] += fu * d
+                        dk_new[_V, j] += fv * d
+                        dk_new[_W, j] += fw * d
+                        dk_new[_P, j] += fp * d
+                        dk_new[_Q, j] += fq * d
+                        dk_new[_R, j] += fr * d
+                if cm.current == CURRENT_GROUND:
+                    # the current in the body frame turns with psi: the dynamics depend on it
+                    fu = a * A[_U, _PSI]
+                    fv = a * A[_V, _PSI]
+                    fw = a * A[_W, _PSI]
+                    fp = a * A[_P, _PSI]
+                    fq = a * A[_Q, _PSI]
+                    fr = a * A[_R, _PSI]
+                    for j in range(n):
+                        d = dk[_PSI, j]
                         dk_new[_U, j] += fu * d
                         dk_new[_V, j] += fv * d
                         dk_new[_W, j] += fw * d

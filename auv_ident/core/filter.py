@@ -4,17 +4,19 @@ what to identify and how (:class:`FilterConfig`), the initial estimate and covar
 streaming identifier. The compiled per-step algebra is in ekf.py, the batch methods over a whole
 record in batch.py.
 
-Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p coefficients)].
+Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p parameters: the
+coefficients, then any water-current components the model identifies, core/model.py)].
 """
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import ekf as K
+from .current import ned_current
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
-from .state import COEFFICIENTS, N_STATE, State, VEHICLE
+from .state import COEFFICIENTS, CURRENT_NAMES, N_CURRENT, N_STATE, State, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -27,6 +29,17 @@ DEFAULT_Q_STATE = np.array([2e-6, 2e-6, 2e-6, 2e-7, 2e-7, 2e-7,
 # start-up 1-sigma of channels the sensor suite does not measure (AugmentedEKF.initial_state),
 # in the order of state.State (u v w: m/s, p q r: rad/s, x y z: m, phi theta psi: rad)
 UNMEASURED_SD0 = np.array([0.3, 0.3, 0.3, 0.05, 0.05, 0.05, 100, 100, 10, 0.2, 0.2, np.pi])
+# m/s, initial 1-sigma of an identified water-current component: currents of 0.05-0.5 m/s are
+# common (shared/real_data.md), so 0.5 m/s covers them without claiming to know the direction
+DEFAULT_CURRENT_SD0 = 0.5
+# m/s, initial 1-sigma of an identified DOWN component: vertical currents are small (mm/s to a
+# few cm/s outside upwelling and internal waves), and a wide prior lets the start of the run
+# trade it against the heave coefficients (Z_w 50 % off drove it to 0.2 m/s and the relative
+# surge negative within 0.3 s on a 10 Hz independent bag)
+DEFAULT_CURRENT_DOWN_SD0 = 0.05
+# m/s, 1-sigma of the current guessed from the first measurement (AugmentedEKF.start_current):
+# how far from its straight trim through the water a cruising vehicle typically starts a log
+CURRENT_GUESS_SD = 0.1
 
 
 @dataclass
@@ -47,6 +60,18 @@ class FilterConfig:
     theta_cov0 : (p, p) initial covariance of the coefficients (symmetric positive definite, the
         coefficients' units squared), e.g. from a previous run's estimate; None for
         diag((p0_rel |initial guess|)^2)
+    current_initial : (3,) m/s NED, initial guess of the identified current components (the
+        model's theta holds which; the others are the model's fixed current)
+    current_sd0 : m/s, initial 1-sigma of each identified horizontal current component
+    current_down_sd0 : m/s, initial 1-sigma of the down component (when identified)
+    current_walk : m/s/sqrt(s), random-walk intensity of the identified current: 0 (default)
+        for a constant current; otherwise the current may wander by current_walk sqrt(t) over
+        t seconds (per time update of h s the walk adds current_walk^2 h to its variance), i.e.
+        by its prior 1-sigma within the time constant (current_sd0 / current_walk)^2
+        (1e-3 m/s/sqrt(s): 0.06 m/s per hour, tidal; time constant 2.5e5 s at 0.5 m/s)
+
+    In this config "coefficients" (initial, theta_cov0, p) are the model's coefficients only
+    (model.p_coef); the current components have their own settings.
     """
 
     coefficients: list = field(default_factory=list)
@@ -63,6 +88,10 @@ class FilterConfig:
     r_bound: float = 4.0
     q_floor: float = 1e-4
     theta_cov0: object = None
+    current_initial: object = None
+    current_sd0: float = DEFAULT_CURRENT_SD0
+    current_down_sd0: float = DEFAULT_CURRENT_DOWN_SD0
+    current_walk: float = 0.0
 
     def validate(self, p):
         if self.mode not in K.MODES:
@@ -92,6 +121,17 @@ class FilterConfig:
                                  f'{np.asarray(self.initial).shape}')
         if self.theta_cov0 is not None:
             check_theta_cov(self.theta_cov0, p)
+        for name in ('current_sd0', 'current_down_sd0'):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ConfigError(f'{name} = {v!r} m/s must be a positive number')
+        if not np.isfinite(self.current_walk) or self.current_walk < 0:
+            raise ConfigError(f'current_walk = {self.current_walk!r} m/s/sqrt(s) must be >= 0')
+        if self.current_initial is not None:
+            c = np.asarray(self.current_initial, dtype=float)
+            if c.shape != (N_CURRENT,) or not np.all(np.isfinite(c)):
+                raise ConfigError(f'current_initial must be 3 finite numbers (north, east, down '
+                                  f'm/s), got {self.current_initial!r}')
 
 
 def check_theta_cov(C, p):
@@ -145,27 +185,45 @@ class AugmentedEKF:
         self.model = model
         self.cfg = cfg
         self.T = float(T)
-        p = model.p
-        cfg.validate(p)
+        pc = model.p_coef
+        cfg.validate(pc)
         self.names = list(model.theta_names)
-        th0 = (model.theta_true * (1.0 + cfg.initial_offset) if cfg.initial is None
+        th0 = (model.theta_true[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
                else np.asarray(cfg.initial, dtype=float).copy())
         if not np.all(np.isfinite(th0)):
             raise ConfigError(f'initial guesses must be finite, got {th0}')
         if np.any(th0 == 0):
             raise ConfigError('an initial guess of exactly 0 gives no scale for its covariance: '
                               f'{dict(zip(self.names, th0))}')
-        self.theta0 = th0
-        self.theta_cov0 = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
-                           else check_theta_cov(cfg.theta_cov0, p))
+        cov_c = (default_theta_cov(th0, cfg.p0_rel) if cfg.theta_cov0 is None
+                 else check_theta_cov(cfg.theta_cov0, pc))
+        # the identified current components: their own prior and random walk (absolute, m/s)
+        cur = [CURRENT_NAMES.index(n) for n in model.current_names]
+        vc0 = (np.zeros(N_CURRENT) if cfg.current_initial is None
+               else np.asarray(cfg.current_initial, dtype=float))
+        self.theta0 = np.concatenate([th0, vc0[cur]])
+        self.theta_cov0 = np.zeros((model.p, model.p))
+        self.theta_cov0[:pc, :pc] = cov_c
+        cur_sd0 = np.array([cfg.current_down_sd0 if i == 2 else cfg.current_sd0 for i in cur])
+        self.theta_cov0[pc:, pc:] = np.diag(cur_sd0 ** 2)
+        # the identified current's start: the prior (current_initial), or, when none is given
+        # and the velocities are over ground, a guess from the first measurement (start_current)
+        self.guess_current = bool(cur) and (cfg.current_initial is None
+                                            and model.velocity_reference == 'ground')
+        # the parameters' 1-sigma scale (the unit of repair_covariance, the guard's blow-up
+        # limit): p0_rel |initial guess| for coefficients, current_sd0 for the current
+        self.prior_scale = np.concatenate([cfg.p0_rel * np.abs(th0),
+                                           cur_sd0])
+        p = model.p
         n = N_STATE + p
         self.n = n
-        self.ws = K.new_workspace(n, len(model.c))   # scratch reused by every step
+        self.ws = K.new_workspace(n, model.n_coef)   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
         self.noise_std = np.asarray(cfg.noise_std, dtype=float).copy()
-        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0)])
+        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0),
+                            np.full(len(cur), cfg.current_walk * np.sqrt(self.T))])
         self.Q0 = np.diag(q ** 2)
         self.measured = np.asarray(cfg.measured, dtype=bool).copy()
         self.mode = K.MODES[cfg.mode]
@@ -202,12 +260,13 @@ class AugmentedEKF:
 
     def reference_std(self):
         """(n,) 1-sigma scale of each augmented state: noise_std on measured channels, the
-        start-up 1-sigma of unmeasured ones, p0_rel |theta0| for the coefficients. The unit in
+        start-up 1-sigma of unmeasured ones, the parameters' prior scale (p0_rel |theta0| for
+        the coefficients, current_sd0 for the current). The unit in
         which :func:`repair_covariance` floors eigenvalues."""
         sd = np.asarray(self.cfg.noise_std, dtype=float).copy()
         use = ~self.measured | ~(sd > 0)
         sd[use] = UNMEASURED_SD0[use]
-        th = self.cfg.p0_rel * np.abs(self.theta0)
+        th = self.prior_scale
         return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
     def set_prior(self, theta0, theta_cov0):
@@ -219,13 +278,59 @@ class AugmentedEKF:
                               f'{th0}')
         self.theta_cov0 = check_theta_cov(theta_cov0, self.model.p)
         self.theta0 = th0.copy()
+        self.guess_current = False
 
     def initial_estimate(self, y0, rpm):
         """(xa0 (n,), P0 (n, n)): the augmented state and covariance before the first
         measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
         theta_cov0)."""
         x0, sd0 = self.initial_state(y0, rpm)
-        return np.concatenate([x0, self.theta0]), initial_covariance(sd0, self.theta_cov0)
+        theta0, cov0 = self.theta0, self.theta_cov0
+        if self.guess_current:
+            guess = self.start_current(y0, rpm)
+            if guess is not None:
+                pc = self.model.p_coef
+                theta0, cov0 = theta0.copy(), cov0.copy()
+                theta0[pc:] = guess
+                # the guess is as good as the trim assumption: CURRENT_GUESS_SD
+                var = np.minimum(np.diag(cov0)[pc:], CURRENT_GUESS_SD ** 2)
+                cov0[pc:, :] = 0.0
+                cov0[:, pc:] = 0.0
+                cov0[pc:, pc:] = np.diag(var)
+        return np.concatenate([x0, theta0]), initial_covariance(sd0, cov0)
+
+    def start_current(self, y0, rpm):
+        """The identified current components' start guess (m/s) from the first measurement y0
+        over ground at shaft speed rpm, or None (keep the prior theta0).
+
+        The vehicle is taken to be in its straight, level trim through the water, so the
+        current in the body frame is (u - u_trim(rpm), v, w [down only when identified, else
+        0]), turned to NED with y0's attitude; initial_estimate gives it the 1-sigma
+        CURRENT_GUESS_SD. Why: at the start the current is seen only through a few steps of the
+        dynamics, while the coefficients are still far off (50 % at the default start); with
+        the wide prior (current_sd0) the filter explains their error by the current (a heave
+        coefficient 50 % off and an unknown current leave the relative speed as a free scale of
+        the heave and pitch forces), and within a second the relative surge can reach zero,
+        outside the propeller model's domain (seen on independent 10 Hz bags: the along-track
+        current estimate ran from 0.2 to 0.8 m/s in 1.2 s). None when u or v is not measured,
+        no trim exists at rpm, or the guess lies beyond 3 prior 1-sigma."""
+        pc = self.model.p_coef
+        y0 = np.asarray(y0, dtype=float)
+        ok = self.measured & np.isfinite(y0)
+        if not (ok[State.U] and ok[State.V]):
+            return None
+        try:
+            u_trim = trim_speed(self.model, rpm)
+        except DomainError:
+            return None
+        names = self.model.current_names
+        w = y0[State.W] if ('current_d' in names and ok[State.W]) else 0.0
+        ang = [y0[i] if ok[i] else 0.0 for i in (State.PHI, State.THETA, State.PSI)]
+        vc = ned_current((y0[State.U] - u_trim, y0[State.V], w), *ang)
+        guess = vc[[CURRENT_NAMES.index(n) for n in names]]
+        if not np.all(np.abs(guess) <= 3.0 * self.prior_scale[pc:]):
+            return None
+        return guess
 
     def start(self, y0, rpm):
         """Start the filter from the measurement y0 (12,) at shaft speed rpm (fused)."""

@@ -14,6 +14,26 @@ derivatives (all checked against finite differences in the tests).
 Why analytic and compiled: the EKF needs f and both Jacobians four times per RK4 step, tens of
 thousands of times per second.
 
+Water current (Fossen 2021, sec. 10.3, an irrotational current constant in NED, v_c (3,),
+m/s, where the water goes): the hydrodynamic, control, propulsion and added-mass forces act on
+the velocity relative to the water nu_r = nu - [R(Theta)^T v_c; 0]. For such a current the
+rigid-body terms can be written in nu_r as well (Fossen 2021, Property 10.1: with
+d/dt (R^T v_c) = -omega x R^T v_c one has M_RB nu_dot + C_RB(nu) nu = M_RB nu_r_dot
++ C_RB(nu_r) nu_r, checked term by term for v_dot + omega x v and r_G x (v_dot + omega x v)),
+so the whole vehicle equation is the still-water one in nu_r:
+
+    M nu_r_dot + C(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau,                (Fossen eq. 10.18)
+    nu_dot = nu_r_dot + [v_cb x omega; 0],  v_cb = R^T v_c,  eta_dot = J(eta) nu.
+
+Which velocity the state holds is what the velocity sensor measures (so the measurement stays
+a selection of states): with velocity_reference 'ground' (DVL in bottom lock) x holds nu over
+ground and f applies the two lines above (the dynamics then depend on psi through v_cb); with
+'water' (water-track DVL) x holds nu_r, nu_r_dot is the still-water f and the position rate
+gains the current, eta_dot = J(eta) nu_r + [v_c; 0]. The current's components come after the
+vehicle coefficients in c (c[n_coef:n_coef + 3] = v_c north, east, down), so an identified
+component is one more entry of theta and df/dv_c a column of Bt (chain rule through nu_r).
+Still water with no current identified (cm.current == CURRENT_NONE) runs none of this.
+
 Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 """
 import math
@@ -22,9 +42,12 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from .current_terms import (current_ground, current_in_body, CURRENT_GROUND, CURRENT_NONE,
+                            CURRENT_WATER, ZZ_LEN, ZZ_VCB, ZZ_XR)
 from .errors import DomainError
 from .monomials import NZ, Z_EPS, kernel_at, monomial_kernel
-from .state import Input, N_FINS, N_INPUT, N_NU, N_STATE, State
+from .state import (CURRENT_NAMES, Input, N_CURRENT, N_FINS, N_INPUT, N_NU, N_STATE,
+                    State, VELOCITY_REFERENCES)
 from .vehicle import (COS_THETA_MIN, FACTOR_INDEX, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
                       P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_U_MIN, P_W,
                       P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
@@ -36,6 +59,7 @@ _N_RPM = int(Input.N_RPM)
 _Z_ABS = FACTOR_INDEX['|u|']        # |u| .. |r|
 _Z_FINS = FACTOR_INDEX['dr']        # dr ds db dbp dbs
 _Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX['db2']
+
 
 
 # The hot kernels are compiled without numba's reference counting (its `_nrt` option; numba is
@@ -50,11 +74,13 @@ kernel = njit(cache=True, _nrt=False)
 # namedtuple is a plain struct in compiled code (reading a field costs nothing) and, unlike a
 # structref, can be read by the kernels compiled without reference counting.
 CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
-                                            'Minv recompute_minv M_RB theta_pos')
+                                            'Minv recompute_minv M_RB theta_pos current n_coef')
 CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
 
-c0 : (n_coef,) coefficient values (the file's units) for the coefficients not in theta
-theta_idx : (p,) int, index in c0 of each identified coefficient (theta's order)
+c0 : (n_coef + 3,) coefficient values (the file's units) for the coefficients not in theta,
+    then the water current north, east, down (m/s, NED)
+theta_idx : (p,) int, index in c0 of each identified parameter (theta's order; n_coef + i for
+    a current component)
 par : (N_PAR,) the vehicle's float parameters (layout vehicle.P_*)
 mono_addr : int, address of the vehicle's compiled monomial kernel (monomials.kernel_at)
 theta_terms : (p, 2) int, [equation, coefficient index] per identified coefficient (equation -1
@@ -64,7 +90,9 @@ am_s : (na,) scale of each added-mass coefficient
 Minv : (6, 6) M^-1 for c0 (used unless recompute_minv)
 recompute_minv : bool, M^-1 is recomputed from the step's coefficients (added mass in theta)
 M_RB : (6, 6) rigid-body mass matrix
-theta_pos : (n_coef,) int, position of each coefficient in theta, or -1
+theta_pos : (n_coef + 3,) int, position of each entry of c0 in theta, or -1
+current : int, CURRENT_NONE, CURRENT_GROUND or CURRENT_WATER (how the current enters f)
+n_coef : int, number of vehicle coefficients (the current's place in c0)
 """
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
@@ -381,12 +409,15 @@ def mass_inverse_into(c, M_RB, am_i, am_s, M, Minv):
 def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     """x_dot = f(x, u_in, c) (12,); with want_jac A = df/dx (12x12), Bt = df/dtheta (12xp).
 
-    c (n_coef,) are this evaluation's coefficient values and Minv (6x6) M^-1 for them
-    (mass_inverse_into); cm (CompiledModel) gives the vehicle's data and which coefficients
-    are theta (p = len(cm.theta_idx)). zz (2 NZ,) and dprod (n_coef,) are scratch. Returns a
-    status code (OK = 0).
+    c (n_coef + 3,) are this evaluation's coefficient values and water current (NED, m/s) and
+    Minv (6x6) M^-1 for them (mass_inverse_into); cm (CompiledModel) gives the vehicle's data,
+    which entries of c are theta (p = len(cm.theta_idx)) and how the current enters (module
+    docstring). zz (ZZ_LEN,) and dprod (n_coef + 3,) are scratch. Returns a status code
+    (OK = 0).
     nu_dot = M^-1 F: F and dF/dx, dF/dtheta are summed into rows 0..5 of xdot, A, Bt and M^-1
     is applied in place at the end. Nothing is allocated (this runs four times per EKF step).
+    With a current over ground the dynamics are evaluated at x_r = [nu_r, eta] (in zz) and
+    current_terms.current_ground adds the rest.
     """
     par = cm.par
     theta_terms = cm.theta_terms
@@ -394,6 +425,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     am_s = cm.am_s
     theta_pos = cm.theta_pos
     p = cm.theta_idx.shape[0]
+    current = cm.current
     for i in range(N_STATE):
         if not math.isfinite(x[i]):
             return ERR_NONFINITE
@@ -407,6 +439,18 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     sth = math.sin(th)
     sph = math.sin(x[_PHI])
     cph = math.cos(x[_PHI])
+    xv = x                   # the state the dynamics see: x, or x_r with a current over ground
+    if current == CURRENT_GROUND:
+        vc = c[cm.n_coef:cm.n_coef + N_CURRENT]
+        for i in range(N_CURRENT):
+            if not math.isfinite(vc[i]):
+                return ERR_NONFINITE
+        current_in_body(vc, sph, cph, sth, cth, x[_PSI], zz)
+        xv = zz[ZZ_XR:ZZ_XR + N_STATE]
+        for i in range(N_STATE):
+            xv[i] = x[i]
+        for i in range(3):
+            xv[i] -= zz[ZZ_VCB + i]
     for i in range(N_NU):
         xdot[i] = 0.0
     if want_jac:
@@ -417,10 +461,10 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
                 Bt[i, j] = 0.0
     # factor vector z = zz[:NZ] (vehicle.FACTORS) and zd = zz[NZ:], d z_i / d x_(i mod 6)
     for i in range(N_NU):
-        zz[i] = x[i]
-        zz[_Z_ABS + i] = abs(x[i])
+        zz[i] = xv[i]
+        zz[_Z_ABS + i] = abs(xv[i])
         zz[NZ + i] = 1.0
-        zz[NZ + _Z_ABS + i] = _sign(x[i])
+        zz[NZ + _Z_ABS + i] = _sign(xv[i])
     fl = par[P_FIN]
     for i in range(N_FINS):                  # fins saturated to +-fin limit (rad)
         zz[_Z_FINS + i] = min(max(ui[i], -fl), fl)
@@ -428,7 +472,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     zz[_Z_DB2] = zz[_Z_DBP] + zz[_Z_DBS]
     zz[NZ + _Z_DB2] = 0.0
     n_rpm = min(max(ui[_N_RPM], -par[P_NMAX]), par[P_NMAX])
-    st = _propulsion(x[_U], n_rpm, par, zz, xdot, A, want_jac)
+    st = _propulsion(xv[_U], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
         return st
     kernel_at(cm.mono_addr)(c, zz, want_jac, xdot, A, dprod)
@@ -438,7 +482,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
             if eq >= 0:
                 Bt[eq, j] += dprod[theta_terms[j, 1]]
     _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
-    _crossflow(par, x[_V], x[_W], x[_Q], x[_R], want_jac, xdot, A)
+    _crossflow(par, xv[_V], xv[_W], xv[_Q], xv[_R], want_jac, xdot, A)
     _solve_vec(Minv, xdot)
     if want_jac:
         _solve_minv(Minv, A, N_STATE)
@@ -452,48 +496,96 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
                 eq = am_i[a_, 0]
                 for i in range(N_NU):
                     Bt[i, theta_pos[ci]] += Minv[i, eq] * am_s[a_] * xdot[col]
+    if current == CURRENT_GROUND:
+        current_ground(x, cm, want_jac, xdot, A, Bt, zz)
     for i in range(N_NU):
         if not math.isfinite(xdot[i]):
             return ERR_NONFINITE
     _kinematics(x, sph, cph, sth, cth, want_jac, xdot, A)
+    if current == CURRENT_WATER:
+        # the state holds nu_r: the position rate is J nu_r + v_c (NED)
+        nc = cm.n_coef
+        for k in range(N_CURRENT):
+            xdot[_X + k] += c[nc + k]
+            j = theta_pos[nc + k]
+            if want_jac and j >= 0:
+                Bt[_X + k, j] += 1.0
+        for k in range(N_CURRENT):
+            if not math.isfinite(xdot[_X + k]):
+                return ERR_NONFINITE
     return OK
 
 
 class Model:
-    """A vehicle's model with a chosen set of coefficients theta (by name).
+    """A vehicle's model with a chosen set of parameters theta (by name).
 
     Parameters
     ----------
     vehicle : core.vehicle.Vehicle
     theta_names : sequence of str
         Coefficients whose values come from `theta` in calls (the others stay at the file's
-        values). Order defines theta.
+        values), and any of the water current's components CURRENT_NAMES ('current_n',
+        'current_e', 'current_d', m/s NED). theta is the coefficients in the given order, then
+        the current's components in north, east, down order.
     mass_inverse : {'default', 'exact', 'mss_literal'}
         'default' uses the vehicle file's choice (NPS AUV II: MSS's literal 4-digit inverse).
     coefficient_values : array, optional
         Overrides the file's values for every coefficient (same order as vehicle.names).
+    current : (3,) array, optional
+        The water current (m/s, NED, where the water goes) for the components not in theta;
+        zeros by default (still water).
+    velocity_reference : {'ground', 'water'}
+        What the state's u v w are (module docstring): over ground (DVL in bottom lock, the
+        default) or through the water (water-track DVL).
     """
 
-    def __init__(self, vehicle, theta_names=(), mass_inverse='default', coefficient_values=None):
+    def __init__(self, vehicle, theta_names=(), mass_inverse='default', coefficient_values=None,
+                 current=None, velocity_reference='ground'):
         from .errors import ConfigError
         self.vehicle = vehicle
-        self.theta_names = [vehicle.names[vehicle.index(n)] for n in theta_names]
-        if len(set(self.theta_names)) != len(self.theta_names):
-            raise ConfigError(f'coefficient listed twice in {list(theta_names)}')
-        self.theta_idx = np.array([vehicle.index(n) for n in theta_names], dtype=np.int64)
+        names = list(theta_names)
+        cur = [n for n in CURRENT_NAMES if n in names]
+        coef = [n for n in names if n not in CURRENT_NAMES]
+        self.theta_names = [vehicle.names[vehicle.index(n)] for n in coef] + cur
+        if len(set(self.theta_names)) != len(self.theta_names) or len(names) != len(
+                self.theta_names):
+            raise ConfigError(f'parameter listed twice in {names}')
+        if velocity_reference not in VELOCITY_REFERENCES:
+            raise ConfigError(f'velocity_reference = {velocity_reference!r}; use '
+                              + ' or '.join(VELOCITY_REFERENCES))
+        self.velocity_reference = velocity_reference
+        n_coef = len(vehicle.coefficients)
+        self.n_coef = n_coef
+        self.p_coef = len(coef)                 # coefficients in theta (they come first)
+        self.current_names = cur                # current components in theta (after them)
+        self.theta_idx = np.array([vehicle.index(n) for n in coef]
+                                  + [n_coef + CURRENT_NAMES.index(n) for n in cur],
+                                  dtype=np.int64)
         self.p = len(self.theta_idx)
-        self.theta_pos = -np.ones(len(vehicle.coefficients), dtype=np.int64)
+        self.theta_pos = -np.ones(n_coef + N_CURRENT, dtype=np.int64)
         self.theta_pos[self.theta_idx] = np.arange(self.p)
         self.c = (vehicle.values if coefficient_values is None
                   else np.array(coefficient_values, dtype=float)).copy()
+        if self.c.shape != (n_coef,):
+            raise ConfigError(f'coefficient_values: expected {n_coef} values, got '
+                              f'{self.c.shape}')
+        vc = np.zeros(N_CURRENT) if current is None else np.array(current, dtype=float)
+        if vc.shape != (N_CURRENT,) or not np.all(np.isfinite(vc)):
+            raise ConfigError(f'current must be 3 finite numbers (north, east, down m/s), got '
+                              f'{current!r}')
+        self.current = vc
+        if cur or np.any(vc != 0.0):
+            self.current_mode = (CURRENT_GROUND if velocity_reference == 'ground'
+                                 else CURRENT_WATER)
+        else:
+            self.current_mode = CURRENT_NONE
         mi = vehicle.mass_inverse if mass_inverse == 'default' else mass_inverse
         if mi not in ('exact', 'mss_literal'):
             raise ConfigError(f'mass_inverse = {mass_inverse!r}; use default, exact or '
                               'mss_literal')
         if mi == 'mss_literal' and vehicle.Minv_literal is None:
             raise ConfigError(f'vehicle {vehicle.name!r} has no MSS literal inverse')
-        am_theta = [n for n in self.theta_names
-                    if vehicle.coefficients[vehicle.index(n)].is_added_mass]
+        am_theta = [n for n in coef if vehicle.coefficients[vehicle.index(n)].is_added_mass]
         if am_theta and mi == 'mss_literal':
             raise ConfigError(f'identifying added-mass coefficients {am_theta} changes M, but '
                               f'{vehicle.name} uses the fixed MSS literal inverse: choose '
@@ -502,39 +594,51 @@ class Model:
         self.recompute_minv = bool(am_theta)
         self.Minv = (vehicle.Minv_literal.copy() if mi == 'mss_literal'
                      else np.linalg.inv(vehicle.mass_matrix(self.c)))
-        # the vehicle's compiled monomial kernel, and per identified coefficient its
-        # [equation, coefficient index] (equation -1: added mass, which has no monomial)
+        # the vehicle's compiled monomial kernel, and per identified parameter its
+        # [equation, index in c] (equation -1: added mass or current, which have no monomial)
         self.mono_addr = monomial_kernel(vehicle.terms_i, vehicle.terms_s).address
         self.theta_terms = np.array(
-            [[-1 if vehicle.coefficients[ci].is_added_mass else vehicle.coefficients[ci].equation,
-              ci] for ci in self.theta_idx], dtype=np.int64).reshape(-1, 2)
-        self.compiled = self._compiled(self.c, self.theta_idx, self.theta_terms,
+            [[-1 if ci >= n_coef or vehicle.coefficients[ci].is_added_mass
+              else vehicle.coefficients[ci].equation, ci] for ci in self.theta_idx],
+            dtype=np.int64).reshape(-1, 2)
+        self.compiled = self._compiled(self._c_ext(None), self.theta_idx, self.theta_terms,
                                        self.theta_pos)
 
     def _compiled(self, c0, theta_idx, theta_terms, theta_pos):
         v = self.vehicle
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
-                             self.Minv, self.recompute_minv, v.M_RB, theta_pos)
+                             self.Minv, self.recompute_minv, v.M_RB, theta_pos,
+                             self.current_mode, self.n_coef)
+
+    def _c_ext(self, theta):
+        """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""
+        c = np.concatenate([self.c, self.current])
+        if theta is not None and self.p:
+            c[self.theta_idx] = theta
+        return c
 
     def compiled_fixed(self, theta):
         """CompiledModel of a filter over the 12 vehicle states only, with this model's
-        coefficients theta fixed at the given values (p,) (the batch refinement's candidates).
+        parameters theta fixed at the given values (p,) (the batch refinement's candidates).
         M^-1 is recomputed at every step when theta holds added-mass coefficients."""
-        n_coef = len(self.c)
-        return self._compiled(self.coefficients_with(theta), np.zeros(0, dtype=np.int64),
+        return self._compiled(self._c_ext(theta), np.zeros(0, dtype=np.int64),
                               np.zeros((0, 2), dtype=np.int64),
-                              -np.ones(n_coef, dtype=np.int64))
+                              -np.ones(self.n_coef + N_CURRENT, dtype=np.int64))
 
     @property
     def theta_true(self):
-        """The file's values of the chosen coefficients."""
-        return self.c[self.theta_idx].copy()
+        """The model's values of the chosen parameters (the file's coefficients, the given
+        current)."""
+        return self._c_ext(None)[self.theta_idx]
 
     def coefficients_with(self, theta):
-        c = self.c.copy()
-        if self.p:
-            c[self.theta_idx] = theta
-        return c
+        """The vehicle's coefficient values (n_coef,) with theta (p,) in place (a current in
+        theta is left out)."""
+        return self._c_ext(theta)[:self.n_coef].copy()
+
+    def current_with(self, theta):
+        """The water current (3,), m/s NED, with theta (p,) in place."""
+        return self._c_ext(theta)[self.n_coef:].copy()
 
     def check(self, status, x, ui):
         if status != OK:
@@ -544,7 +648,7 @@ class Model:
     def _evaluate(self, x, ui, theta, want_jac):
         x = np.ascontiguousarray(x, dtype=float)
         ui = np.ascontiguousarray(ui, dtype=float)
-        c = self.c if theta is None else self.coefficients_with(theta)
+        c = self._c_ext(theta)
         v = self.vehicle
         Minv = self.Minv
         if self.recompute_minv:
@@ -556,11 +660,11 @@ class Model:
         A = np.empty((N_STATE, N_STATE))
         Bt = np.empty((N_STATE, self.p))
         st = state_derivative(x, ui, c, Minv, self.compiled, want_jac, xdot, A, Bt,
-                              np.empty(2 * NZ), np.empty(len(c)))
+                              np.empty(ZZ_LEN), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
 
     def f(self, x, ui, theta=None):
-        """x_dot (12,) at state x (12,), inputs ui (6,) (saturated inside), coefficients theta."""
+        """x_dot (12,) at state x (12,), inputs ui (6,) (saturated inside), parameters theta."""
         st, x, ui, xdot, _, _ = self._evaluate(x, ui, theta, False)
         self.check(st, x, ui)
         return xdot

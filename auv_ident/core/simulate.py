@@ -1,6 +1,9 @@
 """Simulator core: integrate a vehicle under a manoeuvre and add sensor noise (no ROS).
 
-Sensor-noise defaults: :mod:`auv_ident.core.sensors`.
+Sensor-noise defaults: :mod:`auv_ident.core.sensors`. With a water current (constant in NED,
+Fossen 2021 sec. 10.3; the model's equations in core/model.py) the true state holds the
+velocity over ground, and the velocity sensor measures it over ground (DVL in bottom lock) or
+through the water (``velocity_reference='water'``: u v w minus R^T v_c).
 """
 from dataclasses import dataclass
 
@@ -8,10 +11,13 @@ import numpy as np
 
 from . import maneuvers
 from .angles import wrap_angle
+from .current import body_current
 from .errors import ConfigError
 from .integrators import rk4_step
+from .model import Model
 from .sensors import DEFAULT_NOISE_STD, DEFAULT_T
-from .state import EULER, INPUT_NAMES, LINEAR, N_NU, N_STATE, NU, State, STATE_NAMES
+from .state import (EULER, INPUT_NAMES, LINEAR, N_CURRENT, N_NU, N_STATE, NU, State,
+                    STATE_NAMES, VELOCITY_REFERENCES)
 from .trim import initial_state
 from .vehicle import P_FIN
 
@@ -31,6 +37,8 @@ class Run:
     u: np.ndarray
     noise_std: np.ndarray
     process_std: np.ndarray
+    current: np.ndarray = None         # (3,) m/s NED, the water current (None: still water)
+    velocity_reference: str = 'ground'  # what y's u v w are
 
     def summary(self):
         x = self.x
@@ -48,7 +56,8 @@ class Run:
 
 
 def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=None,
-             noise_std=None, process_std=None, x0=None, substeps=1):
+             noise_std=None, process_std=None, x0=None, substeps=1, current=None,
+             velocity_reference='ground'):
     """Integrate the model with RK4 (step T/substeps) and sample every T.
 
     Parameters
@@ -58,6 +67,10 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
     duration : float          s
     noise_std : (12,) array   measurement noise 1-sigma (DEFAULT_NOISE_STD); zeros for none
     process_std : (6,) array  white acceleration noise on nu_dot, or None for none
+    current : (3,) array      m/s NED, a constant water current (where the water goes); None
+                              or zeros for still water. The run starts in the trimmed straight
+                              run through the water (x0 over ground, unless x0 is given).
+    velocity_reference : 'ground' or 'water', what the measured u v w are
     """
     if not np.isfinite(duration) or duration <= 0:
         raise ConfigError(f'duration = {duration!r} s must be positive')
@@ -68,13 +81,32 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
     if (noise_std.shape != (N_STATE,) or np.any(noise_std < 0)
             or not np.all(np.isfinite(noise_std))):
         raise ConfigError(f'noise_std must be 12 non-negative numbers, got {noise_std}')
+    if velocity_reference not in VELOCITY_REFERENCES:
+        raise ConfigError(f'velocity_reference = {velocity_reference!r}; use ground or water')
+    vc = None
+    trim = initial_state(model, rpm) if x0 is None else None   # through the water
+    if current is not None:
+        vc = np.asarray(current, dtype=float)
+        if vc.shape != (N_CURRENT,) or not np.all(np.isfinite(vc)):
+            raise ConfigError(f'current must be 3 finite numbers (N, E, D m/s), got {current!r}')
+        if np.any(vc != 0.0):
+            # the truth with the current, its state over ground
+            model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
+                          coefficient_values=model.c, current=vc)
+        else:
+            vc = None
     rng = np.random.default_rng(seed)
     n = int(round(duration / T)) + 1
     t = np.arange(n) * T
     u = maneuvers.commands(maneuver, t, rpm=rpm, seed=seed,
                            fin_limit=model.vehicle.par[P_FIN])
     x = np.empty((n, N_STATE))
-    x[0] = initial_state(model, rpm) if x0 is None else x0
+    if x0 is None:
+        x[0] = trim
+        if vc is not None:
+            x[0, LINEAR] += body_current(vc, *x[0, EULER])
+    else:
+        x[0] = x0
     h = T / substeps
     f = model.f
     for k in range(n - 1):
@@ -87,10 +119,15 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
             xk[NU] += rng.normal(0.0, 1.0, N_NU) * np.asarray(process_std) * np.sqrt(T)
         x[k + 1] = xk
     x[:, State.PSI] = wrap_angle(x[:, State.PSI])
-    y = x + rng.normal(0.0, 1.0, x.shape) * noise_std
+    meas = x
+    if vc is not None and velocity_reference == 'water':
+        meas = x.copy()
+        meas[:, LINEAR] -= body_current(vc, x[:, State.PHI], x[:, State.THETA], x[:, State.PSI])
+    y = meas + rng.normal(0.0, 1.0, x.shape) * noise_std
     y[:, EULER] = wrap_angle(y[:, EULER])
     return Run(model.vehicle.name, str(maneuver), T, seed, t, x, y, u, noise_std,
-               np.zeros(6) if process_std is None else np.asarray(process_std, float))
+               np.zeros(6) if process_std is None else np.asarray(process_std, float),
+               None if vc is None else vc.copy(), velocity_reference)
 
 
 def save_run_csv(run, path):

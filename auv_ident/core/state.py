@@ -70,3 +70,11 @@ INPUT_NAMES = tuple(i.name.lower() for i in Input)
 INPUT_UNITS = ('rad',) * 5 + ('rpm',)
 NU_NAMES = STATE_NAMES[NU]
 ANGLE_STATES = (State.PHI, State.THETA, State.PSI)  # innovations of these are wrapped to (-pi, pi]
+
+# The water current (core/model.py), NED, m/s: its components as parameters of the augmented
+# vector are named CURRENT_NAMES and come after the coefficients
+N_CURRENT = 3
+CURRENT_NAMES = ('current_n', 'current_e', 'current_d')
+# what the velocity sensor measures, hence what the state's u v w are: 'ground' (DVL in bottom
+# lock: nu over ground) or 'water' (water-track DVL: nu_r, the velocity through the water)
+VELOCITY_REFERENCES = ('ground', 'water')

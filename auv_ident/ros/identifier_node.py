@@ -83,7 +83,10 @@ start-up, declared read-only)
     (1.0), ``q_theta_rel`` (1e-5), ``measured`` (channel names, default all 12), ``frame``
     ('ned' | 'enu'), ``sample_time`` (0.05 s), ``max_gap`` (5.0 s), ``max_bridge``
     (0.0 = 0.25 s; not yet in config/identifier.yaml), ``mass_inverse`` ('default'),
-    ``save_path`` (''), ``warm_start`` (''). An empty list means the default
+    ``current`` ('estimate' | 'none' | 'N,E[,D]'), ``current_down`` (false),
+    ``velocity_reference`` ('ground' | 'water'), ``current_sd0`` (0.5 m/s), ``current_walk``
+    (0.0 m/s/sqrt(s); docs/current.md), ``max_command_age`` (0: none), ``noise_source``
+    ('message'), ``save_path`` (''), ``warm_start`` (''). An empty list means the default
     (ROS turns ``[]`` into "not set"). Bad values (or types) print one line naming the
     parameter and exit with status 2 (ros/toolkit.py).
 
@@ -173,6 +176,16 @@ _PARAMETERS = (
     Param('noise_source', 'message', "measurement noise: 'message' (the Odometry covariance "
                                      'diagonals where finite and positive, noise_std elsewhere) '
                                      "or 'parameter' (noise_std)"),
+    Param('current', 'estimate', "the water current: 'estimate' (with the coefficients, "
+                                 "published as current_n, current_e), 'none' (still water) or "
+                                 "'N,E[,D]' (a known current, NED) [m/s]"),
+    Param('current_down', False, 'also estimate the down component of the current [-]'),
+    Param('velocity_reference', 'ground', "twist.linear is over 'ground' (DVL bottom lock) or "
+                                          "through the 'water' (water-track DVL)"),
+    Param('current_sd0', 0.5, 'initial 1-sigma of each estimated horizontal current component '
+                              '[m/s]'),
+    Param('current_walk', 0.0, 'random walk of the estimated current; 0 = constant '
+                               '[m/s/sqrt(s)]'),
     Param('save_path', '', 'estimate JSON written on ~/save and on shutdown; empty = none'),
     Param('warm_start', '', 'estimate JSON to start from (estimate and covariance); empty = '
                             'none'),

@@ -39,6 +39,10 @@ Parameters (``config/simulator.yaml``; read once at start-up, declared read-only
     ``noise_std`` (12 floats)  measurement 1-sigma of u v w (m/s), p q r (rad/s), x y z (m),
         phi theta psi (rad); default core.simulate.DEFAULT_NOISE_STD.
     ``process_noise`` (bool, false)  add white accelerations (core.simulate.DEFAULT_PROCESS_STD).
+    ``current`` (2 or 3 floats, [0, 0, 0] m/s)  a constant water current, NED (north, east[,
+        down]; where the water goes); zeros = still water (docs/current.md).
+    ``velocity_reference`` ('ground' | 'water', 'ground')  what the published twist.linear is:
+        over ground (DVL in bottom lock) or through the water (water-track DVL).
     ``real_time_factor`` (float, 1.0)  >1 publishes faster than real time; 0 = as fast as
         possible (may outrun a subscriber, see QoS).
     ``publish_clock`` (bool, unset)  publish /clock; unset = true when real_time_factor != 1.
@@ -108,6 +112,14 @@ def _noise_std(name, value):
     return noise
 
 
+def _current(name, value):
+    current = [float(v) for v in (value or [])]
+    if len(current) not in (0, 2, 3) or not all(math.isfinite(v) for v in current):
+        raise ParameterError(name, f'expected north, east[, down] in m/s, got {current}')
+    current = (current + [0.0] * 3)[:3] if current else None
+    return current if current and any(current) else None
+
+
 _PARAMETERS = (
     Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
           _vehicle),
@@ -122,6 +134,11 @@ _PARAMETERS = (
     Param('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
           'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi '
           '[rad]', _noise_std),
+    Param('current', [0.0, 0.0, 0.0], 'constant water current north, east[, down], where the '
+                                      'water goes (NED); zeros = still water [m/s]', _current),
+    Param('velocity_reference', 'ground', "published twist.linear: 'ground' (DVL bottom lock) "
+                                          "or 'water' (water-track DVL)",
+          choice(('ground', 'water'))),
     Param('process_noise', False, 'add white acceleration noise (unmodelled forces) [-]'),
     Param('real_time_factor', 1.0, 'simulated s per wall s; >1 faster than real time, 0 = as '
                                    'fast as possible [-]', number(minimum=0.0)),
@@ -144,7 +161,9 @@ class SimulatorNode(Node):
         try:
             self.run = simulate(model, self.maneuver, duration=self.duration, T=self.T,
                                 seed=self.seed, rpm=self.rpm, noise_std=self.noise_std,
-                                process_std=DEFAULT_PROCESS_STD if self.process_noise else None)
+                                process_std=DEFAULT_PROCESS_STD if self.process_noise else None,
+                                current=self.current,
+                                velocity_reference=self.velocity_reference)
         except AuvIdentError as err:
             name = 'rpm' if 'surge' in str(err) else 'maneuver'
             raise ParameterError(name, str(err)) from None
@@ -195,6 +214,8 @@ class SimulatorNode(Node):
         self.publish_clock = (self.real_time_factor != 1.0) if clk is None else clk
         self.wait_for = p['wait_for_subscribers']
         self.wait_timeout = p['wait_timeout']
+        self.current = p['current']
+        self.velocity_reference = p['velocity_reference']
 
     # -- publishing --
 

@@ -30,11 +30,12 @@ import operator
 
 import numpy as np
 
+from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter import DEFAULT_Q_STATE, FilterConfig
+from auv_ident.core.filter import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES
+from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.core.vehicle import P_FIN, P_NMAX
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
@@ -89,7 +90,8 @@ class IdentSession:
         restarts the vehicle states too (0 or None: settings.MAX_BRIDGE_S = 0.25 s, at least
         one sample time, at most max_gap; see core/stream.py for why)
     mass_inverse : one of settings.MASS_INVERSES ('default', 'exact', 'mss_literal')
-    warm_start : '' or an estimate JSON path (start from its estimate and covariance)
+    warm_start : '' or an estimate JSON path (start from its estimate and covariance; the
+        coefficients only: a previous run's current is not this run's)
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
     max_command_age : s, a command in force older than this makes the odometry 'stale command'
         (None or 0, the default: no limit, a held command stays in force: drivers that publish
@@ -97,6 +99,18 @@ class IdentSession:
     noise_source : 'message' (default): the Odometry covariance diagonals are the measurement
         variances of each message where they are finite and positive, noise_std for the other
         channels (one notice names them); 'parameter': noise_std always
+    current : 'estimate' (default), 'none', or 'N,E[,D]' (m/s NED, a known current): the water
+        current (core/current.py). Estimated by default because every AUV runs in one and 0.1
+        m/s left out wrecks the coefficients, while estimating a zero current costs little;
+        'none' is still water, the filter of before (bit for bit)
+    current_down : bool, also estimate the down component (with current 'estimate')
+    velocity_reference : 'ground' (DVL in bottom lock, default) or 'water' (water-track DVL:
+        twist.linear is the velocity through the water)
+    current_sd0 : m/s, initial 1-sigma of each estimated current component
+    current_walk : m/s/sqrt(s), random walk of the estimated current (0: constant)
+
+    The identified parameters (``names``) are the coefficients, then the estimated current
+    components ('current_n', 'current_e'[, 'current_d']).
 
     Time: stamps are integer ns; the session works in seconds since a time origin, the whole
     second of the first stamp when stamps are wall-clock times (>= TIME_ORIGIN_MIN_NS), else 0,
@@ -109,7 +123,9 @@ class IdentSession:
                  noise_mode='fixed', tau=10.0, lam=2e-3, noise_std=None, q_state=None,
                  p0_rel=1.0, q_theta_rel=1e-5, measured=(), frame='ned', sample_time=0.05,
                  max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
-                 max_bridge=None, max_command_age=None, noise_source='message'):
+                 max_bridge=None, max_command_age=None, noise_source='message',
+                 current=DEFAULT_CURRENT, current_down=False, velocity_reference='ground',
+                 current_sd0=DEFAULT_CURRENT_SD0, current_walk=0.0):
         self.vehicle = vehicle_named(vehicle)
         self.frame = choice('frame', frame, FRAMES)
         choice('mass_inverse', mass_inverse, MASS_INVERSES)
@@ -127,17 +143,30 @@ class IdentSession:
         canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
                                                       warm_start, warm)
         try:
-            self.model = Model(self.vehicle, canon, mass_inverse=mass_inverse)
+            self.current_option = parse_current(current, bool(current_down))
+        except ConfigError as err:
+            raise ParameterError('current_down' if current_down and str(current).strip()
+                                 != 'estimate' else 'current', str(err)) from None
+        self.velocity_reference = choice('velocity_reference', velocity_reference,
+                                         VELOCITY_REFERENCES)
+        current_sd0 = positive('current_sd0', current_sd0)
+        current_walk = positive('current_walk', current_walk, allow_zero=True)
+        try:
+            self.model = Model(self.vehicle, canon + self.current_option.names,
+                               mass_inverse=mass_inverse, current=self.current_option.fixed,
+                               velocity_reference=self.velocity_reference)
         except ConfigError as err:
             raise ParameterError('mass_inverse', str(err)) from None
 
         self.cfg = FilterConfig(coefficients=canon, initial=init, initial_offset=initial_offset,
                                 p0_rel=p0_rel, q_theta_rel=q_theta_rel, q_state=qs,
                                 noise_std=noise, measured=mask, mode=noise_mode, tau=tau,
-                                lam=lam, theta_cov0=self.warm_cov)
+                                lam=lam, theta_cov0=self.warm_cov, current_sd0=current_sd0,
+                                current_walk=current_walk)
         self.T = T
         self.max_gap = max_gap
-        self.names = canon
+        self.names = list(self.model.theta_names)
+        self.coefficient_names = canon
         self.measured = mask
         self._measured_states = tuple(int(i) for i in np.flatnonzero(mask))
         self._all_measured = bool(mask.all())
@@ -157,7 +186,7 @@ class IdentSession:
         except ConfigError as err:  # what the checks above did not catch
             raise ParameterError('initial', str(err)) from None
         self.theta0 = self.stream.ekf.theta0.copy()
-        self.blowup_std = COV_BLOWUP_FACTOR * self.cfg.p0_rel * np.abs(self.theta0)
+        self.blowup_std = COV_BLOWUP_FACTOR * self.stream.ekf.prior_scale
         self._blowup_std = self.blowup_std.tolist()
         v = self.vehicle.par
         self.fin_limit = float(v[P_FIN])        # rad

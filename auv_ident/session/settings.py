@@ -14,7 +14,7 @@ import numpy as np
 
 from auv_ident.core.ekf import MODES
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.state import N_STATE, STATE_NAMES
+from auv_ident.core.state import CURRENT_NAMES, N_STATE, STATE_NAMES
 from auv_ident.session.messages import FRAMES
 from auv_ident.vehicles import load_vehicle
 
@@ -188,6 +188,11 @@ def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
     names = list(coefficients or ())
     if warm is not None:
         w_vehicle, w_names, w_est, w_cov = warm
+        # the file's water current (a previous run's) is not taken: only its coefficients
+        keep = [i for i, n in enumerate(w_names) if n not in CURRENT_NAMES]
+        w_names = [w_names[i] for i in keep]
+        w_est = np.asarray(w_est)[keep]
+        w_cov = np.asarray(w_cov)[np.ix_(keep, keep)]
         if w_vehicle != vehicle.name:
             raise ParameterError('warm_start', f'{warm_start} is for vehicle {w_vehicle!r}, '
                                                f'not {vehicle.name!r}')
@@ -196,6 +201,9 @@ def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
     if not names:
         names = list(vehicle.identify_default)
     for n in names:
+        if n in CURRENT_NAMES:
+            raise ParameterError('coefficients', f'{n!r} is the water current: choose it with '
+                                                 'the current setting, not as a coefficient')
         try:
             vehicle.index(n)
         except ConfigError as err:

@@ -112,7 +112,9 @@ class Case:
     expect: set                           # reason keys ('odom: non-finite') that must appear
     allow: set = field(default_factory=set)   # other keys that may appear
     resets: tuple = (0, 0)                # allowed range of filter resets
-    tol: float = 0.05                     # final |est - reference| / |truth|
+    # final |est - reference| / |truth| of the coefficients (0.07: with the current estimated,
+    # as by default, a 20 s estimate moves by up to 5.6 % with or without the segment's data)
+    tol: float = 0.07
     bag: bool = True                      # also replayed from a bag
     recover: bool = True
     seg_end: int = SEG[1]                 # sample where good data return
@@ -513,7 +515,8 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
     if case.recover:
         assert all(e.kind == 'update' and e.good for e in tail), \
             [(e.kind, e.code, e.reason) for e in tail if not e.good][:3]
-        rel = np.abs(session.last_good.estimate - reference) / np.abs(truth)
+        p = len(truth)      # the coefficients (the current components follow them)
+        rel = np.abs(session.last_good.estimate[:p] - reference[:p]) / np.abs(truth)
         assert np.all(rel < case.tol), rel
         assert session.health().level != 'ERROR' or case.resets[1] > 0
 
@@ -566,7 +569,8 @@ def test_forced_non_positive_definite_covariance_is_repaired(run, ctx):
         assert ev.kind == 'update' and ev.code == 'repaired' and ev.good
         assert 'not positive definite' in ev.reason and 'repaired' in ev.reason
         assert node.session.repairs == 1 and node.session.errors == 0
-        assert np.all(np.abs(ev.estimate - before) < 0.05 * np.abs(before))
+        p = node.session.model.p_coef      # the coefficients (the current follows them)
+        assert np.all(np.abs(ev.estimate[:p] - before[:p]) < 0.05 * np.abs(before[:p]))
         assert any('repaired' in t for lv, t in node.log_lines)
         kv = {v.key: v.value for v in node.diagnostic_status().values}
         assert kv['repairs'] == '1'
@@ -947,8 +951,10 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
     doc = json.loads(save.read_text())
     assert doc['steps'] == int(kv['accepted']) and np.all(np.isfinite(doc['covariance']))
     warm = IdentSession(warm_start=str(save))
-    assert np.array_equal(warm.theta0, doc['estimate'])
-    assert np.allclose(warm.current()[1], doc['covariance'])
+    p = warm.model.p_coef        # a warm start takes the coefficients; the current starts afresh
+    assert doc['coefficients'][p:] == ['current_n', 'current_e']
+    assert np.array_equal(warm.theta0[:p], doc['estimate'][:p])
+    assert np.allclose(warm.current()[1][:p, :p], np.asarray(doc['covariance'])[:p, :p])
 
 
 # --- legitimate data are untouched; persistence ------------------------------------------------

@@ -114,17 +114,19 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
     # the estimate file written on SIGINT
     doc = json.loads(save.read_text())
     names = list(load_vehicle('nps_auv2').identify_default)
-    p = len(names)
-    assert doc['vehicle'] == 'nps_auv2' and doc['coefficients'] == names
+    p = len(names) + 2          # the coefficients, then the current (estimated by default)
+    assert doc['vehicle'] == 'nps_auv2'
+    assert doc['coefficients'] == names + ['current_n', 'current_e']
     assert doc['steps'] >= 0.9 * N_SAMPLES, doc['steps']
     cov = np.array(doc['covariance'])
     assert cov.shape == (p, p) and np.allclose(cov, cov.T)
     assert np.allclose(doc['std'], np.sqrt(np.diag(cov)))
     assert doc['stamp'] == pytest.approx(SIM_EPOCH_NS / 1e9 + DURATION, abs=0.5)  # dated sim time
     truth = Model(load_vehicle('nps_auv2'), names).theta_true
-    rel = np.abs(np.array(doc['estimate']) - truth) / np.abs(truth)
+    rel = np.abs(np.array(doc['estimate'][:len(names)]) - truth) / np.abs(truth)
     assert np.all(rel < MAX_REL_ERROR), dict(zip(names, rel))
 
+    names = doc['coefficients']   # published too: the coefficients, then the current
     # estimates as published: documented layout, stamps of the odometry (k / 20 s)
     assert len(estimates) >= 0.5 * N_SAMPLES, len(estimates)
     last = estimates[-1]

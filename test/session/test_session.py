@@ -335,6 +335,13 @@ BAD_SETTINGS = [
     ('initial', [1.0, 0.0, 1.0, 1.0, 1.0], 'finite and non-zero'),
     ('initial', ['a'] * 5, 'expected 5 numbers'),
     ('coefficients', ['Z_w', 'nope'], 'nope'),
+    ('coefficients', ['Z_w', 'current_n'], 'is the water current'),
+    ('current', 'fast', "use estimate, none, or N,E[,D]"),
+    ('current', '0.1', "use estimate, none, or N,E[,D]"),
+    ('current', 3, "use estimate, none, or N,E[,D]"),
+    ('velocity_reference', 'bottom', 'use one of ground, water'),
+    ('current_sd0', 0.0, 'positive'),
+    ('current_walk', -1e-3, 'non-negative'),
 ]
 
 
@@ -345,6 +352,37 @@ def test_bad_setting_is_a_parameter_error_naming_it(name, value, needle):
         IdentSession(**{name: value})
     assert info.value.name == name
     assert str(info.value).startswith(f'parameter {name!r}: ') and needle in str(info.value)
+
+
+def test_current_down_without_estimating_the_current_is_a_parameter_error():
+    with pytest.raises(ParameterError, match="parameter 'current_down': current-down needs"):
+        IdentSession(current='none', current_down=True)
+
+
+def test_current_settings_reach_the_model_and_the_names():
+    s = IdentSession(current='estimate', current_down=True, velocity_reference='water',
+                     current_walk=1e-3)
+    assert s.names[-3:] == ['current_n', 'current_e', 'current_d']
+    assert s.model.velocity_reference == 'water' and s.model.p_coef == len(s.names) - 3
+    assert s.stream.ekf.Q0[-1, -1] == pytest.approx(1e-6 * s.T)
+    given = IdentSession(current='0.1, -0.2')
+    assert given.names == given.coefficient_names and list(given.model.current) == [0.1, -0.2,
+                                                                                    0.0]
+    assert IdentSession(current='none').model.current_mode == 0
+
+
+def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
+    """A previous run's current is not this run's: a warm start restarts it from its prior."""
+    from auv_ident.session.estimate_file import write_estimate_json
+    s = IdentSession()
+    doc = s.document()
+    doc['estimate'][-2:] = [0.3, -0.2]        # a current in the file
+    write_estimate_json(tmp_path / 'est.json', doc)
+    warm = IdentSession(warm_start=str(tmp_path / 'est.json'))
+    assert warm.names == s.names
+    assert np.array_equal(warm.theta0[:-2], doc['estimate'][:-2])
+    assert list(warm.theta0[-2:]) == [0.0, 0.0]
+    assert np.allclose(warm.current()[1][-2:, -2:], np.eye(2) * 0.5 ** 2)
 
 
 def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
