@@ -218,7 +218,7 @@ def test_simulator_publishes_the_run(ctx, nodes):
     assert [stamp_to_ns(m.clock) for m in got['clock']] == stamps
     # exactly the messages of sim_bag.sample_messages (the simulated bag's content)
     k = 17
-    ref = {t: m for t, _, m in sample_messages(sim.run, k, 'ned')}
+    ref = {t: m for t, _, m in sample_messages(sim.run, k, 'ned', epoch_ns=SIM_EPOCH_NS)}
     assert got['odom'][k] == ref[ODOM_TOPIC]
     assert got['actuators'][k] == ref[ACTUATOR_TOPIC]
 
