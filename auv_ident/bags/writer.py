@@ -1,18 +1,8 @@
 """Rosbag2 (Jazzy) MCAP bag writer without rosbag2: :class:`BagWriter`.
 
-
-Layout written (that of Jazzy's rosbag2 with the MCAP storage plugin, which ``ros2 bag play``
-expects)::
-
-    <bag>/metadata.yaml       rosbag2_bagfile_information, version 9
-    <bag>/<bag>_0.mcap        profile 'ros2'; one Schema per type: name 'pkg/msg/Type',
-                              encoding 'ros2msg', data = rosbag2's full message definition
-                              text; one Channel per topic: message_encoding 'cdr', metadata
-                              'offered_qos_profiles' (YAML) and 'topic_type_hash' (RIHS01_...);
-                              a 'rosbag2' Metadata record (serialized_metadata); Statistics.
-
-Message definitions and type hashes come from the installed interface packages
-(``<prefix>/share/<pkg>/msg/<Type>.msg`` and ``.json``), exactly as rosbag2 reads them.
+It writes the layout of Jazzy's rosbag2 with the MCAP storage plugin, which ``ros2 bag play``
+expects (metadata.yaml version 9, schemas, channels with their QoS and type hashes, the
+'rosbag2' metadata record, statistics): :mod:`auv_ident.bags.schema` describes it.
 """
 import atexit
 import functools
