@@ -45,6 +45,14 @@ def _finite_channels(r):
     return np.where(ok, r, 0.0), ok
 
 
+def _lagged_products(a, b, max_lag):
+    """sum_k a[k + l] b[k] for l = 0..max_lag (FFT, zero-padded: no wrap-around)."""
+    n = a.shape[0]
+    nfft = 1 << int(2 * n - 1).bit_length()
+    spec = np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft))
+    return np.fft.irfft(spec, nfft)[:max_lag + 1]
+
+
 def autocorrelation(x, max_lag):
     """Sample autocorrelation of one channel for lags 0..max_lag (NaN samples skipped).
 
@@ -55,7 +63,8 @@ def autocorrelation(x, max_lag):
 
     Returns
     -------
-    (max_lag + 1,) autocorrelation, rho[0] = 1 (all NaN if the channel has under 3 samples)
+    (max_lag + 1,) autocorrelation, rho[0] = 1 (all NaN if the channel has under 3 samples);
+    lag l averages the products of the pairs of samples l apart that are both present
     """
     x = np.asarray(x, dtype=float)
     ok = np.isfinite(x)
@@ -66,12 +75,13 @@ def autocorrelation(x, max_lag):
     c0 = float(np.dot(z, z)) / ok.sum()
     if c0 <= 0.0:
         return out
-    n = len(z)
-    for lag in range(min(max_lag, n - 1) + 1):
-        pairs = np.count_nonzero(ok[lag:] & ok[:n - lag])
-        if pairs == 0:
-            continue
-        out[lag] = float(np.dot(z[lag:], z[:n - lag])) / pairs / c0
+    lags = min(max_lag, len(z) - 1)
+    okf = ok.astype(float)
+    pairs = np.rint(_lagged_products(okf, okf, lags))
+    sums = _lagged_products(z, z, lags)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out[:lags + 1] = np.where(pairs > 0, sums / np.maximum(pairs, 1.0) / c0, np.nan)
+    out[0] = 1.0
     return out
 
 
@@ -298,10 +308,9 @@ def input_correlation(white, U, max_lag, names=None, input_names=None):
             band = np.nan_to_num(acf_x) * np.nan_to_num(acf_u[i])
             var = (1.0 + 2.0 * float(np.sum(band[1:]))) / cnt
             sd = math.sqrt(max(var, 1.0 / cnt))
-            for lag in range(max_lag + 1):
-                a = z_x[lag:] * np.where(good[lag:], 1.0, 0.0)
-                b = zu[:n - lag] if lag else zu
-                r = float(np.dot(a, b)) / cnt / (sx * su)
-                out.append((r / sd, names[j], input_names[i], lag))
+            # r(l) = sum_k x[k + l] u[k] over the samples where both are present
+            cross = _lagged_products(z_x * good, zu, max_lag) / cnt / (sx * su)
+            out.extend((float(r) / sd, names[j], input_names[i], lag)
+                       for lag, r in enumerate(cross))
     out.sort(key=lambda e: -abs(e[0]))
     return out
