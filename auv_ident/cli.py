@@ -293,8 +293,9 @@ def build_parser():
     def current_args(sp):
         sp.add_argument('--current', default='estimate', metavar='estimate|none|N,E[,D]',
                         help='the water current: estimate it with the coefficients (default: '
-                             'every AUV runs in one, and 0.1 m/s left out wrecks the '
-                             'coefficients), none (still water), or a known current in m/s NED')
+                             'every AUV runs in one, and 0.1 m/s left out biases the '
+                             'coefficients beyond their error bars), none (still water), or a '
+                             'known current in m/s NED')
         sp.add_argument('--current-down', dest='current_down', action='store_true',
                         help='estimate the down component of the current too')
         sp.add_argument('--velocity-reference', dest='velocity_reference', default=None,

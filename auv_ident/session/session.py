@@ -101,7 +101,8 @@ class IdentSession:
         channels (one notice names them); 'parameter': noise_std always
     current : 'estimate' (default), 'none', or 'N,E[,D]' (m/s NED, a known current): the water
         current (core/current.py). Estimated by default because every AUV runs in one and 0.1
-        m/s left out wrecks the coefficients, while estimating a zero current costs little;
+        m/s left out biases the coefficients beyond their error bars, while estimating a zero
+        current costs nothing measurable;
         'none' is still water, the filter of before (bit for bit)
     current_down : bool, also estimate the down component (with current 'estimate')
     velocity_reference : 'ground' (DVL in bottom lock, default) or 'water' (water-track DVL:
