@@ -24,9 +24,8 @@ import numpy as np
 from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.bags.writer import BagWriter
-from auv_ident.session.messages import (_as_cov6, _as_vector, _check_frame, _swap_ned_enu,
-                                        ConversionError, DEFAULT_FRAME_IDS, euler_to_quat,
-                                        JOINT_NAMES, NS_PER_S, RPM_TO_RAD_S, sec_to_ns)
+from auv_ident.session.messages import (_as_vector, ConversionError, JOINT_NAMES, NS_PER_S,
+                                        odometry_fields, RPM_TO_RAD_S, sec_to_ns)
 
 ODOM_TOPIC = '/odom'
 ACTUATOR_TOPIC = '/actuators'
@@ -71,15 +70,8 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
     The fields equal those of :func:`auv_ident.ros.conversions.state_to_odometry` (same frame
     algebra, from :mod:`auv_ident.session.messages`); ``t_ns`` (int ns) is the stamp.
     """
-    _check_frame(frame)
-    x = _as_vector(x12, 12, 'x12')
-    pcov = _as_cov6(pose_cov, 'pose_cov')
-    tcov = _as_cov6(twist_cov, 'twist_cov')
-    lin, ang, pos = x[0:3], x[3:6], x[6:9]
-    quat = euler_to_quat(x[9], x[10], x[11])
-    if frame == 'enu':
-        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
-    default_world, default_body = DEFAULT_FRAME_IDS[frame]
+    pos, quat, lin, ang, pcov, tcov, frame_id, child_frame_id = odometry_fields(
+        x12, frame, pose_cov, twist_cov, frame_id, child_frame_id)
     pose = _T['geometry_msgs/msg/Pose'](
         position=_T['geometry_msgs/msg/Point'](x=float(pos[0]), y=float(pos[1]),
                                                z=float(pos[2])),
@@ -87,8 +79,8 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
                                                        w=quat[3]))
     twist = _T['geometry_msgs/msg/Twist'](linear=_vector3(lin), angular=_vector3(ang))
     return _T['nav_msgs/msg/Odometry'](
-        header=_header(t_ns, default_world if frame_id is None else frame_id),
-        child_frame_id=default_body if child_frame_id is None else child_frame_id,
+        header=_header(t_ns, frame_id),
+        child_frame_id=child_frame_id,
         pose=_T['geometry_msgs/msg/PoseWithCovariance'](
             pose=pose, covariance=np.array(pcov, dtype=np.float64).reshape(36)),
         twist=_T['geometry_msgs/msg/TwistWithCovariance'](

@@ -8,9 +8,8 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from auv_ident.session.messages import (_as_cov6, _as_vector, _check_frame, _swap_ned_enu,
-                                        ConversionError, DEFAULT_FRAME_IDS, euler_to_quat,
-                                        JOINT_NAMES, NS_PER_S, RPM_TO_RAD_S, sec_to_ns)
+from auv_ident.session.messages import (_as_vector, ConversionError, JOINT_NAMES, NS_PER_S,
+                                        odometry_fields, RPM_TO_RAD_S, sec_to_ns)
 
 
 def ns_to_stamp(t_ns):
@@ -49,20 +48,13 @@ def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
     frame_id, child_frame_id : str, optional
         Override the convention's default frame ids.
     """
-    _check_frame(frame)
-    x = _as_vector(x12, 12, 'x12')
-    pcov = _as_cov6(pose_cov, 'pose_cov')
-    tcov = _as_cov6(twist_cov, 'twist_cov')
-    lin, ang, pos = x[0:3], x[3:6], x[6:9]
-    quat = euler_to_quat(x[9], x[10], x[11])
-    if frame == 'enu':
-        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
-    default_world, default_body = DEFAULT_FRAME_IDS[frame]
+    pos, quat, lin, ang, pcov, tcov, frame_id, child_frame_id = odometry_fields(
+        x12, frame, pose_cov, twist_cov, frame_id, child_frame_id)
 
     msg = Odometry()
     msg.header.stamp = sec_to_stamp(t_sec)
-    msg.header.frame_id = default_world if frame_id is None else frame_id
-    msg.child_frame_id = default_body if child_frame_id is None else child_frame_id
+    msg.header.frame_id = frame_id
+    msg.child_frame_id = child_frame_id
     p = msg.pose.pose.position
     p.x, p.y, p.z = (float(v) for v in pos)
     o = msg.pose.pose.orientation

@@ -284,6 +284,30 @@ def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
             _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN))
 
 
+def odometry_fields(x12, frame='ned', pose_cov=None, twist_cov=None, frame_id=None,
+                    child_frame_id=None):
+    """What a nav_msgs/Odometry of a NED/FRD state holds in convention ``frame``: the one
+    computation behind both message builders (rclpy: ros/conversions.py, rosbags:
+    bags/sim_bag.py).
+
+    Returns ``(pos (3,), quat (x, y, z, w), lin (3,), ang (3,), pose_cov (6, 6),
+    twist_cov (6, 6), frame_id, child_frame_id)``; covariances are zeros if omitted, the frame
+    ids the convention's defaults unless given.
+    """
+    _check_frame(frame)
+    x = _as_vector(x12, 12, 'x12')
+    pcov = _as_cov6(pose_cov, 'pose_cov')
+    tcov = _as_cov6(twist_cov, 'twist_cov')
+    lin, ang, pos = x[0:3], x[3:6], x[6:9]
+    quat = euler_to_quat(x[9], x[10], x[11])
+    if frame == 'enu':
+        pos, lin, ang, quat, pcov, tcov = _swap_ned_enu(pos, lin, ang, quat, pcov, tcov)
+    default_world, default_body = DEFAULT_FRAME_IDS[frame]
+    return (pos, quat, lin, ang, pcov, tcov,
+            default_world if frame_id is None else frame_id,
+            default_body if child_frame_id is None else child_frame_id)
+
+
 def _field(msg, path):
     """Return a nested attribute of an Odometry, naming a missing one in a ConversionError."""
     obj = msg
