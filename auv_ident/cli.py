@@ -133,7 +133,7 @@ def cmd_montecarlo(args):
                        noise_mode='fixed' if args.fixed_noise else args.noise_mode,
                        maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
                        refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update,
-                       tau=args.tau)
+                       tau=args.tau, scheduler=args.scheduler)
     pr.close()
     print(f'{v.title}: {args.seeds} seeds x offsets {offsets}, manoeuvre {args.maneuver!r}, '
           f'{args.duration:.0f} s, noise adaptation {st["noise_mode"]}, '
@@ -142,6 +142,28 @@ def cmd_montecarlo(args):
     if args.json:
         results.write_json(args.json, st)
         print(f'wrote {args.json}')
+    return 0
+
+
+def cmd_campaign(args):
+    from auv_ident.analysis.campaign import run_campaign
+    bars = []
+
+    def progress_bar(total):
+        bars.append(_progress('campaign', total))
+        return bars[-1].update
+    try:
+        out = run_campaign(args.bags, args.out, vehicle=args.vehicle,
+                           coefficients=args.coefficients, refine=not args.no_refine,
+                           scheduler=args.scheduler, workers=args.workers,
+                           progress_bar=progress_bar)
+    finally:
+        for bar in bars:
+            bar.close()
+    print(f"campaign: {out['bags']} bags ({out['skipped']} already done, skipped); "
+          f"identified now: {out['ok']} ok, {out['error']} error, on {out['workers']} "
+          f"worker(s), wall {out['wall_s']:.1f} s")
+    print(f"wrote {out['csv']} and {out['trends']}")
     return 0
 
 
@@ -257,6 +279,11 @@ def build_parser():
                         choices=('default', 'exact', 'mss_literal'),
                         help="default: the vehicle file's choice (NPS AUV II: MSS literal)")
 
+    def scheduler_arg(sp):
+        sp.add_argument('--scheduler', default=None, metavar='ADDRESS',
+                        help='run on this existing Dask cluster (tcp://host:8786, or a '
+                             'scheduler file) instead of a local one (docs/campaigns.md)')
+
     sp = sub.add_parser('simulate', help='simulate a manoeuvre and print a summary')
     vehicle_arg(sp)
     sp.add_argument('--maneuver', default='zigzag', help='zigzag, steps, prbs, roll or a CSV')
@@ -330,9 +357,30 @@ def build_parser():
     sp.add_argument('--offsets', default='0.5,-0.5', help='initial offsets, comma-separated')
     sp.add_argument('--maneuver', default='ident')
     sp.add_argument('--duration', type=float, default=600.0)
-    sp.add_argument('--jobs', type=int, default=2)
+    sp.add_argument('--jobs', type=int, default=2,
+                    help='worker processes of the local Dask cluster (1: serially in this '
+                         'process, no cluster); ignored with --scheduler')
+    scheduler_arg(sp)
     ident_args(sp)
     sp.set_defaults(func=cmd_montecarlo)
+
+    sp = sub.add_parser('campaign', help='identify every bag of a folder on Dask: '
+                                         'campaign.csv and trends.png')
+    sp.add_argument('--bags', required=True, metavar='DIR_OR_GLOB',
+                    help='a folder (searched recursively for bags) or a glob pattern')
+    sp.add_argument('--vehicle', default=None,
+                    help="vehicle name or YAML path (default: each bag's metadata; its "
+                         'content is sent to the workers)')
+    sp.add_argument('--coefficients', default='',
+                    help="comma-separated names (default: the vehicle's set)")
+    sp.add_argument('--no-refine', action='store_true', help='EKF pass only (no refinement)')
+    sp.add_argument('--workers', type=int, default=2,
+                    help='worker processes of the local Dask cluster (ignored with --scheduler)')
+    scheduler_arg(sp)
+    sp.add_argument('--out', required=True,
+                    help='folder of campaign.csv and trends.png; re-running with the same '
+                         "folder skips the bags already 'ok'")
+    sp.set_defaults(func=cmd_campaign)
 
     sp = sub.add_parser('report', help='identification + held-out validation report (md + PNG)')
     vehicle_arg(sp)

@@ -3,7 +3,7 @@
 ROS-free (bags come in through analysis/bag_identify.py). Every figure printed here can be reproduced with
 the command shown next to it in docs/.
 """
-import multiprocessing as mp
+import contextlib
 import time
 
 import numpy as np
@@ -73,13 +73,19 @@ def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                               + where)
 
 
+MC_WARM_UP_DURATION_S = 20.0   # s of the run each Dask worker identifies before its cases
+
+
 def _mc_case(args):
-    (vehicle_name, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass,
+    """One Monte Carlo case (runs on a Dask worker, or in this process): its row of
+    stats['runs']. The vehicle comes as its file's content (engine.VehicleText)."""
+    (vehicle, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass,
      tau) = args
     cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset, tau=tau)
     try:
-        res, _, _ = identify_simulated(vehicle_name, names, cfg, maneuver=maneuver, seed=seed,
-                                       duration=duration, rpm=rpm, refine_pass=refine_pass)
+        res, _, _ = identify_simulated(vehicle.local_path(), names, cfg, maneuver=maneuver,
+                                       seed=seed, duration=duration, rpm=rpm,
+                                       refine_pass=refine_pass)
     except ArithmeticError as err:      # DomainError / DivergenceError: a diverged run
         return {'seed': seed, 'offset': offset, 'diverged': str(err)}
     e = res.estimate - res.truth
@@ -94,23 +100,36 @@ def _mc_case(args):
             'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s}
 
 
+def _mc_warm_up(case):
+    """A short run of the campaign's first case: compiles what its cases use (engine.WarmUp)."""
+    _mc_case(case[:6] + (MC_WARM_UP_DURATION_S,) + case[7:])
+
+
 def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
                maneuver=DEFAULT_MANEUVER, duration=DEFAULT_DURATION, rpm=None, refine_pass=True,
-               jobs=2, progress=None, tau=10.0):
-    """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS."""
-    cases = [(vehicle_name, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
+               jobs=2, progress=None, tau=10.0, scheduler=None):
+    """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS.
+
+    The cases run as tasks on the Dask engine (analysis/engine.py): on the cluster at
+    `scheduler` if given, else on a local cluster of `jobs` worker processes, or one after the
+    other in this process for jobs <= 1. Each case is a function of its seed and offset only,
+    and the statistics are taken in case order, so every way gives the same numbers."""
+    from auv_ident.analysis import engine      # distributed is imported only when used
+    vehicle = engine.VehicleText.read(vehicle_name)
+    cases = [(vehicle, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
               tau) for s in range(seeds) for off in offsets]
     t0 = time.perf_counter()
-    out = []
-    if jobs > 1:
-        with mp.get_context('spawn').Pool(jobs) as pool:
-            for r in pool.imap_unordered(_mc_case, cases):
-                out.append(r)
-                if progress:
-                    progress()
-    else:
-        for c in cases:
-            out.append(_mc_case(c))
+    out = [None] * len(cases)
+    serial = scheduler is None and jobs <= 1
+    with (contextlib.nullcontext() if serial else engine.dask_client(scheduler, jobs)) as client:
+        if client is not None:
+            client.register_plugin(engine.WarmUp(_mc_warm_up, (cases[0],)))
+        for i, outcome in engine.run_tasks(client, _mc_case, cases):
+            if isinstance(outcome, Exception):
+                seed, off = cases[i][4], cases[i][3]
+                raise engine.EngineError(f'montecarlo case seed {seed}, offset {off:+g}: '
+                                         f'{engine.one_line(outcome)}')
+            out[i] = outcome
             if progress:
                 progress()
     ok = [r for r in out if 'diverged' not in r]
