@@ -117,6 +117,16 @@ def worker_address():
         return ''
 
 
+def local_cluster(workers, silence_logs=logging.ERROR):
+    """A distributed.LocalCluster of `workers` single-threaded worker processes, everything on
+    127.0.0.1, no dashboard. The scheduler still serves its small HTTP API (health, metrics):
+    on a free loopback port, not on 8787, which another cluster may hold."""
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        host=LOOPBACK, dashboard_address=None, env=dict(WORKER_ENV),
+                        silence_logs=silence_logs,
+                        scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})
+
+
 @contextlib.contextmanager
 def dask_client(scheduler=None, workers=2):
     """A distributed.Client: on the existing cluster at `scheduler` (an address such as
@@ -143,9 +153,7 @@ def dask_client(scheduler=None, workers=2):
     else:
         if workers < 1:
             raise ConfigError(f'--workers {workers}: need at least 1 worker process')
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host=LOOPBACK, dashboard_address=None, env=dict(WORKER_ENV),
-                               silence_logs=logging.ERROR)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     try:
         yield client
