@@ -128,15 +128,20 @@ def write_table(path, rows):
 
 
 def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, scheduler=None,
-                 workers=2, progress_bar=None, warm_up=True):
+                 workers=2, progress_bar=None, warm_up=True, worker_env=None):
     """Identify every bag of `bags` (folder or glob, see find_bags) on the engine; write
     OUT/campaign.csv (after every bag) and OUT/trends.png. Bags with an 'ok' row in an
     existing OUT/campaign.csv are skipped.
 
     vehicle : name or path of a vehicle file (its content goes to the workers), or None: the
     vehicle each bag's metadata names. progress_bar : progress_bar(number of bags to
-    identify) returns a callable, called once per bag done.
-    Returns a summary dict: bags, skipped, ok, error, workers, wall_s, csv, trends."""
+    identify) returns a callable, called once per bag done. warm_up : compile on each worker
+    before its first task (engine.WarmUp). worker_env : more environment variables for the
+    workers of a local cluster.
+
+    Returns a summary dict: bags, skipped, ok, error, workers, csv, trends, and the times in s:
+    wall_s (all), start_s (cluster up and warmed up), tasks_s (first task submitted to last
+    row written), warm_up_s ({worker address: s}, {} without warm-up)."""
     t0 = time.perf_counter()
     all_bags = find_bags(bags)
     os.makedirs(out, exist_ok=True)
@@ -147,13 +152,15 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
     vtext = engine.VehicleText.read(vehicle) if vehicle else None
     jobs = [{'bag': b, 'vehicle': vtext, 'coefficients': coefficients, 'refine': refine}
             for b in todo]
-    used_workers = 0
+    used_workers, start_s, tasks_s, warm_up_s = 0, 0.0, 0.0, {}
     progress = progress_bar(len(jobs)) if progress_bar and jobs else None
     if jobs:
-        with engine.dask_client(scheduler, workers) as client:
+        with engine.dask_client(scheduler, workers, env=worker_env) as client:
             used_workers = len(client.scheduler_info()['workers'])
             if warm_up:
                 client.register_plugin(engine.WarmUp(warm_up_bag, (vtext, coefficients, refine)))
+                warm_up_s = engine.warm_up_times(client)
+            start_s = time.perf_counter() - t0
             for i, outcome in engine.run_tasks(client, identify_bag_row, jobs):
                 if isinstance(outcome, Exception):     # the task itself was lost
                     outcome = {'bag': jobs[i]['bag'], 'status': 'error',
@@ -162,6 +169,7 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
                 write_table(csv_path, list(rows.values()))
                 if progress:
                     progress()
+            tasks_s = time.perf_counter() - t0 - start_s
     write_table(csv_path, list(rows.values()))
     trends = os.path.join(out, TRENDS_NAME)
     plot_trends(read_table(csv_path), trends)
@@ -169,4 +177,5 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
     return {'bags': len(all_bags), 'skipped': len(all_bags) - len(todo),
             'ok': sum(r['status'] == 'ok' for r in new),
             'error': sum(r['status'] == 'error' for r in new), 'workers': used_workers,
-            'wall_s': time.perf_counter() - t0, 'csv': csv_path, 'trends': trends}
+            'wall_s': time.perf_counter() - t0, 'start_s': start_s, 'tasks_s': tasks_s,
+            'warm_up_s': warm_up_s, 'csv': csv_path, 'trends': trends}

@@ -35,7 +35,7 @@ from auv_ident.vehicles import resolve_vehicle_path
 
 WORKER_ENV = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
 LOOPBACK = '127.0.0.1'
-CONNECT_TIMEOUT_S = 30.0     # s to reach an existing scheduler
+CONNECT_TIMEOUT_S = 10.0     # s to reach an existing scheduler (connection refused: retried)
 WORKER_WAIT_S = 120.0        # s for the first worker to join an existing scheduler
 
 
@@ -117,22 +117,25 @@ def worker_address():
         return ''
 
 
-def local_cluster(workers, silence_logs=logging.ERROR):
+def local_cluster(workers, silence_logs=logging.ERROR, env=None):
     """A distributed.LocalCluster of `workers` single-threaded worker processes, everything on
     127.0.0.1, no dashboard. The scheduler still serves its small HTTP API (health, metrics):
-    on a free loopback port, not on 8787, which another cluster may hold."""
+    on a free loopback port, not on 8787, which another cluster may hold. env : more
+    environment variables for the workers (tools/campaign_bench.py: empty compile caches)."""
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        host=LOOPBACK, dashboard_address=None, env=dict(WORKER_ENV),
+                        host=LOOPBACK, dashboard_address=None,
+                        env=dict(WORKER_ENV, **(env or {})),
                         silence_logs=silence_logs,
                         scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})
 
 
 @contextlib.contextmanager
-def dask_client(scheduler=None, workers=2):
+def dask_client(scheduler=None, workers=2, env=None):
     """A distributed.Client: on the existing cluster at `scheduler` (an address such as
     tcp://host:8786, or a scheduler file written by `dask scheduler --scheduler-file`), else on
     a LocalCluster of `workers` single-threaded worker processes on 127.0.0.1 with no
-    dashboard. Closed (and the local cluster shut down) on the way out."""
+    dashboard (env: more environment variables for its workers). Closed (and the local
+    cluster shut down) on the way out."""
     cluster = None
     if scheduler:
         where = ({'scheduler_file': scheduler} if os.path.isfile(scheduler)
@@ -153,7 +156,7 @@ def dask_client(scheduler=None, workers=2):
     else:
         if workers < 1:
             raise ConfigError(f'--workers {workers}: need at least 1 worker process')
-        cluster = local_cluster(workers)
+        cluster = local_cluster(workers, env=env)
         client = Client(cluster)
     try:
         yield client

@@ -190,6 +190,16 @@ def test_an_unreachable_scheduler_is_one_clear_error(archive, tmp_path):
     assert "cannot reach the Dask scheduler 'tcp://127.0.0.1:9'" in proc.stderr
 
 
+def test_a_folder_without_bags_is_one_clear_error(tmp_path):
+    (tmp_path / 'empty').mkdir()
+    proc = subprocess.run(
+        [sys.executable, '-m', 'auv_ident', 'campaign', '--bags', str(tmp_path / 'empty'),
+         '--out', str(tmp_path / 'out')], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 2
+    assert proc.stderr == f'error: --bags {tmp_path / "empty"}: no bag there (a folder with ' \
+                          'metadata.yaml, or a .mcap file)\n'
+
+
 def _wait_for_file(path, proc, timeout=60.0):
     deadline = time.monotonic() + timeout
     while not os.path.exists(path):
