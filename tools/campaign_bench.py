@@ -17,7 +17,8 @@ folder (or DIR with --keep, reused when it holds the bags). What is compared:
   (every thread: the task, Dask's event loop, heartbeats) against the serial loop's; on a
   machine others share, the CPU time is the steadier measure of the engine's overhead;
 - without warm-up (1 worker): the first task pays loading the compiled kernels;
-- --cold: workers with empty numba and kernel caches: the warm-up compiles once per worker.
+- --cold: workers with empty numba and kernel caches: the warm-up compiles once per worker;
+  and without the warm-up, the first task of the worker compiles.
 """
 import argparse
 import csv
@@ -36,7 +37,7 @@ from distributed import Client  # noqa: E402
 
 from auv_ident.analysis import engine  # noqa: E402
 from auv_ident.analysis.bag_identify import identify_bag  # noqa: E402
-from auv_ident.analysis.campaign import find_bags, run_campaign, warm_up_bag  # noqa: E402
+from auv_ident.analysis.campaign import find_bags, run_campaign, warm_up_plugin  # noqa: E402
 from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag  # noqa: E402
 from auv_ident.core.model import Model  # noqa: E402
 from auv_ident.core.simulate import simulate  # noqa: E402
@@ -76,10 +77,10 @@ def measured_campaign(bag_glob, out, workers):
     worker, worker CPU s during the campaign)."""
     t0 = time.perf_counter()
     with engine.local_cluster(workers) as lc, Client(lc.scheduler_address) as client:
-        client.register_plugin(engine.WarmUp(warm_up_bag, (engine.VehicleText.read(VEHICLE),
-                                                           '', True)))
+        plugin = warm_up_plugin(engine.VehicleText.read(VEHICLE), '', True)
+        client.register_plugin(plugin)
         start_s = time.perf_counter() - t0
-        warm = engine.warm_up_times(client)
+        warm = engine.warm_up_times(client, plugin.name)
         cpu0 = sum(client.run(_process_cpu_s).values())
         s = campaign(bag_glob, out, workers, scheduler=lc.scheduler_address)
         cpu = sum(client.run(_process_cpu_s).values()) - cpu0
@@ -147,6 +148,15 @@ def main(argv=None):
             warm = ', '.join(f'{v:.1f}' for v in s['warm_up_s'].values())
             print(f'cold caches, {w} worker(s): warm-up (compilation) per worker {warm} s; '
                   f'then task walls {min(walls):.2f}-{max(walls):.2f} s (no task compiles); '
+                  f'wall {s["wall_s"]:.1f} s')
+        with tempfile.TemporaryDirectory(prefix='auv_ident_cold_') as cold:
+            env = {'NUMBA_CACHE_DIR': os.path.join(cold, 'numba'),
+                   'AUV_IDENT_KERNEL_CACHE': os.path.join(cold, 'kernels')}
+            s = campaign(bag_glob, os.path.join(tmp.name, 'out_cold1'), 1, worker_env=env,
+                         warm_up=False)
+            walls = task_walls(os.path.join(tmp.name, 'out_cold1'))
+            print(f'cold caches, 1 worker, no warm-up: the first task {walls[0]:.2f} s '
+                  f'(it compiles), the others {sum(walls[1:]) / max(1, n - 1):.2f} s on average; '
                   f'wall {s["wall_s"]:.1f} s')
     tmp.cleanup()
     return 0

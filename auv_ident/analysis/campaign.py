@@ -13,13 +13,18 @@ import csv
 import datetime
 import glob
 import os
+import tempfile
 import time
 
 from auv_ident.analysis import engine
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.analysis.campaign_plot import plot_trends
 from auv_ident.bags.info import bag_info
+from auv_ident.bags.sim_bag import write_run_bag
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.vehicles import load_vehicle
 
 CSV_NAME = 'campaign.csv'
 TRENDS_NAME = 'trends.png'
@@ -83,20 +88,23 @@ def identify_bag_row(job):
     return row
 
 
-def warm_up_bag(vehicle, coefficients, refine, folder=None):
+def warm_up_bag(vehicle, coefficients, refine):
     """What each worker runs before its first task (engine.WarmUp): identify a short bag of
-    the vehicle simulated on the worker, through the very path of the tasks."""
-    import tempfile
-
-    from auv_ident.bags.sim_bag import write_run_bag
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
-    from auv_ident.vehicles import load_vehicle
+    the vehicle (VehicleText; None: NPS AUV II) simulated on the worker, through the very path
+    of the tasks."""
     path = vehicle.local_path() if vehicle is not None else 'nps_auv2'
-    with tempfile.TemporaryDirectory(prefix='auv_ident_warm_', dir=folder) as tmp:
+    with tempfile.TemporaryDirectory(prefix='auv_ident_warm_') as tmp:
         run = simulate(Model(load_vehicle(path)), 'ident', duration=WARM_UP_DURATION_S, seed=0)
         bag = write_run_bag(run, os.path.join(tmp, 'bag'))
         identify_bag(bag, vehicle=path, coefficients=coefficients, refine_pass=refine)
+
+
+def warm_up_plugin(vehicle, coefficients, refine):
+    """The engine.WarmUp of a campaign: named after the vehicle file's content, so that a
+    cluster that already warmed up for it (an earlier campaign) is not asked again."""
+    name = ('auv_ident-warm-up-campaign-'
+            + (f'{vehicle.name}-{vehicle.digest}' if vehicle else 'bag-metadata'))
+    return engine.WarmUp(warm_up_bag, (vehicle, coefficients, refine), name=name)
 
 
 def read_table(path):
@@ -158,8 +166,9 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
         with engine.dask_client(scheduler, workers, env=worker_env) as client:
             used_workers = len(client.scheduler_info()['workers'])
             if warm_up:
-                client.register_plugin(engine.WarmUp(warm_up_bag, (vtext, coefficients, refine)))
-                warm_up_s = engine.warm_up_times(client)
+                plugin = warm_up_plugin(vtext, coefficients, refine)
+                client.register_plugin(plugin)
+                warm_up_s = engine.warm_up_times(client, plugin.name)
             start_s = time.perf_counter() - t0
             for i, outcome in engine.run_tasks(client, identify_bag_row, jobs):
                 if isinstance(outcome, Exception):     # the task itself was lost

@@ -61,11 +61,15 @@ class VehicleText:
         with open(path, encoding='utf-8') as fh:
             return cls(os.path.splitext(os.path.basename(path))[0], fh.read())
 
+    @property
+    def digest(self):
+        """The first 16 hex digits of the text's sha256: names what depends on the content."""
+        return hashlib.sha256(self.text.encode()).hexdigest()[:16]
+
     def local_path(self):
         """Path of this content on the machine that calls it (written once per content: the
-        folder is named after its sha256, the file is renamed into place atomically)."""
-        digest = hashlib.sha256(self.text.encode()).hexdigest()[:16]
-        folder = os.path.join(tempfile.gettempdir(), 'auv_ident_vehicles', digest)
+        folder is named after its digest, the file is renamed into place atomically)."""
+        folder = os.path.join(tempfile.gettempdir(), 'auv_ident_vehicles', self.digest)
         path = os.path.join(folder, self.name + '.yaml')
         if not os.path.isfile(path):
             os.makedirs(folder, exist_ok=True)
@@ -81,11 +85,12 @@ class WarmUp(WorkerPlugin):
     numba kernels (tens of seconds cold, about a second from numba's on-disk cache) then
     happens once per worker process, not in a task. It runs in a thread, so the worker keeps
     answering the scheduler meanwhile. A failure is kept (`error`), not raised: the tasks then
-    meet the same problem and report it on their rows."""
+    meet the same problem and report it on their rows. A cluster runs a plugin of a given
+    `name` once per worker (idempotent): name it after what it warms up."""
 
     idempotent = True
 
-    def __init__(self, func, args=(), name='auv_ident-warm-up'):
+    def __init__(self, func, args, name):
         self.func = func
         self.args = tuple(args)
         self.name = name
@@ -101,7 +106,7 @@ class WarmUp(WorkerPlugin):
         self.seconds = time.perf_counter() - t0
 
 
-def warm_up_times(client, name='auv_ident-warm-up'):
+def warm_up_times(client, name):
     """{worker address: seconds its warm-up took} (None: not run there)."""
     def read(dask_worker):
         plugin = dask_worker.plugins.get(name)

@@ -123,7 +123,8 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     serial = scheduler is None and jobs <= 1
     with (contextlib.nullcontext() if serial else engine.dask_client(scheduler, jobs)) as client:
         if client is not None:
-            client.register_plugin(engine.WarmUp(_mc_warm_up, (cases[0],)))
+            name = f'auv_ident-warm-up-montecarlo-{vehicle.name}-{vehicle.digest}'
+            client.register_plugin(engine.WarmUp(_mc_warm_up, (cases[0],), name=name))
         for i, outcome in engine.run_tasks(client, _mc_case, cases):
             if isinstance(outcome, Exception):
                 seed, off = cases[i][4], cases[i][3]

@@ -20,7 +20,8 @@ from distributed import Client
 from auv_ident.analysis import engine
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.analysis.campaign import find_bags, run_campaign
-from auv_ident.analysis.experiments import montecarlo
+from auv_ident.analysis.experiments import identify_simulated, montecarlo
+from auv_ident.analysis.results import make_config
 from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
@@ -168,9 +169,15 @@ def test_montecarlo_on_dask_gives_the_numbers_of_the_serial_loop(cluster):
             r.pop('wall_s')
     assert on_dask == serial
     assert serial['cases'] == 4 and serial['diverged'] == 0
+    # and a case is what identify_simulated gives with the vehicle by name (no engine at all)
+    cfg = make_config(['Z_w', 'M_ds'], initial_offset=-0.5)
+    res, _, _ = identify_simulated('nps_auv2', ['Z_w', 'M_ds'], cfg, seed=1, duration=BAG_S,
+                                   refine_pass=False)
+    run = next(r for r in serial['runs'] if (r['seed'], r['offset']) == (1, -0.5))
+    assert run['error_pct'] == res.error_pct().tolist()
 
 
-def test_vehicle_text_is_written_where_the_worker_is(tmp_path):
+def test_vehicle_text_becomes_a_file_of_the_same_content():
     vt = engine.VehicleText.read('nps_auv2')
     path = vt.local_path()
     assert os.path.basename(path) == 'nps_auv2.yaml' and path != load_vehicle('nps_auv2').path
