@@ -44,6 +44,7 @@ from auv_ident.core.simulate import simulate  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 VEHICLE = 'nps_auv2'
+IDLE_S = 10.0      # s of an idle cluster over which the workers' own CPU use is measured
 DAY_NS = 86_400 * 1_000_000_000
 
 
@@ -74,17 +75,23 @@ def _process_cpu_s():
 def measured_campaign(bag_glob, out, workers):
     """run_campaign on a local cluster started here, the warm-up registered before (the same
     plugin run_campaign registers, so it is not run twice): (summary, start_s, warm-up s per
-    worker, worker CPU s during the campaign)."""
+    worker, CPU of an idle worker in cores (its event loop, heartbeats, monitoring; measured
+    over IDLE_S before the campaign), worker CPU s during the campaign)."""
     t0 = time.perf_counter()
     with engine.local_cluster(workers) as lc, Client(lc.scheduler_address) as client:
         plugin = warm_up_plugin(engine.VehicleText.read(VEHICLE), '', True)
         client.register_plugin(plugin)
         start_s = time.perf_counter() - t0
         warm = engine.warm_up_times(client, plugin.name)
+        idle0, t_idle = client.run(_process_cpu_s), time.perf_counter()
+        time.sleep(IDLE_S)
+        idle1 = client.run(_process_cpu_s)
+        idle_s = time.perf_counter() - t_idle
+        idle = sum(idle1[w] - idle0[w] for w in idle0) / len(idle0) / idle_s
         cpu0 = sum(client.run(_process_cpu_s).values())
         s = campaign(bag_glob, out, workers, scheduler=lc.scheduler_address)
         cpu = sum(client.run(_process_cpu_s).values()) - cpu0
-    return s, start_s, warm, cpu
+    return s, start_s, warm, idle, cpu
 
 
 def campaign(bag_glob, out, workers, **kw):
@@ -122,7 +129,8 @@ def main(argv=None):
           f'({serial / n:.2f} s per bag), CPU {serial_cpu:.1f} s')
 
     for w in counts:
-        s, start_s, warm, cpu = measured_campaign(bag_glob, os.path.join(tmp.name, f'out{w}'), w)
+        s, start_s, warm, idle, cpu = measured_campaign(bag_glob,
+                                                        os.path.join(tmp.name, f'out{w}'), w)
         wall = start_s + s['wall_s']
         print(f'campaign, {w} worker(s): start {start_s:.1f} s (cluster + warm-up, warm-up per '
               f'worker ' + ', '.join(f'{v:.1f}' for v in warm.values()) + ' s), campaign '
@@ -130,7 +138,9 @@ def main(argv=None):
               f'with the start, {60 * n / s["tasks_s"]:.1f} in the tasks; speed-up over the '
               f'serial loop {serial / s["tasks_s"]:.2f}x in the tasks, {serial / wall:.2f}x '
               f'with the start; worker CPU {cpu:.1f} s = {100 * (cpu / serial_cpu - 1):+.1f} % '
-              'against the serial loop')
+              f'against the serial loop; an idle worker uses {100 * idle:.1f} % of a core '
+              f'(x {w} worker(s) x the campaign\'s {s["wall_s"]:.1f} s = '
+              f'{idle * w * s["wall_s"]:.1f} s of the difference)')
 
     s = campaign(bag_glob, os.path.join(tmp.name, 'out_nowarm'), 1, warm_up=False)
     walls = task_walls(os.path.join(tmp.name, 'out_nowarm'))

@@ -2,12 +2,13 @@
 per bag, into one table (campaign.csv) and a plot of each coefficient over time (trends.png).
 
 A bag that cannot be identified is a row with its one-line error, never the end of the
-campaign. The table is rewritten after every bag (atomically), so an interrupted campaign
-keeps what it finished, and a run with the same output folder skips the bags already 'ok'
-(bags that failed are tried again: one may have been repaired meanwhile). Why CSV and no
+campaign. The table is rewritten (atomically) every TABLE_EVERY_S while bags finish and when
+the campaign ends or is interrupted, so an interrupted campaign keeps what it finished, and a
+run with the same output folder skips the bags already 'ok' (bags that failed are tried
+again: one may have been repaired meanwhile). Why CSV and no
 Parquet: a campaign table is one row per bag, thousands of rows at most; CSV is read by
-everything the operators use, and pyarrow would add ~100 MB to every install for nothing
-measurable at that size.
+everything the operators use, and pyarrow (a wheel of tens of MB) would weigh on every
+install for nothing measurable at that size.
 """
 import csv
 import datetime
@@ -31,6 +32,9 @@ TRENDS_NAME = 'trends.png'
 HEAD_COLUMNS = ('bag', 'status', 'worker', 'wall_s', 'start_time', 'duration_s', 'vehicle')
 TAIL_COLUMNS = ('consistent', 'error')
 WARM_UP_DURATION_S = 20.0    # s of the simulated bag each worker identifies before its tasks
+# s between rewrites of campaign.csv during a campaign: a rewrite after every bag would cost
+# O(bags^2) rows written on a large archive; a crash loses at most this much of finished work
+TABLE_EVERY_S = 2.0
 
 
 def find_bags(where):
@@ -138,7 +142,7 @@ def write_table(path, rows):
 def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, scheduler=None,
                  workers=2, progress_bar=None, warm_up=True, worker_env=None):
     """Identify every bag of `bags` (folder or glob, see find_bags) on the engine; write
-    OUT/campaign.csv (after every bag) and OUT/trends.png. Bags with an 'ok' row in an
+    OUT/campaign.csv (every TABLE_EVERY_S s, and at the end) and OUT/trends.png. Bags with an 'ok' row in an
     existing OUT/campaign.csv are skipped.
 
     vehicle : name or path of a vehicle file (its content goes to the workers), or None: the
@@ -170,14 +174,20 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
                 client.register_plugin(plugin)
                 warm_up_s = engine.warm_up_times(client, plugin.name)
             start_s = time.perf_counter() - t0
-            for i, outcome in engine.run_tasks(client, identify_bag_row, jobs):
-                if isinstance(outcome, Exception):     # the task itself was lost
-                    outcome = {'bag': jobs[i]['bag'], 'status': 'error',
-                               'error': engine.one_line(outcome)}
-                rows[outcome['bag']] = outcome
+            written = time.monotonic()
+            try:
+                for i, outcome in engine.run_tasks(client, identify_bag_row, jobs):
+                    if isinstance(outcome, Exception):     # the task itself was lost
+                        outcome = {'bag': jobs[i]['bag'], 'status': 'error',
+                                   'error': engine.one_line(outcome)}
+                    rows[outcome['bag']] = outcome
+                    if time.monotonic() - written > TABLE_EVERY_S:
+                        write_table(csv_path, list(rows.values()))
+                        written = time.monotonic()
+                    if progress:
+                        progress()
+            finally:                 # interrupted too: what finished is kept
                 write_table(csv_path, list(rows.values()))
-                if progress:
-                    progress()
             tasks_s = time.perf_counter() - t0 - start_s
     write_table(csv_path, list(rows.values()))
     trends = os.path.join(out, TRENDS_NAME)

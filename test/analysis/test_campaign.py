@@ -106,7 +106,7 @@ def test_good_and_corrupt_bags_give_their_rows(archive, cluster, tmp_path):
 
 def test_resume_skips_the_bags_already_done(archive, cluster, tmp_path):
     """An 'ok' row of an earlier run stays as it was (its bag is not run again); an 'error' row
-    is tried again."""
+    is tried again; a campaign with nothing left to do starts no cluster."""
     root, good, bad = archive
     out = tmp_path / 'out'
     out.mkdir()
@@ -118,12 +118,14 @@ def test_resume_skips_the_bags_already_done(archive, cluster, tmp_path):
         w = csv.DictWriter(fh, list(earlier[0]))
         w.writeheader()
         w.writerows(earlier)
-    summary = run_campaign(str(root / 'auv1' / 'mission*'), str(out), vehicle='nps_auv2',
+    # no --vehicle: the bags' metadata name it
+    summary = run_campaign(str(root / 'auv1' / 'mission*'), str(out),
                            scheduler=cluster.scheduler_address)
     assert (summary['bags'], summary['skipped'], summary['ok']) == (3, 1, 2)
     rows = _rows(out)
     assert rows[good[0]]['worker'] == 'an earlier run' and rows[good[0]]['Z_w'] == '-0.25'
     assert rows[good[1]]['status'] == 'ok' and rows[good[1]]['worker'].startswith('tcp://')
+    assert rows[good[1]]['vehicle'] == 'nps_auv2' and float(rows[good[1]]['K_v_std']) > 0
     assert rows[good[2]]['status'] == 'ok'
     # all done: a third run identifies nothing and starts no cluster
     again = run_campaign(str(root / 'auv1' / 'mission*'), str(out), vehicle='nps_auv2',
