@@ -3,19 +3,21 @@ docs/campaigns.md: throughput with 1 and 2 local workers (bags per minute), the 
 against a plain serial loop in one process, and what the per-worker warm-up does.
 
     .venv/bin/python tools/campaign_bench.py [--bags 16] [--duration 120] [--workers 1,2]
-        [--cold] [--keep DIR]
+        [--repeat 3] [--cold] [--keep DIR]
 
 Every figure comes from one run on this machine (its load average is printed with them). The
 bags are simulated (nps_auv2, manoeuvre 'ident', seeds 0..N-1), written once to a temporary
-folder (or DIR with --keep, reused when it holds the bags). What is compared:
+folder (or under DIR with --keep, reused). What is compared:
 
 - serial: `identify_bag` on every bag, one after the other, in this process, after one
   untimed identification (so that neither side pays the compilation);
-- campaign, W workers: `run_campaign` on a new local cluster: the wall time of the start
-  (cluster up, every worker warmed up) and of the campaign (first task submitted to last row
-  written, plus trends.png), and the CPU time of the worker processes during the campaign
-  (every thread: the task, Dask's event loop, heartbeats) against the serial loop's; on a
-  machine others share, the CPU time is the steadier measure of the engine's overhead;
+- campaign, W workers: a local cluster is started (its start: cluster up, every worker warmed
+  up), then --repeat pairs of (serial loop, `run_campaign` on the cluster) run back to back;
+  the best of each is compared (on a shared machine the best is the least disturbed). The
+  campaign's "tasks" time runs from the first task submitted to the last row in hand. Also
+  printed: the CPU time of the worker processes (every thread: the task, Dask's event loop,
+  heartbeats) against the serial loop's, what an idle worker uses, and the engine's own time
+  per task (a task submitted alone: the client's round trip minus the task's wall time);
 - without warm-up (1 worker): the first task pays loading the compiled kernels;
 - --cold: workers with empty numba and kernel caches: the warm-up compiles once per worker;
   and without the warm-up, the first task of the worker compiles.
@@ -37,7 +39,8 @@ from distributed import Client  # noqa: E402
 
 from auv_ident.analysis import engine  # noqa: E402
 from auv_ident.analysis.bag_identify import identify_bag  # noqa: E402
-from auv_ident.analysis.campaign import find_bags, run_campaign, warm_up_plugin  # noqa: E402
+from auv_ident.analysis.campaign import (find_bags, identify_bag_row, run_campaign,  # noqa: E402
+                                         warm_up_plugin)
 from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag  # noqa: E402
 from auv_ident.core.model import Model  # noqa: E402
 from auv_ident.core.simulate import simulate  # noqa: E402
@@ -45,6 +48,7 @@ from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 VEHICLE = 'nps_auv2'
 IDLE_S = 10.0      # s of an idle cluster over which the workers' own CPU use is measured
+ROUND_TRIPS = 10   # tasks submitted one at a time: the engine's cost per task
 DAY_NS = 86_400 * 1_000_000_000
 
 
@@ -72,11 +76,20 @@ def _process_cpu_s():
     return t.user + t.system
 
 
-def measured_campaign(bag_glob, out, workers):
-    """run_campaign on a local cluster started here, the warm-up registered before (the same
-    plugin run_campaign registers, so it is not run twice): (summary, start_s, warm-up s per
-    worker, CPU of an idle worker in cores (its event loop, heartbeats, monitoring; measured
-    over IDLE_S before the campaign), worker CPU s during the campaign)."""
+def serial_pass(bags):
+    """identify_bag on every bag in this process: (wall s, CPU s)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    for b in bags:
+        identify_bag(b, vehicle=VEHICLE)
+    return time.perf_counter() - t0, time.process_time() - c0
+
+
+def measured_cluster(bag_glob, bags, tmp, workers, repeat):
+    """A local cluster started here with the warm-up registered (the plugin run_campaign
+    registers, so it is not run twice); its CPU when idle over IDLE_S (event loop,
+    heartbeats, monitoring); then `repeat` pairs of a serial pass in this process and the
+    campaign on the cluster (fresh output folder), back to back, so that both see the same
+    load. Returns a dict of the figures."""
     t0 = time.perf_counter()
     with engine.local_cluster(workers) as lc, Client(lc.scheduler_address) as client:
         plugin = warm_up_plugin(engine.VehicleText.read(VEHICLE), '', True)
@@ -88,10 +101,24 @@ def measured_campaign(bag_glob, out, workers):
         idle1 = client.run(_process_cpu_s)
         idle_s = time.perf_counter() - t_idle
         idle = sum(idle1[w] - idle0[w] for w in idle0) / len(idle0) / idle_s
-        cpu0 = sum(client.run(_process_cpu_s).values())
-        s = campaign(bag_glob, out, workers, scheduler=lc.scheduler_address)
-        cpu = sum(client.run(_process_cpu_s).values()) - cpu0
-    return s, start_s, warm, idle, cpu
+        job = {'bag': bags[0], 'vehicle': engine.VehicleText.read(VEHICLE),
+               'coefficients': '', 'refine': True}
+        round_trip = []
+        for _ in range(ROUND_TRIPS):
+            t1 = time.perf_counter()
+            row = client.submit(identify_bag_row, job, pure=False).result()
+            round_trip.append(time.perf_counter() - t1 - row['wall_s'])
+        pairs = []
+        for r in range(repeat):
+            serial, serial_cpu = serial_pass(bags)
+            cpu0 = sum(client.run(_process_cpu_s).values())
+            s = campaign(bag_glob, os.path.join(tmp, f'out{workers}_{r}'), workers,
+                         scheduler=lc.scheduler_address)
+            cpu = sum(client.run(_process_cpu_s).values()) - cpu0
+            pairs.append({'serial': serial, 'serial_cpu': serial_cpu, 'wall': s['wall_s'],
+                          'tasks': s['tasks_s'], 'cpu': cpu})
+    return {'start': start_s, 'warm': warm, 'idle': idle, 'pairs': pairs,
+            'round_trip': sorted(round_trip)}
 
 
 def campaign(bag_glob, out, workers, **kw):
@@ -108,10 +135,14 @@ def main(argv=None):
     ap.add_argument('--cold', action='store_true',
                     help='also measure workers with empty compile caches')
     ap.add_argument('--keep', help='folder for the bags (kept, reused)')
+    ap.add_argument('--repeat', type=int, default=3,
+                    help='pairs of (serial loop, campaign) per worker count; the best of each '
+                         'is compared (the machine may be shared)')
     args = ap.parse_args(argv)
     counts = [int(w) for w in args.workers.split(',')]
     tmp = tempfile.TemporaryDirectory(prefix='auv_ident_campaign_bench_')
-    folder = args.keep or os.path.join(tmp.name, 'bags')
+    # a folder of exactly these bags: the campaign takes every bag in it
+    folder = os.path.join(args.keep or tmp.name, f'bags_{args.bags}x{args.duration:g}s')
     os.makedirs(folder, exist_ok=True)
     bags = make_bags(folder, args.bags, args.duration)
     n = len(bags)
@@ -121,26 +152,27 @@ def main(argv=None):
           + ' '.join(f'{x:.2f}' for x in os.getloadavg()))
 
     identify_bag(bags[0], vehicle=VEHICLE)          # compile/load, untimed
-    t0, c0 = time.perf_counter(), time.process_time()
-    for b in bags:
-        identify_bag(b, vehicle=VEHICLE)
-    serial, serial_cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f'serial loop in one process: wall {serial:.1f} s, {60 * n / serial:.1f} bags/min '
-          f'({serial / n:.2f} s per bag), CPU {serial_cpu:.1f} s')
-
     for w in counts:
-        s, start_s, warm, idle, cpu = measured_campaign(bag_glob,
-                                                        os.path.join(tmp.name, f'out{w}'), w)
-        wall = start_s + s['wall_s']
-        print(f'campaign, {w} worker(s): start {start_s:.1f} s (cluster + warm-up, warm-up per '
-              f'worker ' + ', '.join(f'{v:.1f}' for v in warm.values()) + ' s), campaign '
-              f'{s["wall_s"]:.1f} s (tasks {s["tasks_s"]:.1f} s): {60 * n / wall:.1f} bags/min '
-              f'with the start, {60 * n / s["tasks_s"]:.1f} in the tasks; speed-up over the '
-              f'serial loop {serial / s["tasks_s"]:.2f}x in the tasks, {serial / wall:.2f}x '
-              f'with the start; worker CPU {cpu:.1f} s = {100 * (cpu / serial_cpu - 1):+.1f} % '
-              f'against the serial loop; an idle worker uses {100 * idle:.1f} % of a core '
-              f'(x {w} worker(s) x the campaign\'s {s["wall_s"]:.1f} s = '
-              f'{idle * w * s["wall_s"]:.1f} s of the difference)')
+        m = measured_cluster(bag_glob, bags, tmp.name, w, args.repeat)
+        pairs = m['pairs']
+        serial = min(p['serial'] for p in pairs)
+        tasks = min(p['tasks'] for p in pairs)
+        wall = min(p['wall'] for p in pairs)
+        print(f'{w} worker(s): cluster start {m["start"]:.1f} s, of which warm-up per worker '
+              + ', '.join(f'{v:.1f}' for v in m['warm'].values()) + ' s; an idle worker uses '
+              f'{100 * m["idle"]:.1f} % of a core; engine time per task (client round trip '
+              f'minus the task\'s own wall time, {ROUND_TRIPS} tasks one at a time): median '
+              f'{1000 * m["round_trip"][ROUND_TRIPS // 2]:.0f} ms, max '
+              f'{1000 * m["round_trip"][-1]:.0f} ms')
+        for p in pairs:
+            print(f'  pair: serial loop {p["serial"]:.1f} s (CPU {p["serial_cpu"]:.1f} s), '
+                  f'campaign {p["wall"]:.1f} s (tasks {p["tasks"]:.1f} s, worker CPU '
+                  f'{p["cpu"]:.1f} s = {100 * (p["cpu"] / p["serial_cpu"] - 1):+.1f} %)')
+        print(f'  best of {len(pairs)}: serial loop {serial:.1f} s = {60 * n / serial:.1f} '
+              f'bags/min; campaign tasks {tasks:.1f} s = {60 * n / tasks:.1f} bags/min '
+              f'({100 * (w * tasks / serial - 1):+.1f} % worker time against the serial loop, '
+              f'speed-up {serial / tasks:.2f}x); with the cluster start '
+              f'{60 * n / (m["start"] + wall):.1f} bags/min')
 
     s = campaign(bag_glob, os.path.join(tmp.name, 'out_nowarm'), 1, warm_up=False)
     walls = task_walls(os.path.join(tmp.name, 'out_nowarm'))
