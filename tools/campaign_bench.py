@@ -9,8 +9,8 @@ Every figure comes from one run on this machine (its load average is printed wit
 bags are simulated (nps_auv2, manoeuvre 'ident', seeds 0..N-1), written once to a temporary
 folder (or under DIR with --keep, reused). What is compared:
 
-- serial: `identify_bag` on every bag, one after the other, in this process, after one
-  untimed identification (so that neither side pays the compilation);
+- serial: `identify_bag` on every bag, one after the other, in a Python process of its own
+  without Dask, after one untimed identification (so that neither side pays the compilation);
 - campaign, W workers: a local cluster is started (its start: cluster up, every worker warmed
   up), then --repeat pairs of (serial loop, `run_campaign` on the cluster) run back to back;
   the best of each is compared (on a shared machine the best is the least disturbed). The
@@ -24,8 +24,10 @@ folder (or under DIR with --keep, reused). What is compared:
 """
 import argparse
 import csv
+import json
 import os
 from pathlib import Path
+import subprocess
 import sys
 import tempfile
 import time
@@ -38,7 +40,6 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 from distributed import Client  # noqa: E402
 
 from auv_ident.analysis import engine  # noqa: E402
-from auv_ident.analysis.bag_identify import identify_bag  # noqa: E402
 from auv_ident.analysis.campaign import (find_bags, identify_bag_row, run_campaign,  # noqa: E402
                                          warm_up_plugin)
 from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag  # noqa: E402
@@ -76,12 +77,28 @@ def _process_cpu_s():
     return t.user + t.system
 
 
+SERIAL_LOOP = """
+import json, sys, time
+from auv_ident.analysis.bag_identify import identify_bag
+bags, vehicle = json.loads(sys.argv[1]), sys.argv[2]
+identify_bag(bags[0], vehicle=vehicle)        # compile/load, untimed
+t0, c0 = time.perf_counter(), time.process_time()
+for b in bags:
+    identify_bag(b, vehicle=vehicle)
+print(json.dumps([time.perf_counter() - t0, time.process_time() - c0]))
+"""
+
+
 def serial_pass(bags):
-    """identify_bag on every bag in this process: (wall s, CPU s)."""
-    t0, c0 = time.perf_counter(), time.process_time()
-    for b in bags:
-        identify_bag(b, vehicle=VEHICLE)
-    return time.perf_counter() - t0, time.process_time() - c0
+    """identify_bag on every bag, one after the other, in a process of its own without Dask
+    (in this one, the local cluster's scheduler thread would compete for the interpreter):
+    (wall s, CPU s) of the loop, after one untimed identification."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (str(Path(__file__).resolve().parents[1]), os.environ.get('PYTHONPATH'))
+        if p))
+    out = subprocess.run([sys.executable, '-c', SERIAL_LOOP, json.dumps(bags), VEHICLE],
+                         env=env, capture_output=True, text=True, check=True)
+    return tuple(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
 def measured_cluster(bag_glob, bags, tmp, workers, repeat):
@@ -151,7 +168,6 @@ def main(argv=None):
           f'refinement; {os.cpu_count()} cores, load average at start '
           + ' '.join(f'{x:.2f}' for x in os.getloadavg()))
 
-    identify_bag(bags[0], vehicle=VEHICLE)          # compile/load, untimed
     for w in counts:
         m = measured_cluster(bag_glob, bags, tmp.name, w, args.repeat)
         pairs = m['pairs']
@@ -168,11 +184,13 @@ def main(argv=None):
             print(f'  pair: serial loop {p["serial"]:.1f} s (CPU {p["serial_cpu"]:.1f} s), '
                   f'campaign {p["wall"]:.1f} s (tasks {p["tasks"]:.1f} s, worker CPU '
                   f'{p["cpu"]:.1f} s = {100 * (p["cpu"] / p["serial_cpu"] - 1):+.1f} %)')
+        cpu = sorted(p['cpu'] / p['serial_cpu'] - 1 for p in pairs)[len(pairs) // 2]
         print(f'  best of {len(pairs)}: serial loop {serial:.1f} s = {60 * n / serial:.1f} '
               f'bags/min; campaign tasks {tasks:.1f} s = {60 * n / tasks:.1f} bags/min '
-              f'({100 * (w * tasks / serial - 1):+.1f} % worker time against the serial loop, '
-              f'speed-up {serial / tasks:.2f}x); with the cluster start '
-              f'{60 * n / (m["start"] + wall):.1f} bags/min')
+              f'(wall {100 * (tasks / serial - 1):+.1f} % against the serial loop, speed-up '
+              f'{serial / tasks:.2f}x); with the cluster start '
+              f'{60 * n / (m["start"] + wall):.1f} bags/min; worker CPU against the serial '
+              f'loop\'s, median of the pairs: {100 * cpu:+.1f} %')
 
     s = campaign(bag_glob, os.path.join(tmp.name, 'out_nowarm'), 1, warm_up=False)
     walls = task_walls(os.path.join(tmp.name, 'out_nowarm'))
