@@ -416,8 +416,13 @@ class IdentifierNode(Node):
                   ('last_nis', num(s.last_nis)), ('last_dof', str(s.last_dof)),
                   ('last_stamp', 'n/a' if s.last_good is None
                    else num(s.last_good.stamp_ns * 1e-9))]
+        verdicts, diagnosis = s.diagnosis(h)
+        values += [('consistent', {True: 'true', False: 'false', None: 'not judged'}[
+            diagnosis['consistent']]), ('diagnosis', diagnosis['messages'][0])]
+        values += [(f'diagnosis_{i}', m) for i, m in enumerate(diagnosis['messages'][1:], 1)]
         for name, v, sd in zip(self.names, est, std):
-            values += [(name, num(v)), (name + '_std', num(sd))]
+            values += [(name, num(v)), (name + '_std', num(sd)),
+                       (name + '_verdict', verdicts[name]['verdict'])]
         values += [('R_' + n, num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
         values += [('Q_' + n, num(v)) for n, v in zip(self.names, np.diag(f.Q)[12:])]
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,

@@ -410,7 +410,14 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
         assert float(kv[name + '_std']) > 0
         # the coefficients' random walk; the current is constant by default (current_walk 0)
         assert float(kv['Q_' + name]) > 0 or name.startswith('current_')
+        assert kv[name + '_verdict'] in ('identifiable', 'weak', 'not excited')
     assert float(kv['R_u']) == pytest.approx(0.01 ** 2)
+    # the live diagnosis (session/live_diagnosis.py): 20 s fill the 200-update window
+    verdicts, diagnosis = ident.session.diagnosis()
+    assert kv['consistent'] == {True: 'true', False: 'false', None: 'not judged'}[
+        diagnosis['consistent']]
+    assert kv['diagnosis'] == diagnosis['messages'][0]
+    assert kv['consistent'] == 'true' and kv['diagnosis'].startswith('consistent')
 
     client_save = probe.create_client(Trigger, '/identifier/save')
     client_reset = probe.create_client(Trigger, '/identifier/reset')
