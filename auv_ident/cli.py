@@ -98,6 +98,7 @@ def cmd_identify(args):
             sim_current=_sim_current(args.sim_current),
             velocity_reference=args.velocity_reference or 'ground')
         pr.close()
+        print(res.diagnosis['messages'][0])
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
               f'{run.u[0, 5]:.0f} rpm, sensor noise 1-sigma (u..psi) '
@@ -114,7 +115,8 @@ def cmd_identify(args):
                                   else np.zeros(3))
         print(results.doc_table(doc))
         print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
-              f'wall {res.wall_s:.2f} s')
+              f'wall {res.wall_s:.2f} s'
+              + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
     if args.json:
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')

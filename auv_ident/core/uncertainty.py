@@ -132,7 +132,8 @@ def noise_model(white, dt, names=None):
             tau = -dt / math.log(a1)
         out[names[j]] = {'level': float(np.sqrt(np.mean(x[ok] ** 2))), 'ar1': a1,
                          'tau_s': tau, 'ljung_box': q, 'p_white': p,
-                         'white': bool(p >= WHITENESS_P), 'samples': n}
+                         'white': bool(p >= WHITENESS_P), 'samples': n,
+                         'acf': [float(v) for v in np.nan_to_num(rho, nan=0.0)]}
     return out
 
 
@@ -201,7 +202,7 @@ def sandwich_covariance(J, white, lags=None):
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
 
 
-def identifiability(J, estimate, names, cov=None):
+def identifiability(J, estimate, names, cov=None, absolute_std=None):
     """Per coefficient: how well the run determines it, from its sensitivities.
 
     Parameters
@@ -212,6 +213,8 @@ def identifiability(J, estimate, names, cov=None):
     names : p names
     cov : (p, p) covariance to report the 1-sigma from (default the Cramer-Rao bound
         (J^T J)^-1; pass the sandwich covariance for honest figures under coloured residuals)
+    absolute_std : (p,) or None, per parameter a 1-sigma to judge it by instead of the
+        relative one (NaN: relative), see :func:`verdicts_from_covariance`
 
     Returns
     -------
@@ -228,7 +231,8 @@ def identifiability(J, estimate, names, cov=None):
             cov = np.linalg.inv(F)
         except np.linalg.LinAlgError:
             cov = np.linalg.pinv(F)
-    return verdicts_from_covariance(cov, estimate, names, informed=np.diag(F) > 0)
+    return verdicts_from_covariance(cov, estimate, names, informed=np.diag(F) > 0,
+                                    absolute_std=absolute_std)
 
 
 def verdicts_from_covariance(cov, estimate, names, informed=None, absolute_std=None):
