@@ -1,4 +1,4 @@
-"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,bag,import,...}.
+"""Command line: python -m auv_ident {simulate,identify,report,bag,import,derivatives,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
 line on stderr and exit with status 2; no traceback.

@@ -42,6 +42,7 @@ psi``; at a roll of 0.5 deg the neglected cos(phi) factor is 1 - 4e-5) and w sta
 
 Every check raises :class:`ColumnMapError` naming the map (file) and the entry.
 """
+from decimal import Decimal, InvalidOperation, ROUND_HALF_EVEN
 import math
 
 import numpy as np
@@ -221,7 +222,6 @@ class ColumnMap:
         """The time column as int64 ns (exact decimal conversion, no float rounding).
 
         cells : list of str; where_cell(i) : text naming cell i (file, line, column)."""
-        from decimal import Decimal, InvalidOperation, ROUND_HALF_EVEN
         ent = self.entries['time']
         factor = UNITS['time'][ent['unit']] * ent['sign']
         out = np.empty(len(cells), dtype=np.int64)

@@ -152,7 +152,7 @@ class _Table:
         return out
 
 
-def _read_text(path, encoding):
+def _read_text(path, encoding, label):
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -161,7 +161,7 @@ def _read_text(path, encoding):
     try:
         text = data.decode(encoding)
     except UnicodeDecodeError as exc:
-        raise RunFileError(f'{path}: not {encoding} text (byte {exc.start})') from None
+        raise RunFileError(f'{path}: not {label} text (byte {exc.start})') from None
     return path, text, hashlib.sha256(data).hexdigest()
 
 
@@ -197,7 +197,7 @@ def read_hsva(path):
     from the earth-fixed xdot0, ydot0 with psi), r, x, y, phi, psi; inputs rudder (rad),
     thrust (N) and shaft (rpm, 60 n).
     """
-    path, text, sha = _read_text(path, HSVA_ENCODING)
+    path, text, sha = _read_text(path, HSVA_ENCODING, 'ISO-8859-1')
     lines = text.splitlines()
     if len(lines) <= HSVA_HEADER_LINES:
         raise RunFileError(f'{path}: {len(lines)} lines: an HSVA file has {HSVA_HEADER_LINES} '
@@ -222,7 +222,7 @@ def read_csv_run(path, column_map):
         lines skipped); column_map : a YAML file path or a :class:`ColumnMap`
     """
     cmap = column_map if isinstance(column_map, ColumnMap) else load_column_map(column_map)
-    path, text, sha = _read_text(path, 'utf-8-sig')
+    path, text, sha = _read_text(path, 'utf-8-sig', 'UTF-8')
     reader = csv.reader(io.StringIO(text, newline=''), delimiter=cmap.delimiter)
     header = None
     rows = []

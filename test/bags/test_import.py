@@ -350,6 +350,19 @@ def test_earth_velocities_with_zdot_use_the_full_rotation(tmp_path):
     assert run.measured_names == ['u', 'v', 'w', 'phi', 'theta', 'psi']
 
 
+def test_the_documented_example_map_is_valid():
+    """docs/bags.md's complete example column map is a valid map, in ENU, every quantity."""
+    text = (REPO / 'docs' / 'bags.md').read_text(encoding='utf-8')
+    section = text[text.index('### CSV logs and the column map'):]
+    block = section[section.index('```yaml') + len('```yaml'):]
+    doc = yaml.safe_load(block[:block.index('```')])
+    cmap = ColumnMap(doc)
+    assert cmap.world == 'enu' and cmap.time_base == 'unix'
+    assert set(doc) - {'world', 'delimiter'} == {'time', 'x', 'y', 'z', 'phi', 'theta', 'psi',
+                                                 'xdot', 'ydot', 'r', 'rudder', 'thrust',
+                                                 'shaft'}
+
+
 def test_white_noise_std_of_a_smooth_signal_with_white_noise():
     rng = np.random.default_rng(7)
     t = np.arange(0.0, 200.0, 0.05)
