@@ -153,8 +153,8 @@ class ColumnMap:
         if 'unit' not in val:
             raise ColumnMapError(f'{where}: give its unit (one of {", ".join(units)})')
         if val['unit'] not in units:
-            raise ColumnMapError(f'{where}: unknown unit {val["unit"]!r} for a {kind}; '
-                                 f'known: {", ".join(units)}')
+            raise ColumnMapError(f'{where}: unknown unit {val["unit"]!r}; {name} takes '
+                                 f'{", ".join(units)}')
         sign = val.get('sign', 1)
         if isinstance(sign, bool) or sign not in (1, -1):
             raise ColumnMapError(f'{where}: sign must be 1 or -1, got {sign!r}')
@@ -164,7 +164,8 @@ class ColumnMap:
                                      'is for positions and velocities)')
             other = {'u': 'xdot', 'v': 'ydot', 'w': 'zdot', 'xdot': 'u', 'ydot': 'v',
                      'zdot': 'w'}.get(name)
-            hint = (f': for a {val["frame"]}-frame velocity use {other}' if other else '')
+            kind_text = {'earth': 'an earth-fixed', 'body': 'a body'}.get(val['frame'])
+            hint = (f': for {kind_text} velocity use {other}' if other and kind_text else '')
             raise ColumnMapError(f'{where}: frame {val["frame"]!r}, but {name} is a '
                                  f'{frame}-frame quantity{hint}')
         base = val.get('base', 'run')

@@ -406,13 +406,15 @@ def _with(**changes):
 BAD_MAPS = [
     (_with(speed={'column': 'u', 'unit': 'm/s'}), r"map.yaml: unknown quantity 'speed'; known:"),
     (_with(psi={'column': 'hdg', 'unit': 'grad'}),
-     r"map.yaml: psi: unknown unit 'grad' for a angle; known: rad, deg"),
+     r"map.yaml: psi: unknown unit 'grad'; psi takes rad, deg"),
     (_with(psi={'column': 'hdg'}), r'map.yaml: psi: give its unit \(one of rad, deg\)'),
     (_with(psi={'column': 'heading', 'unit': 'deg'}),
      r"map.yaml: column\(s\) 'heading' not in .*run.csv; its columns: t, hdg, u, d"),
     (_with(u={'column': 'u', 'unit': 'm/s', 'frame': 'earth'}),
-     r"map.yaml: u: frame 'earth', but u is a body-frame quantity: for a earth-frame "
+     r"map.yaml: u: frame 'earth', but u is a body-frame quantity: for an earth-fixed "
      r'velocity use xdot'),
+    (_with(psi={'column': 'hdg', 'unit': 'deg', 'frame': 'body'}),
+     r'map.yaml: psi: frame does not apply to psi'),
     (_with(psi={'column': 'hdg', 'unit': 'deg', 'sign': 2}),
      r'map.yaml: psi: sign must be 1 or -1, got 2'),
     (_with(psi={'column': 'hdg', 'unit': 'deg', 'scale': 2}),
