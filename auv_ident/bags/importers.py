@@ -23,7 +23,7 @@ then grows). n is 10.2295 rps in every run; the torque has no input channel and 
 carried.
 """
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import hashlib
 import io
 import math
@@ -73,7 +73,6 @@ class MeasuredRun:
     fmt: str
     column_map: dict
     absolute: bool = False
-    notes: list = field(default_factory=list)
 
     @property
     def t(self):
