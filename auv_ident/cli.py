@@ -1,4 +1,4 @@
-"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,bag,...}.
+"""Command line: python -m auv_ident {simulate,identify,report,bag,import,derivatives,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
 line on stderr and exit with status 2; no traceback.
@@ -194,6 +194,32 @@ def cmd_bag_repair(args):
     return 0
 
 
+def cmd_import(args):
+    from auv_ident.bags.import_bag import write_imported_bag
+    from auv_ident.bags.importers import read_csv_run, read_hsva
+    if args.format == 'hsva':
+        if args.columns:
+            raise AuvIdentError('--columns is for --format csv (HSVA files have a fixed layout)')
+        run = read_hsva(args.file)
+    else:
+        if not args.columns:
+            raise AuvIdentError('--format csv needs --columns MAP.yaml (docs/bags.md, '
+                                '"Importing measured runs")')
+        run = read_csv_run(args.file, args.columns)
+    write_imported_bag(run, args.out, vehicle=args.vehicle, start=args.start,
+                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    t = run.t
+    std = ', '.join(f'{n} {s:.3g}' for n, s in zip(run.measured_names,
+                                                   run.noise_std[run.measured]))
+    print(f'{run.source.name} ({run.fmt}): {len(t)} samples over {t[-1]:.3f} s, sample time '
+          f'{run.sample_time:g} s')
+    print(f"measured: {' '.join(run.measured_names)}; inputs: "
+          f"{' '.join(sorted(run.inputs)) or 'none'}")
+    print(f'noise 1-sigma estimates (SI): {std}')
+    print(f'wrote {args.out}')
+    return 0
+
+
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
@@ -369,6 +395,22 @@ def build_parser():
     bp.add_argument('--out', help='write the repaired bag to this new directory '
                                   '(default: in place, originals kept as <file>.orig)')
     bp.set_defaults(func=cmd_bag_repair)
+
+    sp = sub.add_parser('import', help='write a measured run (HSVA file, CSV log) as a bag in '
+                                       'our topics and frames')
+    sp.add_argument('file', help='the measured run: an HSVA .dat file or a CSV log')
+    sp.add_argument('--format', required=True, choices=('hsva', 'csv'),
+                    help='hsva: HSVA KVLCC2 free-running test file; csv: CSV log with --columns')
+    sp.add_argument('--columns', metavar='MAP.yaml',
+                    help='csv: the column map (quantity, unit, frame, sign, time base per '
+                         'column; docs/bags.md)')
+    sp.add_argument('--out', required=True, help='bag directory to write (must not exist)')
+    sp.add_argument('--vehicle', default=None,
+                    help='stored in the bag for identify --bag (hsva default: kvlcc2_hsva)')
+    sp.add_argument('--start', metavar='ISO8601',
+                    help='UTC time of t = 0, e.g. 2006-05-17T10:00:00Z (default: nominal, '
+                         '2006-01-01T00:00:00Z for hsva, 2024-01-01T00:00:00Z for csv)')
+    sp.set_defaults(func=cmd_import)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)

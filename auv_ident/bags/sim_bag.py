@@ -87,22 +87,25 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
             twist=twist, covariance=np.array(tcov, dtype=np.float64).reshape(36)))
 
 
-def joint_state_msg(t_ns, u6):
+def joint_state_msg(t_ns, u6, effort=None):
     """Return a rosbags sensor_msgs/JointState of actuator vector ``u6`` stamped ``t_ns``.
 
     ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm); layout of
-    :mod:`auv_ident.session.messages` (JOINT_NAMES). ``effort`` is six zeros rather than empty:
-    a message ending with an empty float64 sequence is exactly what rclpy (Fast-CDR) pads with
-    up to 8 extra bytes and strict decoders (rosbags) reject, so no writer of these messages
-    should produce one.
+    :mod:`auv_ident.session.messages` (JOINT_NAMES). ``effort`` (6,) per joint in JOINT_NAMES
+    order (N m for the fins, N for the propeller: its measured thrust), default six zeros;
+    never empty: a message ending with an empty float64 sequence is exactly what rclpy
+    (Fast-CDR) pads with up to 8 extra bytes and strict decoders (rosbags) reject, so no
+    writer of these messages should produce one.
     """
     u = _as_vector(u6, 6, 'u6')
+    eff = (np.zeros(len(JOINT_NAMES)) if effort is None
+           else np.array(_as_vector(effort, len(JOINT_NAMES), 'effort'), dtype=np.float64))
     return _T['sensor_msgs/msg/JointState'](
         header=_header(t_ns, ''),
         name=list(JOINT_NAMES),
         position=np.array([float(v) for v in u[:5]] + [0.0]),
         velocity=np.array([0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]),
-        effort=np.zeros(len(JOINT_NAMES)))
+        effort=eff)
 
 
 def bag_sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=SIM_EPOCH_NS):
@@ -135,6 +138,25 @@ def run_metadata(run, frame='ned', command='', epoch_ns=SIM_EPOCH_NS):
     return meta
 
 
+def write_message_bag(path, topic_types, custom_data, messages, compression='zstd'):
+    """Write rosbags messages as a rosbag2 MCAP bag directory at path (must not exist).
+
+    topic_types : {topic: 'pkg/msg/Type'}, in the order the topics are registered
+    custom_data : {str: str}, metadata.yaml's custom_data
+    messages : iterable of (topic, t_ns, rosbags message); t_ns (int ns) is the log time
+    The one writing path of simulated (:func:`write_run_bag`) and imported
+    (:mod:`auv_ident.bags.import_bag`) runs; returns path.
+    """
+    with BagWriter(path, compression=compression) as w:
+        for topic, typ in topic_types.items():
+            w.add_topic(topic, typ)
+        for key, val in custom_data.items():
+            w.set_custom_data(key, val)
+        for topic, t_ns, msg in messages:
+            w.write(topic, t_ns, _STORE.serialize_cdr(msg, topic_types[topic]))
+    return path
+
+
 def write_run_bag(run, path, frame='ned', compression='zstd', command='',
                   epoch_ns=SIM_EPOCH_NS):
     """Write a simulated run as a rosbag2 MCAP bag directory at path (must not exist).
@@ -142,12 +164,7 @@ def write_run_bag(run, path, frame='ned', compression='zstd', command='',
     Stamps and log times are ``epoch_ns + t_k`` (default 2024-01-01T00:00:00Z, see the module
     docstring); returns path.
     """
-    with BagWriter(path, compression=compression) as w:
-        for topic, typ in TOPIC_TYPES.items():
-            w.add_topic(topic, typ)
-        for key, val in run_metadata(run, frame, command, epoch_ns).items():
-            w.set_custom_data(key, val)
-        for k in range(len(run.t)):
-            for topic, t_ns, msg in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns):
-                w.write(topic, t_ns, _STORE.serialize_cdr(msg, TOPIC_TYPES[topic]))
-    return path
+    messages = (m for k in range(len(run.t))
+                for m in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns))
+    return write_message_bag(path, TOPIC_TYPES, run_metadata(run, frame, command, epoch_ns),
+                             messages, compression)
