@@ -16,9 +16,10 @@ vehicle file, in the run's true current) flies too.
 Initial state: the free run starts at the first sample whose measured channels are all present
 (channels that the run measures somewhere), from each channel's straight-line least-squares fit
 over the first second of the run evaluated there (a single sample would carry the whole sensor
-noise, 0.5 m in x and y, which a free run keeps for ever in positions and heading). A channel the run never measures starts at the
-prior model's trim (u at the trim speed of the run's median shaft speed, rates and angles 0,
-positions 0): x, y and z do not enter the dynamics, and such a channel is not scored.
+noise, 0.5 m in x and y, which a free run keeps for ever in positions and heading). A channel
+the run never measures starts at the prior model's trim (u at the trim speed of the run's
+median shaft speed, rates and angles 0, positions 0): x, y and z do not enter the dynamics, and
+such a channel is not scored.
 
 ROS-free; matplotlib only inside :func:`fig_measured`.
 """
@@ -132,8 +133,7 @@ def _initial_state(t, Y, prior_model, rpm, window):
             ok = near & np.isfinite(Yu[:, i])
             ok[:k0] = False
             if np.sum(ok) >= 3:
-                slope, icpt = np.polyfit(t[ok] - t[k0], Yu[ok, i], 1)
-                x0[i] = icpt
+                x0[i] = np.polyfit(t[ok] - t[k0], Yu[ok, i], 1)[1]     # value at t0
         x0[EULER] = wrap_angle(x0[EULER])
     if not measured.all():
         trim = initial_state(prior_model, rpm, depth=0.0)
