@@ -338,6 +338,21 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
                          velocity_reference=velocity_reference, x0_window=float(x0_window))
 
 
+def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=None, **kwargs):
+    """validate_on_run on a bag's measurements (paired as for identification:
+    bag_identify.bag_source); the truth flies too when the bag is our simulator's (its truth is
+    the vehicle file). velocity_reference: None for what the bag says (else 'ground');
+    kwargs: validate_on_run's horizons, max_step, x0_window. Returns (RunValidation, Source)."""
+    from auv_ident.analysis.bag_identify import bag_source
+    run = bag_source(bag, vehicle=vehicle.path, coefficients=','.join(names),
+                     velocity_reference=velocity_reference)
+    val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
+                          source=run.description, velocity_reference=run.velocity_reference,
+                          include_truth=run.truth is not None, truth_current=run.current_truth,
+                          **kwargs)
+    return val, run
+
+
 # ------------------------------------------------------------------------------- the report
 
 DEG = 180.0 / np.pi

@@ -14,7 +14,7 @@ from auv_ident.analysis.report import make_report
 from auv_ident.analysis.report_html import markdown_to_html
 from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.validation import (refuse_identification_run, refuse_same_bag,
-                                           split_held_out, validate_on_run)
+                                           split_held_out, validate_on_bag, validate_on_run)
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
@@ -88,6 +88,20 @@ def test_held_out_split_and_refusal_of_the_identification_run():
         refuse_identification_run(a, held)       # a cut of it
     refuse_identification_run(a, b)              # another run: same stamps, other values
     refuse_identification_run(ident, held)       # the held-out part is not the identified part
+
+
+def test_validate_on_bag_scores_given_coefficients_on_a_bag(tmp_path):
+    """A model given by its values (as from an estimate file) scored on a bag: with the file's
+    own values it is the prior, so both models fly the same and follow the bag."""
+    data = generate(DataConfig(seed=7, duration=20.0), tmp_path / 'gen')
+    v = load_vehicle('nps_auv2')
+    names = coefficient_list(v, '')
+    val, run = validate_on_bag(v, names, Model(v, names).theta_true, None, str(data.bag))
+    doc = val.document()
+    assert run.description.startswith(f'bag {data.bag} (')
+    assert doc['models'] == ['identified', 'prior']
+    assert all(d['fit_percent'] == d['fit_percent_prior'] for d in doc['channels'].values())
+    assert doc['channels']['r']['fit_percent'] > 80
 
 
 def test_same_bag_path_is_refused_before_anything_is_written(tmp_path):
