@@ -42,6 +42,7 @@ SHARED_LIMIT = 0.5              # a run sharing more of its samples with the ide
                                 # than this is (a copy or a cut of) the identification run
 MODELS = ('identified', 'prior', 'truth')
 SUFFIX = {'identified': '', 'prior': '_prior', 'truth': '_truth'}
+SAME_VALUE_TOL = 1e-9           # two samples closer than this in every channel are one sample
 X0_WINDOW = 1.0                 # s, start of the run the initial state is fitted on
 MIN_SAMPLES = 10                # measured samples a validation run needs at least
 
@@ -74,10 +75,11 @@ def split_held_out(src, fraction=DEFAULT_HOLDOUT):
     return parts[0], parts[1]
 
 
-def _stamps_us(src):
-    """Absolute stamps (int microseconds) of a Source's measured samples, and those samples."""
+def _stamps_us(src, absolute=True):
+    """Stamps (int microseconds; absolute, or from the run's time origin) of a Source's measured
+    samples, and those samples."""
     meas = np.any(np.isfinite(src.Y), axis=1)
-    origin = int(getattr(src, 'time_origin_ns', 0) or 0)
+    origin = int(getattr(src, 'time_origin_ns', 0) or 0) if absolute else 0
     stamps = (origin // 1000 + np.round(np.asarray(src.t)[meas] * 1e6)).astype(np.int64)
     return stamps, np.asarray(src.Y)[meas]
 
@@ -93,16 +95,23 @@ def refuse_same_bag(ident_path, val_path):
 def refuse_identification_run(ident_src, val_src, ident_path=None, val_path=None):
     """Raise ConfigError if the validation run is the identification run itself: the same bag
     path, or the same content (more than SHARED_LIMIT of the validation run's measured samples
-    found in the identification run at the same absolute stamp with the same 12 values, i.e. a
-    copy or a cut of it)."""
+    found in the identification run at the same absolute stamp (to 1 us) with the same 12
+    values (to SAME_VALUE_TOL), i.e. a copy or a cut of it, or a bag of the same simulation)."""
     refuse_same_bag(ident_path, val_path)
-    s_val, y_val = _stamps_us(val_src)
-    s_id, y_id = _stamps_us(ident_src)
+    # a run simulated in memory has no absolute time (origin 0): compare from the origins
+    absolute = bool(getattr(ident_src, 'time_origin_ns', 0)) and bool(
+        getattr(val_src, 'time_origin_ns', 0))
+    s_val, y_val = _stamps_us(val_src, absolute)
+    s_id, y_id = _stamps_us(ident_src, absolute)
     common, i_val, i_id = np.intersect1d(s_val, s_id, return_indices=True)
     if not len(s_val) or not len(common):
         return
-    same = np.all((y_val[i_val] == y_id[i_id]) | (np.isnan(y_val[i_val]) & np.isnan(y_id[i_id])),
-                  axis=1)
+    diff = y_val[i_val] - y_id[i_id]
+    diff[:, EULER] = wrap_angle(diff[:, EULER])
+    # equal to rounding: a bag stores attitudes as quaternions (1e-16 rad), and two runs differ
+    # by their sensor noise (>= 1e-3 in every channel)
+    same = np.all((np.abs(diff) <= SAME_VALUE_TOL)
+                  | (np.isnan(y_val[i_val]) & np.isnan(y_id[i_id])), axis=1)
     shared = float(np.sum(same)) / len(s_val)
     if shared > SHARED_LIMIT:
         raise ConfigError(f'validation run {val_src.description} is the identification run '

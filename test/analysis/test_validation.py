@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 
 from auv_ident import cli
+from auv_ident.analysis.bag_identify import bag_source
 from auv_ident.analysis.experiments import load_source
 from auv_ident.analysis.report import make_report
 from auv_ident.analysis.report_html import markdown_to_html
 from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.validation import (refuse_identification_run, refuse_same_bag,
                                            split_held_out, validate_on_bag, validate_on_run)
+from auv_ident.bags.sim_bag import write_run_bag
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
 from auv_ident.core.simulate import simulate
@@ -88,6 +90,18 @@ def test_held_out_split_and_refusal_of_the_identification_run():
         refuse_identification_run(a, held)       # a cut of it
     refuse_identification_run(a, b)              # another run: same stamps, other values
     refuse_identification_run(ident, held)       # the held-out part is not the identified part
+
+
+def test_a_bag_of_the_simulated_identification_run_is_refused(tmp_path):
+    """--simulate M --validate BAG where BAG holds the same simulation: the bag's stamps have an
+    epoch and its attitudes went through quaternions, yet it is the identification run."""
+    a = load_source('nps_auv2', 'ident', seed=0, duration=20.0)
+    bag = write_run_bag(simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=20.0,
+                                 seed=0), str(tmp_path / 'same'))
+    same = bag_source(bag)
+    assert same.time_origin_ns > 0 and a.time_origin_ns == 0
+    with pytest.raises(ConfigError, match='100 % of its samples'):
+        refuse_identification_run(a, same)
 
 
 def test_validate_on_bag_scores_given_coefficients_on_a_bag(tmp_path):
