@@ -23,7 +23,7 @@ such a channel is not scored.
 
 ROS-free; matplotlib only inside :func:`fig_measured`.
 """
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import os
 
 import numpy as np
@@ -227,7 +227,6 @@ class RunValidation:
     current: object = None
     velocity_reference: str = 'ground'
     x0_window: float = 0.0
-    extra: dict = field(default_factory=dict)
 
     def mean_fit(self, model='identified', names=NU_NAMES):
         """Mean fit % over the channels `names` (u v w p q r by default); NaN channels (not
@@ -258,7 +257,6 @@ class RunValidation:
                'mean_fit_percent_nu': {m: self.mean_fit(m) for m in models},
                'failed_at_s': dict(self.failed_at),
                'channels': self.channels, 'prediction': self.prediction}
-        doc.update(self.extra)
         return clean(doc)
 
 
