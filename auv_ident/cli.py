@@ -156,18 +156,33 @@ def cmd_report(args):
                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
                       current=args.current, current_down=args.current_down,
                       sim_current=_sim_current(args.sim_current),
-                      velocity_reference=args.velocity_reference)
+                      velocity_reference=args.velocity_reference,
+                      validate_bag=args.validate, holdout=args.holdout)
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
     print(doc_table(doc))
-    val = doc.get('validation') or {}
-    if val.get('rms'):
-        print(f"validation on the held-out {val['maneuver']!r} manoeuvre (seed {val['seed']}, "
-              'process noise on), RMS error of the identified model: '
-              + ', '.join(f"{k} {v:.3g} {val['rms_units'][k]}" for k, v in val['rms'].items()))
-    print(f"report: {out['report']}")
+    val = doc['validation']
+    mean = val['mean_fit_percent_nu']
+    print(f"validation against the measurements of {val['source']}: mean fit % over u v w p q r "
+          + ', '.join(f'{m} {mean[m]:.1f}' if mean[m] is not None else f'{m} -'
+                      for m in val['models'])
+          + '; fit % per channel (identified / prior): '
+          + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
+                      for ch, d in val['channels'].items()))
+    true_val = doc.get('validation_true_model') or {}
+    if true_val.get('rms'):
+        print(f"validation on the held-out {true_val['maneuver']!r} manoeuvre (seed "
+              f"{true_val['seed']}, process noise on), RMS error of the identified model "
+              'against the true one: '
+              + ', '.join(f"{k} {v:.3g} {true_val['rms_units'][k]}"
+                          for k, v in true_val['rms'].items()))
+    print(f"report: {out['report']} and {out['html']}")
     return 0
+
+
+def _pct(v):
+    return '-' if v is None else f'{v:.1f}'
 
 
 def cmd_bench(args):
@@ -362,7 +377,8 @@ def build_parser():
     ident_args(sp)
     sp.set_defaults(func=cmd_montecarlo)
 
-    sp = sub.add_parser('report', help='identification + held-out validation report (md + PNG)')
+    sp = sub.add_parser('report', help='identification + validation against held-out '
+                                       'measurements: report.md, report.html, PNG, JSON')
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
     sp.add_argument('--simulate', metavar='MANEUVER')
@@ -373,6 +389,12 @@ def build_parser():
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.add_argument('--validate', metavar='BAG',
+                    help='another bag of the same vehicle to validate on (default: the final '
+                         '--holdout part of the identification run, left out of it)')
+    sp.add_argument('--holdout', type=float, default=0.25,
+                    help='without --validate: fraction of the run held out at its end '
+                         '(default 0.25)')
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     current_args(sp)

@@ -149,4 +149,5 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
                   noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
                   maneuver=meta.get('auv_ident.maneuver', ''),
-                  current_truth=_bag_current_truth(meta), velocity_reference=vr)
+                  current_truth=_bag_current_truth(meta), velocity_reference=vr,
+                  time_origin_ns=rr.time_origin_ns)

@@ -46,6 +46,7 @@ class Source:
     maneuver: str = ''
     current_truth: object = None        # (3,) m/s NED the run flew in, if known
     velocity_reference: str = 'ground'  # what Y's u v w are (ground or water)
+    time_origin_ns: int = 0             # absolute stamp of t = 0 (a bag's; 0 if simulated)
 
 def paper_values(vehicle, name):
     """(paper's estimate, paper's error % text) or (None, None)."""
