@@ -93,36 +93,36 @@ def _runs(t, ok, max_bridge):
     return np.split(idx, cut)
 
 
-def smoothed_derivatives(t, Y, U, T, window_s, max_bridge):
-    """Per run of measured samples: the uniform grid (step T) over it, the smoothed states
-    (n, 12: u..r, phi, theta filled, the rest 0), their smoothed rates nu_dot (n, 6) and the
-    inputs held at the grid times (n, 6). Half a window is dropped at each end of a run (the
-    polynomial is extrapolated there)."""
+def smoothing_window(window_s, T):
+    """The Savitzky-Golay window in samples (odd) for window_s seconds at step T (s)."""
     win = int(round(window_s / T)) | 1
     if win <= POLYORDER + 1:
         raise ConfigError(f'equation error: the smoothing window {window_s} s is {win} samples '
                           f'at T = {T} s; it needs more than {POLYORDER + 1}')
+    return win
+
+
+def smoothed_runs(t, Y, U, T, win, max_bridge):
+    """Per run of measured samples, on a uniform grid (step T) over it: the smoothed states
+    (n, 12: u..r, phi, theta filled, the rest 0), their smoothed rates nu_dot (n, 6) and the
+    inputs held at the grid times (n, 6); runs shorter than two windows are left out."""
     ok = np.all(np.isfinite(Y[:, list(NEEDED)]), axis=1)
-    Xs, Xd, Us = [], [], []
+    out = []
     for run in _runs(t, ok, max_bridge):
         tr = t[run]
         grid = np.arange(tr[0], tr[-1] + 0.5 * T, T)
         if grid.size < 2 * win:
             continue
         cols = np.column_stack([np.interp(grid, tr, Y[run, i]) for i in NEEDED])
-        sm = savgol_filter(cols, win, POLYORDER, axis=0)
-        der = savgol_filter(cols[:, :N_NU], win, POLYORDER, deriv=1, delta=T, axis=0)
-        keep = slice(win // 2, grid.size - win // 2)
         x = np.zeros((grid.size, N_STATE))
-        x[:, list(NEEDED)] = sm
+        x[:, list(NEEDED)] = savgol_filter(cols, win, POLYORDER, axis=0)
+        nu_dot = savgol_filter(cols[:, :N_NU], win, POLYORDER, deriv=1, delta=T, axis=0)
         held = np.clip(np.searchsorted(t, grid, side='right') - 1, 0, len(t) - 1)
-        Xs.append(x[keep])
-        Xd.append(der[keep])
-        Us.append(U[held][keep])
-    if not Xs:
+        out.append((x, nu_dot, U[held]))
+    if not out:
         raise DataError('equation error: no stretch of measured velocities and attitude is '
-                        f'two smoothing windows ({2 * window_s:g} s) long')
-    return np.vstack(Xs), np.vstack(Xd), np.vstack(Us)
+                        f'two smoothing windows ({2 * win * T:g} s) long')
+    return out
 
 
 def equation_error(model, t, Y, U, measured=None, T=None, window_s=DEFAULT_WINDOW_S,
@@ -162,20 +162,31 @@ def equation_error(model, t, Y, U, measured=None, T=None, window_s=DEFAULT_WINDO
     if unmeasured:
         raise DataError('equation error needs the velocities and roll and pitch measured; '
                         f'not measured: {", ".join(unmeasured)}')
-    X, nu_dot, Ug = smoothed_derivatives(t, Y, U, T, window_s, max_bridge)
+    win = smoothing_window(window_s, T)
     M = np.linalg.inv(model.Minv)
     zero = np.zeros(p)
-    n = X.shape[0]
-    force = np.empty((n, N_NU))         # y = M (nu_dot - f_0), per equation
-    regressors = np.empty((n, p))       # dF_e / dc_j for each coefficient's own equation
     eq_of = np.array([model.vehicle.coefficients[model.vehicle.index(names[j])].equation
                       if j in fit else -1 for j in range(p)])
-    for k in range(n):
-        f0 = model.f(X[k], Ug[k], zero)
-        _, _, Bt = model.jacobians(X[k], Ug[k], zero)
-        force[k] = M @ (nu_dot[k] - f0[:N_NU])
-        dF = M @ Bt[:N_NU]
-        regressors[k] = dF[eq_of.clip(0), np.arange(p)]
+    forces, regs = [], []
+    for x, nu_dot, u in smoothed_runs(t, Y, U, T, win, max_bridge):
+        n = x.shape[0]
+        known = np.empty((n, N_NU))        # M f_0: the known part of the force
+        reg = np.empty((n, p))             # dF_e / dc_j for each coefficient's own equation
+        for k in range(n):
+            f0, _, Bt = model.jacobians(x[k], u[k], zero)
+            known[k] = M @ f0[:N_NU]
+            reg[k] = (M @ Bt[:N_NU])[eq_of.clip(0), np.arange(p)]
+        # the same smoothing on the right-hand side as on nu_dot: the relation is linear in c,
+        # so it survives, and a fin step (a jump of the regressor that the smoothed nu_dot
+        # spreads over the window) is spread the same way on both sides
+        known = savgol_filter(known, win, POLYORDER, axis=0)
+        reg = savgol_filter(reg, win, POLYORDER, axis=0)
+        keep = slice(win // 2, n - win // 2)   # the polynomial is extrapolated at the ends
+        forces.append((nu_dot @ M.T - known)[keep])
+        regs.append(reg[keep])
+    force = np.vstack(forces)           # y = M nu_dot - M f_0, per equation
+    regressors = np.vstack(regs)
+    n = force.shape[0]
     for eq in sorted(set(eq_of[fit])):
         cols = [j for j in fit if eq_of[j] == eq]
         A = regressors[:, cols]

@@ -144,13 +144,15 @@ def segment_index(start, n_sub):
     before the first start and after a gap (n_sub == 0) until the next start."""
     seg = np.full(len(start), -1, dtype=np.int64)
     s = -1
+    active = False
     for k in range(len(start)):
         if start[k]:
-            s += 1 if s >= 0 or k == np.flatnonzero(start)[0] else 0
-            s = max(s, 0)
+            s += 1
+            active = True
         elif k > 0 and n_sub[k] == 0:
-            s = -1 - abs(s)          # inactive until the next start
-        seg[k] = s if s >= 0 else -1
+            active = False           # a gap: nothing is simulated until the next start
+        if active:
+            seg[k] = s
     return seg
 
 
