@@ -141,7 +141,9 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
     Returns the result dict (JSON-ready): 'source', 'vehicle', 'coefficients' (names),
     'truth' and 'initial' {name: value}, 'validation' {'description', 'samples'}, and
     'methods' {method: {'coefficients': {name: {'estimate', 'std', 'error_pct'[, 'refused']}},
-    'wall_s', 'fit_percent' {channel: %}, 'notes'[, 'error']}}.
+    'wall_s', 'fit_percent' {channel: %}, 'notes'[, 'error']}}, and 'reference_fit_percent'
+    {'initial guess': {channel: %}[, 'truth': ...]}: the fit % of the common start and, when the
+    truth is known, of the true model (the ceiling the sensor noise leaves).
     """
     methods = list(methods)
     v = source.vehicle
@@ -202,6 +204,13 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
                                 for k, x in validation_fit(model, used, tv, Yv, Uv).items()}
         doc['methods'][name] = entry
     doc['methods'] = {m: doc['methods'][m] for m in methods}
+    # references for the fit %: the model at the common initial guess, and (when known) the
+    # truth, whose fit is the ceiling the sensor noise leaves
+    doc['reference_fit_percent'] = {'initial guess': {
+        k: _jsonable(x) for k, x in validation_fit(model, theta0, tv, Yv, Uv).items()}}
+    if truth is not None:
+        doc['reference_fit_percent']['truth'] = {
+            k: _jsonable(x) for k, x in validation_fit(model, truth, tv, Yv, Uv).items()}
     return doc
 
 
@@ -252,6 +261,9 @@ def methods_table(doc):
             continue
         fits = ' '.join(f'{_cell(e["fit_percent"].get(ch), ">6.1f")}' for ch in TABLE_CHANNELS)
         lines.append(f'{m:<16}{e["wall_s"]:>8.2f}  {fits}')
+    for ref, fits in (doc.get('reference_fit_percent') or {}).items():
+        lines.append(f'{"(" + ref + ")":<16}{"":>8}  '
+                     + ' '.join(f'{_cell(fits.get(ch), ">6.1f")}' for ch in TABLE_CHANNELS))
     for m in methods:
         notes = doc['methods'][m].get('notes')
         if notes:

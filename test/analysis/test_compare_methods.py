@@ -26,6 +26,8 @@ def test_cli_writes_every_method_with_estimates_times_and_fits(compared):
     names = doc['coefficients']
     assert names == ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
     assert 'final 20 %' in doc['validation']['description']
+    ref = doc['reference_fit_percent']
+    assert set(ref) == {'initial guess', 'truth'} and set(ref['truth']) == set(STATE_NAMES)
     for name, m in doc['methods'].items():
         assert 'error' not in m, (name, m.get('error'))
         assert m['wall_s'] > 0
@@ -56,3 +58,26 @@ def test_bad_method_names_one_line_and_exit_2(capsys):
     assert main(['compare-methods', '--simulate', 'ident', '--methods', 'ekf,kalman']) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'kalman' in err[0]
+
+
+@pytest.mark.slow
+def test_bag_with_a_validation_bag(tmp_path):
+    """--bag A --validate B: identification on all of A (a simulated bag: its truth is known),
+    the fit % on B, whose description is the bag's."""
+    from auv_ident.bags.sim_bag import write_run_bag
+    from auv_ident.core.model import Model
+    from auv_ident.core.simulate import simulate
+    from auv_ident.vehicles import load_vehicle
+    truth = Model(load_vehicle('nps_auv2'))
+    a = write_run_bag(simulate(truth, 'ident', duration=60.0, seed=4), str(tmp_path / 'a'))
+    b = write_run_bag(simulate(truth, 'zigzag', duration=30.0, seed=5), str(tmp_path / 'b'))
+    out = tmp_path / 'm.json'
+    assert main(['compare-methods', '--bag', a, '--validate', b, '--methods',
+                 'ekf,ukf,output_error,equation_error', '--json', str(out)]) == 0
+    doc = json.loads(out.read_text(encoding='utf-8'))
+    assert list(doc['methods']) == ['ekf', 'ukf', 'output_error', 'equation_error']
+    assert doc['validation']['description'].startswith(f'bag {b}')
+    assert doc['identification_samples'] >= 1200
+    for name, m in doc['methods'].items():
+        assert abs(m['coefficients']['M_ds']['error_pct']) < 2.0, name
+        assert m['fit_percent']['r'] > 70.0, name
