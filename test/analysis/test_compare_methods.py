@@ -1,6 +1,7 @@
 """compare-methods: the command line writes the side-by-side JSON of the methods, and bad
 input gives one line and status 2."""
 import json
+import os
 
 import pytest
 
@@ -81,3 +82,25 @@ def test_bag_with_a_validation_bag(tmp_path):
     for name, m in doc['methods'].items():
         assert abs(m['coefficients']['M_ds']['error_pct']) < 2.0, name
         assert m['fit_percent']['r'] > 70.0, name
+
+
+# docs/methods.md: the accuracy each method meets on the shipped bag (|error| %, and every
+# estimate within 2 of its 1-sigma)
+SHIPPED_BAG_LIMITS = {'ekf': {}, 'ukf': {}, 'filter_error': {}, 'output_error': {},
+                      'equation_error': {'Z_ds': 6.0, 'Z_q': 6.0, 'Z_w': 6.0}}
+SHIPPED_BAG_DEFAULT = {'ekf': 0.5, 'ukf': 0.5, 'filter_error': 0.5, 'output_error': 2.0,
+                       'equation_error': 1.5}
+
+
+@pytest.mark.slow
+def test_shipped_bag_meets_the_documented_accuracy():
+    from helpers import REPO
+    from auv_ident.analysis.compare_methods import compare_methods
+    from auv_ident.analysis.experiments import load_source
+    doc = compare_methods(load_source(bag=os.path.join(REPO, 'bags', 'nps_auv2_ident')))
+    for name, m in doc['methods'].items():
+        assert 'error' not in m, (name, m.get('error'))
+        for n, c in m['coefficients'].items():
+            limit = SHIPPED_BAG_LIMITS[name].get(n, SHIPPED_BAG_DEFAULT[name])
+            assert abs(c['error_pct']) < limit, (name, n, c)
+            assert abs(c['estimate'] - doc['truth'][n]) < 2.0 * c['std'], (name, n, c)

@@ -59,3 +59,13 @@ def test_ukf_refuses_an_adaptive_noise_mode():
     cfg = make_config(model.theta_names, noise_mode='matching')
     with pytest.raises(ConfigError, match='fixed Q and R'):
         run_ukf(model, cfg, run.t[:10], run.y[:10], run.u[:10], T=run.T)
+
+
+def test_ukf_on_irregular_stamps_with_dropouts():
+    """Every 7th and 11th sample dropped (intervals of 0.05-0.15 s, crossed in RK4 steps of at
+    most T with the command held): still within 1.5 % (measured at most 0.7 %)."""
+    model, run = light_run()
+    keep = np.array([k % 7 != 3 and k % 11 != 5 for k in range(len(run.t))])
+    cfg = make_config(model.theta_names, noise_std=LIGHT_NOISE_STD.copy())
+    ukf = run_ukf(model, cfg, run.t[keep], run.y[keep], run.u[keep], T=run.T)
+    assert relative_error(ukf.theta, model.theta_true).max() < 0.015
