@@ -179,6 +179,7 @@ def cmd_compare_methods(args):
         duration=args.duration, coefficients=args.coefficients, validate=args.validate)
     doc = cm.compare_methods(source, validation, methods=methods,
                              initial_offset=args.initial_offset, holdout=args.holdout,
+                             mass_inverse=args.mass_inverse,
                              progress=lambda m: print(f'running {m} ...', file=sys.stderr))
     print(cm.methods_table(doc))
     if args.json:

@@ -131,12 +131,14 @@ def _jsonable(v):
 
 
 def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5,
-                    holdout=HOLDOUT_FRACTION, progress=None):
+                    holdout=HOLDOUT_FRACTION, progress=None, mass_inverse='default'):
     """Run `methods` on a Source (analysis/results.Source) and validate each.
 
     validation : a Source to validate on (None: the final `holdout` fraction of `source`, left
         out of the identification)
     progress : callable(method name), called before each method
+    mass_inverse : the identified model's M^-1 (core.model.Model; 'exact' to identify added
+        mass with the methods that can)
 
     Returns the result dict (JSON-ready): 'source', 'vehicle', 'coefficients' (names),
     'truth' and 'initial' {name: value}, 'validation' {'description', 'samples'}, and
@@ -148,7 +150,7 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
     methods = list(methods)
     v = source.vehicle
     names = list(source.names)
-    model = Model(v, names)
+    model = Model(v, names, mass_inverse=mass_inverse)
     truth = None if source.truth is None else np.asarray(source.truth, float)[:len(names)]
     theta0 = model.theta_true * (1.0 + initial_offset)
     if validation is None:

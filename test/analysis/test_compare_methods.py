@@ -53,6 +53,23 @@ def test_recursive_and_likelihood_methods_recover_the_truth(compared):
             assert abs(c['estimate'] - truth) < 3.5 * c['std'], (name, n, c)
 
 
+def test_equation_error_labels_added_mass_refused(tmp_path, capsys):
+    """An added-mass coefficient (REMUS 100, whose M^-1 is exact): the equation error refuses
+    it by name in the table and the JSON (estimate None) and still estimates the other one; the
+    EKF estimates both."""
+    out = tmp_path / 'am.json'
+    assert main(['compare-methods', '--vehicle', 'remus100', '--simulate', 'ident',
+                 '--duration', '30', '--coefficients', 'Z_wdot,M_w',
+                 '--methods', 'ekf,equation_error', '--json', str(out)]) == 0
+    assert 'refused  added mass' in capsys.readouterr().out
+    doc = json.loads(out.read_text(encoding='utf-8'))
+    ee = doc['methods']['equation_error']['coefficients']
+    assert ee['Z_wdot']['estimate'] is None and 'mass matrix' in ee['Z_wdot']['refused']
+    assert ee['M_w']['estimate'] is not None and 'refused' not in ee['M_w']
+    ekf = doc['methods']['ekf']['coefficients']
+    assert all(c['estimate'] is not None and 'refused' not in c for c in ekf.values())
+
+
 def test_bad_method_names_one_line_and_exit_2(capsys):
     with pytest.raises(ConfigError, match="unknown method 'kalman'"):
         parse_methods('ekf,kalman')
