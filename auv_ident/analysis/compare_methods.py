@@ -35,7 +35,7 @@ from auv_ident.core.equation_error import equation_error
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.model import Model
 from auv_ident.core.noise_fit import identify_with_noise_model
-from auv_ident.core.output_error import output_error
+from auv_ident.core.output_error import DEFAULT_SEGMENT_S, output_error
 from auv_ident.core.prediction import angle_channels, fit_percent, free_run
 from auv_ident.core.state import State, STATE_NAMES
 from auv_ident.core.ukf import run_ukf
@@ -81,7 +81,7 @@ def _ukf(model, cfg, t, Y, U, T):
 def _output_error(model, cfg, t, Y, U, T):
     theta0 = np.asarray(cfg.initial, dtype=float)
     r = output_error(model, t, Y, U, theta0, cfg.noise_std, T=T)
-    notes = [f'{r.segments} segments of up to 20 s, starts estimated; fitted '
+    notes = [f'{r.segments} segments of up to {DEFAULT_SEGMENT_S:g} s, starts estimated; fitted '
              + ' '.join(r.channels)]
     if not r.converged:
         notes.append('the search stopped at its evaluation limit')
