@@ -272,3 +272,43 @@ def methods_table(doc):
             lines.append(f'{m}: ' + '; '.join(notes))
     lines += list(doc.get('warnings') or [])
     return '\n'.join(lines)
+
+
+def methods_markdown(doc):
+    """The comparison as Markdown (for a report's "methods" section): per method and coefficient
+    the estimate, 1-sigma and error % (with error / 1-sigma when the truth is known), the wall
+    time, then the validation fit % table with the references."""
+    names = doc['coefficients']
+    lines = [f'Data: {doc["source"]}. Validation: {doc["validation"]["description"]}.', '',
+             '| method | ' + ' | '.join(names) + ' | wall s |',
+             '|---|' + '---|' * (len(names) + 1)]
+    for m, e in doc['methods'].items():
+        if 'error' in e:
+            lines.append(f'| {m} | failed: {e["error"]} |' + ' |' * len(names))
+            continue
+        cells = []
+        for n in names:
+            c = e['coefficients'][n]
+            if 'refused' in c or c['estimate'] is None:
+                cells.append('refused' if 'refused' in c else '-')
+                continue
+            cell = f'{c["estimate"]:.6g} ± {_cell(c["std"], ".2g")}'
+            if c['error_pct'] is not None:
+                z = ((c['estimate'] - doc['truth'][n]) / c['std']) if c['std'] else None
+                cell += f' ({c["error_pct"]:+.2f} %' + (f', {z:+.1f} σ)' if z is not None
+                                                          else ')')
+            cells.append(cell)
+        lines.append(f'| {m} | ' + ' | '.join(cells) + f' | {e["wall_s"]:.2f} |')
+    lines += ['', 'Fit % of each model run open loop over the validation run:', '',
+              '| model | ' + ' | '.join(TABLE_CHANNELS) + ' |',
+              '|---|' + '---|' * len(TABLE_CHANNELS)]
+    rows = [(m, e['fit_percent']) for m, e in doc['methods'].items() if 'error' not in e]
+    rows += [(f'({ref})', fits) for ref, fits in (doc.get('reference_fit_percent') or {}).items()]
+    for label, fits in rows:
+        lines.append(f'| {label} | ' + ' | '.join(_cell(fits.get(ch), '.1f')
+                                                 for ch in TABLE_CHANNELS) + ' |')
+    refused = [f'{m}: {n} refused ({c["refused"]})' for m, e in doc['methods'].items()
+               for n, c in e.get('coefficients', {}).items() if 'refused' in c]
+    if refused:
+        lines += [''] + [f'- {r}' for r in refused]
+    return '\n'.join(lines)

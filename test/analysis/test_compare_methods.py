@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from auv_ident.analysis.compare_methods import METHODS, parse_methods
+from auv_ident.analysis.compare_methods import METHODS, methods_markdown, parse_methods
 from auv_ident.cli import main
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.state import STATE_NAMES
@@ -40,6 +40,14 @@ def test_cli_writes_every_method_with_estimates_times_and_fits(compared):
         # over the 12 s held out, the free run follows the yaw rate it was fitted on
         # (measured 88.8-89.0 %)
         assert m['fit_percent']['r'] > 70.0, name
+
+
+def test_markdown_for_the_report(compared):
+    md = methods_markdown(compared).splitlines()
+    head = md.index('| method | Z_ds | Z_q | Z_w | M_ds | K_v | wall s |')
+    assert [ln.split(' | ')[0] for ln in md[head + 2:head + 7]] == ['| ' + m for m in METHODS]
+    assert all(ln.count('|') == 8 for ln in md[head:head + 7])
+    assert any(ln.startswith('| (truth) |') for ln in md)
 
 
 def test_recursive_and_likelihood_methods_recover_the_truth(compared):
