@@ -176,7 +176,8 @@ def cmd_compare_methods(args):
     methods = cm.parse_methods(args.methods)
     source, validation = cm.compare_sources(
         vehicle=args.vehicle, simulate_maneuver=args.simulate, bag=args.bag, seed=args.seed,
-        duration=args.duration, coefficients=args.coefficients, validate=args.validate)
+        duration=args.duration, coefficients=args.coefficients, validate=args.validate,
+        truth=args.truth)
     doc = cm.compare_methods(source, validation, methods=methods,
                              initial_offset=args.initial_offset, holdout=args.holdout,
                              mass_inverse=args.mass_inverse,
@@ -387,6 +388,10 @@ def build_parser():
     sp.add_argument('--validate', metavar='BAG',
                     help='validate on this bag (default: the final --holdout of the data, '
                          'left out of the identification)')
+    sp.add_argument('--truth', metavar='JSON',
+                    help='the true coefficients ("coefficients": {name: value}, e.g. the '
+                         'truth.json of test/independent_data.py) for error %% on a bag not '
+                         'written by our simulator')
     sp.add_argument('--holdout', type=float, default=0.2,
                     help='fraction of the record kept for validation without --validate')
     sp.add_argument('--initial-offset', type=float, default=0.5,

@@ -25,6 +25,7 @@ method refuses keeps its initial guess in that method's model.
 ROS-free; the sources come from analysis/experiments.load_source.
 """
 from dataclasses import replace
+import json
 import math
 import time
 
@@ -216,12 +217,37 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
     return doc
 
 
+def read_truth(path, names):
+    """(p,) the true values of `names` from a JSON file with a "coefficients" mapping (the
+    truth.json that test/independent_data.py writes next to its bags). ConfigError naming the
+    file and the missing coefficient otherwise."""
+    try:
+        with open(path, encoding='utf-8') as fh:
+            doc = json.load(fh)
+    except (OSError, ValueError) as err:
+        raise ConfigError(f'--truth {path}: cannot read it as JSON ({err})') from None
+    coefs = doc.get('coefficients') if isinstance(doc, dict) else None
+    if not isinstance(coefs, dict):
+        raise ConfigError(f'--truth {path}: no "coefficients" mapping')
+    missing = [n for n in names if n not in coefs]
+    if missing:
+        raise ConfigError(f'--truth {path}: no value for {missing[0]}')
+    try:
+        return np.array([float(coefs[n]) for n in names])
+    except (TypeError, ValueError):
+        raise ConfigError(f'--truth {path}: a value of {", ".join(names)} is not a number') \
+            from None
+
+
 def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
-                    coefficients='', validate=None):
+                    coefficients='', validate=None, truth=None):
     """(source, validation or None) for the command line: --simulate M or --bag A, and
-    --validate B (a bag)."""
+    --validate B (a bag); truth: a JSON file with the true coefficients (read_truth), for bags
+    not written by our simulator."""
     source = load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
                          seed=seed, duration=duration, coefficients=coefficients)
+    if truth:
+        source = replace(source, truth=read_truth(truth, source.names))
     validation = None
     if validate:
         validation = load_source(vehicle=source.vehicle.name, bag=validate,
@@ -230,7 +256,11 @@ def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, dura
 
 
 def _cell(x, fmt):
-    return format(x, fmt) if x is not None else '-'
+    """x formatted, or '-' as wide as the format asks."""
+    if x is not None:
+        return format(x, fmt)
+    width = ''.join(ch for ch in fmt.split('.')[0] if ch.isdigit())
+    return format('-', '>' + width) if width else '-'
 
 
 def methods_table(doc):

@@ -5,7 +5,8 @@ import os
 
 import pytest
 
-from auv_ident.analysis.compare_methods import METHODS, methods_markdown, parse_methods
+from auv_ident.analysis.compare_methods import (METHODS, methods_markdown, parse_methods,
+                                                read_truth)
 from auv_ident.cli import main
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.state import STATE_NAMES
@@ -76,6 +77,17 @@ def test_equation_error_labels_added_mass_refused(tmp_path, capsys):
     assert ee['M_w']['estimate'] is not None and 'refused' not in ee['M_w']
     ekf = doc['methods']['ekf']['coefficients']
     assert all(c['estimate'] is not None and 'refused' not in c for c in ekf.values())
+
+
+def test_truth_file_gives_the_values_or_names_what_is_missing(tmp_path):
+    path = tmp_path / 'truth.json'
+    path.write_text(json.dumps({'coefficients': {'Z_ds': -0.073, 'K_v': 0.0031}}))
+    assert read_truth(str(path), ['K_v', 'Z_ds']).tolist() == [0.0031, -0.073]
+    with pytest.raises(ConfigError, match='no value for Z_q'):
+        read_truth(str(path), ['Z_ds', 'Z_q'])
+    path.write_text('[1, 2]')
+    with pytest.raises(ConfigError, match='no "coefficients" mapping'):
+        read_truth(str(path), ['Z_ds'])
 
 
 def test_bad_method_names_one_line_and_exit_2(capsys):
