@@ -1,5 +1,5 @@
-"""Equation-error least squares (Jategaonkar 2015, ch. 6; Morelli & Klein 2016, ch. 5): the
-force equations regressed on the coefficients that enter them linearly.
+"""Equation-error least squares (Jategaonkar 2015, ch. 6; Klein & Morelli 2006, regression
+methods): the force equations regressed on the coefficients that enter them linearly.
 
 The model is M nu_dot = F(nu, eta, delta, c) (model.py) and every hydrodynamic or control
 coefficient c_j has one monomial term in one equation e_j: c_j s_j z_a z_b ... (s_j = (rho/2)
@@ -8,7 +8,7 @@ differentiated (Savitzky-Golay, a local cubic over window_s seconds: nu_s, nu_do
 sample gives per equation e
 
     y_e = [M (nu_dot_s - f_0(nu_s, eta_s, delta))]_e = sum_{j in e} c_j x_j,
-    x_j = dF_e / dc_j = s_j z_a z_b ...                                    (Jategaonkar eq. 6.2)
+    x_j = dF_e / dc_j = s_j z_a z_b ...
 
 with f_0 the model's x_dot with the identified coefficients set to 0 (the known terms: the
 other coefficients, rigid-body Coriolis, restoring, propeller, cross-flow) and M the mass matrix

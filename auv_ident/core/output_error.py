@@ -6,17 +6,16 @@ measured inputs from a known initial state, must reproduce the measured outputs,
 minimises the negative log-likelihood
 
     J(theta, R) = 1/2 sum_k e_k^T R^-1 e_k + N/2 ln det R,   e_k = y_k - x_hat_k(theta)
-                                                                  (Jategaonkar eq. 4.8)
 
 over the chosen output channels. For a given R it is a weighted least-squares problem, solved
-by Levenberg-Marquardt (scipy least_squares) in parameters scaled by their start value; R is
-then re-estimated from the residuals, R = diag(1/N sum e_k e_k^T) (Jategaonkar eq. 4.16, the
-diagonal as his practice for uncorrelated channels), and the two steps alternate until the
-cost stops falling (relaxation strategy, Jategaonkar sec. 4.10). 1-sigma: the Gauss-Newton
-information matrix, cov = (J_w^T J_w)^-1 with J_w the Jacobian of the whitened residuals
-(Cramer-Rao bound, Jategaonkar eq. 4.29).
+by trust-region Gauss-Newton (scipy least_squares 'trf' with a sparse Jacobian, below) in
+parameters scaled by their start value; R is then re-estimated from the residuals,
+R = diag(1/N sum e_k e_k^T) (the maximum-likelihood R for the given theta, kept diagonal for
+uncorrelated channels), and the two steps alternate until the cost stops falling (the
+relaxation strategy of Jategaonkar ch. 4). 1-sigma: the Gauss-Newton information matrix,
+cov = (J_w^T J_w)^-1 with J_w the Jacobian of the whitened residuals (the Cramer-Rao bound).
 
-Why multiple shooting (Bock 1983; Jategaonkar 2015, sec. 4.18 on long records): an AUV's free
+Why multiple shooting (the record cut into segments that each start afresh): an AUV's free
 run drifts in position and heading (neutral modes: no force pulls x, y, psi back), and over
 minutes the small velocity errors of a slightly wrong model integrate into large position and
 heading errors that swamp the fit. The record is cut into segments of segment_s seconds; each
@@ -58,7 +57,7 @@ START_CHANNELS = (State.U, State.V, State.W, State.P, State.Q, State.R, State.PH
 # 120 s run when the starts were taken as measured)
 IC_CHANNELS = (State.U, State.V, State.W, State.P, State.Q, State.R, State.PHI, State.THETA)
 DEFAULT_SEGMENT_S = 20.0      # s, length of a shooting segment
-MAX_RELAXATIONS = 4           # alternations of theta (LM) and R (from the residuals)
+MAX_RELAXATIONS = 4           # alternations of theta (Gauss-Newton) and R (from the residuals)
 RELAXATION_TOL = 1e-3         # relative fall of the likelihood cost that ends them
 
 
@@ -238,8 +237,7 @@ def output_error(model, t, Y, U, theta0, noise_std, T=None, segment_s=DEFAULT_SE
         e = errors(z)
         e[~use] = np.nan
         sd = np.sqrt(np.nanmean(e ** 2, axis=0))
-        # R from the residuals (Jategaonkar eq. 4.16); the likelihood is then
-        # N/2 ln det R + const (eq. 4.17)
+        # R from the residuals; the likelihood is then N/2 ln det R + const
         cost = float(np.sum(np.sum(use, axis=0) * np.log(sd)))
         row_factor = np.broadcast_to(1.0 / (sd * weights), use.shape)[use]
         weights = 1.0 / sd

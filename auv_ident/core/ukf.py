@@ -7,7 +7,7 @@ R, measured channels, stamps and gaps (timing.py via batch's timeline): only the
 state's distribution is carried through the model differs, so the two can be compared on the
 same data.
 
-Time update (scaled unscented transform, Wan & van der Merwe 2000, eqs. 15-17): with
+Time update (the scaled unscented transform of Wan & van der Merwe 2000): with
 n = 12 + p, lambda = alpha^2 (n + kappa) - n and S the lower Cholesky factor of P,
 
     X_0 = x*,  X_i = x* + sqrt(n + lambda) S[:, i],  X_(n+i) = x* - sqrt(n + lambda) S[:, i]
