@@ -32,8 +32,8 @@ sqrt(n) 1-sigma from the mean.
 Measurement update: the measurement is a selection of states (y = H x* + v, NaN channels
 skipped). For a linear h the unscented transform is exact (predicted measurement H x*^-,
 P_xz = P^- H^T, P_zz = H P^- H^T + R from the sigma points of (x*^-, P^-)), so the update is
-the Kalman update with the angle innovations wrapped to (-pi, pi] and the Joseph form, the
-same as the EKF's.
+the Kalman update with the angle innovations wrapped to (-pi, pi] and the Joseph form: the
+EKF's own compiled update (ekf.update) is used.
 """
 import math
 from dataclasses import dataclass
@@ -48,10 +48,9 @@ from .batch import _record, _timeline
 from .errors import ConfigError, DivergenceError, DomainError
 from .filter import AugmentedEKF
 from .model import OK, STATUS_TEXT
-from .state import EULER, Input, N_STATE, State
+from .state import EULER, Input, N_STATE
 from .timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
 
-ANGLES = np.array([State.PHI, State.THETA, State.PSI])
 
 
 @dataclass
@@ -133,30 +132,27 @@ def unscented_mean_cov(X, Wm, Wc):
     return mean, 0.5 * (cov + cov.T)
 
 
-def kalman_update(xa, P, y, measured, R):
-    """Kalman update with the channels of y (12,) that are measured and finite; angle
-    innovations wrapped; Joseph form. Returns (xa+, P+, NIS, number of channels)."""
-    idx = np.flatnonzero(measured & np.isfinite(y))
-    if idx.size == 0:
-        return xa, P, 0.0, 0
-    nu = y[idx] - xa[idx]
-    ang = np.isin(idx, ANGLES)
-    nu[ang] = wrap_angle(nu[ang])
-    PHt = P[:, idx]
-    S = PHt[idx, :] + R[np.ix_(idx, idx)]
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        raise DivergenceError('UKF: the innovation covariance is not positive '
-                              'definite') from None
-    Kg = np.linalg.solve(S, PHt.T).T
-    xa = xa + Kg @ nu
-    xa[State.PSI] = wrap_angle(xa[State.PSI])
-    IKH = np.eye(len(xa))
-    IKH[:, idx] -= Kg
-    P = IKH @ P @ IKH.T + Kg @ R[np.ix_(idx, idx)] @ Kg.T
-    white = np.linalg.solve(L, nu)
-    return xa, 0.5 * (P + P.T), float(white @ white), idx.size
+class MeasurementUpdate:
+    """The measurement update of the UKF: the EKF's compiled Kalman update (ekf.update: angle
+    innovations wrapped, channels fused one at a time for a diagonal R, which for a linear
+    measurement is the batch update, Joseph form), with its scratch allocated once."""
+
+    def __init__(self, n, ws):
+        self.ws = ws
+        self.xa = np.empty(n)
+        self.P = np.empty((n, n))
+        self.innov = np.empty(N_STATE)
+        self.S_diag = np.empty(N_STATE)
+        self.white = np.empty(N_STATE)
+
+    def __call__(self, xa, P, y, measured, R):
+        """(xa+, P+, NIS, channels used) after fusing the finite measured channels of y (12,).
+        Raises DivergenceError when the posterior is not a covariance."""
+        st, nis, m = K.update(xa, P, np.ascontiguousarray(y, dtype=float), measured, R,
+                              self.xa, self.P, self.innov, self.S_diag, self.white, self.ws)
+        if st != OK:
+            raise DivergenceError('UKF: the measurement update lost positive definiteness')
+        return self.xa.copy(), self.P.copy(), float(nis), int(m)
 
 
 def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE,
@@ -194,6 +190,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
     Q, R, measured = settings.Q0, settings.R0, np.asarray(settings.measured, dtype=bool)
     ws = K.new_workspace(n, model.compiled.c0.shape[0])
     X_out = np.empty((2 * n + 1, n))
+    kalman_update = MeasurementUpdate(n, ws)
     cm = model.compiled
     sum_nis = sum_dof = 0.0
     r = 0
