@@ -35,15 +35,13 @@ from dataclasses import dataclass
 import time
 
 import numpy as np
-from numba import njit
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from . import ekf as K
 from .angles import wrap_angle
 from .batch import _record, parameter_scale
 from .errors import ConfigError, DataError, DivergenceError
-from .model import OK
+from .propagation import simulate_segments
 from .state import N_STATE, State, STATE_NAMES
 from .timing import DEFAULT_MAX_BRIDGE, nominal_sample_time, time_steps
 
@@ -80,44 +78,6 @@ class OutputErrorResult:
     @property
     def theta_std(self):
         return np.sqrt(np.diag(self.cov))
-
-
-@njit(cache=True)
-def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
-    """Free run of each segment: X[k] (12,) the model's state at sample k. Segment s starts at
-    the first sample k with seg[k] = s, from X0[s] (12,); seg[k] = -1 before the first start.
-    NaN after a failed step until the next start. theta (p,) the parameters (the augmented
-    model cm reads them from the state's tail); n_sub[k], h[k] the RK4 steps crossing
-    [t_{k-1}, t_k] (timing.time_steps) with U[k-1] held. Returns the number of segments that
-    left the model's domain."""
-    p = theta.shape[0]
-    n = N_STATE + p
-    ws = K.new_workspace(n, cm.c0.shape[0])
-    xa = np.empty(n)
-    xb = np.empty(n)
-    for j in range(p):
-        xa[N_STATE + j] = theta[j]
-    active = False
-    failed = 0
-    current = -1
-    for k in range(X.shape[0]):
-        if seg[k] != current:
-            current = seg[k]
-            if current >= 0:
-                for i in range(N_STATE):
-                    xa[i] = X0[current, i]
-            active = current >= 0
-        elif active:
-            for s in range(n_sub[k]):
-                st = K.rk4_step_into(xa, U[k - 1], cm, h[k], False, xb, ws.Fa, ws)
-                if st != OK:
-                    active = False
-                    failed += 1
-                    break
-                xa, xb = xb, xa
-        for i in range(N_STATE):
-            X[k, i] = xa[i] if active else np.nan
-    return failed
 
 
 def segment_starts(t, Y, n_sub, segment_s):

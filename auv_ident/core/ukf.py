@@ -40,7 +40,6 @@ from dataclasses import dataclass
 import time
 
 import numpy as np
-from numba import njit
 
 from . import ekf as K
 from .angles import wrap_angle
@@ -48,6 +47,7 @@ from .batch import _record, _timeline
 from .errors import ConfigError, DivergenceError, DomainError
 from .filter import AugmentedEKF
 from .model import OK, STATUS_TEXT
+from .propagation import propagate_sigma_points
 from .state import EULER, Input, N_STATE
 from .timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
 
@@ -94,18 +94,6 @@ class UkfResult:
     @property
     def theta_std(self):
         return np.sqrt(np.diag(self.theta_cov))
-
-
-@njit(cache=True)
-def propagate_sigma_points(X, ui, cm, h, X_out, ws):
-    """X_out[i] = one RK4 step of h seconds of sigma point X[i] ((2n+1, n) rows, augmented
-    states) with the inputs ui held; cm the model's CompiledModel, ws its ekf.Workspace.
-    Returns OK or the first failing point's status code."""
-    for i in range(X.shape[0]):
-        st = K.rk4_step_into(X[i], ui, cm, h, False, X_out[i], ws.Fa, ws)
-        if st != OK:
-            return st
-    return OK
 
 
 def sigma_points(xa, P, gamma):
