@@ -185,6 +185,27 @@ def _pct(v):
     return '-' if v is None else f'{v:.1f}'
 
 
+def cmd_compare_methods(args):
+    from auv_ident.analysis import compare_methods as cm
+    from auv_ident.analysis.results import write_json
+    if args.simulate and args.bag:
+        raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
+    methods = cm.parse_methods(args.methods)
+    source, validation = cm.compare_sources(
+        vehicle=args.vehicle, simulate_maneuver=args.simulate, bag=args.bag, seed=args.seed,
+        duration=args.duration, coefficients=args.coefficients, validate=args.validate,
+        truth=args.truth)
+    doc = cm.compare_methods(source, validation, methods=methods,
+                             initial_offset=args.initial_offset, holdout=args.holdout,
+                             mass_inverse=args.mass_inverse,
+                             progress=lambda m: print(f'running {m} ...', file=sys.stderr))
+    print(cm.methods_table(doc))
+    if args.json:
+        write_json(args.json, doc)
+        print(f'wrote {args.json}')
+    return 0
+
+
 def cmd_bench(args):
     from auv_ident.analysis.bench import bench, format_bench
     b = bench(duration=args.duration)
@@ -399,6 +420,34 @@ def build_parser():
                     help='with --simulate: fly the run in this water current, m/s NED')
     current_args(sp)
     sp.set_defaults(func=cmd_report)
+
+    sp = sub.add_parser('compare-methods',
+                        help='the same data through EKF, UKF, filter-error, output-error and '
+                             'equation-error identification (docs/methods.md)')
+    vehicle_arg(sp)
+    sp.set_defaults(vehicle=None)
+    sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
+    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file) to identify from')
+    sp.add_argument('--seed', type=int, default=0)
+    sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
+    sp.add_argument('--coefficients', default='',
+                    help="comma-separated names (default: the paper's set for the vehicle)")
+    sp.add_argument('--methods', default='',
+                    help='comma-separated subset of ekf,ukf,filter_error,output_error,'
+                         'equation_error (default: all)')
+    sp.add_argument('--validate', metavar='BAG',
+                    help='validate on this bag (default: the final --holdout of the data, '
+                         'left out of the identification)')
+    sp.add_argument('--truth', metavar='JSON',
+                    help='the true coefficients ("coefficients": {name: value}, e.g. the '
+                         'truth.json of test/independent_data.py) for error %% on a bag not '
+                         'written by our simulator')
+    sp.add_argument('--holdout', type=float, default=0.2,
+                    help='fraction of the record kept for validation without --validate')
+    sp.add_argument('--initial-offset', type=float, default=0.5,
+                    help='initial guesses = vehicle file value * (1 + offset); default 0.5')
+    sp.add_argument('--json', help='write the comparison as JSON')
+    sp.set_defaults(func=cmd_compare_methods)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')
     sp.add_argument('--duration', type=float, default=600.0)
