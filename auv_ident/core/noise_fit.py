@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from .batch import refine, run_ekf
+from .errors import DivergenceError, DomainError
 from .filter import AugmentedEKF
 from .state import STATE_NAMES
 from .timing import nominal_sample_time
@@ -40,6 +41,7 @@ from .uncertainty import noise_model, sandwich_covariance
 
 NOISE_MODEL_CHANGE = 1.5    # a channel's effective variance off by this factor: use the model
 SANDWICH_WIDER = 1.2        # sandwich 1-sigma wider than the white one by this: use it
+RETRY_NOISE_FACTORS = (3.0, 10.0)   # noise scalings tried when the configured pass fails
 MAX_RHO = 0.995             # AR(1) coefficient used at most (a random walk has no long-run var)
 
 
@@ -107,26 +109,48 @@ def _pass_record(f, stats, hist):
 def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25, hist_every=0):
     """Noise model of a record from an EKF pass with the configured noise. Returns NoiseFit
     (used = whether the effective noise should replace the configured one; configured_pass =
-    that EKF pass, with histories every hist_every samples)."""
+    that EKF pass, with histories every hist_every samples).
+
+    If that pass leaves the model's domain or diverges (noise far above the configured level
+    makes an over-confident filter chase it, e.g. into a negative surge speed), the pass is
+    made again with the noise scaled by RETRY_NOISE_FACTORS in turn, the noise model is read
+    off the first pass that completes (its levels relative to that scaled noise), and a note
+    says so; only if every pass fails is the last error raised."""
     T = nominal_sample_time(t) if T is None else T
-    f = AugmentedEKF(model, cfg, T)
-    stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=True,
-                                 max_step=max_step, max_bridge=max_bridge)
-    nm = noise_model(white, T, STATE_NAMES)
     conf = np.asarray(cfg.noise_std, dtype=float)
-    eff = effective_std(conf, nm, np.asarray(cfg.measured, dtype=bool))
+    failures = []
+    for factor in (1.0,) + RETRY_NOISE_FACTORS:
+        base = conf * factor
+        f = AugmentedEKF(model, cfg if factor == 1.0 else replace(cfg, noise_std=base), T)
+        try:
+            stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=True,
+                                         max_step=max_step, max_bridge=max_bridge)
+            break
+        except (DomainError, DivergenceError) as err:
+            failures.append((factor, err))
+    else:
+        raise failures[-1][1]
+    nm = noise_model(white, T, STATE_NAMES)
+    eff = effective_std(base, nm, np.asarray(cfg.measured, dtype=bool))
     ratio = (eff / conf) ** 2
-    used = bool(np.any((ratio > NOISE_MODEL_CHANGE) | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
+    used = bool(factor != 1.0 or np.any((ratio > NOISE_MODEL_CHANGE)
+                                        | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
                    used=used, configured_pass=_pass_record(f, stats, hist))
+    if failures:
+        fit.notes.append(
+            f'the EKF with the configured noise failed ({failures[0][1]}): the noise is far '
+            f'above the configured level; the noise model was read off a pass with {factor:g}x '
+            'the configured noise')
     if used:
         worst = max(nm, key=lambda n: abs(math.log(ratio[STATE_NAMES.index(n)])))
         d = nm[worst]
         fit.notes.append(
-            f'the measurement noise is not what was configured: e.g. {worst} is {d["level"]:.2g}'
-            f'x the assumed level with a lag-1 correlation of {d["ar1"]:.2f} (time constant '
-            f'{d["tau_s"]:.2g} s); identified with the noise model from the data (effective '
-            '1-sigma = level x sqrt((1 + rho) / (1 - rho)) x configured)')
+            f'the measurement noise is not what was configured: e.g. {worst} is '
+            f'{d["level"] * factor:.2g}x the assumed level with a lag-1 correlation of '
+            f'{d["ar1"]:.2f} (time constant {d["tau_s"]:.2g} s); identified with the noise '
+            'model from the data (effective 1-sigma = level x sqrt((1 + rho) / (1 - rho)) x '
+            'configured)')
     return fit
 
 
