@@ -70,8 +70,6 @@ class SteeringGear:
                               f'{self.rate}')
         if not (np.isfinite(self.limit) and self.limit > 0.0):
             raise ConfigError(f'steering gear limit must be finite and > 0 rad, got {self.limit}')
-        if not np.isfinite(self.rate) and self.time_constant == 0.0:
-            pass    # an ideal (instant) rudder: allowed
 
     @classmethod
     def ideal(cls, rate_deg_s, limit_deg=DEFAULT_LIMIT_DEG):
@@ -90,7 +88,8 @@ class SteeringGear:
         size = abs(span)
         sign = 1.0 if span >= 0.0 else -1.0
         out = np.full(s.shape, float(start))
-        go = s > 0.0
+        # an instant rudder (R = inf, T_s = 0) is at its target from s = 0 on (right-continuous)
+        go = s >= 0.0 if not np.isfinite(self.rate) and self.time_constant == 0.0 else s > 0.0
         if size == 0.0 or not go.any():
             return out if out.ndim else float(out)
         sg = s[go]

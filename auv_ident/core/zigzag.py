@@ -122,8 +122,9 @@ def check_series(t, *signals, names=('psi', 'delta')):
         s = np.asarray(s, dtype=float)
         if s.shape != t.shape:
             raise DataError(f'{name} has shape {s.shape}, the time stamps {t.shape}')
-        if not np.all(np.isfinite(s)):
-            raise DataError(f'{name} holds NaN/Inf at sample {int(np.flatnonzero(~np.isfinite(s))[0])}')
+        bad = np.flatnonzero(~np.isfinite(s))
+        if len(bad):
+            raise DataError(f'{name} holds NaN/Inf at sample {int(bad[0])}')
         out.append(s)
     return out
 

@@ -80,9 +80,11 @@ class _Helm:
         del self.orders[n_orders:]
         del self.segments[n_orders + 1:]
 
-    def rudder(self, t):
+    def rudder(self, t, left=False):
+        """The rudder angle at t (rad); left: its limit from the left, which differs at a
+        servo start only for an instant rudder."""
         for t_srv, a, b in reversed(self.segments):
-            if t >= t_srv:
+            if (t > t_srv) if left else (t >= t_srv):
                 return self.gear.response(t - t_srv, a, b) if np.isfinite(t_srv) else a
         return self.segments[0][1]
 
@@ -162,15 +164,15 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
     helm.order(float(execute_time), -side * rudder_deg * DEG)
     switch = switch_deg * DEG
 
-    def u_of(t, x):
+    def u_of(t, x, left=False):
         u = base(x)
-        u[rudder_index] = helm.rudder(t)
+        u[rudder_index] = helm.rudder(t, left)
         if thrust is not None:
             u[thrust_index] = float(thrust(x))
         return u
 
-    def rhs(t, x):
-        return np.asarray(f(x, u_of(t, x)), dtype=float)
+    def rhs(t, x, left=False):
+        return np.asarray(f(x, u_of(t, x, left)), dtype=float)
 
     def advance(t0, t1, x):
         cuts = [t0] + helm.breaks(t0, t1) + [t1]
@@ -179,7 +181,7 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
             k1 = rhs(a, x)
             k2 = rhs(a + 0.5 * h, x + 0.5 * h * k1)
             k3 = rhs(a + 0.5 * h, x + 0.5 * h * k2)
-            k4 = rhs(b, x + h * k3)
+            k4 = rhs(b, x + h * k3, left=True)   # the sub-step ends before a break
             x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         return x
 
@@ -205,7 +207,7 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
                 y1 = side * (x1[State.PSI] - psi0) - switch
                 if y0 < 0.0 <= y1 and t0 >= execute_time:
                     d0 = side * rhs(t0, X[k])[State.PSI]
-                    d1 = side * rhs(t1, x1)[State.PSI]
+                    d1 = side * rhs(t1, x1, left=True)[State.PSI]
                     tc = _hermite_root(t0, t1, y0, y1, d0, d1)
                     side = -side
                     helm.order(tc, -side * rudder_deg * DEG)
