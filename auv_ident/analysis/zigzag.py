@@ -8,7 +8,9 @@ Glue over :mod:`auv_ident.core.zigzag`, :mod:`~auv_ident.core.steering`,
 - :func:`measured_measures` gives the measures of a run with its first execute at the order
   time the gear implies (rudder onset minus the mean onset delay), so measured and simulated
   measures share the definition of the execute;
-- :func:`measures_table`, :func:`gear_table`, :func:`thrust_table` format Markdown tables.
+- :func:`closed_loop` simulates a run's zig-zag with a model (identified gear and ideal helm);
+- :func:`measures_table`, :func:`gear_table`, :func:`thrust_table`, :func:`closed_loop_table`
+  format Markdown tables.
 """
 from pathlib import Path
 
@@ -18,6 +20,7 @@ from auv_ident.bags.importers import read_hsva
 from auv_ident.core.errors import DataError
 from auv_ident.core.state import State
 from auv_ident.core.zigzag import zigzag_measures
+from auv_ident.core.zigzag_sim import simulate_zigzag
 
 HSVA_RUNS = ('Z_10_10_S', 'Z_10_10_P', 'Z_20_10_S', 'Z_20_10_P')
 HSVA_PATTERN = 'HSVA_CPMC_KVLCC2_{}.dat'
@@ -98,4 +101,35 @@ def thrust_table(models, names):
     for label, m in models.items():
         lines.append('| ' + ' | '.join([label, m.formula(), _f(m.rms)]
                                        + [_f(v) for v in m.loro_rms]) + ' |')
+    return '\n'.join(lines)
+
+
+def closed_loop(run, f, ident, ideal, step=0.05):
+    """Measured and simulated measures of a run: the model f (x, u) -> x_dot from the run's
+    first measured state, with the run's test, side and order time of the first execute, once
+    through the identified gear and once with the ideal helm. Returns (measured, with gear,
+    ideal) ZigzagMeasures and the two ZigzagSimulations."""
+    m = measured_measures(run, ident)
+    kw = dict(rudder_deg=m.nominal[0], switch_deg=m.nominal[1], duration=float(run.t[-1]),
+              first=m.first, execute_time=m.execute_time, step=step)
+    sim_g = simulate_zigzag(f, run.x[0], gear=ident.gear, **kw)
+    sim_i = simulate_zigzag(f, run.x[0], gear=ideal, **kw)
+    return m, sim_g, sim_i
+
+
+def closed_loop_table(rows):
+    """Markdown table of {name: (measured, sim with gear, sim ideal, heading fit %)}: first
+    and second overshoots (deg) and the time to the first (s)."""
+    head = ['run', 'measured 1st / 2nd (deg)', 'model + identified gear', 'model + ideal helm',
+            'helm effect on 1st (deg)', 'time to 1st: measured / gear / ideal (s)',
+            'heading fit % (gear)']
+    lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+    for name, (m, g, i, fit) in rows.items():
+        def pair(x):
+            return f'{_f(x.first_overshoot_deg)} / {_f(x.second_overshoot_deg)}'
+        lines.append('| ' + ' | '.join([
+            name, pair(m), pair(g), pair(i),
+            _f(g.first_overshoot_deg - i.first_overshoot_deg, '+.2f'),
+            ' / '.join(_f(x.times_to_overshoot[0] if x.times_to_overshoot else None)
+                       for x in (m, g, i)), _f(fit, '.1f')]) + ' |')
     return '\n'.join(lines)

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from auv_ident.analysis.zigzag import (gear_table, HSVA_RUNS, load_hsva_runs,
-                                       measured_measures, measures_table)
+from auv_ident.analysis.zigzag import (closed_loop, closed_loop_table, gear_table, HSVA_RUNS,
+                                       load_hsva_runs, measured_measures, measures_table)
 from auv_ident.core.errors import DataError
-from auv_ident.core.steering import identify_steering_gear
+from auv_ident.core.nomoto import fit_nomoto
+from auv_ident.core.steering import identify_steering_gear, SteeringGear
 from auv_ident.core.thrust_fit import DEFAULT_TERMS, fit_thrust_model, SPEED_TERMS
 
 REPO = Path(__file__).resolve().parents[2]
@@ -86,6 +87,22 @@ def test_thrust_depends_on_sway_and_yaw_as_well(runs):
     assert all(f < s for f, s in zip(full.loro_rms, speed.loro_rms))
     x0 = runs['Z_20_10_S'].x[0]
     assert 35.0 < full(x0) < 55.0      # N, the thrust range measured at 10.2295 rps
+
+
+def test_closed_loop_shows_the_helm(runs, ident):
+    run = runs['Z_20_10_S']
+    nomoto = fit_nomoto([runs['Z_20_10_S'], runs['Z_20_10_P']])
+    m, sim_g, sim_i = closed_loop(run, nomoto.f, ident, SteeringGear.ideal(15.8))
+    assert sim_g.measures.label == m.label == '20/10' and sim_g.measures.first == 'starboard'
+    # the simulation orders at the same instants it measures: its check times are its orders
+    assert sim_g.measures.check_times == pytest.approx([o[0] for o in sim_g.orders[1:]],
+                                                       abs=1e-3)
+    # the basin's gear (0.36 s dead time, slow start and end) turns back later than the ideal
+    # helm: a larger first overshoot, later (tools/zigzag_measures.py: +0.99 deg)
+    assert sim_g.measures.first_overshoot_deg > sim_i.measures.first_overshoot_deg + 0.5
+    assert sim_g.measures.times_to_overshoot[0] > sim_i.measures.times_to_overshoot[0]
+    table = closed_loop_table({'Z_20_10_S': (m, sim_g.measures, sim_i.measures, 70.0)})
+    assert '| Z_20_10_S | 11.71 / 15.62 |' in table
 
 
 def test_a_missing_file_is_named(tmp_path):

@@ -1,14 +1,16 @@
-"""core.zigzag, core.steering, core.thrust_fit, core.zigzag_sim against hand computations and
-independent integrations: IMO overshoots of a heading with known extremes, a steering gear
+"""core.zigzag, core.steering, core.thrust_fit, core.zigzag_sim, core.nomoto against hand
+computations and independent integrations: IMO overshoots of a heading with known extremes, a steering gear
 recovered from a rudder made by a fine Euler integration of the servo, a thrust model recovered
 from exact data, and the closed-loop zig-zag of a first-order Nomoto model against its
-closed-form solution and against scipy's DOP853 with events."""
+closed-form solution and against scipy's DOP853 with events, and a Nomoto model recovered from
+its own simulated zig-zags."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from auv_ident.core.errors import ConfigError, DataError
+from auv_ident.core.nomoto import fit_nomoto, NomotoModel
 from auv_ident.core.state import Input, State
 from auv_ident.core.steering import identify_steering_gear, SteeringGear
 from auv_ident.core.thrust_fit import fit_thrust_model, SPEED_TERMS
@@ -300,3 +302,23 @@ def test_closed_loop_writes_the_thrust_and_checks_its_arguments():
         simulate_zigzag(nomoto, x0, 10, 10, 30, gear, thrust=lambda x: 1.0)
     with pytest.raises(ConfigError, match='first'):
         simulate_zigzag(nomoto, x0, 10, 10, 30, gear, first='left')
+
+
+def test_nomoto_fit_recovers_the_model_of_a_simulated_zigzag():
+    truth = NomotoModel(K=-0.06, T=12.0, delta_0=0.01)
+    x0 = np.zeros(12)
+    x0[State.U] = U0
+    runs = []
+    for first in ('starboard', 'port'):
+        sim = simulate_zigzag(truth.f, x0, 20.0, 10.0, 120.0, SteeringGear.ideal(15.8),
+                              first=first, execute_time=1.0)
+        runs.append((sim.t, sim.x[:, State.R], sim.rudder))
+    fit = fit_nomoto(runs)
+    # the fit holds the 20 Hz rudder samples (the simulation moves it in between): close, not
+    # exact
+    assert fit.K == pytest.approx(truth.K, rel=0.01)
+    assert fit.T == pytest.approx(truth.T, rel=0.01)
+    assert fit.delta_0 == pytest.approx(truth.delta_0, abs=2e-4)
+    assert fit.rms_r < 1e-4
+    with pytest.raises(DataError, match='Nomoto'):
+        fit_nomoto([(np.arange(3.0), np.zeros(3), np.zeros(2))])
