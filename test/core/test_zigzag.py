@@ -1,9 +1,9 @@
 """core.zigzag, core.steering, core.thrust_fit, core.zigzag_sim, core.nomoto against hand
-computations and independent integrations: IMO overshoots of a heading with known extremes, a steering gear
-recovered from a rudder made by a fine Euler integration of the servo, a thrust model recovered
-from exact data, and the closed-loop zig-zag of a first-order Nomoto model against its
-closed-form solution and against scipy's DOP853 with events, and a Nomoto model recovered from
-its own simulated zig-zags."""
+computations and independent integrations: IMO overshoots of a heading with known extremes, a
+steering gear recovered from a rudder made by a fine Euler integration of the servo, a thrust
+model recovered from exact data, the closed-loop zig-zag of a first-order Nomoto model against
+its closed-form solution and against scipy's DOP853 with events, and a Nomoto model recovered
+from its own simulated zig-zags."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
