@@ -14,8 +14,8 @@ rudder follows a proportional servo with a rate limit,
     d(delta)/dt = sat((delta_c - delta) / T_s, R)          (rad/s)
 
 (``time_constant`` T_s in s, ``rate`` R in rad/s; T_s = 0 is a pure rate limit, the classic
-steering-gear model, e.g. Fossen 2021, sec. 15.x: rudder servo with magnitude and rate
-saturation), and the ordered angle is clipped to +-``limit``. For a step of the order the
+steering-gear model: a servo with magnitude and rate saturation), and the ordered angle is
+clipped to +-``limit``. For a step of the order the
 response is closed-form (:meth:`SteeringGear.response`): a ramp at R until the error is R T_s,
 then an exponential approach with T_s. The measured rudder of the HSVA runs starts slowly
 (~0.3 s to reach full rate) and slows down near the new angle (~0.5 s): the fitted dead time
