@@ -43,6 +43,7 @@ from .zigzag import (check_series, HOLD_RATE_DEG_S, RAD2DEG, rudder_tolerance,
 DEG = np.pi / 180.0
 DEFAULT_LIMIT_DEG = 35.0    # deg: the rudder stops of a conventional ship (SOLAS II-1/29)
 SETTLE_S = 1.5              # s: the fit window runs this long past the rudder's arrival
+HOLD_WINDOW_S = 2.0         # s: the held angle before a reversal is read over this long
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,8 @@ def reversal_windows(t, psi, delta):
         i_on = int(np.searchsorted(t, t_on))
         i_next = (int(np.searchsorted(t, m.check_times[k + 1])) if k + 1 < len(m.check_times)
                   else len(t))
-        before = _held_level(t, d, max(0, i_on - 40), i_on + 1)
+        # the held angle: over the HOLD_WINDOW_S before the onset
+        before = _held_level(t, d, int(np.searchsorted(t, t_on - HOLD_WINDOW_S)), i_on + 1)
         after = _held_level(t, d, i_on + 1, i_next)
         if before is None or after is None:
             continue
