@@ -37,7 +37,7 @@ from scipy.optimize import least_squares
 
 from .errors import ConfigError, DataError
 from .state import State
-from .zigzag import (check_series, HOLD_RATE_DEG_S, RAD2DEG, rudder_tolerance,
+from .zigzag import (check_series, HOLD_RATE_DEG_S, RAD2DEG, rudder_rate, rudder_tolerance,
                      zigzag_measures)
 
 DEG = np.pi / 180.0
@@ -101,7 +101,7 @@ class SteeringGear:
             t_ramp = max(size - R * T, 0.0) / R if np.isfinite(R) else 0.0
             e0 = min(size, R * T)     # the error when the exponential phase starts
             moved = np.where(sg <= t_ramp, R * sg if np.isfinite(R) else 0.0,
-                             size - e0 * np.exp(-(sg - t_ramp) / T))
+                             size - e0 * np.exp(-np.maximum(sg - t_ramp, 0.0) / T))
         out[go] = start + sign * moved
         return out if out.ndim else float(out)
 
@@ -148,8 +148,7 @@ def run_series(run):
 
 def _held_level(t, d, i0, i1):
     """deg: the median of the held samples of d in [i0, i1) (None if none is held)."""
-    rate = np.abs(np.gradient(d[i0:i1], t[i0:i1])) if i1 - i0 > 1 else np.zeros(1)
-    held = rate < HOLD_RATE_DEG_S
+    held = rudder_rate(t, d)[i0:i1] < HOLD_RATE_DEG_S
     return float(np.median(d[i0:i1][held])) if held.any() else None
 
 
@@ -192,9 +191,9 @@ def _residuals(p, pieces):
         for tw, dw, tc, a, b in pieces])
 
 
-def _fit(pieces):
-    """(delay s, rate deg/s, T_s s), rms deg: least squares over the pieces."""
-    x0 = np.array([0.2, 15.0, 0.2])
+def _fit(pieces, x0=(0.2, 15.0, 0.2)):
+    """(delay s, rate deg/s, T_s s), rms deg: least squares over the pieces from x0."""
+    x0 = np.clip(np.asarray(x0, dtype=float), [0.0, 0.5, 0.0], [3.0, 200.0, 3.0])
     res = least_squares(_residuals, x0, args=(pieces,),
                         bounds=([0.0, 0.5, 0.0], [3.0, 200.0, 3.0]), x_scale=[0.1, 5.0, 0.1])
     rms = float(np.sqrt(np.mean(res.fun ** 2)))
@@ -236,7 +235,10 @@ def identify_steering_gear(runs, limit_deg=DEFAULT_LIMIT_DEG):
     if not pieces:
         raise DataError('no complete rudder reversal in the runs: nothing to identify the '
                         'steering gear from')
-    p, rms = _fit(pieces)
+    # the joint fit starts from the median of the per-reversal fits: the residual is not
+    # smooth in the dead time (sampled ramps), and a common start can stall far from it
+    p, rms = _fit(pieces, np.median([[r['delay'], r['rate'], r['time_constant']]
+                                     for r in rows], axis=0))
     gear = SteeringGear(delay=float(p[0]), rate=float(p[1]) * DEG, time_constant=float(p[2]),
                         limit=limit_deg * DEG)
     keys = ('onset_delay', 'mean_rate', 'delay', 'rate', 'time_constant', 'rms_deg')

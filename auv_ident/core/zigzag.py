@@ -13,8 +13,9 @@ definitions, all angles in deg and from the initial heading psi_0 (the heading a
 execute), times in s:
 
 - *rudder angle* (``rudder_deg``): the held rudder amplitude, the median |delta| over the
-  samples where the rudder is held (moving slower than 0.5 deg/s) beyond half its largest
-  deflection; ``nominal`` rounds it to a whole degree (the ordered angle);
+  samples where the rudder is held (moving slower than 0.5 deg/s over 0.5 s) beyond half its
+  largest deflection; a *reversal* is the rudder passing from beyond half that amplitude on
+  one side to beyond it on the other (noise about zero makes none); ``nominal`` rounds it to a whole degree (the ordered angle);
 - *switch angle* (``switch_deg``): the heading deviation at which the rudder leaves its held
   angle at each reversal (median over the reversals). It exceeds the ordered switch angle by
   the heading change over the gear's onset delay (0.1-0.45 deg in the HSVA runs); ``nominal``
@@ -53,6 +54,9 @@ HOLD_RATE_DEG_S = 0.5     # deg/s: slower than this the rudder counts as held
 RUDDER_TOL_DEG = 0.02     # deg: the least rudder motion that counts as a move, when the held
 #                           rudder is noise-free (the HSVA files: held angles constant to the
 #                           last digit, 0.0122 deg quantisation); else 4 noise sigmas
+RATE_SPAN_S = 0.5         # s: the rudder rate that decides 'held' is a difference over this span,
+#                           so sensor noise (0.05 deg at 20 Hz: 1.4 deg/s sample to sample) does
+#                           not hide a hold (0.14 deg/s over 0.5 s)
 RETURN_DEG = 0.1          # deg: how far the heading must turn back for an extreme to count
 
 
@@ -129,10 +133,22 @@ def check_series(t, *signals, names=('psi', 'delta')):
     return out
 
 
+def rudder_rate(t, delta_deg):
+    """(N,) deg/s, |d(delta)/dt| as the central difference over RATE_SPAN_S (one-sided at
+    the ends)."""
+    lo = np.searchsorted(t, t - 0.5 * RATE_SPAN_S)
+    hi = np.minimum(np.searchsorted(t, t + 0.5 * RATE_SPAN_S, side='right') - 1, len(t) - 1)
+    span = t[hi] - t[lo]
+    out = np.zeros(len(t))
+    ok = span > 0
+    out[ok] = np.abs(delta_deg[hi[ok]] - delta_deg[lo[ok]]) / span[ok]
+    return out
+
+
 def rudder_tolerance(t, delta_deg):
     """deg: the least rudder motion that counts as a move: 4 sigmas of the white noise on the
     held samples (1.4826 MAD of their second differences / sqrt 6), at least RUDDER_TOL_DEG."""
-    rate = np.abs(np.gradient(delta_deg, t))
+    rate = rudder_rate(t, delta_deg)
     held = rate < HOLD_RATE_DEG_S
     d2 = np.diff(delta_deg, 2)[held[1:-1]]
     if len(d2) < 5:
@@ -149,17 +165,18 @@ def rudder_onset(t, delta_deg, start, tol_deg):
 
 
 def _crossing_time(t, y, level, i0, i1):
-    """First time in samples [i0, i1] where y rises through level (linear interpolation);
-    None if it does not."""
+    """(time, index) of the first rise of y through level between samples i0 and i1: the
+    first j in (i0, i1] with y[j - 1] < level <= y[j], the time interpolated linearly; None
+    if there is none. The first crossing, not a smoothed one: the helm reverses when the
+    heading it reads first passes the switch angle, noise and all (smoothing over a span would
+    also blur the kink an instant rudder puts into the heading at a reversal)."""
     seg = y[i0:i1 + 1]
-    above = np.flatnonzero(seg >= level)
-    if not len(above):
+    rise = np.flatnonzero((seg[:-1] < level) & (seg[1:] >= level))
+    if not len(rise):
         return None
-    j = i0 + int(above[0])
-    if j == 0 or y[j - 1] >= level:
-        return float(t[j])
+    j = i0 + int(rise[0]) + 1
     a = (level - y[j - 1]) / (y[j] - y[j - 1])
-    return float(t[j - 1] + a * (t[j] - t[j - 1]))
+    return float(t[j - 1] + a * (t[j] - t[j - 1])), j
 
 
 def _peak(t, y, i):
@@ -184,7 +201,7 @@ def _peak(t, y, i):
 def held_amplitude(t, delta_deg):
     """deg: median |delta| over the samples held (rate below HOLD_RATE_DEG_S) beyond half the
     largest deflection; DataError if the rudder never holds a deflection."""
-    rate = np.abs(np.gradient(delta_deg, t))
+    rate = rudder_rate(t, delta_deg)
     big = np.abs(delta_deg) > 0.5 * np.max(np.abs(delta_deg))
     held = (rate < HOLD_RATE_DEG_S) & big
     if not held.any() or np.max(np.abs(delta_deg)) < 1.0:
@@ -193,28 +210,29 @@ def held_amplitude(t, delta_deg):
     return float(np.median(np.abs(delta_deg[held])))
 
 
-def reversal_onsets(t, delta_deg, start, tol_deg):
+def reversal_onsets(t, delta_deg, start, tol_deg, amp_deg):
     """Indices of the last sample at the held angle before each reversal of the rudder after
-    sample ``start`` (the first execute): for each sign change of delta, the held angle is the
-    median of the samples held (rate below HOLD_RATE_DEG_S) since the previous change, and the
-    onset is the last sample before the change within tol_deg of it."""
-    rate = np.abs(np.gradient(delta_deg, t))
-    sign = np.sign(delta_deg)
+    sample ``start`` (the first execute). A reversal: the rudder passes from beyond half the
+    amplitude amp_deg on one side to beyond it on the other (so noise about zero is none); the
+    held angle is the median of the samples held (rate below HOLD_RATE_DEG_S) since the
+    previous reversal, and the onset is the last sample before the move within tol_deg of
+    it."""
+    rate = rudder_rate(t, delta_deg)
+    big = np.flatnonzero(np.abs(delta_deg) > 0.5 * amp_deg)
+    big = big[big >= start]
+    sides = np.sign(delta_deg[big])
     out = []
     last = start
-    for j in range(start + 1, len(delta_deg)):
-        if sign[j] == 0 or sign[j - 1] == 0 or sign[j] == sign[j - 1]:
-            continue
-        held = rate[last:j] < HOLD_RATE_DEG_S
-        if not held.any():
-            last = j
-            continue    # a pass through zero without a hold before it: not a reversal
-        level = float(np.median(delta_deg[last:j][held]))
-        k = j - 1
-        while k > last and abs(delta_deg[k] - level) > tol_deg:
-            k -= 1
-        out.append(k)
-        last = j
+    for i in np.flatnonzero(sides[1:] != sides[:-1]) + 1:
+        p, q = int(big[i - 1]), int(big[i])     # the last sample before, first after
+        held = rate[last:p + 1] < HOLD_RATE_DEG_S
+        if held.any():
+            level = float(np.median(delta_deg[last:p + 1][held]))
+            k = p
+            while k > last and abs(delta_deg[k] - level) > tol_deg:
+                k -= 1
+            out.append(k)
+        last = q
     return out
 
 
@@ -258,7 +276,7 @@ def zigzag_measures(t, psi, delta, execute_time=None, rudder_deg=None, switch_de
     execute_time = float(execute_time)
     psi0 = float(np.interp(execute_time, t, psi_deg))
     dev = psi_deg - psi0
-    onsets = reversal_onsets(t, d_deg, first_move, rudder_tol_deg)
+    onsets = reversal_onsets(t, d_deg, first_move, rudder_tol_deg, amp)
     onset_dev = [float(s0 * (-1) ** k * dev[i]) for k, i in enumerate(onsets)]
     if switch_deg is None:
         if not onsets:
@@ -279,11 +297,11 @@ def zigzag_measures(t, psi, delta, execute_time=None, rudder_deg=None, switch_de
     i_from = i_exec
     side = s0
     while True:
-        tc = _crossing_time(t, side * dev, switch_nom, i_from, len(t) - 1)
-        if tc is None:
+        hit = _crossing_time(t, side * dev, switch_nom, i_from, len(t) - 1)
+        if hit is None:
             break
-        checks.append(tc)
-        i_from = int(np.searchsorted(t, tc))
+        checks.append(hit[0])
+        i_from = hit[1]     # strictly later each time: the loop ends
         side = -side
     m = ZigzagMeasures(rudder_deg=rudder_meas, switch_deg=switch_meas,
                        nominal=(rudder_nom, switch_nom), first=first,

@@ -75,6 +75,26 @@ def test_overshoots_of_a_known_heading():
     assert d.execute_time == pytest.approx(T_EXEC + 0.2, abs=DT)
 
 
+def test_noisy_records_give_the_same_test_and_gear():
+    """Sensor noise (rudder 0.1 deg, heading 0.02 deg, white) must not make reversals of the
+    noise about zero, nor hide the holds (the rudder rate is read over 0.5 s)."""
+    t = np.arange(0.0, 125.0, DT)
+    psi = synthetic_heading(t)
+    checks = [T_EXEC + (k * np.pi + np.arcsin(10.0 / a)) / OMEGA for k, a in enumerate(AMPS)]
+    orders = [(T_EXEC - 1.0, -20.0)] + [(tc, 20.0 * (-1) ** k) for k, tc in enumerate(checks)]
+    delta = ramp_rudder(t, orders, 15.0, 0.2)
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        run = (t, (psi + rng.normal(0.0, 0.02, len(t))) * DEG,
+               (delta + rng.normal(0.0, 0.1, len(t))) * DEG)
+        m = zigzag_measures(*run)
+        assert m.label == '20/10' and len(m.rudder_onsets) == len(AMPS)
+        assert m.overshoots_deg == pytest.approx([a - 10.0 for a in AMPS], abs=0.15)
+        g = identify_steering_gear([run]).gear
+        assert g.delay == pytest.approx(0.2, abs=0.03)
+        assert g.rate_deg_s == pytest.approx(15.0, rel=0.01)
+
+
 def test_an_overshoot_cut_by_the_end_of_the_run_is_not_reported():
     t = np.arange(0.0, T_EXEC + 1.5 * np.pi / OMEGA, DT)     # ends at the second extreme
     psi = synthetic_heading(t)
