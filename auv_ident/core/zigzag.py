@@ -14,12 +14,15 @@ execute), times in s:
 
 - *rudder angle* (``rudder_deg``): the held rudder amplitude, the median |delta| over the
   samples where the rudder is held (moving slower than 0.5 deg/s over 0.5 s) beyond half its
-  largest deflection; a *reversal* is the rudder passing from beyond half that amplitude on
-  one side to beyond it on the other (noise about zero makes none); ``nominal`` rounds it to a whole degree (the ordered angle);
+  largest deflection, rounded to a whole degree in ``nominal`` (the ordered angle); a
+  *reversal* is the rudder passing from beyond half that amplitude on one side to beyond it
+  on the other (noise about zero makes none);
 - *switch angle* (``switch_deg``): the heading deviation at which the rudder leaves its held
   angle at each reversal (median over the reversals). It exceeds the ordered switch angle by
-  the heading change over the gear's onset delay (0.1-0.45 deg in the HSVA runs); ``nominal``
-  rounds it to a whole degree, and every time measure below uses the nominal (ordered) angle;
+  the heading change over the gear's onset delay (0.26-0.47 deg in the HSVA runs), so
+  ``nominal`` takes the largest whole degree not above it plus one sample's heading change
+  (the order precedes the onset; this assumes the heading moves less than 1 deg from order to
+  onset, else give switch_deg); every time measure below uses the nominal (ordered) angle;
 - *check times* (``check_times``): the instants the heading deviation passes +-nominal switch
   angle, one per reversal: the reversal orders (the second, third, ... executes);
 - *overshoot angle* k (``overshoots_deg[k]``): the heading's excursion beyond the switch
