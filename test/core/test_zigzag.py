@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from auv_ident.core.errors import ConfigError, DataError
+from auv_ident.core.errors import ConfigError, DataError, DomainError
 from auv_ident.core.nomoto import fit_nomoto, NomotoModel
 from auv_ident.core.state import Input, State
 from auv_ident.core.steering import identify_steering_gear, SteeringGear
@@ -342,3 +342,19 @@ def test_nomoto_fit_recovers_the_model_of_a_simulated_zigzag():
     assert fit.rms_r < 1e-4
     with pytest.raises(DataError, match='Nomoto'):
         fit_nomoto([(np.arange(3.0), np.zeros(3), np.zeros(2))])
+
+
+def test_a_model_leaving_its_domain_ends_the_run_early():
+    def fragile(x, u):
+        if x[State.PSI] < -12.0 * DEG:
+            raise DomainError('heading beyond the model\'s data')
+        return nomoto(x, u)
+
+    x0 = np.zeros(12)
+    x0[State.U] = U0
+    sim = simulate_zigzag(fragile, x0, 20.0, 10.0, 150.0, SteeringGear.ideal(15.8))
+    assert sim.stopped and 'beyond' in sim.stopped
+    assert 20.0 < sim.t[-1] < 150.0 and len(sim.x) == len(sim.t) == len(sim.rudder)
+    assert np.all(np.isfinite(sim.x)) and sim.x[-1, State.PSI] >= -12.0 * DEG
+    # the overshoot after the first reversal was complete before the stop
+    assert len(sim.measures.overshoots_deg) == 1
