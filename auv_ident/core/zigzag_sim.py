@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .angles import wrap_angle
-from .errors import ConfigError, DomainError
+from .errors import ConfigError, DataError, DomainError
 from .state import EULER, Input, N_INPUT, N_STATE, State
 from .zigzag import zigzag_measures
 
@@ -47,7 +47,8 @@ DEFAULT_STEP = 0.05    # s
 @dataclass
 class ZigzagSimulation:
     """A simulated zig-zag (module docstring); ``stopped`` says why it ended early (a
-    DomainError of the model: the rows after it are not there), else None."""
+    DomainError of the model: the rows after it are not there) or why it has no measures
+    (``measures`` None), else None."""
 
     t: np.ndarray
     x: np.ndarray
@@ -226,8 +227,13 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
     T = U[:, thrust_index].copy() if thrust is not None else None
     measures = None
     if len(t) >= 3 and np.any(rudder != rudder[0]):
-        measures = zigzag_measures(t, X[:, State.PSI], rudder, execute_time=execute_time,
-                                   rudder_deg=rudder_deg, switch_deg=switch_deg)
+        try:
+            measures = zigzag_measures(t, X[:, State.PSI], rudder, execute_time=execute_time,
+                                       rudder_deg=rudder_deg, switch_deg=switch_deg)
+        except DataError as exc:
+            # a run too short for the rudder to hold its angle has no measures; its series
+            # are still the simulation's result
+            stopped = stopped or f'no zig-zag measures: {exc}'
     Xw = X.copy()
     Xw[:, EULER] = wrap_angle(Xw[:, EULER])
     return ZigzagSimulation(t=t, x=Xw, rudder=rudder, order=order, inputs=U, thrust=T,

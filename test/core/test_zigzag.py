@@ -358,3 +358,7 @@ def test_a_model_leaving_its_domain_ends_the_run_early():
     assert np.all(np.isfinite(sim.x)) and sim.x[-1, State.PSI] >= -12.0 * DEG
     # the overshoot after the first reversal was complete before the stop
     assert len(sim.measures.overshoots_deg) == 1
+    # too short for the rudder to reach and hold its angle: series, no measures, and why
+    short = simulate_zigzag(nomoto, x0, 20.0, 10.0, 1.0, SteeringGear.ideal(15.8))
+    assert short.measures is None and 'no zig-zag measures' in short.stopped
+    assert len(short.t) == 21
