@@ -147,6 +147,15 @@ def cmd_montecarlo(args):
     return 0
 
 
+def _report_methods(text):
+    """--methods of report: None (not given), or the validated method names ('all': every
+    one)."""
+    if text is None:
+        return None
+    from auv_ident.analysis.compare_methods import parse_methods
+    return parse_methods('' if text.strip() == 'all' else text)
+
+
 def cmd_report(args):
     from auv_ident.analysis.results import doc_table
     from auv_ident.analysis.report import make_report
@@ -157,7 +166,8 @@ def cmd_report(args):
                       current=args.current, current_down=args.current_down,
                       sim_current=_sim_current(args.sim_current),
                       velocity_reference=args.velocity_reference,
-                      validate_bag=args.validate, holdout=args.holdout)
+                      validate_bag=args.validate, holdout=args.holdout,
+                      methods=_report_methods(args.methods))
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
@@ -413,6 +423,10 @@ def build_parser():
     sp.add_argument('--validate', metavar='BAG',
                     help='another bag of the same vehicle to validate on (default: the final '
                          '--holdout part of the identification run, left out of it)')
+    sp.add_argument('--methods', metavar='LIST',
+                    help="also run these identification methods on the same data and "
+                         "validation run ('all', or e.g. ekf,ukf,output_error; "
+                         "docs/methods.md) and add a section 'Methods side by side'")
     sp.add_argument('--holdout', type=float, default=0.25,
                     help='without --validate: fraction of the run held out at its end '
                          '(default 0.25)')

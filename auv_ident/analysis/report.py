@@ -412,7 +412,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
                 current_down=False, sim_current=None, velocity_reference=None,
-                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT):
+                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
     """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate against the measurements of a held-out run
     (and, when the truth is known, against the true model on a held-out manoeuvre), write the
     report: report.md, report.html (self-contained), result.json and PNG figures.
@@ -436,6 +436,10 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         the final `holdout` fraction of the identification run is held out (identification
         uses the rest)
     holdout : fraction (0, 0.9] held out when no validate_bag is given
+
+    methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
+        same identification data and validate on the same held-out run: result.json gets
+        `methods` and report.md a section "Methods side by side" (None: not run)
 
     Returns
     -------
@@ -502,6 +506,10 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                     'reference': 'truth (vehicle file)',
                     'rms': None if val is None else val.rms,
                     'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}
+    methods_doc = None
+    if methods:
+        from auv_ident.analysis.compare_methods import compare_methods
+        methods_doc = compare_methods(src, run, methods=methods)
     extra = {'maneuver': src.maneuver, 'seed': src.seed,
              'duration_s': float(src.t[-1] - src.t[0]),
              'noise_mode': noise_mode, 'source': src.description,
@@ -509,6 +517,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': _versions(), 'command': command,
              'validation': val_doc, 'validation_true_model': true_doc}
+    if methods_doc is not None:
+        extra['methods'] = methods_doc['methods']
+        extra['methods_reference_fit_percent'] = methods_doc.get('reference_fit_percent')
     doc = results.result_dict(v, res, extra, current_truth=src.current_truth)
     json_path = os.path.join(out_dir, 'result.json')
     results.write_json(json_path, doc)
@@ -545,6 +556,12 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
 
     md_path = os.path.join(out_dir, 'report.md')
     md = _markdown(doc, src, cfg, val_error, figures, command, holdout)
+    if methods_doc is not None:
+        from auv_ident.analysis.compare_methods import methods_markdown
+        head, sep, tail = md.partition('\n## Figures')
+        md = (head + '\n## Methods side by side\n\nThe same identification data through '
+              'the standard methods (docs/methods.md), each validated on the same held-out '
+              'run.\n\n' + methods_markdown(methods_doc) + '\n' + sep + tail)
     with open(md_path, 'w', encoding='utf-8') as fh:
         fh.write(md + '\n')
     html_path = write_html(md, out_dir, os.path.join(out_dir, 'report.html'))

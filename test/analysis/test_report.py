@@ -200,3 +200,19 @@ def test_unknown_truth_validates_on_held_out_measurements_against_the_prior(tmp_
         md = fh.read()
     assert '## Validation against measurements' in md and 'against the true model' not in md
     assert all(row['truth'] == '-' for row in _rows(md, 'coefficient').values())
+
+
+def test_report_with_methods_side_by_side(tmp_path):
+    """--methods: the standard methods on the same data and held-out run, in result.json and a
+    report section before the figures."""
+    r = make_report(str(tmp_path), vehicle='nps_auv2', simulate_maneuver='ident', seed=SEED,
+                    duration=60.0, validation_duration=20.0, progress=False,
+                    methods=['ekf', 'equation_error'])
+    doc = r['result']
+    assert list(doc['methods']) == ['ekf', 'equation_error']
+    for m in doc['methods'].values():
+        assert set(m['coefficients']) == set(doc['coefficients'])
+        assert m['wall_s'] >= 0 and m['fit_percent']
+    md = open(r['report'], encoding='utf-8').read()
+    assert md.index('## Methods side by side') < md.index('## Figures')
+    assert '| ekf |' in md and '| equation_error |' in md
