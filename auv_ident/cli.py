@@ -194,6 +194,7 @@ def cmd_bag_repair(args):
 
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
+THRUST_COL = 'thrust'     # N, optional (0 when absent): the input of measured_thrust vehicles
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
@@ -212,13 +213,15 @@ def cmd_derivatives(args):
         if missing:
             raise AuvIdentError(f'{args.input}: missing column(s) {", ".join(missing)}')
         idx = [header.index(c) for c in IN_COLS]
+        if THRUST_COL in header:
+            idx.append(header.index(THRUST_COL))
         wr = csv.writer(fout)
         wr.writerow(OUT_COLS)
         for rownum, row in enumerate(rd, start=2):
             try:
-                vals = np.array([float(row[i]) for i in idx])
+                vals = np.array([float(row[i]) for i in idx] + [0.0] * (19 - len(idx)))
             except (ValueError, IndexError):
-                print(f'{args.input}: row {rownum}: not 18 numbers', file=sys.stderr)
+                print(f'{args.input}: row {rownum}: not {len(idx)} numbers', file=sys.stderr)
                 wr.writerow([''] * 12)
                 bad += 1
                 continue

@@ -133,7 +133,7 @@ def test_array_api_rejects_unreadable_arrays_by_name(run):
 def test_array_api_copies_the_callers_arrays(run):
     """A caller may reuse its buffers: what the session keeps is its own copy."""
     reused, fresh = IdentSession(keep_arrays=True), IdentSession(keep_arrays=True)
-    u, x = np.empty(6), np.empty(12)
+    u, x = np.empty(7), np.empty(12)
     for k in range(40):
         stamp_ns = round(run.t[k] * 1e9)
         u[:] = run.u[k]
