@@ -2,8 +2,8 @@
 
 A vehicle is data (coefficients with their equation, length exponent and multiplier) plus a
 model structure chosen by keys (`scaling`, `propulsion.model`, `crossflow.model`,
-`mass_inverse`, `dofs`). The rigid-body mass matrix and Coriolis terms, restoring forces and kinematics
-are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021, ch. 3-4), so a
+`mass_inverse`, `dofs`). The rigid-body mass matrix and Coriolis terms, restoring forces and
+kinematics are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021, ch. 3-4), so a
 vehicle file holds only the hydrodynamic and control coefficients.
 
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
