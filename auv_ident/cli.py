@@ -74,9 +74,24 @@ def cmd_identify(args):
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     mode = 'fixed' if args.fixed_noise else args.noise_mode
-    if args.bag:
+    if args.bag and len(args.bag) > 1:
+        from auv_ident.analysis.bag_identify import identify_bags
+        if args.current not in ('estimate', 'none') or args.current_down or mode != 'fixed':
+            raise AuvIdentError('several bags are identified in still water with the fixed '
+                                'noise of their messages: --current, --current-down and '
+                                '--noise-mode apply to one bag')
+        doc, table = identify_bags(args.bag, vehicle=args.vehicle,
+                                   coefficients=args.coefficients,
+                                   initial_offset=args.initial_offset,
+                                   refine_pass=not args.no_refine,
+                                   noise_source=args.noise_source,
+                                   max_command_age=args.max_command_age,
+                                   velocity_reference=args.velocity_reference)
+        print(table)
+    elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
-        doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
+        doc, table = identify_bag(args.bag[0], vehicle=args.vehicle,
+                                  coefficients=args.coefficients,
                                   noise_mode=mode, initial_offset=args.initial_offset,
                                   refine_pass=not args.no_refine,
                                   noise_source=args.noise_source,
@@ -310,7 +325,9 @@ def build_parser():
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
     sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
-    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
+    sp.add_argument('--bag', action='append',
+                    help='rosbag2 MCAP directory (or .mcap file); repeat it for one model from '
+                         'several runs of the vehicle')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',

@@ -278,7 +278,7 @@ class Dynamics:
         self.model = model
         self.vc = np.asarray(current_ned, dtype=float)
         self.x = np.empty(12)
-        self.u = np.zeros(6)
+        self.u = np.zeros(7)
 
     def nu_over_ground(self, y):
         nu = np.array(y[:6], dtype=float)

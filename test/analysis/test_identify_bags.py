@@ -1,0 +1,47 @@
+"""One model from several bags (`identify --bag A --bag B`): two simulated bags of the planar
+ship, identified together, recover the truth within their error bars."""
+import numpy as np
+import pytest
+
+from auv_ident.analysis.bag_identify import identify_bags
+from auv_ident.bags.reader import BagError
+from auv_ident.bags.sim_bag import write_run_bag
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.core.state import N_STATE, State
+from auv_ident.vehicles import load_vehicle
+
+NAMES = 'Y_v,N_r,Y_dr,N_dr'
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    d = tmp_path_factory.mktemp('planar_bags')
+    m = Model(load_vehicle('kvlcc2_hsva'))
+    noise = np.full(N_STATE, 1e-3)
+    noise[[State.U, State.V]] = 0.003
+    noise[State.R] = 5e-4
+    noise[[State.X, State.Y]] = 0.01
+    paths = []
+    for seed in (4, 5):
+        run = simulate(m, 'zigzag', duration=60.0, T=0.1, seed=seed, noise_std=noise)
+        paths.append(write_run_bag(run, str(d / f'run{seed}')))
+    return paths
+
+
+def test_two_simulated_bags_give_one_model_within_its_error_bars(bags):
+    doc, table = identify_bags(bags, coefficients=NAMES, initial_offset=0.2)
+    assert 'from 2 bags together' in table
+    co = doc['coefficients']
+    assert sorted(co) == sorted(NAMES.split(','))
+    for name, c in co.items():
+        assert abs(c['estimate'] - c['truth']) < 4.0 * c['std'], (name, c)
+        assert abs(c['estimate'] - c['truth']) < 0.03 * abs(c['truth']), (name, c)
+    # (that the error bars use both runs: test/core/test_planar.py, on arrays)
+
+
+def test_bags_of_two_vehicles_are_refused(bags, tmp_path):
+    run = simulate(Model(load_vehicle('nps_auv2')), 'zigzag', duration=5.0, seed=1)
+    other = write_run_bag(run, str(tmp_path / 'auv'))
+    with pytest.raises(BagError, match='one model needs one vehicle'):
+        identify_bags([bags[0], other], coefficients='')
