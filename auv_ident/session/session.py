@@ -271,6 +271,7 @@ class IdentSession:
             x0 = initial_state(self.model, rpm)
             u0 = np.zeros(N_INPUT)
             u0[Input.N_RPM] = rpm
+            u0[Input.THRUST] = self.vehicle.cruise_thrust     # the trim's (0 for an AUV)
             s.add_command(0.0, u0)
             for k in range(3):
                 s.add_measurement(k * self.T, np.where(self.measured, x0, np.nan))
