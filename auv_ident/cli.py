@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.state import Input
 
 
 def _model(args, theta_names=()):
@@ -115,7 +116,7 @@ def cmd_identify(args):
         pr.close()
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
-              f'{run.u[0, 5]:.0f} rpm, sensor noise 1-sigma (u..psi) '
+              f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
               + ' '.join(f'{s:g}' for s in run.noise_std))
         print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
               f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'

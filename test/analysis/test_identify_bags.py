@@ -45,3 +45,15 @@ def test_bags_of_two_vehicles_are_refused(bags, tmp_path):
     other = write_run_bag(run, str(tmp_path / 'auv'))
     with pytest.raises(BagError, match='one model needs one vehicle'):
         identify_bags([bags[0], other], coefficients='')
+
+
+def test_identify_command_takes_several_bags(bags, capsys):
+    from auv_ident.cli import main
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--coefficients', 'N_r',
+                 '--initial-offset', '0.1', '--no-refine']) == 0
+    out = capsys.readouterr().out
+    assert 'from 2 bags together' in out and 'N_r' in out
+    # what applies to one bag only is one clear error (exit status 2)
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--current', '0.1,0']) == 2
+    assert '--current, --current-down and --noise-mode apply to one bag' in \
+        capsys.readouterr().err
