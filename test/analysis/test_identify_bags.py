@@ -57,3 +57,16 @@ def test_identify_command_takes_several_bags(bags, capsys):
     assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--current', '0.1,0']) == 2
     assert '--current, --current-down and --noise-mode apply to one bag' in \
         capsys.readouterr().err
+
+
+def test_one_planar_bag_with_the_noise_model_and_the_diagnosis(bags):
+    """identify --bag on a planar vehicle: the noise model from the data and the diagnosis see
+    the held channels as unmeasured (no model for them, no verdict on them), the rest as usual."""
+    from auv_ident.analysis.bag_identify import identify_bag
+    doc, table = identify_bag(bags[0], coefficients=NAMES, initial_offset=0.2, current='none')
+    assert table.startswith('consistent'), table
+    for name, c in doc['coefficients'].items():
+        assert abs(c['estimate'] - c['truth']) < 4.0 * c['std'], (name, c)
+    modelled = {n for n, d in doc['noise_model']['channels'].items() if d is not None}
+    assert {'u', 'v', 'r', 'x', 'y', 'psi'} <= modelled
+    assert not modelled & {'w', 'p', 'q', 'z', 'phi', 'theta'}
