@@ -140,6 +140,9 @@ class IdentSession:
         initial_offset = relative_offset('initial_offset', initial_offset)
         noise, qs, mask = noise_model(noise_std, q_state, measured, DEFAULT_NOISE_STD,
                                       DEFAULT_Q_STATE)
+        # a planar vehicle's held states are not measurements (core/planar.py): their fields
+        # are neither read nor screened, whatever an odometry message holds there
+        mask = mask & self.vehicle.free_states
         warm = load_estimate_json(warm_start) if warm_start else None
         canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
                                                       warm_start, warm)
