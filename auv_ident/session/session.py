@@ -314,7 +314,8 @@ class IdentSession:
         """Buffer an actuator command. Returns an Event.
 
         stamp_ns : int, header stamp (ns)
-        u6 : (6,) fins (rad) and shaft speed (rpm), core/state.py ``Input`` order; copied
+        u6 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/state.py ``Input``
+            order; copied
         """
         try:
             stamp_ns = _integer_stamp(stamp_ns)
@@ -430,7 +431,7 @@ class IdentSession:
         self._R_filter, self._R_now = f, r
 
     def _command(self, stamp_ns, u6):
-        """add_command after reading: stamp_ns int, u6 a (6,) float array of our own."""
+        """add_command after reading: stamp_ns int, u6 a (7,) float array of our own."""
         zero = self._zero_stamp('actuators', stamp_ns)
         if zero is not None:
             return zero
