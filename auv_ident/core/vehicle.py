@@ -3,8 +3,8 @@
 A vehicle is data (coefficients with their equation, length exponent and multiplier) plus a
 model structure chosen by keys (`scaling`, `propulsion.model`, `crossflow.model`,
 `mass_inverse`, `dofs`). The rigid-body mass matrix and Coriolis terms, restoring forces and
-kinematics are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021, ch. 3-4), so a
-vehicle file holds only the hydrodynamic and control coefficients.
+kinematics are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021,
+ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients.
 
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
 """
@@ -383,6 +383,9 @@ def _build(raw, path):
     M_RB[held_nu, held_nu] = 1.0
     mass_inverse = raw.get('mass_inverse', 'exact')
     Minv_literal = None
+    if mass_inverse == 'mss_literal' and not free.all():
+        raise ConfigError(f'{where}: mass_inverse: mss_literal is a 6-DOF inverse; a vehicle '
+                          'with dofs needs exact')
     if mass_inverse == 'mss_literal':
         try:
             Minv_literal = np.array(raw['mss_inverse'], dtype=float)

@@ -112,6 +112,9 @@ def test_bad_dofs_and_held_added_mass_are_one_clear_error(tmp_path):
     coefs = dict(raw['coefficients'], Z_wdot=[-0.01, 'Z', 3, 'wdot'])
     with pytest.raises(ConfigError, match='Z_wdot: added mass of a held degree of freedom'):
         _build(dict(raw, coefficients=coefs), str(tmp_path / 'b.yaml'))
+    with pytest.raises(ConfigError, match='mss_literal is a 6-DOF inverse'):
+        _build(dict(raw, mass_inverse='mss_literal', mss_inverse=np.eye(6).tolist()),
+               str(tmp_path / 'c.yaml'))
 
 
 NAMES = ['X_uu', 'Y_v', 'Y_r', 'N_v', 'N_r', 'Y_dr', 'N_dr']
