@@ -392,8 +392,7 @@ class AugmentedEKF:
             raise DimensionError(f'inputs must have {N_INPUT} entries, got {u_prev.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, u_prev, self.Q,
-                       m.compiled, T, xa_b, P_b, self.ws)
+        st = K.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
