@@ -1,4 +1,4 @@
-"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,bag,...}.
+"""Command line: python -m auv_ident {simulate,identify,report,bag,import,derivatives,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
 line on stderr and exit with status 2; no traceback.
@@ -114,6 +114,7 @@ def cmd_identify(args):
             sim_current=_sim_current(args.sim_current),
             velocity_reference=args.velocity_reference or 'ground')
         pr.close()
+        print(res.diagnosis['messages'][0])
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
               f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
@@ -130,7 +131,8 @@ def cmd_identify(args):
                                   else np.zeros(3))
         print(results.doc_table(doc))
         print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
-              f'wall {res.wall_s:.2f} s')
+              f'wall {res.wall_s:.2f} s'
+              + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
     if args.json:
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
@@ -205,6 +207,32 @@ def cmd_bag_repair(args):
     from auv_ident.bags.repair import repair_bag
     report = repair_bag(args.path, out=args.out)
     print('\n'.join(report.lines()))
+    return 0
+
+
+def cmd_import(args):
+    from auv_ident.bags.import_bag import write_imported_bag
+    from auv_ident.bags.importers import read_csv_run, read_hsva
+    if args.format == 'hsva':
+        if args.columns:
+            raise AuvIdentError('--columns is for --format csv (HSVA files have a fixed layout)')
+        run = read_hsva(args.file)
+    else:
+        if not args.columns:
+            raise AuvIdentError('--format csv needs --columns MAP.yaml (docs/bags.md, '
+                                '"Importing measured runs")')
+        run = read_csv_run(args.file, args.columns)
+    write_imported_bag(run, args.out, vehicle=args.vehicle, start=args.start,
+                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    t = run.t
+    std = ', '.join(f'{n} {s:.3g}' for n, s in zip(run.measured_names,
+                                                   run.noise_std[run.measured]))
+    print(f'{run.source.name} ({run.fmt}): {len(t)} samples over {t[-1]:.3f} s, sample time '
+          f'{run.sample_time:g} s')
+    print(f"measured: {' '.join(run.measured_names)}; inputs: "
+          f"{' '.join(sorted(run.inputs)) or 'none'}")
+    print(f'noise 1-sigma estimates (SI): {std}')
+    print(f'wrote {args.out}')
     return 0
 
 
@@ -388,6 +416,22 @@ def build_parser():
     bp.add_argument('--out', help='write the repaired bag to this new directory '
                                   '(default: in place, originals kept as <file>.orig)')
     bp.set_defaults(func=cmd_bag_repair)
+
+    sp = sub.add_parser('import', help='write a measured run (HSVA file, CSV log) as a bag in '
+                                       'our topics and frames')
+    sp.add_argument('file', help='the measured run: an HSVA .dat file or a CSV log')
+    sp.add_argument('--format', required=True, choices=('hsva', 'csv'),
+                    help='hsva: HSVA KVLCC2 free-running test file; csv: CSV log with --columns')
+    sp.add_argument('--columns', metavar='MAP.yaml',
+                    help='csv: the column map (quantity, unit, frame, sign, time base per '
+                         'column; docs/bags.md)')
+    sp.add_argument('--out', required=True, help='bag directory to write (must not exist)')
+    sp.add_argument('--vehicle', default=None,
+                    help='stored in the bag for identify --bag (hsva default: kvlcc2_hsva)')
+    sp.add_argument('--start', metavar='ISO8601',
+                    help='UTC time of t = 0, e.g. 2006-05-17T10:00:00Z (default: nominal, '
+                         '2006-01-01T00:00:00Z for hsva, 2024-01-01T00:00:00Z for csv)')
+    sp.set_defaults(func=cmd_import)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)

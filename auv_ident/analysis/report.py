@@ -14,8 +14,12 @@ import numpy as np
 from auv_ident import __version__
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
+from auv_ident.analysis.identification import identify_with_diagnosis
+from auv_ident.analysis.report_format import (cell as _num, markdown_table as _table,
+                                              pyplot as _plt, save_figure as _save)
+from auv_ident.analysis.report_noise import (diagnosis_lines, fig_innovation_autocorrelation,
+                                             identifiability_markdown, noise_model_markdown)
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.batch import identify
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -110,19 +114,6 @@ def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=10
 
 
 # ----------------------------------------------------------------------------------- figures
-
-def _plt():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _save(fig, path):
-    fig.savefig(path, dpi=110)
-    _plt().close(fig)
-    return path
-
 
 def _log_axis(ax, values=None):
     """Log y axis labelled 0.01, 0.02, 0.05, ... (not 2x10^-2), limits around `values`."""
@@ -292,19 +283,6 @@ def fig_noise(path, res, noise_mode):
 
 # ---------------------------------------------------------------------------------- markdown
 
-def _num(v):
-    """A table cell: 6 significant digits (the test parses these back), '-' when unknown."""
-    if v is None:
-        return '-'
-    return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
-
-
-def _table(header, rows):
-    out = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
-    out += ['| ' + ' | '.join(r) + ' |' for r in rows]
-    return '\n'.join(out)
-
-
 def _versions():
     import matplotlib
     import numba
@@ -318,7 +296,7 @@ def _markdown(doc, src, cfg, val_error, figures, command):
     v = src.vehicle
     co = doc['coefficients']
     known = src.truth is not None
-    L = [f'# Identification report: {v.title}', '',
+    L = [f'# Identification report: {v.title}', ''] + diagnosis_lines(doc) + [
          f'Command: `{command or "(not given)"}`', '',
          'Versions: ' + ', '.join(f'{k} {s}' for k, s in doc['versions'].items()), '',
          f'- source: {src.description}',
@@ -328,7 +306,8 @@ def _markdown(doc, src, cfg, val_error, figures, command):
          f'{doc["velocity_reference"]}',
          f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
          '(filter-error maximum likelihood)',
-         '- sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi rad): '
+         '- configured sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi '
+         'rad): '
          + ' '.join(f'{s:g}' for s in doc['noise_std']),
          '- EKF state process noise 1-sigma per step (same units): '
          + ' '.join(f'{s:g}' for s in cfg.q_state),
@@ -351,6 +330,8 @@ def _markdown(doc, src, cfg, val_error, figures, command):
                       _num(c['ekf_error_pct']), _num(c['estimate']), _num(c['error_pct'])]
                      for n, c in co.items()]))
     L += _current_markdown(doc)
+    L += noise_model_markdown(doc)
+    L += identifiability_markdown(doc)
     vd = doc['validation']
     L += ['', '## Validation on a held-out manoeuvre', '',
           f'Manoeuvre {vd["maneuver"]!r} (not used for identification, which used '
@@ -377,7 +358,9 @@ def _markdown(doc, src, cfg, val_error, figures, command):
         'validation_attitudes': 'attitudes, true vs identified model (cf. Fig. 4)',
         'validation_speeds': 'linear and angular speeds, true vs identified model (cf. Fig. 5)',
         'nis': 'normalised innovation squared against its chi-square 95 % bands',
-        'adapted_noise': 'measurement and coefficient noise covariances over time'}
+        'adapted_noise': 'measurement and coefficient noise covariances over time',
+        'innovation_autocorrelation': 'autocorrelation of the whitened innovations per '
+                                      'channel, against the band of white noise'}
     for key, p in figures.items():
         L += [f'![{captions[key]}]({os.path.basename(p)})', '', f'*{captions[key]}*', '']
     return '\n'.join(L)
@@ -418,7 +401,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
                 current_down=False, sim_current=None, velocity_reference=None):
-    """Identify (EKF + batch refinement), validate on a held-out manoeuvre, write the report.
+    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate on a
+    held-out manoeuvre, write the report.
 
     Parameters
     ----------
@@ -459,9 +443,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
     model = Model(v, list(src.names) + opt.names, current=opt.fixed,
                   velocity_reference=src.velocity_reference)
-    res = identify(model, src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
-                   hist_every=hist_every, truth=src.truth,
-                   progress=bar.update if bar else None)
+    res = identify_with_diagnosis(model, cfg, src.t, src.Y, src.U, T=src.T, refine_pass=True,
+                                  hist_every=hist_every, truth=src.truth,
+                                  progress=bar.update if bar else None)
     if bar:
         bar.close()
 
@@ -512,6 +496,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                                           [State.W, State.R]], f'{what}: speeds', ref)
     figures['nis'] = fig_nis(j('nis'), res, src.T, hist_every)
     figures['adapted_noise'] = fig_noise(j('adapted_noise'), res, noise_mode)
+    acf = fig_innovation_autocorrelation(j('innovation_autocorrelation'), doc, src.T)
+    if acf:
+        figures['innovation_autocorrelation'] = acf
 
     md_path = os.path.join(out_dir, 'report.md')
     with open(md_path, 'w', encoding='utf-8') as fh:

@@ -109,6 +109,9 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
             else 'dimensional SI') + ')',
          'current': current_dict(getattr(res, 'current', None), current_truth),
          'warnings': current_warnings(getattr(res, 'current', None))}
+    for key in ('noise_model', 'identifiability', 'diagnosis'):
+        if getattr(res, key, None) is not None:
+            d[key] = getattr(res, key)
     if extra:
         d.update(extra)
     return d

@@ -134,6 +134,25 @@ def run_metadata(run, frame='ned', command='', epoch_ns=SIM_EPOCH_NS):
     return meta
 
 
+def write_message_bag(path, topic_types, custom_data, messages, compression='zstd'):
+    """Write rosbags messages as a rosbag2 MCAP bag directory at path (must not exist).
+
+    topic_types : {topic: 'pkg/msg/Type'}, in the order the topics are registered
+    custom_data : {str: str}, metadata.yaml's custom_data
+    messages : iterable of (topic, t_ns, rosbags message); t_ns (int ns) is the log time
+    The one writing path of simulated (:func:`write_run_bag`) and imported
+    (:mod:`auv_ident.bags.import_bag`) runs; returns path.
+    """
+    with BagWriter(path, compression=compression) as w:
+        for topic, typ in topic_types.items():
+            w.add_topic(topic, typ)
+        for key, val in custom_data.items():
+            w.set_custom_data(key, val)
+        for topic, t_ns, msg in messages:
+            w.write(topic, t_ns, _STORE.serialize_cdr(msg, topic_types[topic]))
+    return path
+
+
 def write_run_bag(run, path, frame='ned', compression='zstd', command='',
                   epoch_ns=SIM_EPOCH_NS):
     """Write a simulated run as a rosbag2 MCAP bag directory at path (must not exist).
@@ -141,12 +160,7 @@ def write_run_bag(run, path, frame='ned', compression='zstd', command='',
     Stamps and log times are ``epoch_ns + t_k`` (default 2024-01-01T00:00:00Z, see the module
     docstring); returns path.
     """
-    with BagWriter(path, compression=compression) as w:
-        for topic, typ in TOPIC_TYPES.items():
-            w.add_topic(topic, typ)
-        for key, val in run_metadata(run, frame, command, epoch_ns).items():
-            w.set_custom_data(key, val)
-        for k in range(len(run.t)):
-            for topic, t_ns, msg in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns):
-                w.write(topic, t_ns, _STORE.serialize_cdr(msg, TOPIC_TYPES[topic]))
-    return path
+    messages = (m for k in range(len(run.t))
+                for m in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns))
+    return write_message_bag(path, TOPIC_TYPES, run_metadata(run, frame, command, epoch_ns),
+                             messages, compression)

@@ -55,6 +55,10 @@ class Result:
     R_final: object = None
     Q_final: object = None
     current: object = None   # core.current.CurrentEstimate, or None (still water, not asked)
+    # set by analysis.identification.identify_with_diagnosis (None from identify() alone):
+    noise_model: dict = None      # core.noise_fit.NoiseFit.document()
+    identifiability: dict = None  # per coefficient verdicts (core/diagnosis.py)
+    diagnosis: dict = None        # {'consistent', 'messages', 'checks'}
 
     def error_pct(self, which='estimate'):
         if self.truth is None:

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from .current import MAX_CURRENT_STD
 from .state import INPUT_NAMES, STATE_NAMES
 from .uncertainty import identifiability, input_correlation
 from .vehicle import EQUATIONS
@@ -61,7 +62,10 @@ def excitation_advice(vehicle, name):
 
 def coefficient_verdicts(vehicle, names, estimate, J, cov):
     """identifiability() of the run with the excitation advice for the weak ones."""
-    out = identifiability(J, estimate, names, cov=cov)
+    # a water-current component may be ~0: judged by its 1-sigma in m/s, not relative to it
+    absolute = np.array([MAX_CURRENT_STD if n.startswith('current_') else math.nan
+                         for n in names])
+    out = identifiability(J, estimate, names, cov=cov, absolute_std=absolute)
     for name, d in out.items():
         if d['verdict'] != 'identifiable':
             d['advice'] = excitation_advice(vehicle, name)

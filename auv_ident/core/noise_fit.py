@@ -68,6 +68,10 @@ class NoiseFit:
     notes: list = field(default_factory=list)
     white: np.ndarray = None        # (N, 12) whitened innovations at the refined solution
     jacobian: np.ndarray = None     # (N * 12, p) their Jacobian w.r.t. the coefficients
+    # the EKF pass whose estimate is reported (the configured noise's, or the effective
+    # noise's when used): {'stats', 'hist', 'R', 'Q', 'theta0'} (core.batch.run_ekf's)
+    ekf_run: dict = None
+    configured_pass: dict = None    # the same for the pass with the configured noise
 
     def document(self):
         """JSON-ready dict (the result's `noise_model`)."""
@@ -94,20 +98,27 @@ def effective_std(configured_std, model, measured):
     return out
 
 
-def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25):
+def _pass_record(f, stats, hist):
+    return {'stats': stats, 'hist': hist, 'R': f.R.copy(), 'Q': f.Q.copy(),
+            'theta0': f.theta0.copy(), 'theta': f.theta.copy(), 'theta_cov': f.theta_cov.copy(),
+            'mean_nis_per_dof': float(stats[2] / max(1.0, stats[3])), 'steps': int(stats[1])}
+
+
+def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25, hist_every=0):
     """Noise model of a record from an EKF pass with the configured noise. Returns NoiseFit
-    (used = whether the effective noise should replace the configured one)."""
+    (used = whether the effective noise should replace the configured one; configured_pass =
+    that EKF pass, with histories every hist_every samples)."""
     T = nominal_sample_time(t) if T is None else T
     f = AugmentedEKF(model, cfg, T)
-    _, _, white = run_ekf(f, t, Y, U, want_white=True, max_step=max_step,
-                          max_bridge=max_bridge)
+    stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=True,
+                                 max_step=max_step, max_bridge=max_bridge)
     nm = noise_model(white, T, STATE_NAMES)
     conf = np.asarray(cfg.noise_std, dtype=float)
     eff = effective_std(conf, nm, np.asarray(cfg.measured, dtype=bool))
     ratio = (eff / conf) ** 2
     used = bool(np.any((ratio > NOISE_MODEL_CHANGE) | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
-                   used=used)
+                   used=used, configured_pass=_pass_record(f, stats, hist))
     if used:
         worst = max(nm, key=lambda n: abs(math.log(ratio[STATE_NAMES.index(n)])))
         d = nm[worst]
@@ -120,7 +131,7 @@ def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25):
 
 
 def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max_step=None,
-                              max_bridge=0.25, progress=None, ekf_pass=None):
+                              max_bridge=0.25, progress=None, ekf_pass=None, hist_every=0):
     """EKF pass and refinement with the noise model from the data.
 
     ekf_pass : (estimate, covariance) of an EKF pass already made with the configured noise
@@ -128,15 +139,21 @@ def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max
     Returns (ekf_estimate, ekf_cov, estimate, cov, NoiseFit): the EKF pass with the effective
     noise (or ekf_pass), and (refine_pass) the refined estimate, started from the EKF pass,
     with the covariance the residuals support (module docstring); without refine_pass
-    estimate, cov are the EKF pass's."""
+    estimate, cov are the EKF pass's. The reported EKF pass's record (histories every
+    hist_every samples, final R and Q) is fit.ekf_run (None when ekf_pass was kept)."""
     T = nominal_sample_time(t) if T is None else T
-    fit = fit_noise(model, cfg, t, Y, U, T, max_step, max_bridge)
+    fit = fit_noise(model, cfg, t, Y, U, T, max_step, max_bridge, hist_every=hist_every)
     cfg_eff = replace(cfg, noise_std=fit.effective_std.copy()) if fit.used else cfg
     if ekf_pass is not None and not fit.used:
         ekf_est, ekf_cov = (np.array(a, dtype=float) for a in ekf_pass)
+    elif not fit.used:      # the configured noise holds: its pass is the EKF pass
+        fit.ekf_run = fit.configured_pass
+        ekf_est, ekf_cov = fit.ekf_run['theta'], fit.ekf_run['theta_cov']
     else:
         f = AugmentedEKF(model, cfg_eff, T)
-        run_ekf(f, t, Y, U, max_step=max_step, max_bridge=max_bridge)
+        stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
+                                 max_bridge=max_bridge)
+        fit.ekf_run = _pass_record(f, stats, hist)
         ekf_est, ekf_cov = f.theta.copy(), f.theta_cov.copy()
     if not refine_pass or model.p == 0:
         return ekf_est, ekf_cov, ekf_est, ekf_cov, fit

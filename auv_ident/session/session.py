@@ -43,6 +43,7 @@ from auv_ident.session.guard import (COV_BLOWUP_FACTOR, Event, GUARD_FACTOR, GUA
                                      GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
                                      GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
                                      LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
+from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (_as_vector, ConversionError, joint_state_to_actuators,
                                         NS_PER_S, odometry_state, odometry_variances,
                                         stamp_to_ns)
@@ -588,6 +589,15 @@ class IdentSession:
         est, cov = self.current()
         return judge_health(self._nis_window, self.guard_inconsistent(), self._since_error,
                             self.started, est, cov)
+
+    def diagnosis(self, health=None):
+        """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
+        identified parameter its verdict from the best estimate's covariance against the
+        prior, and {'consistent': True | False | None, 'messages': [...]}."""
+        est, cov = self.best()
+        prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
+        verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
+        return verdicts, live_diagnosis(self.health() if health is None else health, verdicts)
 
 
 def _has_cholesky(P):

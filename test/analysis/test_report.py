@@ -18,7 +18,7 @@ from auv_ident.analysis.report import make_report, validate
 from independent_data import DataConfig, generate
 
 FIGURES = ('convergence', 'validation_positions', 'validation_attitudes', 'validation_speeds',
-           'nis', 'adapted_noise')
+           'nis', 'adapted_noise', 'innovation_autocorrelation')
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 SEED = 3
 
@@ -103,6 +103,24 @@ def test_report_tables_hold_the_result_json_numbers(report):
         assert _same(rms[ch]['RMS difference'], doc['validation']['rms'][ch])
         assert rms[ch]['unit'] == doc['validation']['rms_units'][ch]
     assert f'{doc["mean_nis_per_dof"]:.3f}' in md and '`pytest`' in md
+
+
+def test_the_diagnosis_comes_first_and_the_noise_model_is_reported(report):
+    _, doc, md = report
+    d = doc['diagnosis']
+    lines = md.splitlines()
+    assert lines[2] == f'**{d["messages"][0]}**'       # right under the title
+    assert d['consistent'] is True                      # white noise at the configured level
+    nm = _rows(md, 'measured channel')
+    assert list(nm) == list(STATE_NAMES)
+    for ch, row in nm.items():
+        c = doc['noise_model']['channels'][ch]
+        assert _same(row['level'], c['level']) and _same(row['AR(1)'], c['ar1'])
+        assert 0.8 < c['level'] < 1.2 and len(c['acf']) == 21 and c['acf'][0] == 1.0
+    ident = _rows(md, 'parameter')
+    assert set(ident) == set(doc['identifiability'])
+    for n, row in ident.items():
+        assert row['verdict'] == doc['identifiability'][n]['verdict']
 
 
 def test_validation_uses_a_held_out_manoeuvre_and_its_own_seed(report):
