@@ -67,6 +67,20 @@ def _progress(label, total):
     return pr
 
 
+def _twelve(text, option):
+    """(12,) non-negative 1-sigmas, u v w p q r x y z phi theta psi, from 'a,b,...', or None."""
+    if not text:
+        return None
+    try:
+        vals = np.array([float(v) for v in text.split(',')])
+    except ValueError:
+        raise AuvIdentError(f'{option} {text!r}: not numbers') from None
+    if vals.shape != (12,) or not np.all(np.isfinite(vals)) or np.any(vals < 0):
+        raise AuvIdentError(f'{option} {text!r}: give 12 non-negative 1-sigmas, u v w p q r x '
+                            'y z phi theta psi in m/s, rad/s, m, rad')
+    return vals
+
+
 def cmd_identify(args):
     from auv_ident.analysis import experiments as ex
     from auv_ident.analysis import results
@@ -87,8 +101,13 @@ def cmd_identify(args):
                                    refine_pass=not args.no_refine,
                                    noise_source=args.noise_source,
                                    max_command_age=args.max_command_age,
-                                   velocity_reference=args.velocity_reference)
+                                   velocity_reference=args.velocity_reference,
+                                   noise_std=_twelve(args.noise_std, '--noise-std'),
+                                   q_state=_twelve(args.q_state, '--q-state'))
         print(table)
+    elif args.noise_std or args.q_state:
+        raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
+                            '--bag B ...)')
     elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
         doc, table = identify_bag(args.bag[0], vehicle=args.vehicle,
@@ -357,6 +376,12 @@ def build_parser():
     sp.add_argument('--bag', action='append',
                     help='rosbag2 MCAP directory (or .mcap file); repeat it for one model from '
                          'several runs of the vehicle')
+    sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
+                         'psi; m/s, rad/s, m, rad) instead of the messages\'')
+    sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 per-step state process-noise 1-sigmas instead of '
+                         'the default (an AUV\'s: a real ship needs far more, docs/kvlcc2.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',

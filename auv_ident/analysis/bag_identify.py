@@ -154,7 +154,7 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
 
 def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
                   progress=None, noise_source='message', max_command_age=None,
-                  velocity_reference=None):
+                  velocity_reference=None, noise_std=None, q_state=None):
     """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle
     (core.batch.identify_runs: the EKF pass over the runs in turn, each from its own first
     measurement with the coefficients carried; the refinement on all runs' innovations
@@ -162,7 +162,10 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     measurements, its commands held, the noise of its messages); the filter then runs with
     that noise fixed, the median over the bags per channel, in still water (current 'none').
     Not (yet) over several runs: the noise model from the data and the diagnosis of
-    identify_bag. Returns (JSON document, printable table)."""
+    identify_bag. noise_std, q_state : (12,) the measurement and per-step state process noise
+    1-sigma (the states' units) instead of the messages' and the default (an AUV's): real
+    runs with filtered channels and a model far from exact need both (docs/kvlcc2.md).
+    Returns (JSON document, printable table)."""
     t0 = time.perf_counter()
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
     records, noises, rejected, model, vrefs = [], [], 0, None, set()
@@ -172,8 +175,10 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
         vrefs.add(vref)
         rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
                         initial_offset=initial_offset,
-                        noise_std=_bag_truth_and_noise(path, None)[1],
-                        noise_source=noise_source, max_command_age=max_command_age,
+                        noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
+                                   else noise_std),
+                        noise_source=noise_source if noise_std is None else 'parameter',
+                        q_state=q_state, max_command_age=max_command_age,
                         current='none', velocity_reference=vref)
         if rr.accepted < 2:
             raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
@@ -192,6 +197,8 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     noise = np.median(np.array(noises), axis=0)
     cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
                          initial_offset=initial_offset)
+    if q_state is not None:
+        cfg.q_state = np.asarray(q_state, dtype=float)
     truths = [_bag_truth_and_noise(p, model)[0] for p in paths]
     truth = truths[0] if all(tr is not None for tr in truths) else None
     res = identify_runs(model, records, cfg, refine_pass=refine_pass, truth=truth,
@@ -199,11 +206,14 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     res.wall_s = time.perf_counter() - t0
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
                                   'noise_mode': 'fixed', 'noise_source': noise_source,
-                                  'noise_std': [float(x) for x in noise]})
+                                  'noise_std': [float(x) for x in noise],
+                                  'q_state': [float(x) for x in cfg.q_state]})
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {res.steps} samples, {rejected} rejected)'
             f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
-            'fixed at the messages\' (median over the bags); ' +
+            + ('fixed at the messages\' (median over the bags)' if noise_std is None
+               else 'as given') + ('' if q_state is None else ', state process noise as given')
+            + '; ' +
             ('EKF pass over the runs in turn + batch refinement on all of them'
              if refine_pass else 'EKF pass over the runs in turn'))
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '

@@ -70,3 +70,11 @@ def test_one_planar_bag_with_the_noise_model_and_the_diagnosis(bags):
     modelled = {n for n, d in doc['noise_model']['channels'].items() if d is not None}
     assert {'u', 'v', 'r', 'x', 'y', 'psi'} <= modelled
     assert not modelled & {'w', 'p', 'q', 'z', 'phi', 'theta'}
+
+
+def test_noise_and_process_noise_options_are_checked(bags, capsys):
+    from auv_ident.cli import main
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--noise-std', '0.01,0.01']) == 2
+    assert '--noise-std' in capsys.readouterr().err
+    assert main(['identify', '--bag', bags[0], '--q-state', ','.join(['1e-4'] * 12)]) == 2
+    assert 'apply to several bags' in capsys.readouterr().err
