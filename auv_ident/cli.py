@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.state import Input
 
 
 def _model(args, theta_names=()):
@@ -66,6 +67,20 @@ def _progress(label, total):
     return pr
 
 
+def _twelve(text, option):
+    """(12,) non-negative 1-sigmas, u v w p q r x y z phi theta psi, from 'a,b,...', or None."""
+    if not text:
+        return None
+    try:
+        vals = np.array([float(v) for v in text.split(',')])
+    except ValueError:
+        raise AuvIdentError(f'{option} {text!r}: not numbers') from None
+    if vals.shape != (12,) or not np.all(np.isfinite(vals)) or np.any(vals < 0):
+        raise AuvIdentError(f'{option} {text!r}: give 12 non-negative 1-sigmas, u v w p q r x '
+                            'y z phi theta psi in m/s, rad/s, m, rad')
+    return vals
+
+
 def cmd_identify(args):
     from auv_ident.analysis import experiments as ex
     from auv_ident.analysis import results
@@ -74,9 +89,29 @@ def cmd_identify(args):
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     mode = 'fixed' if args.fixed_noise else args.noise_mode
-    if args.bag:
+    if args.bag and len(args.bag) > 1:
+        from auv_ident.analysis.bag_identify import identify_bags
+        if args.current not in ('estimate', 'none') or args.current_down or mode != 'fixed':
+            raise AuvIdentError('several bags are identified in still water with the fixed '
+                                'noise of their messages: --current, --current-down and '
+                                '--noise-mode apply to one bag')
+        doc, table = identify_bags(args.bag, vehicle=args.vehicle,
+                                   coefficients=args.coefficients,
+                                   initial_offset=args.initial_offset,
+                                   refine_pass=not args.no_refine,
+                                   noise_source=args.noise_source,
+                                   max_command_age=args.max_command_age,
+                                   velocity_reference=args.velocity_reference,
+                                   noise_std=_twelve(args.noise_std, '--noise-std'),
+                                   q_state=_twelve(args.q_state, '--q-state'))
+        print(table)
+    elif args.noise_std or args.q_state:
+        raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
+                            '--bag B ...)')
+    elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
-        doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
+        doc, table = identify_bag(args.bag[0], vehicle=args.vehicle,
+                                  coefficients=args.coefficients,
                                   noise_mode=mode, initial_offset=args.initial_offset,
                                   refine_pass=not args.no_refine,
                                   noise_source=args.noise_source,
@@ -101,7 +136,7 @@ def cmd_identify(args):
         print(res.diagnosis['messages'][0])
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
-              f'{run.u[0, 5]:.0f} rpm, sensor noise 1-sigma (u..psi) '
+              f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
               + ' '.join(f'{s:g}' for s in run.noise_std))
         print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
               f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
@@ -268,6 +303,7 @@ def cmd_import(args):
 
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
+THRUST_COL = 'thrust'     # N, optional (0 when absent): the input of measured_thrust vehicles
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
@@ -286,13 +322,15 @@ def cmd_derivatives(args):
         if missing:
             raise AuvIdentError(f'{args.input}: missing column(s) {", ".join(missing)}')
         idx = [header.index(c) for c in IN_COLS]
+        if THRUST_COL in header:
+            idx.append(header.index(THRUST_COL))
         wr = csv.writer(fout)
         wr.writerow(OUT_COLS)
         for rownum, row in enumerate(rd, start=2):
             try:
-                vals = np.array([float(row[i]) for i in idx])
+                vals = np.array([float(row[i]) for i in idx] + [0.0] * (19 - len(idx)))
             except (ValueError, IndexError):
-                print(f'{args.input}: row {rownum}: not 18 numbers', file=sys.stderr)
+                print(f'{args.input}: row {rownum}: not {len(idx)} numbers', file=sys.stderr)
                 wr.writerow([''] * 12)
                 bad += 1
                 continue
@@ -381,7 +419,15 @@ def build_parser():
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
     sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
-    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
+    sp.add_argument('--bag', action='append',
+                    help='rosbag2 MCAP directory (or .mcap file); repeat it for one model from '
+                         'several runs of the vehicle')
+    sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
+                         'psi; m/s, rad/s, m, rad) instead of the messages\'')
+    sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 per-step state process-noise 1-sigmas instead of '
+                         'the default (an AUV\'s: a real ship needs far more, docs/kvlcc2.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',

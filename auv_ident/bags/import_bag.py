@@ -44,14 +44,13 @@ from auv_ident.bags.column_map import ColumnMapError
 from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, joint_state_msg, ODOM_TOPIC, odometry_msg,
                                     SIM_EPOCH, write_message_bag)
 from auv_ident.core.state import Input, N_INPUT
-from auv_ident.session.messages import JOINT_NAMES, NS_PER_S, PROPELLER_JOINT
+from auv_ident.session.messages import NS_PER_S
 
 HSVA_EPOCH = '2006-01-01T00:00:00Z'
 UNMEASURED_VARIANCE = 1e6
 TOPIC_TYPES = {ODOM_TOPIC: 'nav_msgs/msg/Odometry',
                ACTUATOR_TOPIC: 'sensor_msgs/msg/JointState'}
 DEFAULT_VEHICLE = {'hsva': 'kvlcc2_hsva'}
-_PROPELLER = JOINT_NAMES.index(PROPELLER_JOINT)
 
 
 def parse_epoch(text):
@@ -93,27 +92,26 @@ def covariances(run):
 
 
 def input_arrays(run):
-    """(u6 (N, 6) [delta_r .. n_rpm] (rad, rpm), effort (N, 6) with the thrust (N) on the
-    propeller joint)."""
+    """u (N, 7) [delta_r .. n_rpm thrust] (rad, rpm, N), core.state.Input order: the thrust is
+    an input, written to the propeller joint's effort by joint_state_msg."""
     n = len(run.t_ns)
-    u6 = np.zeros((n, N_INPUT))
-    effort = np.zeros((n, len(JOINT_NAMES)))
+    u = np.zeros((n, N_INPUT))
     if 'rudder' in run.inputs:
-        u6[:, Input.DELTA_R] = run.inputs['rudder']
+        u[:, Input.DELTA_R] = run.inputs['rudder']
     if 'shaft' in run.inputs:
-        u6[:, Input.N_RPM] = run.inputs['shaft']
+        u[:, Input.N_RPM] = run.inputs['shaft']
     if 'thrust' in run.inputs:
-        effort[:, _PROPELLER] = run.inputs['thrust']
-    return u6, effort
+        u[:, Input.THRUST] = run.inputs['thrust']
+    return u
 
 
 def imported_messages(run, epoch_ns):
     """(topic, t_ns, rosbags message) of every sample, the actuators first at each stamp."""
     pose_cov, twist_cov = covariances(run)
-    u6, effort = input_arrays(run)
+    u = input_arrays(run)
     for k, tk in enumerate(run.t_ns):
         t_ns = int(epoch_ns) + int(tk)
-        yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u6[k], effort[k])
+        yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u[k])
         yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], 'ned', pose_cov, twist_cov)
 
 

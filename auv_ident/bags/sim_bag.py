@@ -5,7 +5,7 @@ Topics (absolute names as they appear in the root namespace and in bags):
 - ``/odom`` nav_msgs/Odometry: the MEASURED state y_k (sensor noise included), stamped t_k;
   covariances = the noise model (diagonal: pose x y z phi theta psi, twist u v w p q r).
 - ``/actuators`` sensor_msgs/JointState: the command u_k applied over [t_k, t_k+1), stamped t_k;
-  ``effort`` is six zeros (not empty: see :func:`joint_state_msg`).
+  ``effort`` the thrust on the propeller joint, zeros elsewhere (see :func:`joint_state_msg`).
 - ``/simulator/truth`` nav_msgs/Odometry: the true state x_k (zero covariance), for evaluation.
 
 Messages are built as rosbags message objects (rosbags' Jazzy types) with the frame algebra of
@@ -24,8 +24,9 @@ import numpy as np
 from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.bags.writer import BagWriter
-from auv_ident.session.messages import (_as_vector, ConversionError, JOINT_NAMES, NS_PER_S,
-                                        odometry_fields, RPM_TO_RAD_S, sec_to_ns)
+from auv_ident.session.messages import (actuator_joint_fields, ConversionError,
+                                        JOINT_NAMES, NS_PER_S,
+                                        odometry_fields, sec_to_ns)
 
 ODOM_TOPIC = '/odom'
 ACTUATOR_TOPIC = '/actuators'
@@ -87,25 +88,20 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
             twist=twist, covariance=np.array(tcov, dtype=np.float64).reshape(36)))
 
 
-def joint_state_msg(t_ns, u6, effort=None):
+def joint_state_msg(t_ns, u6):
     """Return a rosbags sensor_msgs/JointState of actuator vector ``u6`` stamped ``t_ns``.
 
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm); layout of
-    :mod:`auv_ident.session.messages` (JOINT_NAMES). ``effort`` (6,) per joint in JOINT_NAMES
-    order (N m for the fins, N for the propeller: its measured thrust), default six zeros;
-    never empty: a message ending with an empty float64 sequence is exactly what rclpy
-    (Fast-CDR) pads with up to 8 extra bytes and strict decoders (rosbags) reject, so no
-    writer of these messages should produce one.
+    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N);
+    layout of :mod:`auv_ident.session.messages` (actuator_joint_fields). ``effort`` (the
+    thrust on the propeller joint, zeros elsewhere) is never empty:
+    a message ending with an empty float64 sequence is exactly what rclpy (Fast-CDR) pads with
+    up to 8 extra bytes and strict decoders (rosbags) reject, so no writer of these messages
+    should produce one.
     """
-    u = _as_vector(u6, 6, 'u6')
-    eff = (np.zeros(len(JOINT_NAMES)) if effort is None
-           else np.array(_as_vector(effort, len(JOINT_NAMES), 'effort'), dtype=np.float64))
+    position, velocity, effort = actuator_joint_fields(u6)
     return _T['sensor_msgs/msg/JointState'](
-        header=_header(t_ns, ''),
-        name=list(JOINT_NAMES),
-        position=np.array([float(v) for v in u[:5]] + [0.0]),
-        velocity=np.array([0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]),
-        effort=eff)
+        header=_header(t_ns, ''), name=list(JOINT_NAMES), position=np.array(position),
+        velocity=np.array(velocity), effort=np.array(effort))
 
 
 def bag_sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=SIM_EPOCH_NS):

@@ -140,7 +140,7 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
            refined=True):
     """Identifiability and diagnosis of an identification made with
     core.noise_fit.identify_with_noise_model (its NoiseFit holds the refined residuals and
-    their Jacobian). U (N, 6): the inputs of the record the refinement ran on; dt (s): its
+    their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt (s): its
     sample time. Returns (verdicts or None, diagnosis dict)."""
     verdicts = xcorr = None
     if fit is not None and fit.white is not None:

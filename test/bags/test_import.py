@@ -176,6 +176,7 @@ def test_hsva_bag_topics_stamps_and_messages(s_run, s_bag):
         assert u6[Input.N_RPM] == pytest.approx(613.77, rel=1e-12)
         assert js.velocity[5] == pytest.approx(10.2295 * 2 * math.pi, rel=1e-12)
         assert list(js.effort) == [0.0] * 5 + [a[k, 10]]          # thrust (N), propeller
+        assert u6[Input.THRUST] == a[k, 10]                       # read as the thrust input
         assert js.velocity[5] / RPM_TO_RAD_S == pytest.approx(u6[Input.N_RPM])
 
 

@@ -300,7 +300,7 @@ def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_
     assert diff <= 1e-9 and dstd <= 1e-9
     assert np.allclose(res.cov, last.cov, rtol=0, atol=1e-12)
     # arrays for the batch pass: U[k] is the command in force at t[k]
-    assert res.Y.shape == (len(run.t), 12) and res.U.shape == (len(run.t), 6)
+    assert res.Y.shape == (len(run.t), 12) and res.U.shape == (len(run.t), 7)
     assert np.allclose(res.t, run.t, atol=1e-9)
     assert np.allclose(res.U, run.u) and np.allclose(res.Y, run.y)
     # and without a bag
