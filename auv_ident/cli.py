@@ -1,4 +1,4 @@
-"""Command line: python -m auv_ident {simulate,derivatives,identify,montecarlo,bench,bag,...}.
+"""Command line: python -m auv_ident {simulate,identify,report,bag,import,derivatives,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
 line on stderr and exit with status 2; no traceback.
@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.state import Input
 
 
 def _model(args, theta_names=()):
@@ -66,6 +67,20 @@ def _progress(label, total):
     return pr
 
 
+def _twelve(text, option):
+    """(12,) non-negative 1-sigmas, u v w p q r x y z phi theta psi, from 'a,b,...', or None."""
+    if not text:
+        return None
+    try:
+        vals = np.array([float(v) for v in text.split(',')])
+    except ValueError:
+        raise AuvIdentError(f'{option} {text!r}: not numbers') from None
+    if vals.shape != (12,) or not np.all(np.isfinite(vals)) or np.any(vals < 0):
+        raise AuvIdentError(f'{option} {text!r}: give 12 non-negative 1-sigmas, u v w p q r x '
+                            'y z phi theta psi in m/s, rad/s, m, rad')
+    return vals
+
+
 def cmd_identify(args):
     from auv_ident.analysis import experiments as ex
     from auv_ident.analysis import results
@@ -74,9 +89,29 @@ def cmd_identify(args):
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     mode = 'fixed' if args.fixed_noise else args.noise_mode
-    if args.bag:
+    if args.bag and len(args.bag) > 1:
+        from auv_ident.analysis.bag_identify import identify_bags
+        if args.current not in ('estimate', 'none') or args.current_down or mode != 'fixed':
+            raise AuvIdentError('several bags are identified in still water with the fixed '
+                                'noise of their messages: --current, --current-down and '
+                                '--noise-mode apply to one bag')
+        doc, table = identify_bags(args.bag, vehicle=args.vehicle,
+                                   coefficients=args.coefficients,
+                                   initial_offset=args.initial_offset,
+                                   refine_pass=not args.no_refine,
+                                   noise_source=args.noise_source,
+                                   max_command_age=args.max_command_age,
+                                   velocity_reference=args.velocity_reference,
+                                   noise_std=_twelve(args.noise_std, '--noise-std'),
+                                   q_state=_twelve(args.q_state, '--q-state'))
+        print(table)
+    elif args.noise_std or args.q_state:
+        raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
+                            '--bag B ...)')
+    elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
-        doc, table = identify_bag(args.bag, vehicle=args.vehicle, coefficients=args.coefficients,
+        doc, table = identify_bag(args.bag[0], vehicle=args.vehicle,
+                                  coefficients=args.coefficients,
                                   noise_mode=mode, initial_offset=args.initial_offset,
                                   refine_pass=not args.no_refine,
                                   noise_source=args.noise_source,
@@ -98,9 +133,10 @@ def cmd_identify(args):
             sim_current=_sim_current(args.sim_current),
             velocity_reference=args.velocity_reference or 'ground')
         pr.close()
+        print(res.diagnosis['messages'][0])
         print(f'{v.title}: identified {", ".join(names)} from a simulated '
               f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
-              f'{run.u[0, 5]:.0f} rpm, sensor noise 1-sigma (u..psi) '
+              f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
               + ' '.join(f'{s:g}' for s in run.noise_std))
         print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
               f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
@@ -114,7 +150,8 @@ def cmd_identify(args):
                                   else np.zeros(3))
         print(results.doc_table(doc))
         print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
-              f'wall {res.wall_s:.2f} s')
+              f'wall {res.wall_s:.2f} s'
+              + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
     if args.json:
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
@@ -167,6 +204,15 @@ def cmd_campaign(args):
     return 0
 
 
+def _report_methods(text):
+    """--methods of report: None (not given), or the validated method names ('all': every
+    one)."""
+    if text is None:
+        return None
+    from auv_ident.analysis.compare_methods import parse_methods
+    return parse_methods('' if text.strip() == 'all' else text)
+
+
 def cmd_report(args):
     from auv_ident.analysis.results import doc_table
     from auv_ident.analysis.report import make_report
@@ -176,17 +222,54 @@ def cmd_report(args):
                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
                       current=args.current, current_down=args.current_down,
                       sim_current=_sim_current(args.sim_current),
-                      velocity_reference=args.velocity_reference)
+                      velocity_reference=args.velocity_reference,
+                      validate_bag=args.validate, holdout=args.holdout,
+                      methods=_report_methods(args.methods))
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
     print(doc_table(doc))
-    val = doc.get('validation') or {}
-    if val.get('rms'):
-        print(f"validation on the held-out {val['maneuver']!r} manoeuvre (seed {val['seed']}, "
-              'process noise on), RMS error of the identified model: '
-              + ', '.join(f"{k} {v:.3g} {val['rms_units'][k]}" for k, v in val['rms'].items()))
-    print(f"report: {out['report']}")
+    val = doc['validation']
+    mean = val['mean_fit_percent_nu']
+    print(f"validation against the measurements of {val['source']}: mean fit % over u v w p q r "
+          + ', '.join(f'{m} {mean[m]:.1f}' if mean[m] is not None else f'{m} -'
+                      for m in val['models'])
+          + '; fit % per channel (identified / prior): '
+          + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
+                      for ch, d in val['channels'].items()))
+    true_val = doc.get('validation_true_model') or {}
+    if true_val.get('rms'):
+        print(f"validation on the held-out {true_val['maneuver']!r} manoeuvre (seed "
+              f"{true_val['seed']}, process noise on), RMS error of the identified model "
+              'against the true one: '
+              + ', '.join(f"{k} {v:.3g} {true_val['rms_units'][k]}"
+                          for k, v in true_val['rms'].items()))
+    print(f"report: {out['report']} and {out['html']}")
+    return 0
+
+
+def _pct(v):
+    return '-' if v is None else f'{v:.1f}'
+
+
+def cmd_compare_methods(args):
+    from auv_ident.analysis import compare_methods as cm
+    from auv_ident.analysis.results import write_json
+    if args.simulate and args.bag:
+        raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
+    methods = cm.parse_methods(args.methods)
+    source, validation = cm.compare_sources(
+        vehicle=args.vehicle, simulate_maneuver=args.simulate, bag=args.bag, seed=args.seed,
+        duration=args.duration, coefficients=args.coefficients, validate=args.validate,
+        truth=args.truth)
+    doc = cm.compare_methods(source, validation, methods=methods,
+                             initial_offset=args.initial_offset, holdout=args.holdout,
+                             mass_inverse=args.mass_inverse,
+                             progress=lambda m: print(f'running {m} ...', file=sys.stderr))
+    print(cm.methods_table(doc))
+    if args.json:
+        write_json(args.json, doc)
+        print(f'wrote {args.json}')
     return 0
 
 
@@ -214,8 +297,35 @@ def cmd_bag_repair(args):
     return 0
 
 
+def cmd_import(args):
+    from auv_ident.bags.import_bag import write_imported_bag
+    from auv_ident.bags.importers import read_csv_run, read_hsva
+    if args.format == 'hsva':
+        if args.columns:
+            raise AuvIdentError('--columns is for --format csv (HSVA files have a fixed layout)')
+        run = read_hsva(args.file)
+    else:
+        if not args.columns:
+            raise AuvIdentError('--format csv needs --columns MAP.yaml (docs/bags.md, '
+                                '"Importing measured runs")')
+        run = read_csv_run(args.file, args.columns)
+    write_imported_bag(run, args.out, vehicle=args.vehicle, start=args.start,
+                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    t = run.t
+    std = ', '.join(f'{n} {s:.3g}' for n, s in zip(run.measured_names,
+                                                   run.noise_std[run.measured]))
+    print(f'{run.source.name} ({run.fmt}): {len(t)} samples over {t[-1]:.3f} s, sample time '
+          f'{run.sample_time:g} s')
+    print(f"measured: {' '.join(run.measured_names)}; inputs: "
+          f"{' '.join(sorted(run.inputs)) or 'none'}")
+    print(f'noise 1-sigma estimates (SI): {std}')
+    print(f'wrote {args.out}')
+    return 0
+
+
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
+THRUST_COL = 'thrust'     # N, optional (0 when absent): the input of measured_thrust vehicles
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
@@ -234,13 +344,15 @@ def cmd_derivatives(args):
         if missing:
             raise AuvIdentError(f'{args.input}: missing column(s) {", ".join(missing)}')
         idx = [header.index(c) for c in IN_COLS]
+        if THRUST_COL in header:
+            idx.append(header.index(THRUST_COL))
         wr = csv.writer(fout)
         wr.writerow(OUT_COLS)
         for rownum, row in enumerate(rd, start=2):
             try:
-                vals = np.array([float(row[i]) for i in idx])
+                vals = np.array([float(row[i]) for i in idx] + [0.0] * (19 - len(idx)))
             except (ValueError, IndexError):
-                print(f'{args.input}: row {rownum}: not 18 numbers', file=sys.stderr)
+                print(f'{args.input}: row {rownum}: not {len(idx)} numbers', file=sys.stderr)
                 wr.writerow([''] * 12)
                 bad += 1
                 continue
@@ -334,7 +446,15 @@ def build_parser():
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
     sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
-    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file)')
+    sp.add_argument('--bag', action='append',
+                    help='rosbag2 MCAP directory (or .mcap file); repeat it for one model from '
+                         'several runs of the vehicle')
+    sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
+                         'psi; m/s, rad/s, m, rad) instead of the messages\'')
+    sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
+                    help='several bags: 12 per-step state process-noise 1-sigmas instead of '
+                         'the default (an AUV\'s: a real ship needs far more, docs/kvlcc2.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',
@@ -382,7 +502,8 @@ def build_parser():
                          "folder skips the bags already 'ok'")
     sp.set_defaults(func=cmd_campaign)
 
-    sp = sub.add_parser('report', help='identification + held-out validation report (md + PNG)')
+    sp = sub.add_parser('report', help='identification + validation against held-out '
+                                       'measurements: report.md, report.html, PNG, JSON')
     vehicle_arg(sp)
     sp.set_defaults(vehicle=None)
     sp.add_argument('--simulate', metavar='MANEUVER')
@@ -393,10 +514,48 @@ def build_parser():
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.add_argument('--validate', metavar='BAG',
+                    help='another bag of the same vehicle to validate on (default: the final '
+                         '--holdout part of the identification run, left out of it)')
+    sp.add_argument('--methods', metavar='LIST',
+                    help="also run these identification methods on the same data and "
+                         "validation run ('all', or e.g. ekf,ukf,output_error; "
+                         "docs/methods.md) and add a section 'Methods side by side'")
+    sp.add_argument('--holdout', type=float, default=0.25,
+                    help='without --validate: fraction of the run held out at its end '
+                         '(default 0.25)')
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     current_args(sp)
     sp.set_defaults(func=cmd_report)
+
+    sp = sub.add_parser('compare-methods',
+                        help='the same data through EKF, UKF, filter-error, output-error and '
+                             'equation-error identification (docs/methods.md)')
+    vehicle_arg(sp)
+    sp.set_defaults(vehicle=None)
+    sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
+    sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file) to identify from')
+    sp.add_argument('--seed', type=int, default=0)
+    sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
+    sp.add_argument('--coefficients', default='',
+                    help="comma-separated names (default: the paper's set for the vehicle)")
+    sp.add_argument('--methods', default='',
+                    help='comma-separated subset of ekf,ukf,filter_error,output_error,'
+                         'equation_error (default: all)')
+    sp.add_argument('--validate', metavar='BAG',
+                    help='validate on this bag (default: the final --holdout of the data, '
+                         'left out of the identification)')
+    sp.add_argument('--truth', metavar='JSON',
+                    help='the true coefficients ("coefficients": {name: value}, e.g. the '
+                         'truth.json of test/independent_data.py) for error %% on a bag not '
+                         'written by our simulator')
+    sp.add_argument('--holdout', type=float, default=0.2,
+                    help='fraction of the record kept for validation without --validate')
+    sp.add_argument('--initial-offset', type=float, default=0.5,
+                    help='initial guesses = vehicle file value * (1 + offset); default 0.5')
+    sp.add_argument('--json', help='write the comparison as JSON')
+    sp.set_defaults(func=cmd_compare_methods)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')
     sp.add_argument('--duration', type=float, default=600.0)
@@ -415,6 +574,22 @@ def build_parser():
     bp.add_argument('--out', help='write the repaired bag to this new directory '
                                   '(default: in place, originals kept as <file>.orig)')
     bp.set_defaults(func=cmd_bag_repair)
+
+    sp = sub.add_parser('import', help='write a measured run (HSVA file, CSV log) as a bag in '
+                                       'our topics and frames')
+    sp.add_argument('file', help='the measured run: an HSVA .dat file or a CSV log')
+    sp.add_argument('--format', required=True, choices=('hsva', 'csv'),
+                    help='hsva: HSVA KVLCC2 free-running test file; csv: CSV log with --columns')
+    sp.add_argument('--columns', metavar='MAP.yaml',
+                    help='csv: the column map (quantity, unit, frame, sign, time base per '
+                         'column; docs/bags.md)')
+    sp.add_argument('--out', required=True, help='bag directory to write (must not exist)')
+    sp.add_argument('--vehicle', default=None,
+                    help='stored in the bag for identify --bag (hsva default: kvlcc2_hsva)')
+    sp.add_argument('--start', metavar='ISO8601',
+                    help='UTC time of t = 0, e.g. 2006-05-17T10:00:00Z (default: nominal, '
+                         '2006-01-01T00:00:00Z for hsva, 2024-01-01T00:00:00Z for csv)')
+    sp.set_defaults(func=cmd_import)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')
     vehicle_arg(sp)

@@ -220,12 +220,12 @@ class GeneratedData:
     nu_r: np.ndarray              # (N, 6) truth velocity relative to the water
     y: np.ndarray                 # (N, 12) measured (twist linear per dvl option, noisy)
     noise: np.ndarray             # (N, 12) the noise added
-    u_true: np.ndarray            # (N, 6) input in force at each odometry stamp
+    u_true: np.ndarray            # (N, 7) input in force at each odometry stamp
     cmd_stamp_ns: np.ndarray      # (M,) stamps of the commands written
     cmd_log_ns: np.ndarray        # (M,)
-    cmd_values: np.ndarray        # (M, 6) rad, rad, rad, rad, rad, rpm
+    cmd_values: np.ndarray        # (M, 7) rad, rad, rad, rad, rad, rpm, N
     tick_t: np.ndarray            # (K,) every tick of the command clock (s)
-    tick_values: np.ndarray       # (K, 6) the driver's command at each tick
+    tick_values: np.ndarray       # (K, 7) the driver's command at each tick
     nominal_odom: int             # samples on the nominal grid (before dropouts and gaps)
     coefficients: dict            # truth coefficient values (all), by name
     factors: dict                 # truth / file value per coefficient (1.0 if kept)
@@ -278,7 +278,7 @@ class Dynamics:
         self.model = model
         self.vc = np.asarray(current_ned, dtype=float)
         self.x = np.empty(12)
-        self.u = np.zeros(6)
+        self.u = np.zeros(7)
 
     def nu_over_ground(self, y):
         nu = np.array(y[:6], dtype=float)
@@ -398,8 +398,8 @@ def command_ticks(cfg, rng):
 
 def command_values(cfg, targets, ticks, rpm):
     """The driver's command at each tick: fins rate-limited towards the targets (and
-    quantised), shaft constant. Returns (K, 6)."""
-    vals = np.zeros((len(ticks), 6))
+    quantised), shaft constant, thrust 0. Returns (K, 7)."""
+    vals = np.zeros((len(ticks), 7))
     vals[:, 5] = rpm
     rate = math.radians(cfg.fin_rate_deg)
     q = math.radians(cfg.fin_quantum_deg)

@@ -7,7 +7,7 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.batch import Result
+from auv_ident.core.batch import identify_runs, Result
 from auv_ident.core.diagnosis import assess
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current, split_current
 from auv_ident.core.model import Model
@@ -149,4 +149,74 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
                   noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
                   maneuver=meta.get('auv_ident.maneuver', ''),
-                  current_truth=_bag_current_truth(meta), velocity_reference=vr)
+                  current_truth=_bag_current_truth(meta), velocity_reference=vr,
+                  time_origin_ns=rr.time_origin_ns)
+
+
+def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
+                  progress=None, noise_source='message', max_command_age=None,
+                  velocity_reference=None, noise_std=None, q_state=None):
+    """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle
+    (core.batch.identify_runs: the EKF pass over the runs in turn, each from its own first
+    measurement with the coefficients carried; the refinement on all runs' innovations
+    stacked). Each bag is replayed as the identifier would have read it (its accepted
+    measurements, its commands held, the noise of its messages); the filter then runs with
+    that noise fixed, the median over the bags per channel, in still water (current 'none').
+    Not (yet) over several runs: the noise model from the data and the diagnosis of
+    identify_bag. noise_std, q_state : (12,) the measurement and per-step state process noise
+    1-sigma (the states' units) instead of the messages' and the default (an AUV's): real
+    runs with filtered channels and a model far from exact need both (docs/kvlcc2.md).
+    Returns (JSON document, printable table)."""
+    t0 = time.perf_counter()
+    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    records, noises, rejected, model, vrefs = [], [], 0, None, set()
+    for path in paths:
+        meta = bag_custom_data(path)
+        vref = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
+        vrefs.add(vref)
+        rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
+                        initial_offset=initial_offset,
+                        noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
+                                   else noise_std),
+                        noise_source=noise_source if noise_std is None else 'parameter',
+                        q_state=q_state, max_command_age=max_command_age,
+                        current='none', velocity_reference=vref)
+        if rr.accepted < 2:
+            raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
+                           f'(rejected: {dict(rr.reasons)})')
+        if model is not None and rr.vehicle != model.vehicle.name:
+            raise BagError(f'{path}: vehicle {rr.vehicle!r}, the other bags\' is '
+                           f'{model.vehicle.name!r}: one model needs one vehicle')
+        model = model or rr.model
+        records.append(_exact_hold(rr))
+        noises.append(rr.noise_std)
+        rejected += rr.rejected
+    if len(vrefs) > 1:
+        raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
+                       'give --velocity-reference')
+    v = load_vehicle(model.vehicle.name)
+    noise = np.median(np.array(noises), axis=0)
+    cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
+                         initial_offset=initial_offset)
+    if q_state is not None:
+        cfg.q_state = np.asarray(q_state, dtype=float)
+    truths = [_bag_truth_and_noise(p, model)[0] for p in paths]
+    truth = truths[0] if all(tr is not None for tr in truths) else None
+    res = identify_runs(model, records, cfg, refine_pass=refine_pass, truth=truth,
+                        progress=progress)
+    res.wall_s = time.perf_counter() - t0
+    doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
+                                  'noise_mode': 'fixed', 'noise_source': noise_source,
+                                  'noise_std': [float(x) for x in noise],
+                                  'q_state': [float(x) for x in cfg.q_state]})
+    head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
+            f'({", ".join(str(p) for p in paths)}; {res.steps} samples, {rejected} rejected)'
+            f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
+            + ('fixed at the messages\' (median over the bags)' if noise_std is None
+               else 'as given') + ('' if q_state is None else ', state process noise as given')
+            + '; ' +
+            ('EKF pass over the runs in turn + batch refinement on all of them'
+             if refine_pass else 'EKF pass over the runs in turn'))
+    table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
+             f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')
+    return doc, table

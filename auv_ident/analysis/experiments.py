@@ -9,7 +9,6 @@ import time
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.batch import identify
 from auv_ident.core.current import parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
@@ -17,6 +16,7 @@ from auv_ident.core.simulate import simulate
 from auv_ident.core.state import Input
 from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.bag_identify import bag_source
+from auv_ident.analysis.identification import identify_with_diagnosis
 from auv_ident.analysis.results import (coefficient_list, DEFAULT_NOISE_MODE, make_config, Source)
 
 DEFAULT_DURATION = 600.0     # s of the identification run
@@ -29,8 +29,8 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
                        sim_current=None, velocity_reference='ground'):
     """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
     if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
-    core/current.py) and the velocity reference of the simulated sensor. Returns (Result, Run,
-    Model)."""
+    core/current.py) and the velocity reference of the simulated sensor, with the noise model
+    from the data and a diagnosis (analysis/identification.py). Returns (Result, Run, Model)."""
     v = load_vehicle(vehicle_name)
     truth = Model(v, mass_inverse=mass_inverse)
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
@@ -39,8 +39,9 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     opt = parse_current(current)
     m = Model(v, list(names) + opt.names, mass_inverse=mass_inverse, current=opt.fixed,
               velocity_reference=velocity_reference)
-    res = identify(m, run.t, run.y, run.u, cfg, T=run.T, refine_pass=refine_pass,
-                   hist_every=hist_every, truth=m.theta_true[:m.p_coef], progress=progress)
+    res = identify_with_diagnosis(m, cfg, run.t, run.y, run.u, T=run.T,
+                                  refine_pass=refine_pass, hist_every=hist_every,
+                                  truth=m.theta_true[:m.p_coef], progress=progress)
     return res, run, m
 
 

@@ -14,8 +14,14 @@ import numpy as np
 from auv_ident import __version__
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
+from auv_ident.analysis.identification import identify_with_diagnosis
+from auv_ident.analysis.report_format import (cell as _num, markdown_table as _table,
+                                              pyplot as _plt, save_figure as _save)
+from auv_ident.analysis.report_noise import (diagnosis_lines, fig_innovation_autocorrelation,
+                                             identifiability_markdown, noise_model_markdown)
+from auv_ident.analysis import validation as mv
+from auv_ident.analysis.report_html import write_html
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.batch import identify
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model import Model
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -110,19 +116,6 @@ def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=10
 
 
 # ----------------------------------------------------------------------------------- figures
-
-def _plt():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _save(fig, path):
-    fig.savefig(path, dpi=110)
-    _plt().close(fig)
-    return path
-
 
 def _log_axis(ax, values=None):
     """Log y axis labelled 0.01, 0.02, 0.05, ... (not 2x10^-2), limits around `values`."""
@@ -292,19 +285,6 @@ def fig_noise(path, res, noise_mode):
 
 # ---------------------------------------------------------------------------------- markdown
 
-def _num(v):
-    """A table cell: 6 significant digits (the test parses these back), '-' when unknown."""
-    if v is None:
-        return '-'
-    return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
-
-
-def _table(header, rows):
-    out = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
-    out += ['| ' + ' | '.join(r) + ' |' for r in rows]
-    return '\n'.join(out)
-
-
 def _versions():
     import matplotlib
     import numba
@@ -314,11 +294,11 @@ def _versions():
             'python': platform.python_version()}
 
 
-def _markdown(doc, src, cfg, val_error, figures, command):
+def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
     v = src.vehicle
     co = doc['coefficients']
     known = src.truth is not None
-    L = [f'# Identification report: {v.title}', '',
+    L = [f'# Identification report: {v.title}', ''] + diagnosis_lines(doc) + [
          f'Command: `{command or "(not given)"}`', '',
          'Versions: ' + ', '.join(f'{k} {s}' for k, s in doc['versions'].items()), '',
          f'- source: {src.description}',
@@ -328,7 +308,8 @@ def _markdown(doc, src, cfg, val_error, figures, command):
          f'{doc["velocity_reference"]}',
          f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
          '(filter-error maximum likelihood)',
-         '- sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi rad): '
+         '- configured sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi '
+         'rad): '
          + ' '.join(f'{s:g}' for s in doc['noise_std']),
          '- EKF state process noise 1-sigma per step (same units): '
          + ' '.join(f'{s:g}' for s in cfg.q_state),
@@ -351,36 +332,49 @@ def _markdown(doc, src, cfg, val_error, figures, command):
                       _num(c['ekf_error_pct']), _num(c['estimate']), _num(c['error_pct'])]
                      for n, c in co.items()]))
     L += _current_markdown(doc)
-    vd = doc['validation']
-    L += ['', '## Validation on a held-out manoeuvre', '',
-          f'Manoeuvre {vd["maneuver"]!r} (not used for identification, which used '
-          f'{src.maneuver or "the bag"!r}), {vd["duration_s"]:g} s at {vd["rpm"]:g} rpm, '
-          f'process noise 1-sigma {" ".join(f"{s:g}" for s in vd["process_std"])} '
-          f'(m/s^2, rad/s^2) with seed {vd["seed"]}. The reference and the identified model '
-          'share the inputs, the initial state and the process-noise realisation, so the '
-          'differences come from the coefficients alone.']
-    if not known:
-        L += ['', "Truth is unknown for this source: the 'true' model below is the vehicle "
-              "file's prior model, not the real vehicle."]
-    L.append('')
-    if val_error:
-        L += [f'The identified model could not be simulated: {val_error}', '']
-    else:
-        L.append(_table(['channel', 'RMS difference', 'unit'],
-                        [[n, _num(vd['rms'][n]), vd['rms_units'][n]] for n in STATE_NAMES]))
-        L.append('')
-    L += ['## Figures', '']
+    L += noise_model_markdown(doc)
+    L += identifiability_markdown(doc)
+    L += mv.markdown_lines(doc['validation'], holdout)
+    L += _true_model_markdown(doc, src, val_error)
+    L += ['', '## Figures', '']
     captions = {
         'convergence': 'EKF estimates with their 3-sigma bands, the true values, the initial '
                        'guesses and the refined estimates (cf. the paper, Figs. 2-3)',
+        'measured_speeds': 'validation run: measured speeds and rates vs the free runs of the '
+                           'identified and the prior model',
+        'measured_pose': 'validation run: measured positions and attitudes vs the free runs of '
+                         'the identified and the prior model',
         'validation_positions': 'positions, true vs identified model (cf. Fig. 4)',
         'validation_attitudes': 'attitudes, true vs identified model (cf. Fig. 4)',
         'validation_speeds': 'linear and angular speeds, true vs identified model (cf. Fig. 5)',
         'nis': 'normalised innovation squared against its chi-square 95 % bands',
-        'adapted_noise': 'measurement and coefficient noise covariances over time'}
+        'adapted_noise': 'measurement and coefficient noise covariances over time',
+        'innovation_autocorrelation': 'autocorrelation of the whitened innovations per '
+                                      'channel, against the band of white noise'}
     for key, p in figures.items():
         L += [f'![{captions[key]}]({os.path.basename(p)})', '', f'*{captions[key]}*', '']
     return '\n'.join(L)
+
+
+def _true_model_markdown(doc, src, val_error):
+    """The section on the simulated held-out manoeuvre, true vs identified model (lines),
+    when the truth is known."""
+    vd = doc.get('validation_true_model')
+    if not vd:
+        return []
+    L = ['', '## Validation on a held-out manoeuvre, against the true model', '',
+         f'Manoeuvre {vd["maneuver"]!r} (not used for identification, which used '
+         f'{src.maneuver or "the bag"!r}), {vd["duration_s"]:g} s at {vd["rpm"]:g} rpm, '
+         f'process noise 1-sigma {" ".join(f"{s:g}" for s in vd["process_std"])} '
+         f'(m/s^2, rad/s^2) with seed {vd["seed"]}. The reference and the identified model '
+         'share the inputs, the initial state and the process-noise realisation, so the '
+         'differences come from the coefficients alone.', '']
+    if val_error:
+        L += [f'The identified model could not be simulated: {val_error}']
+    else:
+        L.append(_table(['channel', 'RMS difference', 'unit'],
+                        [[n, _num(vd['rms'][n]), vd['rms_units'][n]] for n in STATE_NAMES]))
+    return L
 
 
 def _current_markdown(doc):
@@ -417,8 +411,11 @@ def _current_markdown(doc):
 def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
-                current_down=False, sim_current=None, velocity_reference=None):
-    """Identify (EKF + batch refinement), validate on a held-out manoeuvre, write the report.
+                current_down=False, sim_current=None, velocity_reference=None,
+                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
+    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate against the measurements of a held-out run
+    (and, when the truth is known, against the true model on a held-out manoeuvre), write the
+    report: report.md, report.html (self-contained), result.json and PNG figures.
 
     Parameters
     ----------
@@ -426,69 +423,103 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source
     noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
     command : the command line that produced the report (quoted in report.md)
-    validation_maneuver, validation_duration : held-out manoeuvre and its length (s); its
-        seed is seed + 1000 (the bag's recorded seed + 1000 when it has one) and its process
-        noise is DEFAULT_PROCESS_STD
+    validation_maneuver, validation_duration : held-out manoeuvre and its length (s) of the
+        true-model validation (known truth only); its seed is seed + 1000 (the bag's recorded
+        seed + 1000 when it has one) and its process noise is DEFAULT_PROCESS_STD
     progress : show progress bars (only when stderr is a terminal)
     current, current_down : the water current ('estimate', 'none' or 'N,E[,D]' m/s NED; and
         whether its down component is estimated), core/current.py
     sim_current : (3,) m/s NED, the current a simulated run flies in (None: still water)
     velocity_reference : 'ground' or 'water', what the velocities are (None: 'ground', or what
         a bag of our simulator says)
+    validate_bag : another bag of the vehicle to validate on (analysis/validation.py); None:
+        the final `holdout` fraction of the identification run is held out (identification
+        uses the rest)
+    holdout : fraction (0, 0.9] held out when no validate_bag is given
+
+    methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
+        same identification data and validate on the same held-out run: result.json gets
+        `methods` and report.md a section "Methods side by side" (None: not run)
 
     Returns
     -------
-    dict with 'report', 'json' and 'figures' (name -> path) paths and 'result' (the JSON doc)
+    dict with 'report', 'html', 'json' and 'figures' (name -> path) paths and 'result' (the JSON
+    doc)
     """
     from auv_ident.analysis.progress import Progress
-    os.makedirs(out_dir, exist_ok=True)
+    from auv_ident.analysis.bag_identify import bag_source
+    mv.refuse_same_bag(bag, validate_bag)        # before anything is loaded or written
     opt = parse_current(current, current_down)
-    src = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                         seed=seed, duration=duration, coefficients=coefficients,
-                         sim_current=sim_current, velocity_reference=velocity_reference)
+    full = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
+                          seed=seed, duration=duration, coefficients=coefficients,
+                          sim_current=sim_current, velocity_reference=velocity_reference)
     # fail before the long identification if the validation would not be held out
-    if _same_maneuver(validation_maneuver, src.maneuver):
+    if _same_maneuver(validation_maneuver, full.maneuver):
         raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
                           'manoeuvre: validation must use a held-out manoeuvre')
-    v = src.vehicle
+    v = full.vehicle
+    if validate_bag:
+        run = bag_source(validate_bag, vehicle=v.path, coefficients=','.join(full.names),
+                         velocity_reference=velocity_reference or full.velocity_reference)
+        mv.refuse_identification_run(full, run)
+        src, holdout = full, None
+    else:
+        src, run = mv.split_held_out(full, holdout)
+    os.makedirs(out_dir, exist_ok=True)
     cfg = results.make_config(src.names, noise_mode=noise_mode,
-                         noise_std=np.asarray(src.noise_std, dtype=float).copy())
+                              noise_std=np.asarray(src.noise_std, dtype=float).copy())
     # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
     model = Model(v, list(src.names) + opt.names, current=opt.fixed,
                   velocity_reference=src.velocity_reference)
-    res = identify(model, src.t, src.Y, src.U, cfg, T=src.T, refine_pass=True,
-                   hist_every=hist_every, truth=src.truth,
-                   progress=bar.update if bar else None)
+    res = identify_with_diagnosis(model, cfg, src.t, src.Y, src.U, T=src.T, refine_pass=True,
+                                  hist_every=hist_every, truth=src.truth,
+                                  progress=bar.update if bar else None)
     if bar:
         bar.close()
+
+    run_val = mv.validate_on_run(
+        v, src.names, res.estimate, None if res.current is None else res.current.estimate,
+        run.t, run.Y, run.U, source=run.description, velocity_reference=run.velocity_reference,
+        include_truth=run.truth is not None, truth_current=run.current_truth)
+    val_doc = run_val.document()
+    val_doc['holdout_fraction'] = holdout
+    val_doc['identification_run'] = src.description
 
     try:        # the run's own seed when the source knows it (a bag's metadata: text)
         val_seed = int(src.seed) + 1000
     except (TypeError, ValueError):
         val_seed = seed + 1000
     rpm = float(np.median(src.U[:, Input.N_RPM]))
-    val, val_error = None, None
-    try:
-        val = validate(v, src.names, res.estimate, validation_maneuver, validation_duration,
-                       val_seed, src.T, rpm=rpm, identification_maneuver=src.maneuver)
-    except ArithmeticError as err:    # the identified model leaves the model's domain
-        val_error = str(err)
+    val, val_error, true_doc = None, None, None
+    if src.truth is not None:
+        try:
+            val = validate(v, src.names, res.estimate, validation_maneuver, validation_duration,
+                           val_seed, src.T, rpm=rpm, identification_maneuver=src.maneuver)
+        except ArithmeticError as err:    # the identified model leaves the model's domain
+            val_error = str(err)
+        true_doc = {'maneuver': validation_maneuver, 'seed': val_seed,
+                    'duration_s': validation_duration, 'rpm': rpm,
+                    'process_std': DEFAULT_PROCESS_STD.tolist(),
+                    'reference': 'truth (vehicle file)',
+                    'rms': None if val is None else val.rms,
+                    'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}
+    methods_doc = None
+    if methods:
+        from auv_ident.analysis.compare_methods import compare_methods
+        methods_doc = compare_methods(src, run, methods=methods)
     extra = {'maneuver': src.maneuver, 'seed': src.seed,
              'duration_s': float(src.t[-1] - src.t[0]),
              'noise_mode': noise_mode, 'source': src.description,
              'current_option': opt.describe(), 'velocity_reference': src.velocity_reference,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': _versions(), 'command': command,
-             'validation': {'maneuver': validation_maneuver, 'seed': val_seed,
-                            'duration_s': validation_duration, 'rpm': rpm,
-                            'process_std': DEFAULT_PROCESS_STD.tolist(),
-                            'reference': ('truth (vehicle file)' if src.truth is not None
-                                          else "vehicle file's prior model (truth unknown)"),
-                            'rms': None if val is None else val.rms,
-                            'rms_units': dict(zip(STATE_NAMES, UNITS)), 'error': val_error}}
+             'validation': val_doc, 'validation_true_model': true_doc}
+    if methods_doc is not None:
+        extra['methods'] = methods_doc['methods']
+        extra['methods_reference_fit_percent'] = methods_doc.get('reference_fit_percent')
     doc = results.result_dict(v, res, extra, current_truth=src.current_truth)
     json_path = os.path.join(out_dir, 'result.json')
     results.write_json(json_path, doc)
@@ -497,23 +528,42 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         return os.path.join(out_dir, name + '.png')
 
     figures = {'convergence': fig_convergence(j('convergence'), v, res, noise_mode)}
+    what = f'{v.title}, validation run: {run.description}'
+    figures['measured_speeds'] = mv.fig_measured(
+        j('measured_speeds'), run_val, [State.U, State.V, State.W, State.P, State.Q, State.R],
+        f'{what}\nspeeds and rates, measured vs free run')
+    figures['measured_pose'] = mv.fig_measured(
+        j('measured_pose'), run_val, [State.X, State.Y, State.Z, State.PHI, State.THETA,
+                                      State.PSI],
+        f'{what}\npositions and attitudes, measured vs free run')
     if val is not None:
-        ref = 'true model' if src.truth is not None else 'vehicle-file model (prior)'
         what = (f'{v.title}\nheld-out {val.maneuver!r} manoeuvre, seed {val_seed}, '
                 'process noise on')
         figures['validation_positions'] = _overlay(
             j('validation_positions'), val, [[State.X], [State.Y], [State.Z]],
-            f'{what}: positions', ref)
+            f'{what}: positions', 'true model')
         figures['validation_attitudes'] = _overlay(
             j('validation_attitudes'), val, [[State.PHI], [State.THETA], [State.PSI]],
-            f'{what}: attitudes', ref)
+            f'{what}: attitudes', 'true model')
         figures['validation_speeds'] = _overlay(
             j('validation_speeds'), val, [[State.U, State.P], [State.V, State.Q],
-                                          [State.W, State.R]], f'{what}: speeds', ref)
+                                          [State.W, State.R]], f'{what}: speeds', 'true model')
     figures['nis'] = fig_nis(j('nis'), res, src.T, hist_every)
     figures['adapted_noise'] = fig_noise(j('adapted_noise'), res, noise_mode)
+    acf = fig_innovation_autocorrelation(j('innovation_autocorrelation'), doc, src.T)
+    if acf:
+        figures['innovation_autocorrelation'] = acf
 
     md_path = os.path.join(out_dir, 'report.md')
+    md = _markdown(doc, src, cfg, val_error, figures, command, holdout)
+    if methods_doc is not None:
+        from auv_ident.analysis.compare_methods import methods_markdown
+        head, sep, tail = md.partition('\n## Figures')
+        md = (head + '\n## Methods side by side\n\nThe same identification data through '
+              'the standard methods (docs/methods.md), each validated on the same held-out '
+              'run.\n\n' + methods_markdown(methods_doc) + '\n' + sep + tail)
     with open(md_path, 'w', encoding='utf-8') as fh:
-        fh.write(_markdown(doc, src, cfg, val_error, figures, command) + '\n')
-    return {'report': md_path, 'json': json_path, 'figures': figures, 'result': doc}
+        fh.write(md + '\n')
+    html_path = write_html(md, out_dir, os.path.join(out_dir, 'report.html'))
+    return {'report': md_path, 'html': html_path, 'json': json_path, 'figures': figures,
+            'result': doc}

@@ -46,6 +46,7 @@ class Source:
     maneuver: str = ''
     current_truth: object = None        # (3,) m/s NED the run flew in, if known
     velocity_reference: str = 'ground'  # what Y's u v w are (ground or water)
+    time_origin_ns: int = 0             # absolute stamp of t = 0 (a bag's; 0 if simulated)
 
 def paper_values(vehicle, name):
     """(paper's estimate, paper's error % text) or (None, None)."""
@@ -109,6 +110,9 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
             else 'dimensional SI') + ')',
          'current': current_dict(getattr(res, 'current', None), current_truth),
          'warnings': current_warnings(getattr(res, 'current', None))}
+    for key in ('noise_model', 'identifiability', 'diagnosis'):
+        if getattr(res, key, None) is not None:
+            d[key] = getattr(res, key)
     if extra:
         d.update(extra)
     return d

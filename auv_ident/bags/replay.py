@@ -14,6 +14,7 @@ import numpy as np
 import yaml
 
 from auv_ident.bags.reader import bag_topics, BagError, read_bag
+from auv_ident.core.state import N_INPUT
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.session import Health, IdentSession
 
@@ -32,14 +33,14 @@ class ReplayResult:
     accepted, rejected : odometry messages fused / dropped; commands : actuator messages
         buffered; errors : core errors (each restarted the filter); reasons : Counter of
         rejection reasons
-    t, Y, U : (N,), (N, 12), (N, 6) of the accepted measurements (NaN: unmeasured channel) and
+    t, Y, U : (N,), (N, 12), (N, 7) of the accepted measurements (NaN: unmeasured channel) and
         U[k] = the command in force at t[k] (latest stamp <= t[k]), for identify.refine
     mean_nis_per_dof : over the last NIS window; health : the node's health verdict at the end
     noise_std : (12,) the measurement 1-sigma the EKF pass used, per channel (the median over
         the accepted updates: the message covariances with noise_source 'message')
     time_origin_ns : t = 0 of t and of the session's time line (int ns; 0 for stamps that
         start near 0)
-    t_cmd, U_cmd : (M,), (M, 6) the accepted commands by stamp (a later message with the same
+    t_cmd, U_cmd : (M,), (M, 7) the accepted commands by stamp (a later message with the same
         stamp wins), on the same time line
     """
 
@@ -150,7 +151,7 @@ def session_result(session, updates, settings=None):
     t = np.array([m[0] for m in session.measurements], dtype=float)
     Y = (np.array([m[1] for m in session.measurements], dtype=float)
          if session.measurements else np.zeros((0, 12)))
-    U = np.full((len(t), 6), np.nan)
+    U = np.full((len(t), N_INPUT), np.nan)
     for k, tk in enumerate(t):
         i = bisect.bisect_right(cmd_t, tk)
         if i > 0:
@@ -171,7 +172,7 @@ def session_result(session, updates, settings=None):
         time_origin_ns=int(session.time_origin_ns or 0),
         t_cmd=np.array(sorted(by_stamp), dtype=float),
         U_cmd=(np.array([by_stamp[tc] for tc in sorted(by_stamp)], dtype=float) if by_stamp
-               else np.zeros((0, 6))), model=session.model)
+               else np.zeros((0, N_INPUT))), model=session.model)
 
 def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
                actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):

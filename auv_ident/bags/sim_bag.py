@@ -5,7 +5,7 @@ Topics (absolute names as they appear in the root namespace and in bags):
 - ``/odom`` nav_msgs/Odometry: the MEASURED state y_k (sensor noise included), stamped t_k;
   covariances = the noise model (diagonal: pose x y z phi theta psi, twist u v w p q r).
 - ``/actuators`` sensor_msgs/JointState: the command u_k applied over [t_k, t_k+1), stamped t_k;
-  ``effort`` is six zeros (not empty: see :func:`joint_state_msg`).
+  ``effort`` the thrust on the propeller joint, zeros elsewhere (see :func:`joint_state_msg`).
 - ``/simulator/truth`` nav_msgs/Odometry: the true state x_k (zero covariance), for evaluation.
 
 Messages are built as rosbags message objects (rosbags' Jazzy types) with the frame algebra of
@@ -24,8 +24,9 @@ import numpy as np
 from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.bags.writer import BagWriter
-from auv_ident.session.messages import (_as_vector, ConversionError, JOINT_NAMES, NS_PER_S,
-                                        odometry_fields, RPM_TO_RAD_S, sec_to_ns)
+from auv_ident.session.messages import (actuator_joint_fields, ConversionError,
+                                        JOINT_NAMES, NS_PER_S,
+                                        odometry_fields, sec_to_ns)
 
 ODOM_TOPIC = '/odom'
 ACTUATOR_TOPIC = '/actuators'
@@ -90,19 +91,17 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
 def joint_state_msg(t_ns, u6):
     """Return a rosbags sensor_msgs/JointState of actuator vector ``u6`` stamped ``t_ns``.
 
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm); layout of
-    :mod:`auv_ident.session.messages` (JOINT_NAMES). ``effort`` is six zeros rather than empty:
+    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N);
+    layout of :mod:`auv_ident.session.messages` (actuator_joint_fields). ``effort`` (the
+    thrust on the propeller joint, zeros elsewhere) is never empty:
     a message ending with an empty float64 sequence is exactly what rclpy (Fast-CDR) pads with
     up to 8 extra bytes and strict decoders (rosbags) reject, so no writer of these messages
     should produce one.
     """
-    u = _as_vector(u6, 6, 'u6')
+    position, velocity, effort = actuator_joint_fields(u6)
     return _T['sensor_msgs/msg/JointState'](
-        header=_header(t_ns, ''),
-        name=list(JOINT_NAMES),
-        position=np.array([float(v) for v in u[:5]] + [0.0]),
-        velocity=np.array([0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]),
-        effort=np.zeros(len(JOINT_NAMES)))
+        header=_header(t_ns, ''), name=list(JOINT_NAMES), position=np.array(position),
+        velocity=np.array(velocity), effort=np.array(effort))
 
 
 def bag_sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=SIM_EPOCH_NS):
@@ -135,6 +134,25 @@ def run_metadata(run, frame='ned', command='', epoch_ns=SIM_EPOCH_NS):
     return meta
 
 
+def write_message_bag(path, topic_types, custom_data, messages, compression='zstd'):
+    """Write rosbags messages as a rosbag2 MCAP bag directory at path (must not exist).
+
+    topic_types : {topic: 'pkg/msg/Type'}, in the order the topics are registered
+    custom_data : {str: str}, metadata.yaml's custom_data
+    messages : iterable of (topic, t_ns, rosbags message); t_ns (int ns) is the log time
+    The one writing path of simulated (:func:`write_run_bag`) and imported
+    (:mod:`auv_ident.bags.import_bag`) runs; returns path.
+    """
+    with BagWriter(path, compression=compression) as w:
+        for topic, typ in topic_types.items():
+            w.add_topic(topic, typ)
+        for key, val in custom_data.items():
+            w.set_custom_data(key, val)
+        for topic, t_ns, msg in messages:
+            w.write(topic, t_ns, _STORE.serialize_cdr(msg, topic_types[topic]))
+    return path
+
+
 def write_run_bag(run, path, frame='ned', compression='zstd', command='',
                   epoch_ns=SIM_EPOCH_NS):
     """Write a simulated run as a rosbag2 MCAP bag directory at path (must not exist).
@@ -142,12 +160,7 @@ def write_run_bag(run, path, frame='ned', compression='zstd', command='',
     Stamps and log times are ``epoch_ns + t_k`` (default 2024-01-01T00:00:00Z, see the module
     docstring); returns path.
     """
-    with BagWriter(path, compression=compression) as w:
-        for topic, typ in TOPIC_TYPES.items():
-            w.add_topic(topic, typ)
-        for key, val in run_metadata(run, frame, command, epoch_ns).items():
-            w.set_custom_data(key, val)
-        for k in range(len(run.t)):
-            for topic, t_ns, msg in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns):
-                w.write(topic, t_ns, _STORE.serialize_cdr(msg, TOPIC_TYPES[topic]))
-    return path
+    messages = (m for k in range(len(run.t))
+                for m in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns))
+    return write_message_bag(path, TOPIC_TYPES, run_metadata(run, frame, command, epoch_ns),
+                             messages, compression)

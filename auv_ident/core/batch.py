@@ -55,6 +55,10 @@ class Result:
     R_final: object = None
     Q_final: object = None
     current: object = None   # core.current.CurrentEstimate, or None (still water, not asked)
+    # set by analysis.identification.identify_with_diagnosis (None from identify() alone):
+    noise_model: dict = None      # core.noise_fit.NoiseFit.document()
+    identifiability: dict = None  # per coefficient verdicts (core/diagnosis.py)
+    diagnosis: dict = None        # {'consistent', 'messages', 'checks'}
 
     def error_pct(self, which='estimate'):
         if self.truth is None:
@@ -65,13 +69,13 @@ class Result:
 
 def _record(t, Y, U):
     """(t, Y, U) as contiguous float arrays, checked: t (N,) strictly increasing finite times
-    (s), Y (N, 12), U (N, 6)."""
+    (s), Y (N, 12), U (N, 7)."""
     Y = np.ascontiguousarray(Y, dtype=float)
     U = np.ascontiguousarray(U, dtype=float)
     if (Y.ndim != 2 or Y.shape[1] != N_STATE or U.shape != (Y.shape[0], N_INPUT)
             or Y.shape[0] == 0):
-        raise DimensionError(f'Y must be (N, 12) and U (N, 6) with N >= 1; got {Y.shape} and '
-                             f'{U.shape}')
+        raise DimensionError(f'Y must be (N, 12) and U (N, {N_INPUT}) with N >= 1; got '
+                             f'{Y.shape} and {U.shape}')
     return check_times(t, Y.shape[0]), Y, U
 
 
@@ -102,7 +106,7 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     f : AugmentedEKF (its state is replaced by the result)
     t : (N,) sample times (s), strictly increasing; jitter, dropouts and gaps allowed
     Y : (N, 12) measurements (NaN: missing)
-    U : (N, 6) inputs, U[k] the command in force over [t_k, t_k+1) (zero-order hold)
+    U : (N, 7) inputs, U[k] the command in force over [t_k, t_k+1) (zero-order hold)
     hist_every : record histories every this many samples (0: none)
     want_white : return the whitened innovations (N, 12)
     max_step : s, longest RK4 step of a time update (None: the filter's sample time f.T)
@@ -147,8 +151,22 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
     'converged' (bool), 'message' (the optimiser's), 'nfev'. cov is (J^T J)^-1 times the cost
     per residual when that exceeds 1 (the white-noise covariance; core/uncertainty.py has the
     one for coloured residuals)."""
-    t, Y, U = _record(t, Y, U)
-    T = nominal_sample_time(t) if T is None else T
+    return refine_runs(model, cfg, [(t, Y, U)], theta_start, T=T, max_step=max_step,
+                       max_bridge=max_bridge, max_nfev=max_nfev, progress=progress,
+                       details=details)
+
+
+def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
+                max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
+    """Pass 2 over several runs of one vehicle: one theta for all of them. runs: a list of
+    (t, Y, U) records (as for run_ekf), each filtered from its own first measurement; the
+    residual vector is the runs' whitened innovations stacked in order (so 'white' of details
+    is (sum N, 12) and 'J' (sum N * 12, p)), and the covariance uses all of them. T (s): the
+    nominal sample time (None: the first run's median interval). Otherwise as refine()."""
+    runs = [_record(*r) for r in runs]
+    if not runs:
+        raise DimensionError('refinement needs at least one run')
+    T = nominal_sample_time(runs[0][0]) if T is None else T
     p = model.p
     fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
                              noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
@@ -157,21 +175,31 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
                         velocity_reference=model.velocity_reference)
     f = AugmentedEKF(state_model, fixed_cfg, T)
     settings = f.settings()
-    timeline = _timeline(f, t, Y, U, max_step, max_bridge)
-    N = Y.shape[0]
-    x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
-    out = K.new_outputs(N_STATE, N, want_white=True)
-    white = out.white
+    # per run: (Y, U, timeline, x0, P0, outputs); the whitened innovations of run i are rows
+    # bounds[i]:bounds[i + 1] of `white`
+    legs = []
+    for t, Y, U in runs:
+        timeline = _timeline(f, t, Y, U, max_step, max_bridge)
+        x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
+        legs.append((Y, U, timeline, x0, P0, K.new_outputs(N_STATE, Y.shape[0],
+                                                           want_white=True)))
+    white = (legs[0][5].white if len(legs) == 1
+             else np.full((sum(r[1].shape[0] for r in runs), N_STATE), np.nan))
+    bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
     scale = parameter_scale(model, theta_start)
 
     def residuals(z):
         if progress is not None:
             progress()
         # theta enters through the coefficients of a 12-state filter
-        white[:] = np.nan
-        K.run_filter(x0, P0, Y, U, model.compiled_fixed(z * scale), settings, timeline, out)
-        if out.stats[0] != K.OK:
-            return np.full(white.size, 1e3)
+        cm = model.compiled_fixed(z * scale)
+        for i, (Y, U, timeline, x0, P0, out) in enumerate(legs):
+            out.white[:] = np.nan
+            K.run_filter(x0, P0, Y, U, cm, settings, timeline, out)
+            if out.stats[0] != K.OK:
+                return np.full(white.size, 1e3)
+            if len(legs) > 1:
+                white[bounds[i]:bounds[i + 1]] = out.white
         r = white.ravel()
         return np.where(np.isfinite(r), r, 0.0)
 
@@ -204,30 +232,55 @@ def parameter_scale(model, theta):
 def identify(model, t, Y, U, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
              progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
     """Identify model.theta_names from measurements Y (N, 12) stamped t (N,) (s) and inputs
-    U (N, 6), U[k] the command held over [t_k, t_k+1).
+    U (N, 7), U[k] the command held over [t_k, t_k+1).
 
     T (s): the nominal sample time (None: the median interval of t); max_step, max_bridge: as
     for run_ekf; truth: the true coefficients (p_coef,), if known. Returns a Result: the
     coefficients in names/estimate/std/cov, the water current (if the model identifies or
     is given one) in Result.current."""
+    return identify_runs(model, [(t, Y, U)], cfg, T=T, refine_pass=refine_pass,
+                         hist_every=hist_every, truth=truth, progress=progress,
+                         max_step=max_step, max_bridge=max_bridge)
+
+
+def identify_runs(model, runs, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
+                  progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
+    """One set of model.theta_names from several runs of the vehicle: runs is a list of
+    (t (N,), Y (N, 12), U (N, 7)) records, each as identify() takes one.
+
+    The EKF pass runs the runs one after the other: each starts its vehicle states from its
+    own first measurement, the coefficients (and any identified current) from where the
+    previous run left them, with their covariance (AugmentedEKF.set_prior). The refinement fits
+    one theta to all runs' innovations stacked (refine_runs), so the 1-sigma uses all the data.
+    T (s): the nominal sample time (None: the first run's median interval). Result.steps and
+    mean_nis_per_dof are over all runs, Result.history that of the last run."""
     t0 = time.perf_counter()
-    t, Y, U = _record(t, Y, U)
-    T = nominal_sample_time(t) if T is None else T
+    runs = [_record(*r) for r in runs]
+    if not runs:
+        raise DimensionError('identification needs at least one run')
+    T = nominal_sample_time(runs[0][0]) if T is None else T
     f = AugmentedEKF(model, cfg, T)
-    stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
-                             max_bridge=max_bridge)
+    initial = f.theta0[:model.p_coef].copy()     # the first run's start (set_prior moves it)
+    steps, nis, dof = 0, 0.0, 0.0
+    for i, (t, Y, U) in enumerate(runs):
+        if i > 0:       # carry the coefficients' estimate and covariance into the next run
+            f.set_prior(f.theta, f.theta_cov)
+        stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
+                                 max_bridge=max_bridge)
+        steps, nis, dof = steps + int(stats[1]), nis + stats[2], dof + stats[3]
     ekf_est, ekf_cov = f.theta, f.theta_cov
     est, cov = ekf_est, ekf_cov
     if refine_pass and model.p > 0:
-        est, cov, _ = refine(model, cfg, t, Y, U, ekf_est, T=T, max_step=max_step,
-                             max_bridge=max_bridge, progress=progress)
+        est, cov, _ = refine_runs(model, cfg, runs, ekf_est, T=T, max_step=max_step,
+                                  max_bridge=max_bridge, progress=progress)
+    psi = np.concatenate([Y[:, State.PSI] for _, Y, _ in runs])
     est_c, cov_c, ekf_c, ekf_cov_c, current = split_current(model, est, cov, ekf_est, ekf_cov,
-                                                            Y[:, State.PSI])
+                                                            psi)
     wall = time.perf_counter() - t0
     return Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
                   std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
-                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=f.theta0[:model.p_coef].copy(),
+                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
                   truth=None if truth is None else np.asarray(truth, float),
-                  steps=int(stats[1]), wall_s=wall,
-                  mean_nis_per_dof=float(stats[2] / max(1.0, stats[3])), refined=refine_pass,
-                  history=hist, R_final=f.R.copy(), Q_final=f.Q.copy(), current=current)
+                  steps=steps, wall_s=wall, mean_nis_per_dof=float(nis / max(1.0, dof)),
+                  refined=refine_pass, history=hist, R_final=f.R.copy(), Q_final=f.Q.copy(),
+                  current=current)

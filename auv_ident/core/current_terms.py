@@ -7,7 +7,7 @@ import math
 
 from numba import njit
 
-from .monomials import NZ
+from .monomials import ZZ_DU_DV
 from .state import N_CURRENT, N_NU, N_STATE, State
 
 kernel = njit(cache=True, _nrt=False)     # as model.kernel (no reference counting)
@@ -18,13 +18,15 @@ _PHI = int(State.PHI)
 # How the water current enters f (CompiledModel.current): not at all (still water, nothing
 # identified), with the state's velocities over ground, or through the water (core/model.py)
 CURRENT_NONE, CURRENT_GROUND, CURRENT_WATER = 0, 1, 2
-# Scratch zz (ZZ_LEN,): [z (NZ), dz/dx (NZ), x_r (12), v_cb (3), d v_cb / d(phi, theta, psi)
-# (3 x 3, column per angle), R^T (3 x 3, row-major)]
-ZZ_XR = 2 * NZ
+# Scratch zz (ZZ_LEN,): [z (NZ), dz/dx (NZ), dU/dv (1), x_r (12), v_cb (3),
+# d v_cb / d(phi, theta, psi) (3 x 3, column per angle), R^T (3 x 3, row-major), x with the
+# held states at 0 (12, core/planar.py)]
+ZZ_XR = ZZ_DU_DV + 1
 ZZ_VCB = ZZ_XR + N_STATE
 ZZ_DV = ZZ_VCB + 3
 ZZ_RT = ZZ_DV + 9
-ZZ_LEN = ZZ_RT + 9
+ZZ_XH = ZZ_RT + 9
+ZZ_LEN = ZZ_XH + N_STATE
 
 
 @kernel

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from .current import MAX_CURRENT_STD
 from .state import INPUT_NAMES, STATE_NAMES
 from .uncertainty import identifiability, input_correlation
 from .vehicle import EQUATIONS
@@ -61,7 +62,10 @@ def excitation_advice(vehicle, name):
 
 def coefficient_verdicts(vehicle, names, estimate, J, cov):
     """identifiability() of the run with the excitation advice for the weak ones."""
-    out = identifiability(J, estimate, names, cov=cov)
+    # a water-current component may be ~0: judged by its 1-sigma in m/s, not relative to it
+    absolute = np.array([MAX_CURRENT_STD if n.startswith('current_') else math.nan
+                         for n in names])
+    out = identifiability(J, estimate, names, cov=cov, absolute_std=absolute)
     for name, d in out.items():
         if d['verdict'] != 'identifiable':
             d['advice'] = excitation_advice(vehicle, name)
@@ -136,7 +140,7 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
            refined=True):
     """Identifiability and diagnosis of an identification made with
     core.noise_fit.identify_with_noise_model (its NoiseFit holds the refined residuals and
-    their Jacobian). U (N, 6): the inputs of the record the refinement ran on; dt (s): its
+    their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt (s): its
     sample time. Returns (verdicts or None, diagnosis dict)."""
     verdicts = xcorr = None
     if fit is not None and fit.white is not None:

@@ -543,7 +543,7 @@ def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):
     interval as `timeline` says (time updates with U[k-1] held, or a restart of the vehicle
     states) and update with Y[k].
 
-    xa0 (n,), P0 (n, n): the prior of sample 0; Y (N, 12) measurements (NaN: missing), U (N, 6)
+    xa0 (n,), P0 (n, n): the prior of sample 0; Y (N, 12) measurements (NaN: missing), U (N, 7)
     inputs; cm: the model's CompiledModel; settings: FilterSettings; timeline: Timeline; out:
     FilterOutputs, filled in place. Histories every `out.hist_every` samples (0: none):
     coefficients, their 1-sigma, NIS and its degrees of freedom, and the adapted diag(R) (12)

@@ -16,7 +16,7 @@ from .current import ned_current
 from .errors import ConfigError, DimensionError, DivergenceError, DomainError
 from .model import STATUS_TEXT
 from .sensors import DEFAULT_NOISE_STD
-from .state import COEFFICIENTS, CURRENT_NAMES, N_CURRENT, N_STATE, State, VEHICLE
+from .state import COEFFICIENTS, CURRENT_NAMES, N_CURRENT, N_INPUT, N_STATE, State, VEHICLE
 from .trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -222,10 +222,14 @@ class AugmentedEKF:
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
         self.noise_std = np.asarray(cfg.noise_std, dtype=float).copy()
-        q = np.concatenate([np.asarray(cfg.q_state, float), cfg.q_theta_rel * np.abs(th0),
+        # a held state (core/planar.py) gets no process noise and no measurement: it stays
+        # where it starts, uncorrelated with the rest
+        free = model.vehicle.free_states
+        q = np.concatenate([np.where(free, np.asarray(cfg.q_state, float), 0.0),
+                            cfg.q_theta_rel * np.abs(th0),
                             np.full(len(cur), cfg.current_walk * np.sqrt(self.T))])
         self.Q0 = np.diag(q ** 2)
-        self.measured = np.asarray(cfg.measured, dtype=bool).copy()
+        self.measured = np.asarray(cfg.measured, dtype=bool) & free
         self.mode = K.MODES[cfg.mode]
         self.gamma = 1.0 - np.exp(-self.T / cfg.tau)
         # Innovation gate (None: off): gate[m] is the largest NIS accepted from an update with
@@ -247,7 +251,9 @@ class AugmentedEKF:
         self.white = np.full(N_STATE, np.nan)
 
     def initial_state(self, y0, rpm):
-        """x0 from the first measurement; unmeasured channels from a straight, level trim."""
+        """x0 from the first measurement; unmeasured channels from a straight, level trim. A
+        held state starts at 0 with the 1-sigma of an unmeasured one (positive, as the filter
+        requires of every variance; it never changes, core/planar.py)."""
         y0 = np.asarray(y0, dtype=float)
         x0 = np.zeros(N_STATE)
         sd0 = self.noise_std.copy()
@@ -381,10 +387,12 @@ class AugmentedEKF:
         """Time update over T (s; default the configured T) with the inputs u_prev held."""
         m = self.model
         T = self.T if T is None else float(T)
+        u_prev = np.ascontiguousarray(u_prev, dtype=float)
+        if u_prev.shape != (N_INPUT,):     # the kernel reads N_INPUT entries unchecked
+            raise DimensionError(f'inputs must have {N_INPUT} entries, got {u_prev.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, np.ascontiguousarray(u_prev, dtype=float), self.Q,
-                       m.compiled, T, xa_b, P_b, self.ws)
+        st = K.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 

@@ -1,7 +1,9 @@
-"""Manoeuvres: commanded inputs u_cmd(t) = [delta_r delta_s delta_b delta_bp delta_bs n_rpm].
+"""Manoeuvres: commanded inputs u_cmd(t) = [delta_r delta_s delta_b delta_bp delta_bs n_rpm
+thrust].
 
-Fins in rad, shaft speed in rpm. All are open-loop functions of time, built once and evaluated
-on the sample grid, so a run is reproducible from (name, duration, T, seed, rpm).
+Fins in rad, shaft speed in rpm, thrust in N (constant). All are open-loop functions of time,
+built once and evaluated on the sample grid, so a run is reproducible from (name, duration, T,
+seed, rpm).
 
 - `zigzag`: the paper's style (Section 4): rudder and stern planes switch between +-amplitudes
   that change from one half-period to the next (variable amplitudes inside +-20 deg); rudder
@@ -16,8 +18,8 @@ on the sample grid, so a run is reproducible from (name, duration, T, seed, rpm)
   carry K_v and Y_v), stern planes and both bow planes stepping between seeded amplitudes of
   10, 15 and 20 deg (either sign) every 5-6 s (heave/pitch excitation for Z_w, Z_q, Z_ds, M_ds).
   All fins rate-limited to 10 deg/s.
-- a CSV file path: columns t, delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm (header row),
-  zero-order hold between rows.
+- a CSV file path: columns t, delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm and optionally
+  thrust (header row), zero-order hold between rows.
 """
 import csv
 import os
@@ -48,11 +50,13 @@ def _rate_limit(sig, dt, rate):
     return out
 
 
-def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
-    """Commanded inputs on the time grid t (s): array (len(t), 6)."""
+def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG, thrust=0.0):
+    """Commanded inputs on the time grid t (s): array (len(t), 7); the thrust input (N) is
+    constant (a measured_thrust vehicle's cruise_thrust, 0 for the others)."""
     t = np.asarray(t, dtype=float)
     u = np.zeros((len(t), N_INPUT))
     u[:, Input.N_RPM] = rpm
+    u[:, Input.THRUST] = thrust
     if name == 'zigzag':
         u[:, Input.DELTA_R] = _square(t, 40.0, np.array([20.0, 15.0, 20.0, 10.0]) * DEG)
         u[:, Input.DELTA_S] = _square(t, 24.0, np.array([15.0, 10.0, 20.0, 5.0]) * DEG)
@@ -100,17 +104,20 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG):
 
 
 def from_file(path, t):
-    """Zero-order-hold a manoeuvre table (CSV with a header) onto the grid t."""
+    """Zero-order-hold a manoeuvre table (CSV with a header) onto the grid t. The thrust
+    column (N) is optional: 0 when absent."""
     cols = ('t', 'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
     with open(path, newline='', encoding='utf-8') as fh:
         rd = csv.DictReader(fh)
         missing = [c for c in cols if c not in (rd.fieldnames or [])]
         if missing:
             raise ConfigError(f'{path}: manoeuvre file lacks column(s) {", ".join(missing)}')
+        if 'thrust' in rd.fieldnames:
+            cols = cols + ('thrust',)
         rows = []
         for i, row in enumerate(rd, start=2):
             try:
-                vals = [float(row[c]) for c in cols]
+                vals = [float(row[c]) for c in cols] + [0.0] * (N_INPUT + 1 - len(cols))
             except ValueError:
                 raise ConfigError(f'{path}: line {i}: not a number in {row}') from None
             if not np.all(np.isfinite(vals)):

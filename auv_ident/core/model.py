@@ -1,14 +1,16 @@
 """The 6-DOF AUV model x_dot = f(x, u_in, c) and its exact Jacobians, compiled with numba.
 
 x = [u v w p q r x y z phi theta psi] (m/s, rad/s, m, rad; body FRD, world NED, ZYX Euler),
-u_in = [delta_r delta_s delta_b delta_bp delta_bs n_rpm] (rad, rpm), saturated inside,
+u_in = [delta_r delta_s delta_b delta_bp delta_bs n_rpm thrust] (rad, rpm, N), fins and shaft
+saturated inside,
 c = every coefficient of the vehicle file in the file's units (prime values if nondimensional).
 
     M nu_dot = F(nu, eta, delta, c),   eta_dot = J(eta) nu            (Fossen 2021, eq. 6.3)
 
 F = sum of monomial terms (hydrodynamic/control coefficients and rigid-body Coriolis, see
 vehicle.py; compiled per vehicle from its term table by monomials.py) + restoring g(eta) +
-propulsion + cross-flow drag. The Jacobians are analytic: each monomial is differentiated
+propulsion + cross-flow drag. A vehicle with fewer degrees of freedom holds the others
+(core/planar.py). The Jacobians are analytic: each monomial is differentiated
 factor by factor, and propulsion, cross-flow, restoring and kinematics have hand-derived
 derivatives (all checked against finite differences in the tests).
 Why analytic and compiled: the EKF needs f and both Jacobians four times per RK4 step, tens of
@@ -43,19 +45,21 @@ import numpy as np
 from numba import njit
 
 from .current_terms import (current_ground, current_in_body, CURRENT_GROUND, CURRENT_NONE,
-                            CURRENT_WATER, ZZ_LEN, ZZ_VCB, ZZ_XR)
-from .errors import DomainError
-from .monomials import NZ, Z_EPS, kernel_at, monomial_kernel
+                            CURRENT_WATER, ZZ_LEN, ZZ_VCB, ZZ_XH, ZZ_XR)
+from .errors import DimensionError, DomainError
+from .monomials import NZ, Z_EPS, Z_THRUST, kernel_at, monomial_kernel
+from .planar import held_at_zero, hold_states, speed_factor
 from .state import (CURRENT_NAMES, Input, N_CURRENT, N_FINS, N_INPUT, N_NU, N_STATE,
                     State, VELOCITY_REFERENCES)
 from .vehicle import (COS_THETA_MIN, FACTOR_INDEX, P_B, P_CF, P_CF_CY, P_CF_CZ, P_CF_N, P_FIN,
-                      P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_U_MIN, P_W,
-                      P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
+                      P_L, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_RHO, P_SPEED_FACTOR,
+                      P_U_MIN, P_W, P_XB, P_XG, P_YB, P_YG, P_ZB, P_ZG)
 
 # State and input indices, and the places in the factor vector z (vehicle.FACTORS), as plain
 # ints: numba freezes them into the same constants as the literals they replace
 _U, _V, _W, _P, _Q, _R, _X, _Y, _Z, _PHI, _THETA, _PSI = (int(s) for s in State)
 _N_RPM = int(Input.N_RPM)
+_THRUST = int(Input.THRUST)
 _Z_ABS = FACTOR_INDEX['|u|']        # |u| .. |r|
 _Z_FINS = FACTOR_INDEX['dr']        # dr ds db dbp dbs
 _Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX['db2']
@@ -74,7 +78,8 @@ kernel = njit(cache=True, _nrt=False)
 # namedtuple is a plain struct in compiled code (reading a field costs nothing) and, unlike a
 # structref, can be read by the kernels compiled without reference counting.
 CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
-                                            'Minv recompute_minv M_RB theta_pos current n_coef')
+                                            'Minv recompute_minv M_RB theta_pos current n_coef '
+                                            'held')
 CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
 
 c0 : (n_coef + 3,) coefficient values (the file's units) for the coefficients not in theta,
@@ -93,6 +98,7 @@ M_RB : (6, 6) rigid-body mass matrix
 theta_pos : (n_coef + 3,) int, position of each entry of c0 in theta, or -1
 current : int, CURRENT_NONE, CURRENT_GROUND or CURRENT_WATER (how the current enters f)
 n_coef : int, number of vehicle coefficients (the current's place in c0)
+held : (h,) int, the states the vehicle holds (core/planar.py; empty for 6 DOF)
 """
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
@@ -432,6 +438,10 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
     for i in range(N_INPUT):
         if not math.isfinite(ui[i]):
             return ERR_NONFINITE
+    if cm.held.shape[0] > 0:         # the model reads the held states as 0 (core/planar.py)
+        xh = zz[ZZ_XH:ZZ_XH + N_STATE]
+        held_at_zero(x, cm.held, xh)
+        x = xh
     th = x[_THETA]
     cth = math.cos(th)
     if abs(cth) < COS_THETA_MIN:
@@ -471,6 +481,10 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
         zz[NZ + _Z_FINS + i] = 0.0
     zz[_Z_DB2] = zz[_Z_DBP] + zz[_Z_DBS]
     zz[NZ + _Z_DB2] = 0.0
+    zz[Z_THRUST] = ui[_THRUST]               # N, measured (propulsion: measured_thrust)
+    zz[NZ + Z_THRUST] = 0.0
+    if par[P_SPEED_FACTOR] != 0.0:
+        speed_factor(xv[_U], xv[_V], zz)
     n_rpm = min(max(ui[_N_RPM], -par[P_NMAX]), par[P_NMAX])
     st = _propulsion(xv[_U], n_rpm, par, zz, xdot, A, want_jac)
     if st != OK:
@@ -513,6 +527,8 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):
         for k in range(N_CURRENT):
             if not math.isfinite(xdot[_X + k]):
                 return ERR_NONFINITE
+    if cm.held.shape[0] > 0:
+        hold_states(cm.held, want_jac, p, xdot, A, Bt)
     return OK
 
 
@@ -597,6 +613,7 @@ class Model:
         # the vehicle's compiled monomial kernel, and per identified parameter its
         # [equation, index in c] (equation -1: added mass or current, which have no monomial)
         self.mono_addr = monomial_kernel(vehicle.terms_i, vehicle.terms_s).address
+        self.held = vehicle.held
         self.theta_terms = np.array(
             [[-1 if ci >= n_coef or vehicle.coefficients[ci].is_added_mass
               else vehicle.coefficients[ci].equation, ci] for ci in self.theta_idx],
@@ -608,7 +625,7 @@ class Model:
         v = self.vehicle
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
                              self.Minv, self.recompute_minv, v.M_RB, theta_pos,
-                             self.current_mode, self.n_coef)
+                             self.current_mode, self.n_coef, self.held)
 
     def _c_ext(self, theta):
         """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""
@@ -648,6 +665,9 @@ class Model:
     def _evaluate(self, x, ui, theta, want_jac):
         x = np.ascontiguousarray(x, dtype=float)
         ui = np.ascontiguousarray(ui, dtype=float)
+        if ui.shape != (N_INPUT,):     # the kernel reads N_INPUT entries unchecked
+            raise DimensionError(f'inputs must have {N_INPUT} entries (state.Input), got '
+                                 f'{ui.shape}')
         c = self._c_ext(theta)
         v = self.vehicle
         Minv = self.Minv
@@ -664,7 +684,7 @@ class Model:
         return st, x, ui, xdot, A, Bt
 
     def f(self, x, ui, theta=None):
-        """x_dot (12,) at state x (12,), inputs ui (6,) (saturated inside), parameters theta."""
+        """x_dot (12,) at state x (12,), inputs ui (7,) (saturated inside), parameters theta."""
         st, x, ui, xdot, _, _ = self._evaluate(x, ui, theta, False)
         self.check(st, x, ui)
         return xdot

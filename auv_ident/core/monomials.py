@@ -29,9 +29,14 @@ from numba.extending import intrinsic
 
 from .errors import ConfigError
 
-NZ = 19          # length of the factor vector z (vehicle.FACTORS); zz = [z, dz/dx]
+NZ = 21          # length of the factor vector z (vehicle.FACTORS); zz = [z, dz/dx, dU/dv]
 N_STATE_FACTORS = 12   # z[0:6] = u..r (dz/dx = 1), z[6:12] = |u|..|r| (dz/dx = sign)
 Z_EPS = 18             # propeller epsilon (dz/du from the propulsion model)
+# the speed U = sqrt(u^2 + v^2): the one factor of two states, dU/du in zz[NZ + Z_SPEED] as
+# for the others and dU/dv in zz[ZZ_DU_DV]
+Z_SPEED = 19
+Z_THRUST = 20          # measured thrust (an input: no state derivative)
+ZZ_DU_DV = 2 * NZ
 
 # monomial_terms(c, zz, want_jac, xdot, A, dprod): c (n_coef,) coefficient values; zz (2 NZ,)
 # factors and their derivatives; xdot (12,) and A (12 x 12) accumulated in rows 0..5;
@@ -63,14 +68,17 @@ def kernel_at(typingctx, address):
     return MONO_TYPE(address), codegen
 
 
-def _factor_derivative(f):
-    """Source of the factor ' * dz_f/dx_(f mod 6)': '' where it is 1 (u..r: a product by 1.0
-    is exact, so leaving it out changes no bit), None where it is zero (fins and their sums)."""
+def _factor_derivatives(f):
+    """[(state column, source of the factor ' * dz_f/dx_column')] of factor f: '' where the
+    derivative is 1 (u..r: a product by 1.0 is exact, so leaving it out changes no bit); none
+    for the inputs (fins, their sum, the thrust)."""
     if f < 6:
-        return ''
+        return [(f, '')]
     if f < N_STATE_FACTORS or f == Z_EPS:
-        return f' * d{f}'
-    return None
+        return [(f % 6, f' * d{f}')]
+    if f == Z_SPEED:
+        return [(0, f' * d{f}'), (1, ' * dUv')]
+    return []
 
 
 def kernel_source(terms_i, terms_s):
@@ -97,18 +105,19 @@ def kernel_source(terms_i, terms_s):
     L += [f'    xdot[{eq}] = x{eq}' for eq in eqs]
     L.append('    if not want_jac:')
     L.append('        return')
-    L += [f'    d{f} = zz[{NZ + f}]' for f in used if _factor_derivative(f)]
+    L += [f'    d{f} = zz[{NZ + f}]' for f in used
+          if any(dz for _, dz in _factor_derivatives(f))]
+    if Z_SPEED in used:
+        L.append(f'    dUv = zz[{ZZ_DU_DV}]')
     acc = defaultdict(list)      # (eq, column) -> accumulation lines, in table order
     for t, eq, _, fs, _ in rows:
         for j, f in enumerate(fs):
-            dz = _factor_derivative(f)
-            if dz is None:
-                continue
             rest = f'k{t}'
             for jj, g in enumerate(fs):
                 if jj != j:
                     rest += f' * z{g}'
-            acc[(eq, f % 6)].append(f'        a += {rest}{dz}')
+            for col, dz in _factor_derivatives(f):
+                acc[(eq, col)].append(f'        a += {rest}{dz}')
     for (eq, col), lines in sorted(acc.items()):
         L.append(f'    a = A[{eq}, {col}]')
         L += [ln[4:] for ln in lines]

@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from .batch import refine, run_ekf
+from .errors import DivergenceError, DomainError
 from .filter import AugmentedEKF
 from .state import STATE_NAMES
 from .timing import nominal_sample_time
@@ -40,6 +41,7 @@ from .uncertainty import noise_model, sandwich_covariance
 
 NOISE_MODEL_CHANGE = 1.5    # a channel's effective variance off by this factor: use the model
 SANDWICH_WIDER = 1.2        # sandwich 1-sigma wider than the white one by this: use it
+RETRY_NOISE_FACTORS = (3.0, 10.0)   # noise scalings tried when the configured pass fails
 MAX_RHO = 0.995             # AR(1) coefficient used at most (a random walk has no long-run var)
 
 
@@ -68,6 +70,10 @@ class NoiseFit:
     notes: list = field(default_factory=list)
     white: np.ndarray = None        # (N, 12) whitened innovations at the refined solution
     jacobian: np.ndarray = None     # (N * 12, p) their Jacobian w.r.t. the coefficients
+    # the EKF pass whose estimate is reported (the configured noise's, or the effective
+    # noise's when used): {'stats', 'hist', 'R', 'Q', 'theta0'} (core.batch.run_ekf's)
+    ekf_run: dict = None
+    configured_pass: dict = None    # the same for the pass with the configured noise
 
     def document(self):
         """JSON-ready dict (the result's `noise_model`)."""
@@ -94,33 +100,62 @@ def effective_std(configured_std, model, measured):
     return out
 
 
-def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25):
+def _pass_record(f, stats, hist):
+    return {'stats': stats, 'hist': hist, 'R': f.R.copy(), 'Q': f.Q.copy(),
+            'theta0': f.theta0.copy(), 'theta': f.theta.copy(), 'theta_cov': f.theta_cov.copy(),
+            'mean_nis_per_dof': float(stats[2] / max(1.0, stats[3])), 'steps': int(stats[1])}
+
+
+def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25, hist_every=0):
     """Noise model of a record from an EKF pass with the configured noise. Returns NoiseFit
-    (used = whether the effective noise should replace the configured one)."""
+    (used = whether the effective noise should replace the configured one; configured_pass =
+    that EKF pass, with histories every hist_every samples).
+
+    If that pass leaves the model's domain or diverges (noise far above the configured level
+    makes an over-confident filter chase it, e.g. into a negative surge speed), the pass is
+    made again with the noise scaled by RETRY_NOISE_FACTORS in turn, the noise model is read
+    off the first pass that completes (its levels relative to that scaled noise), and a note
+    says so; only if every pass fails is the last error raised."""
     T = nominal_sample_time(t) if T is None else T
-    f = AugmentedEKF(model, cfg, T)
-    _, _, white = run_ekf(f, t, Y, U, want_white=True, max_step=max_step,
-                          max_bridge=max_bridge)
-    nm = noise_model(white, T, STATE_NAMES)
     conf = np.asarray(cfg.noise_std, dtype=float)
-    eff = effective_std(conf, nm, np.asarray(cfg.measured, dtype=bool))
+    failures = []
+    for factor in (1.0,) + RETRY_NOISE_FACTORS:
+        base = conf * factor
+        f = AugmentedEKF(model, cfg if factor == 1.0 else replace(cfg, noise_std=base), T)
+        try:
+            stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=True,
+                                         max_step=max_step, max_bridge=max_bridge)
+            break
+        except (DomainError, DivergenceError) as err:
+            failures.append((factor, err))
+    else:
+        raise failures[-1][1]
+    nm = noise_model(white, T, STATE_NAMES)
+    eff = effective_std(base, nm, np.asarray(cfg.measured, dtype=bool))
     ratio = (eff / conf) ** 2
-    used = bool(np.any((ratio > NOISE_MODEL_CHANGE) | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
+    used = bool(factor != 1.0 or np.any((ratio > NOISE_MODEL_CHANGE)
+                                        | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
-                   used=used)
+                   used=used, configured_pass=_pass_record(f, stats, hist))
+    if failures:
+        fit.notes.append(
+            f'the EKF with the configured noise failed ({failures[0][1]}): the noise is far '
+            f'above the configured level; the noise model was read off a pass with {factor:g}x '
+            'the configured noise')
     if used:
         worst = max(nm, key=lambda n: abs(math.log(ratio[STATE_NAMES.index(n)])))
         d = nm[worst]
         fit.notes.append(
-            f'the measurement noise is not what was configured: e.g. {worst} is {d["level"]:.2g}'
-            f'x the assumed level with a lag-1 correlation of {d["ar1"]:.2f} (time constant '
-            f'{d["tau_s"]:.2g} s); identified with the noise model from the data (effective '
-            '1-sigma = level x sqrt((1 + rho) / (1 - rho)) x configured)')
+            f'the measurement noise is not what was configured: e.g. {worst} is '
+            f'{d["level"] * factor:.2g}x the assumed level with a lag-1 correlation of '
+            f'{d["ar1"]:.2f} (time constant {d["tau_s"]:.2g} s); identified with the noise '
+            'model from the data (effective 1-sigma = level x sqrt((1 + rho) / (1 - rho)) x '
+            'configured)')
     return fit
 
 
 def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max_step=None,
-                              max_bridge=0.25, progress=None, ekf_pass=None):
+                              max_bridge=0.25, progress=None, ekf_pass=None, hist_every=0):
     """EKF pass and refinement with the noise model from the data.
 
     ekf_pass : (estimate, covariance) of an EKF pass already made with the configured noise
@@ -128,15 +163,21 @@ def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max
     Returns (ekf_estimate, ekf_cov, estimate, cov, NoiseFit): the EKF pass with the effective
     noise (or ekf_pass), and (refine_pass) the refined estimate, started from the EKF pass,
     with the covariance the residuals support (module docstring); without refine_pass
-    estimate, cov are the EKF pass's."""
+    estimate, cov are the EKF pass's. The reported EKF pass's record (histories every
+    hist_every samples, final R and Q) is fit.ekf_run (None when ekf_pass was kept)."""
     T = nominal_sample_time(t) if T is None else T
-    fit = fit_noise(model, cfg, t, Y, U, T, max_step, max_bridge)
+    fit = fit_noise(model, cfg, t, Y, U, T, max_step, max_bridge, hist_every=hist_every)
     cfg_eff = replace(cfg, noise_std=fit.effective_std.copy()) if fit.used else cfg
     if ekf_pass is not None and not fit.used:
         ekf_est, ekf_cov = (np.array(a, dtype=float) for a in ekf_pass)
+    elif not fit.used:      # the configured noise holds: its pass is the EKF pass
+        fit.ekf_run = fit.configured_pass
+        ekf_est, ekf_cov = fit.ekf_run['theta'], fit.ekf_run['theta_cov']
     else:
         f = AugmentedEKF(model, cfg_eff, T)
-        run_ekf(f, t, Y, U, max_step=max_step, max_bridge=max_bridge)
+        stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
+                                 max_bridge=max_bridge)
+        fit.ekf_run = _pass_record(f, stats, hist)
         ekf_est, ekf_cov = f.theta.copy(), f.theta_cov.copy()
     if not refine_pass or model.p == 0:
         return ekf_est, ekf_cov, ekf_est, ekf_cov, fit

@@ -25,7 +25,7 @@ from .vehicle import P_FIN
 @dataclass
 class Run:
     """A simulated run sampled at T: t (N,), x true states (N, 12), y measurements (N, 12),
-    u applied commands (N, 6): u[k] is held over [t_k, t_k+1)."""
+    u applied commands (N, 7): u[k] is held over [t_k, t_k+1)."""
 
     vehicle: str
     maneuver: str
@@ -99,7 +99,8 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
     n = int(round(duration / T)) + 1
     t = np.arange(n) * T
     u = maneuvers.commands(maneuver, t, rpm=rpm, seed=seed,
-                           fin_limit=model.vehicle.par[P_FIN])
+                           fin_limit=model.vehicle.par[P_FIN],
+                           thrust=model.vehicle.cruise_thrust)
     x = np.empty((n, N_STATE))
     if x0 is None:
         x[0] = trim

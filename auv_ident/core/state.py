@@ -13,10 +13,12 @@ the vehicle state (:data:`COEFFICIENTS`).
 
 Input (actuator) vector::
 
-    u = [delta_r delta_s delta_b delta_bp delta_bs n_rpm]
+    u = [delta_r delta_s delta_b delta_bp delta_bs n_rpm thrust]
 
 rudder, stern planes, top/bottom bow planes, port and starboard bow planes (rad), shaft speed
-(rpm).
+(rpm), measured propeller thrust (N). The thrust is an input of vehicles whose propulsion is
+`measured_thrust` (a ship model with a thrust dynamometer, core/vehicle.py); the others ignore
+it (0 in their runs and bags).
 """
 from enum import IntEnum
 
@@ -47,11 +49,12 @@ class Input(IntEnum):
     DELTA_BP = 3
     DELTA_BS = 4
     N_RPM = 5
+    THRUST = 6
 
 
 N_STATE = 12                # vehicle states
 N_NU = 6                    # body velocities
-N_INPUT = 6                 # actuator channels
+N_INPUT = 7                 # actuator channels (the thrust last)
 N_FINS = 5                  # fin channels (the inputs before the shaft speed)
 
 NU = slice(0, 6)            # u v w p q r
@@ -67,7 +70,7 @@ FINS = slice(0, N_FINS)     # fin deflections in u (rad)
 STATE_NAMES = tuple(s.name.lower() for s in State)
 STATE_UNITS = ('m/s',) * 3 + ('rad/s',) * 3 + ('m',) * 3 + ('rad',) * 3
 INPUT_NAMES = tuple(i.name.lower() for i in Input)
-INPUT_UNITS = ('rad',) * 5 + ('rpm',)
+INPUT_UNITS = ('rad',) * 5 + ('rpm', 'N')
 NU_NAMES = STATE_NAMES[NU]
 ANGLE_STATES = (State.PHI, State.THETA, State.PSI)  # innovations of these are wrapped to (-pi, pi]
 
@@ -78,3 +81,10 @@ CURRENT_NAMES = ('current_n', 'current_e', 'current_d')
 # what the velocity sensor measures, hence what the state's u v w are: 'ground' (DVL in bottom
 # lock: nu over ground) or 'water' (water-track DVL: nu_r, the velocity through the water)
 VELOCITY_REFERENCES = ('ground', 'water')
+
+# Degrees of freedom a vehicle file may declare (`dofs:`, core/vehicle.py): each names its body
+# velocity and the position or angle it moves. A vehicle without some of them holds those
+# states (rates zero, core/planar.py); all six by default.
+DOF_STATES = {'surge': (State.U, State.X), 'sway': (State.V, State.Y),
+              'heave': (State.W, State.Z), 'roll': (State.P, State.PHI),
+              'pitch': (State.Q, State.THETA), 'yaw': (State.R, State.PSI)}

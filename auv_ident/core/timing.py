@@ -86,7 +86,7 @@ def nominal_sample_time(t):
 
 
 def commands_at(t_cmd, U_cmd, t):
-    """The command in force at each time t (N,): the latest command (row of U_cmd (M, 6))
+    """The command in force at each time t (N,): the latest command (row of U_cmd (M, 7))
     stamped at or before it (t_cmd (M,), increasing), NaN where none is (zero-order hold, the
     streaming identifier's rule). A command published only when it changes is thus held."""
     t_cmd = np.asarray(t_cmd, dtype=float)
@@ -113,7 +113,7 @@ def with_command_changes(t, Y, U, t_cmd, U_cmd, max_bridge=DEFAULT_MAX_BRIDGE):
 
     Parameters
     ----------
-    t, Y, U : (N,), (N, m), (N, 6): samples, measurements (NaN = missing) and the command in
+    t, Y, U : (N,), (N, m), (N, 7): samples, measurements (NaN = missing) and the command in
         force at each sample
     t_cmd, U_cmd : (M,), (M, 6): command stamps (increasing) and commands
 

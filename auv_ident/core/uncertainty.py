@@ -132,7 +132,8 @@ def noise_model(white, dt, names=None):
             tau = -dt / math.log(a1)
         out[names[j]] = {'level': float(np.sqrt(np.mean(x[ok] ** 2))), 'ar1': a1,
                          'tau_s': tau, 'ljung_box': q, 'p_white': p,
-                         'white': bool(p >= WHITENESS_P), 'samples': n}
+                         'white': bool(p >= WHITENESS_P), 'samples': n,
+                         'acf': [float(v) for v in np.nan_to_num(rho, nan=0.0)]}
     return out
 
 
@@ -201,7 +202,7 @@ def sandwich_covariance(J, white, lags=None):
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
 
 
-def identifiability(J, estimate, names, cov=None):
+def identifiability(J, estimate, names, cov=None, absolute_std=None):
     """Per coefficient: how well the run determines it, from its sensitivities.
 
     Parameters
@@ -212,6 +213,8 @@ def identifiability(J, estimate, names, cov=None):
     names : p names
     cov : (p, p) covariance to report the 1-sigma from (default the Cramer-Rao bound
         (J^T J)^-1; pass the sandwich covariance for honest figures under coloured residuals)
+    absolute_std : (p,) or None, per parameter a 1-sigma to judge it by instead of the
+        relative one (NaN: relative), see :func:`verdicts_from_covariance`
 
     Returns
     -------
@@ -222,14 +225,30 @@ def identifiability(J, estimate, names, cov=None):
     CORRELATION_WEAK) or 'not excited' (rel_std >= REL_STD_WEAK, or no information)}.
     """
     J = np.asarray(J, dtype=float)
-    est = np.asarray(estimate, dtype=float)
-    p = len(names)
     F = J.T @ J
     if cov is None:
         try:
             cov = np.linalg.inv(F)
         except np.linalg.LinAlgError:
             cov = np.linalg.pinv(F)
+    return verdicts_from_covariance(cov, estimate, names, informed=np.diag(F) > 0,
+                                    absolute_std=absolute_std)
+
+
+def verdicts_from_covariance(cov, estimate, names, informed=None, absolute_std=None):
+    """The verdicts of :func:`identifiability` from a coefficient covariance alone (the batch
+    refinement's, or the live EKF's P).
+
+    informed : (p,) bool, whether the data carry any information on each coefficient (batch:
+        a positive Fisher diagonal; live: the 1-sigma shrank below its prior's); None: all
+    absolute_std : (p,) or None; where finite, the 1-sigma below which the parameter is
+        'identifiable' (relative figures mean nothing for a parameter whose value may be 0,
+        such as a water-current component); 'not excited' then needs an uninformed parameter
+    """
+    est = np.asarray(estimate, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    p = len(names)
+    informed = np.ones(p, dtype=bool) if informed is None else np.asarray(informed, bool)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid='ignore', divide='ignore'):
         corr = cov / np.outer(sd, sd)
@@ -243,7 +262,15 @@ def identifiability(J, estimate, names, cov=None):
         else:
             c_max, partner = 0.0, None
         rel = float(sd[i] / abs(est[i])) if est[i] != 0 else math.inf
-        if F[i, i] <= 0 or not np.isfinite(rel) or rel >= REL_STD_WEAK:
+        limit = None if absolute_std is None else absolute_std[i]
+        if limit is not None and np.isfinite(limit):
+            if not informed[i]:
+                verdict = 'not excited'
+            elif sd[i] < limit and c_max <= CORRELATION_WEAK:
+                verdict = 'identifiable'
+            else:
+                verdict = 'weak'
+        elif not informed[i] or not np.isfinite(rel) or rel >= REL_STD_WEAK:
             verdict = 'not excited'
         elif rel < REL_STD_IDENTIFIABLE and c_max <= CORRELATION_WEAK:
             verdict = 'identifiable'

@@ -2,9 +2,9 @@
 
 A vehicle is data (coefficients with their equation, length exponent and multiplier) plus a
 model structure chosen by keys (`scaling`, `propulsion.model`, `crossflow.model`,
-`mass_inverse`). The rigid-body mass matrix and Coriolis terms, restoring forces and kinematics
-are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021, ch. 3-4), so a
-vehicle file holds only the hydrodynamic and control coefficients.
+`mass_inverse`, `dofs`). The rigid-body mass matrix and Coriolis terms, restoring forces and
+kinematics are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021,
+ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients.
 
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
 """
@@ -15,24 +15,27 @@ import numpy as np
 import yaml
 
 from .errors import ConfigError
-from .state import ANGULAR, LINEAR, N_NU, NU_NAMES, State
+from .state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
-# Factor vector z (see model.py): index of each multiplier factor.
+# Factor vector z (see model.py): index of each multiplier factor. 'U' is the speed in the
+# horizontal plane sqrt(u^2 + v^2) (m/s; the total speed of a ship, whose prime system scales
+# by it), 'thrust' the measured propeller thrust input (N; see _term_scale for its scaling).
 FACTORS = ('u', 'v', 'w', 'p', 'q', 'r', '|u|', '|v|', '|w|', '|p|', '|q|', '|r|',
-           'dr', 'ds', 'db', 'dbp', 'dbs', 'db2', 'eps')
+           'dr', 'ds', 'db', 'dbp', 'dbs', 'db2', 'eps', 'U', 'thrust')
 FACTOR_INDEX = {name: i for i, name in enumerate(FACTORS)}
 MAX_FACTORS = 5
 
-PROPULSION_MODELS = {'none': 0, 'healey_lienard': 1, 'quadratic_thrust': 2}
+PROPULSION_MODELS = {'none': 0, 'healey_lienard': 1, 'quadratic_thrust': 2,
+                     'measured_thrust': 3}
 CROSSFLOW_MODELS = {'none': 0, 'mss_classic_strip': 1}
 
 # Layout of the float parameter vector `par` handed to the compiled model.
 P_RHO, P_L, P_W, P_B, P_XG, P_YG, P_ZG, P_XB, P_YB, P_ZB = range(10)
 P_FIN, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_PROP_D = range(10, 17)
-P_CF, P_CF_N, P_CF_CY, P_CF_CZ, P_RECOMPUTE_MINV, P_U_MIN = range(17, 23)
-N_PAR = 23
+P_CF, P_CF_N, P_CF_CY, P_CF_CZ, P_RECOMPUTE_MINV, P_U_MIN, P_SPEED_FACTOR = range(17, 24)
+N_PAR = 24
 
 U_MIN = 1e-6          # m/s: |u| below this is outside the Healey-Lienard propeller's domain
 COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular (theta ~ +-90 deg)
@@ -77,6 +80,15 @@ class Vehicle:
     identify_default: list
     paper: dict = field(default_factory=dict)
     cruise_rpm: float = 500.0
+    cruise_thrust: float = 0.0   # N, the thrust input of a straight run (measured_thrust)
+    # (12,) bool, the states the vehicle's degrees of freedom move (`dofs:`); the others are
+    # held (core/planar.py). All True for a 6-DOF vehicle.
+    free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
+
+    @property
+    def held(self):
+        """Indices (int64) of the held states (empty for a 6-DOF vehicle)."""
+        return np.flatnonzero(~self.free_states).astype(np.int64)
 
     @property
     def names(self):
@@ -108,9 +120,38 @@ class Vehicle:
         return M
 
     def nondimensional_scale(self, name):
-        """(rho/2) L^k of a coefficient: its dimensional value is scale * prime value."""
+        """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
+        value is scale * prime value."""
         c = self.coefficients[self.index(name)]
-        return 0.5 * self.par[P_RHO] * self.par[P_L] ** c.k
+        return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
+
+
+def _term_scale(rho, L, k, factors, scaling):
+    """Scale of a coefficient's term: (rho/2) L^k in the prime system (SNAME 1950), 1 for a
+    dimensional file. The thrust factor is a measured force; a force is (rho/2) times lengths
+    and speeds in the prime system, so the thrust counts as T / (rho/2) there and its term's
+    scale is L^k: `X_T: [1 - t_P, X, 0, thrust]` adds (1 - t_P) T to X (t_P the thrust
+    deduction), in either scaling."""
+    if scaling != 'nondimensional':
+        return 1.0
+    scale = 0.5 * rho * L ** k
+    if FACTOR_INDEX['thrust'] in factors:
+        scale /= 0.5 * rho
+    return scale
+
+
+def _dofs(raw, where):
+    """(12,) bool of the states a vehicle's `dofs:` list moves (all six when absent)."""
+    dofs = raw.get('dofs', list(DOF_STATES))
+    if (not isinstance(dofs, list) or not dofs
+            or any(not isinstance(d, str) or d not in DOF_STATES for d in dofs)
+            or len(set(dofs)) != len(dofs)):
+        raise ConfigError(f'{where}: dofs = {dofs!r}; use a list of distinct names from '
+                          + ', '.join(DOF_STATES))
+    free = np.zeros(N_STATE, dtype=bool)
+    for d in dofs:
+        free[list(DOF_STATES[d])] = True
+    return free
 
 
 def _num(d, key, where, positive=False):
@@ -255,6 +296,7 @@ def _build(raw, path):
     par[P_XG:P_ZG + 1] = r_G
     par[P_XB:P_ZB + 1] = r_B
     par[P_FIN], par[P_NMAX], par[P_U_MIN] = fin, nmax, U_MIN
+    free = _dofs(raw, where)
 
     prop = raw.get('propulsion') or {'model': 'none'}
     pm = prop.get('model', 'none')
@@ -306,8 +348,13 @@ def _build(raw, path):
         if not isinstance(k, int) or not 0 <= k <= 6:
             raise ConfigError(f'{cw}: k = {k!r} must be an integer 0..6')
         facs = _parse_multiplier(mult, cw)
-        scale = 0.5 * rho * L ** k if scaling == 'nondimensional' else 1.0
         am_col = facs[1] if facs[0] == 'dot' else -1
+        scale = _term_scale(rho, L, k, facs if am_col < 0 else (), scaling)
+        if am_col >= 0 and not (free[EQUATIONS.index(eq)] and free[am_col]):
+            raise ConfigError(f'{cw}: added mass of a held degree of freedom (dofs: '
+                              f'{raw.get("dofs")}); leave it out')
+        if am_col < 0 and FACTOR_INDEX['U'] in facs:
+            par[P_SPEED_FACTOR] = 1.0
         coefs.append(Coefficient(str(name), value, EQUATIONS.index(eq), k,
                                  facs if am_col < 0 else (), scale, am_col))
 
@@ -326,8 +373,19 @@ def _build(raw, path):
         terms_s.append(const)
 
     M_RB = rigid_body_mass_matrix(mass, r_G, I)
+    # A held degree of freedom: its acceleration is zero and the constraint takes whatever
+    # force its equation needs, so the free accelerations solve M_ff nu_f_dot = F_f alone.
+    # Identity rows and columns for the held ones make M^-1 = blockdiag(M_ff^-1, I) in every
+    # code path that inverts M (the held rows of f are zeroed afterwards, core/planar.py).
+    held_nu = ~free[:N_NU]
+    M_RB[held_nu, :] = 0.0
+    M_RB[:, held_nu] = 0.0
+    M_RB[held_nu, held_nu] = 1.0
     mass_inverse = raw.get('mass_inverse', 'exact')
     Minv_literal = None
+    if mass_inverse == 'mss_literal' and not free.all():
+        raise ConfigError(f'{where}: mass_inverse: mss_literal is a 6-DOF inverse; a vehicle '
+                          'with dofs needs exact')
     if mass_inverse == 'mss_literal':
         try:
             Minv_literal = np.array(raw['mss_inverse'], dtype=float)
@@ -347,7 +405,9 @@ def _build(raw, path):
         am_i=np.array(am_i, dtype=np.int64).reshape(-1, 3), am_s=np.array(am_s, dtype=float),
         M_RB=M_RB, Minv_literal=Minv_literal, mass_inverse=mass_inverse,
         identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
-        cruise_rpm=float(raw.get('cruise_rpm', 500.0)))
+        cruise_rpm=float(raw.get('cruise_rpm', 500.0)),
+        cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
+        free_states=free)
     M = v.mass_matrix()
     if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):
         raise ConfigError(f'{where}: M_RB + M_A is not symmetric (check added-mass pairs)')

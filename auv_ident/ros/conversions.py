@@ -8,8 +8,9 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from auv_ident.session.messages import (_as_vector, ConversionError, JOINT_NAMES, NS_PER_S,
-                                        odometry_fields, RPM_TO_RAD_S, sec_to_ns)
+from auv_ident.session.messages import (actuator_joint_fields, ConversionError,
+                                        JOINT_NAMES, NS_PER_S,
+                                        odometry_fields, sec_to_ns)
 
 
 def ns_to_stamp(t_ns):
@@ -70,16 +71,14 @@ def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
 def actuators_to_joint_state(t_sec, u6):
     """Return a sensor_msgs/JointState for actuator vector ``u6`` at time ``t_sec`` (s).
 
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]`` (rad, rpm).
+    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N).
     """
-    u = _as_vector(u6, 6, 'u6')
     msg = JointState()
     msg.header.stamp = sec_to_stamp(t_sec)
     msg.name = list(JOINT_NAMES)
-    msg.position = [float(v) for v in u[:5]] + [0.0]
-    msg.velocity = [0.0] * 5 + [float(u[5]) * RPM_TO_RAD_S]
-    # zeros, not []: rclpy/Fast-CDR pads a message that ends with an empty float64 sequence
-    # and rosbags' strict reader then refuses every recorded command (ros_stack.md section 3)
-    msg.effort = [0.0] * len(msg.name)
+    # effort holds the thrust and zeros, never []: rclpy/Fast-CDR pads a message that ends
+    # with an empty float64 sequence and rosbags' strict reader then refuses every recorded
+    # command (ros_stack.md section 3)
+    msg.position, msg.velocity, msg.effort = actuator_joint_fields(u6)
     return msg
 

@@ -10,7 +10,8 @@ is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed 
     ``actuators`` sensor_msgs/JointState: commands (conversions.py layout). Created before
         ``odom``, so when both are waiting the executor takes the command first.
     ``odom`` nav_msgs/Odometry: measured state, in the convention of ``frame``; the message
-        covariances are ignored (``noise_std`` is the noise model).
+        covariances are the measurement noise (``noise_source`` 'message', the default) or
+        ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
 
 Publications
     ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good in
@@ -22,7 +23,13 @@ Publications
     ``~/covariance`` std_msgs/Float64MultiArray, with each estimate: layout.dim[0] = label
         'row:' + comma-joined names, size p, stride p*p; dim[1] = 'col:' + names, size p,
         stride p; data = the p x p covariance, row-major.
-    Both RELIABLE + TRANSIENT_LOCAL, depth 1: a late subscriber gets the latest estimate at
+    ``~/current`` geometry_msgs/TwistWithCovarianceStamped, with each estimate when the water
+        current is estimated (parameter ``current`` 'estimate'): header.frame_id = the world
+        frame ('odom_ned' for frame ned, 'odom' for enu), twist.linear = the current where the
+        water goes (NED: north, east, down; ENU: east, north, up; m/s), covariance row-major
+        6x6 with the current's covariance in the linear block; a component not estimated
+        (down, unless current_down) is 0 with variance 0; angular 0 (irrotational).
+    All three RELIABLE + TRANSIENT_LOCAL, depth 1: a late subscriber gets the latest estimate at
     once. Depth 1 keeps only the latest: a slow reader can miss intermediate estimates (the
     count of updates is in /diagnostics; replay_bag gives every one).
     ``/diagnostics`` diagnostic_msgs/DiagnosticArray, every 1 s (steady clock) and at once on a
@@ -99,6 +106,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -112,12 +120,12 @@ from std_srvs.srv import Trigger
 from auv_ident.core.ekf import MODES
 from auv_ident.core.filter import DEFAULT_Q_STATE
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import STATE_NAMES
+from auv_ident.core.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (declare_parameters, DIAGNOSTICS_QOS, LATCHED_QOS,
                                    optional_list, Param, run_node, spin, STREAM_QOS)
 from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.session.messages import NS_PER_S
+from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S
 from auv_ident.session.session import Event, IdentSession
 from auv_ident.session.warning_limiter import WarningLimiter
 
@@ -225,6 +233,15 @@ class IdentifierNode(Node):
                                                     LATCHED_QOS)
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                      DIAGNOSTICS_QOS)
+        # the water current, when estimated: ~/current (module docstring, docs/current.md)
+        self._current_index = [self.names.index(n) if n in self.names else -1
+                               for n in CURRENT_NAMES]
+        self.pub_current = None
+        if any(i >= 0 for i in self._current_index):
+            self._current = TwistWithCovarianceStamped()
+            self._current.header.frame_id = DEFAULT_FRAME_IDS[self.session.frame][0]
+            self.pub_current = self.create_publisher(TwistWithCovarianceStamped, '~/current',
+                                                     LATCHED_QOS)
         self.sub_actuators = self.create_subscription(JointState, 'actuators',
                                                       self.on_actuators, STREAM_QOS)
         # raw: the odometry is read from its CDR bytes into one reused view (ros/cdr.py)
@@ -338,6 +355,36 @@ class IdentifierNode(Node):
         self.pub_estimate.publish(est)
         self._covariance.data = array('d', np.ascontiguousarray(cov, dtype=float).tobytes())
         self.pub_covariance.publish(self._covariance)
+        if self.pub_current is not None:
+            self.publish_current(est.header.stamp, estimate, cov)
+
+    def publish_current(self, stamp, estimate, cov):
+        """~/current: the estimated water current in the world frame of ``frame`` (NED north,
+        east, down; ENU east, north, up), twist.linear, with its covariance in the linear block
+        (row-major 6x6; the angular part is 0 with covariance 0: the current model is
+        irrotational, Fossen 2021 sec. 10.3). A component that is not estimated (down, by default) is 0 with variance 0:
+        it is given, not measured."""
+        ned = np.zeros(3)
+        C = np.zeros((3, 3))
+        for a, i in enumerate(self._current_index):
+            if i < 0:
+                continue
+            ned[a] = estimate[i]
+            for b, j in enumerate(self._current_index):
+                if j >= 0:
+                    C[a, b] = cov[i, j]
+        if self.session.frame == 'enu':       # NED -> ENU: (E, N, -D), a signed permutation
+            perm, sign = [1, 0, 2], np.array([1.0, 1.0, -1.0])
+            ned = ned[perm] * sign
+            C = C[np.ix_(perm, perm)] * np.outer(sign, sign)
+        msg = self._current
+        msg.header.stamp = stamp
+        lin = msg.twist.twist.linear
+        lin.x, lin.y, lin.z = (float(v) for v in ned)
+        full = np.zeros((6, 6))
+        full[:3, :3] = C
+        msg.twist.covariance = array('d', full.ravel().tobytes())
+        self.pub_current.publish(msg)
 
     # -- diagnostics --
 
@@ -369,8 +416,13 @@ class IdentifierNode(Node):
                   ('last_nis', num(s.last_nis)), ('last_dof', str(s.last_dof)),
                   ('last_stamp', 'n/a' if s.last_good is None
                    else num(s.last_good.stamp_ns * 1e-9))]
+        verdicts, diagnosis = s.diagnosis(h)
+        values += [('consistent', {True: 'true', False: 'false', None: 'not judged'}[
+            diagnosis['consistent']]), ('diagnosis', diagnosis['messages'][0])]
+        values += [(f'diagnosis_{i}', m) for i, m in enumerate(diagnosis['messages'][1:], 1)]
         for name, v, sd in zip(self.names, est, std):
-            values += [(name, num(v)), (name + '_std', num(sd))]
+            values += [(name, num(v)), (name + '_std', num(sd)),
+                       (name + '_verdict', verdicts[name]['verdict'])]
         values += [('R_' + n, num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
         values += [('Q_' + n, num(v)) for n, v in zip(self.names, np.diag(f.Q)[12:])]
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,

@@ -24,7 +24,7 @@ def sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=0):
     t = float(run.t[k])
     t_ns = int(epoch_ns) + sec_to_ns(t)
     pose_cov, twist_cov = noise_covariances(run.noise_std)
-    joints = actuators_to_joint_state(t, run.u[k])     # effort zeros, as the bag's messages
+    joints = actuators_to_joint_state(t, run.u[k])     # effort: the thrust, as in the bags
     # the command first: a replay in log-time order then pairs the first odometry with it
     out = [(ACTUATOR_TOPIC, t_ns, joints),
            (ODOM_TOPIC, t_ns, state_to_odometry(t, run.y[k], frame, pose_cov, twist_cov))]

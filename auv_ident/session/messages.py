@@ -15,8 +15,9 @@ State vector ``x12 = [u v w p q r x y z phi theta psi]``:
   NED is ``R = Rz(psi) Ry(theta) Rx(phi)``. Angles leaving this module are canonical:
   ``phi, psi`` in (-pi, pi], ``theta`` in [-pi/2, pi/2].
 
-Actuator vector ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm]``: rudder, stern
-planes, bow planes, port bow plane, starboard bow plane (rad) and propeller speed (rpm).
+Actuator vector ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]``
+(core.state.Input; the name predates the thrust): rudder, stern planes, bow planes, port bow
+plane, starboard bow plane (rad), propeller speed (rpm) and measured propeller thrust (N).
 
 nav_msgs/Odometry (REP-105 semantics):
 
@@ -45,8 +46,11 @@ permutations, so the transforms are exact and their own inverses (T^-1 = T^T).
 
 JointState layout for actuator commands: ``name = JOINT_NAMES``; ``position`` = fin angles (rad),
 propeller entry 0.0 (meaningless); ``velocity = [0, 0, 0, 0, 0, shaft speed (rad/s)]``;
-``effort`` zeros (an empty last float64 sequence makes rclpy's padding unreadable for rosbags'
-strict reader). Readers match joints by name, in any order.
+``effort = [0, 0, 0, 0, 0, measured thrust (N)]`` (never empty: an empty last float64 sequence
+makes rclpy's padding unreadable for rosbags' strict reader; an AUV's commands carry thrust 0).
+Readers match joints by name, in any order; a message without effort values reads as thrust 0
+(bags recorded before the thrust existed). :func:`actuator_joint_fields` is the one place
+both writers (ros/conversions.py, bags/sim_bag.py) take the layout from.
 
 Non-finite values pass through unchanged: the caller decides (see :func:`is_finite_state`).
 Bad input raises :class:`ConversionError` naming the field.
@@ -453,6 +457,7 @@ def joint_state_to_actuators(msg):
         names = list(msg.name)
         position = np.asarray(msg.position, dtype=float)
         velocity = np.asarray(msg.velocity, dtype=float)
+        effort = np.asarray(getattr(msg, 'effort', ()), dtype=float)
         stamp = msg.header.stamp
     except AttributeError as exc:
         raise ConversionError(f'not a sensor_msgs/JointState: {exc}') from None
@@ -463,6 +468,10 @@ def joint_state_to_actuators(msg):
         raise ConversionError(
             f'JointState.velocity has {len(velocity)} entries for {len(names)} names '
             f'(the {PROPELLER_JOINT!r} shaft speed is read from velocity)')
+    if len(effort) not in (0, len(names)):
+        raise ConversionError(
+            f'JointState.effort has {len(effort)} entries for {len(names)} names '
+            f'(the {PROPELLER_JOINT!r} thrust is read from effort)')
     index = {}
     for i, name in enumerate(names):
         if name in index:
@@ -476,4 +485,17 @@ def joint_state_to_actuators(msg):
     for k, name in enumerate(JOINT_NAMES[FINS]):
         u6[k] = position[index[name]]
     u6[Input.N_RPM] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
+    u6[Input.THRUST] = effort[index[PROPELLER_JOINT]] if len(effort) else 0.0
     return stamp_to_sec(stamp), u6
+
+
+def actuator_joint_fields(u6):
+    """(position, velocity, effort) lists of floats of the actuator JointState of u6 (7,)
+    (module docstring: fins in position, shaft speed in rad/s in velocity, thrust in effort).
+    Raises ConversionError for a vector of another length."""
+    u = _as_vector(u6, N_INPUT, 'u6')
+    n = len(JOINT_NAMES)
+    position = [float(v) for v in u[FINS]] + [0.0]
+    velocity = [0.0] * (n - 1) + [float(u[Input.N_RPM]) * RPM_TO_RAD_S]
+    effort = [0.0] * (n - 1) + [float(u[Input.THRUST])]
+    return position, velocity, effort

@@ -128,7 +128,8 @@ def implausible_states(x12, channels):
 def command_problem(u6, t, fin_limit, shaft_limit):
     """(code, text) if an actuator command breaks the rules, else None.
 
-    u6 : list of 6 floats, fins (rad) and shaft speed (rpm); t : its stamp (s), for the text
+    u6 : list of 7 floats, fins (rad), shaft speed (rpm), thrust (N); t : its stamp (s), for
+        the text (a non-finite thrust is a non-finite command too)
     fin_limit (rad), shaft_limit (rpm) : the vehicle's limits
     """
     if not all(map(math.isfinite, u6)):

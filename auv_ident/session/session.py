@@ -43,6 +43,7 @@ from auv_ident.session.guard import (COV_BLOWUP_FACTOR, Event, GUARD_FACTOR, GUA
                                      GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
                                      GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
                                      LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
+from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (_as_vector, ConversionError, joint_state_to_actuators,
                                         NS_PER_S, odometry_state, odometry_variances,
                                         stamp_to_ns)
@@ -140,6 +141,9 @@ class IdentSession:
         initial_offset = relative_offset('initial_offset', initial_offset)
         noise, qs, mask = noise_model(noise_std, q_state, measured, DEFAULT_NOISE_STD,
                                       DEFAULT_Q_STATE)
+        # a planar vehicle's held states are not measurements (core/planar.py): their fields
+        # are neither read nor screened, whatever an odometry message holds there
+        mask = mask & self.vehicle.free_states
         warm = load_estimate_json(warm_start) if warm_start else None
         canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
                                                       warm_start, warm)
@@ -271,6 +275,7 @@ class IdentSession:
             x0 = initial_state(self.model, rpm)
             u0 = np.zeros(N_INPUT)
             u0[Input.N_RPM] = rpm
+            u0[Input.THRUST] = self.vehicle.cruise_thrust     # the trim's (0 for an AUV)
             s.add_command(0.0, u0)
             for k in range(3):
                 s.add_measurement(k * self.T, np.where(self.measured, x0, np.nan))
@@ -310,7 +315,8 @@ class IdentSession:
         """Buffer an actuator command. Returns an Event.
 
         stamp_ns : int, header stamp (ns)
-        u6 : (6,) fins (rad) and shaft speed (rpm), core/state.py ``Input`` order; copied
+        u6 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/state.py ``Input``
+            order; copied
         """
         try:
             stamp_ns = _integer_stamp(stamp_ns)
@@ -426,7 +432,7 @@ class IdentSession:
         self._R_filter, self._R_now = f, r
 
     def _command(self, stamp_ns, u6):
-        """add_command after reading: stamp_ns int, u6 a (6,) float array of our own."""
+        """add_command after reading: stamp_ns int, u6 a (7,) float array of our own."""
         zero = self._zero_stamp('actuators', stamp_ns)
         if zero is not None:
             return zero
@@ -583,6 +589,15 @@ class IdentSession:
         est, cov = self.current()
         return judge_health(self._nis_window, self.guard_inconsistent(), self._since_error,
                             self.started, est, cov)
+
+    def diagnosis(self, health=None):
+        """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
+        identified parameter its verdict from the best estimate's covariance against the
+        prior, and {'consistent': True | False | None, 'messages': [...]}."""
+        est, cov = self.best()
+        prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
+        verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
+        return verdicts, live_diagnosis(self.health() if health is None else health, verdicts)
 
 
 def _has_cholesky(P):

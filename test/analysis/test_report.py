@@ -17,8 +17,10 @@ from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.report import make_report, validate
 from independent_data import DataConfig, generate
 
-FIGURES = ('convergence', 'validation_positions', 'validation_attitudes', 'validation_speeds',
-           'nis', 'adapted_noise')
+FIGURES = ('convergence', 'measured_speeds', 'measured_pose', 'validation_positions',
+           'validation_attitudes', 'validation_speeds', 'nis', 'adapted_noise',
+           'innovation_autocorrelation')
+TRUE_MODEL_FIGURES = ('validation_positions', 'validation_attitudes', 'validation_speeds')
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 SEED = 3
 
@@ -97,17 +99,36 @@ def test_report_tables_hold_the_result_json_numbers(report):
         for col, key in ekf_cols.items():
             assert _same(ekf[n][col], c[key]), (n, col, ekf[n][col], c[key])
         assert c['truth'] is not None and abs(c['error_pct']) < 20
-    rms = _rows(md, 'channel')
+    rms = _rows(md[md.index('## Validation on a held-out manoeuvre'):], 'channel')
     assert list(rms) == list(STATE_NAMES)
+    vd = doc['validation_true_model']
     for ch in STATE_NAMES:
-        assert _same(rms[ch]['RMS difference'], doc['validation']['rms'][ch])
-        assert rms[ch]['unit'] == doc['validation']['rms_units'][ch]
+        assert _same(rms[ch]['RMS difference'], vd['rms'][ch])
+        assert rms[ch]['unit'] == vd['rms_units'][ch]
     assert f'{doc["mean_nis_per_dof"]:.3f}' in md and '`pytest`' in md
+
+
+def test_the_diagnosis_comes_first_and_the_noise_model_is_reported(report):
+    _, doc, md = report
+    d = doc['diagnosis']
+    lines = md.splitlines()
+    assert lines[2] == f'**{d["messages"][0]}**'       # right under the title
+    assert d['consistent'] is True                      # white noise at the configured level
+    nm = _rows(md, 'measured channel')
+    assert list(nm) == list(STATE_NAMES)
+    for ch, row in nm.items():
+        c = doc['noise_model']['channels'][ch]
+        assert _same(row['level'], c['level']) and _same(row['AR(1)'], c['ar1'])
+        assert 0.8 < c['level'] < 1.2 and len(c['acf']) == 21 and c['acf'][0] == 1.0
+    ident = _rows(md, 'parameter')
+    assert set(ident) == set(doc['identifiability'])
+    for n, row in ident.items():
+        assert row['verdict'] == doc['identifiability'][n]['verdict']
 
 
 def test_validation_uses_a_held_out_manoeuvre_and_its_own_seed(report):
     _, doc, md = report
-    vd = doc['validation']
+    vd = doc['validation_true_model']
     assert doc['maneuver'] == 'ident' and vd['maneuver'] == 'steps'
     assert vd['seed'] == SEED + 1000 and f'seed {SEED + 1000}' in md
     src = load_source('nps_auv2', 'ident', seed=SEED, duration=40.0)
@@ -145,28 +166,53 @@ def test_validating_on_the_identification_manoeuvre_is_refused(nps, tmp_path):
     assert not os.listdir(tmp_path)
 
 
-def test_unknown_truth_validates_against_the_vehicle_file_prior(tmp_path):
+def test_unknown_truth_validates_on_held_out_measurements_against_the_prior(tmp_path):
     """A bag whose metadata claims no simulated truth (the independent generator's: wall-clock
     stamps, no auv_ident custom_data) goes through the real bag path (bag_source: replay, exact
-    hold) and is validated against the vehicle file's prior model."""
-    data = generate(DataConfig(seed=5, duration=30.0, odom_rate=20.0), tmp_path / 'gen')
+    hold), is identified on its first 75 % and validated on the measurements of the final 25 %,
+    the identified model against the vehicle file's prior; no true-model validation."""
+    data = generate(DataConfig(seed=5, duration=40.0, odom_rate=20.0), tmp_path / 'gen')
     meta = yaml.safe_load((data.bag / 'metadata.yaml').read_text())
     assert not meta['rosbag2_bagfile_information'].get('custom_data')
-    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), validation_duration=40.0,
-                    progress=False)
+    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), progress=False)
     doc = r['result']
-    assert doc['source'] == f'bag {data.bag} ({len(data.odom_stamp_ns)} samples)'
-    assert doc['seed'] is None and doc['validation']['seed'] == 1000
+    n = len(data.odom_stamp_ns)
+    # every sample is used (but the first, when its command arrived after it)
+    assert any(doc['source'].startswith(f'first 75 % of bag {data.bag} ({k} samples)')
+               for k in (n - 1, n))
+    assert doc['seed'] is None and doc['validation_true_model'] is None
     assert all(c['truth'] is None and c['error_pct'] is None
                for c in doc['coefficients'].values())
-    assert doc['validation']['reference'].startswith("vehicle file's prior")
-    assert doc['validation']['error'] is None
-    assert set(r['figures']) == set(FIGURES)
-    # the identification ran on the bag's data: near the generator's truth (the file values)
+    vd = doc['validation']
+    assert vd['models'] == ['identified', 'prior'] and vd['holdout_fraction'] == 0.25
+    assert vd['source'].startswith('final 25 % (held out) of bag')
+    # identification stopped where validation starts: 30 s of the 40
+    assert doc['duration_s'] < 30.0 <= vd['t0_s'] and vd['duration_s'] > 9.0
+    assert abs(vd['samples'] - n / 4) <= 2
+    assert set(vd['channels']) == set(STATE_NAMES)
+    # the bag's truth is the file: prior and identified model both follow the measurements
+    assert vd['mean_fit_percent_nu']['prior'] > 30 and vd['mean_fit_percent_nu']['identified'] > 30
+    assert set(r['figures']) == set(FIGURES) - set(TRUE_MODEL_FIGURES)
     truth = json.loads(data.truth_json.read_text())['coefficients']
-    for n, c in doc['coefficients'].items():
-        assert abs(c['estimate'] - truth[n]) < 0.2 * abs(truth[n]), (n, c['estimate'], truth[n])
+    for name, c in doc['coefficients'].items():
+        assert abs(c['estimate'] - truth[name]) < 0.2 * abs(truth[name]), (name, c, truth[name])
     with open(r['report'], encoding='utf-8') as fh:
         md = fh.read()
-    assert "the 'true' model below is the vehicle file's prior model" in md
+    assert '## Validation against measurements' in md and 'against the true model' not in md
     assert all(row['truth'] == '-' for row in _rows(md, 'coefficient').values())
+
+
+def test_report_with_methods_side_by_side(tmp_path):
+    """--methods: the standard methods on the same data and held-out run, in result.json and a
+    report section before the figures."""
+    r = make_report(str(tmp_path), vehicle='nps_auv2', simulate_maneuver='ident', seed=SEED,
+                    duration=60.0, validation_duration=20.0, progress=False,
+                    methods=['ekf', 'equation_error'])
+    doc = r['result']
+    assert list(doc['methods']) == ['ekf', 'equation_error']
+    for m in doc['methods'].values():
+        assert set(m['coefficients']) == set(doc['coefficients'])
+        assert m['wall_s'] >= 0 and m['fit_percent']
+    md = open(r['report'], encoding='utf-8').read()
+    assert md.index('## Methods side by side') < md.index('## Figures')
+    assert '| ekf |' in md and '| equation_error |' in md

@@ -51,7 +51,7 @@ def _expected_messages():
         cov = rng.normal(size=(6, 6))
         odom = rc.state_to_odometry(t, x, 'ned', pose_cov=cov @ cov.T, twist_cov=np.eye(6))
         odom.header.stamp = rc.ns_to_stamp(t_ns)
-        joints = rc.actuators_to_joint_state(t, rng.normal(size=6))
+        joints = rc.actuators_to_joint_state(t, rng.normal(size=7))
         joints.effort = []      # what other writers send: the Fast-CDR padding pitfall
         joints.header.stamp = rc.ns_to_stamp(t_ns)
         clock = Clock(clock=rc.ns_to_stamp(t_ns))

@@ -349,7 +349,7 @@ def test_own_kinematics_match_the_model_rows():
         x = np.concatenate([[rng.uniform(0.3, 1.5)], rng.normal(0, 0.1, 5),
                             rng.normal(0, 10, 3), rng.uniform(-0.5, 0.5, 2),
                             [rng.uniform(-3, 3)]])
-        dyn.u[:] = [*rng.uniform(-0.3, 0.3, 5), 500.0]
+        dyn.u[:] = [*rng.uniform(-0.3, 0.3, 5), 500.0, 0.0]
         mine = dyn(0.0, x)
         ref = model.f(x, dyn.u)
         np.testing.assert_allclose(mine, ref, rtol=1e-12, atol=1e-14)

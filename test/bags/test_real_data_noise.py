@@ -89,3 +89,21 @@ def test_the_other_vehicles_get_honest_bars_on_coloured_noise(tmp_path, vehicle,
     for which, std in (('estimate', 'std'), ('ekf_estimate', 'ekf_std')):
         z, err = _z_and_err(doc, data.truth_json, which, std)
         assert np.all(z < 3.0) and np.all(err < 3.0), (which, z, err)
+
+
+def test_noise_far_above_the_configured_level_does_not_stop_the_identification(tmp_path):
+    """3x the documented level, AR(1) 1 s, not told: the EKF with the configured noise leaves
+    the model's domain 3.5 s in (an over-confident filter chases the noise into a negative
+    surge speed); the noise model is read off a pass with more noise instead, and the result
+    says so rather than ending in an error."""
+    cfg = DataConfig(seed=1, duration=10.0, odom_rate=20.0, commands='periodic',
+                     command_rate=20.0, noise='ar1', noise_level=3.0, noise_tau=1.0)
+    data = generate(cfg, tmp_path / 'loud')
+    doc, table = identify_bag(data.bag, vehicle='nps_auv2', coefficients=PAPER_SET)
+    notes = doc['noise_model']['notes']
+    assert doc['noise_model']['used']
+    assert notes[0].startswith('the EKF with the configured noise failed (EKF stopped at')
+    assert 'a pass with 3x the configured noise' in notes[0]
+    assert notes[0] in table
+    assert all(np.isfinite(c['estimate']) and c['std'] > 0
+               for c in doc['coefficients'].values())

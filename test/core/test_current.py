@@ -25,7 +25,7 @@ def _states(rng, n):
         x = np.concatenate([[rng.uniform(0.5, 2.0)], rng.normal(0, 0.1, 2),
                             rng.normal(0, 0.05, 3), rng.normal(0, 10, 3),
                             rng.uniform(-0.5, 0.5, 2), rng.uniform(-3, 3, 1)])
-        ui = np.concatenate([rng.uniform(-0.3, 0.3, 5), [rng.uniform(300, 1400)]])
+        ui = np.concatenate([rng.uniform(-0.3, 0.3, 5), [rng.uniform(300, 1400)], [0.0]])
         yield x, ui, rng.normal(0.0, 0.2, 3)
 
 

@@ -97,7 +97,7 @@ def test_rk4_transition_jacobian_matches_finite_differences(name):
     rng = np.random.default_rng(3)
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
                          m.theta_true * 1.2])
-    ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0])
+    ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0, 30.0])
     n = len(xa)
     x1, Fa = np.empty(n), np.empty((n, n))
     assert K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == K.OK
@@ -143,7 +143,7 @@ def test_predict_is_F_P_Ft_plus_Q():
     xa = np.concatenate([[1.0, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0], m.theta_true])
     P = _spd(n, rng) * 1e-4
     Q = np.diag(rng.uniform(1e-8, 1e-6, n))
-    ui = np.array([0.1, 0.1, 0, 0, 0, 500.0])
+    ui = np.array([0.1, 0.1, 0, 0, 0, 500.0, 0.0])
     x1, Fa = np.empty(n), np.empty((n, n))
     K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa)
     xo, Po = np.empty(n), np.empty((n, n))

@@ -10,25 +10,34 @@ from auv_ident.vehicles import available_vehicles, load_vehicle
 
 
 def _factors(rng):
-    """zz = [z, dz/dx] as the model builds it: dz/dx is 1 for u..r, sign for |u|..|r|, 0 for
-    the fins and their sums, and the propeller's d eps/du for eps."""
+    """zz = [z, dz/dx, dU/dv] as the model builds it: dz/dx is 1 for u..r, sign for |u|..|r|,
+    0 for the fins and their sums and the thrust, the propeller's d eps/du for eps, and u/U
+    (v/U last) for the speed U."""
     x = rng.uniform(-2.0, 2.0, 6)
     fins = rng.uniform(-0.3, 0.3, 5)
-    z = np.concatenate([x, np.abs(x), fins, [fins[3] + fins[4]], [rng.uniform(-1.0, 1.0)]])
-    dz = np.concatenate([np.ones(6), np.sign(x), np.zeros(6), [rng.uniform(-3.0, 3.0)]])
-    return np.concatenate([z, dz])
+    U = np.hypot(x[0], x[1])
+    z = np.concatenate([x, np.abs(x), fins, [fins[3] + fins[4]], [rng.uniform(-1.0, 1.0)],
+                        [U, rng.uniform(10.0, 50.0)]])
+    dz = np.concatenate([np.ones(6), np.sign(x), np.zeros(6), [rng.uniform(-3.0, 3.0)],
+                         [x[0] / U, 0.0]])
+    return np.concatenate([z, dz, [x[1] / U]])
 
 
 def _by_the_table(v, c, zz):
     """F's monomial part, dF/dx and dF/dc read term by term from the table, in Python."""
-    z, dz = zz[:NZ], zz[NZ:]
+    z, dz = zz[:NZ], zz[NZ:2 * NZ]
     xdot, A, dprod = np.zeros(12), np.zeros((12, 12)), np.zeros(len(c))
     for (eq, ci, *fs), s in zip(v.terms_i, v.terms_s):
         fs = [f for f in fs if f >= 0]
         k = s * (c[ci] if ci >= 0 else 1.0)
         xdot[eq] += k * np.prod(z[fs])
         for j, f in enumerate(fs):
-            A[eq, f % 6] += k * np.prod(np.delete(z[fs], j)) * dz[f]
+            rest = k * np.prod(np.delete(z[fs], j))
+            if f == monomials.Z_SPEED:          # U = sqrt(u^2 + v^2): columns u and v
+                A[eq, 0] += rest * dz[f]
+                A[eq, 1] += rest * zz[monomials.ZZ_DU_DV]
+            elif f < monomials.Z_EPS or f == monomials.Z_EPS:
+                A[eq, f % 6] += rest * dz[f]
         if ci >= 0:
             dprod[ci] = s * np.prod(z[fs])
     return xdot, A, dprod

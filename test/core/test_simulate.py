@@ -42,8 +42,10 @@ def test_nps_trims_to_about_0p6_m_s_at_500_rpm_from_a_long_run():
     assert abs(run.x[-1, 0] - trim_speed(m, 500.0)) < 0.01
 
 
-@pytest.mark.parametrize('name', available_vehicles())
+@pytest.mark.parametrize('name', [n for n in available_vehicles()
+                                  if load_vehicle(n).free_states.all()])
 def test_long_zigzag_stays_finite_and_bounded(name):
+    # (the AUVs: a ship at constant thrust in 20 s rudder holds slows far more, test_planar)
     m = Model(load_vehicle(name))
     run = simulate(m, 'zigzag', duration=600.0, seed=3)
     assert np.all(np.isfinite(run.x))

@@ -31,7 +31,7 @@ GAP = (60.0, 2.0)   # s, start and length of the gap
 
 
 def _record(path, seed, jitter=False, drop=0.0, gap=None):
-    """(t (N,), Y (N, 12), U (N, 6), X (N, 12) true states) of a run sampled at stamps on the
+    """(t (N,), Y (N, 12), U (N, 7), X (N, 12) true states) of a run sampled at stamps on the
     fine grid: nominally every T, moved by one fine step (+-10 % of T) with `jitter`, a fraction
     `drop` of the samples and those in the gap (start, length) left out."""
     rng = np.random.default_rng(seed)
@@ -194,7 +194,7 @@ def test_refine_uses_the_stamps(records):
 def test_bad_sample_times_are_one_clear_error(t, needle):
     f = AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), T)
     Y = np.tile(np.r_[0.6, np.zeros(7), 10.0, 0.0, 0.0, 0.0], (4, 1))
-    U = np.tile(np.r_[np.zeros(5), 500.0], (4, 1))
+    U = np.tile(np.r_[np.zeros(5), 500.0, 0.0], (4, 1))
     with pytest.raises(DataError, match=needle):
         run_ekf(f, t, Y, U)
 

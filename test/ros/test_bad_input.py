@@ -150,7 +150,8 @@ def _nonfinite_commands(run):
 
 
 def _nonfinite_unused_fields(run):
-    """NaN/Inf where nothing is read (the propeller 'position', fin velocities, effort) or
+    """NaN/Inf where nothing is read (the propeller 'position', fin velocities, the fins'
+    effort: the propeller's carries the thrust) or
     where a value only replaces a default (a covariance diagonal: noise_std is used for that
     channel, with one notice per channel): nothing rejected."""
     def bad(k):
@@ -168,7 +169,7 @@ def _nonfinite_unused_fields(run):
         vel = list(js.velocity)
         vel[k % 5] = math.inf
         js.velocity = vel
-        js.effort = [math.nan] * 6
+        js.effort = [math.nan] * 5 + [js.effort[5]]
         return msgs
     return _with_segment(run, bad)
 

@@ -288,32 +288,39 @@ def test_odometry_errors():
 
 
 def test_joint_state_layout_and_round_trip():
-    u6 = np.array([0.1, -0.2, 0.05, -0.03, 0.04, 1200.0])
+    u6 = np.array([0.1, -0.2, 0.05, -0.03, 0.04, 1200.0, 41.25])
     msg = rc.actuators_to_joint_state(3.25, u6)
     assert list(msg.name) == ['rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                               'bow_plane_starboard', 'propeller']
     assert list(msg.position) == [0.1, -0.2, 0.05, -0.03, 0.04, 0.0]
     assert list(msg.velocity)[:5] == [0.0] * 5
     assert math.isclose(msg.velocity[5], 1200.0 * 2 * math.pi / 60, rel_tol=1e-15)
-    assert list(msg.effort) == [0.0] * 6      # not empty: rosbags must read it strictly
+    # the thrust on the propeller joint (N), zeros elsewhere: never empty, rosbags must read it
+    # strictly
+    assert list(msg.effort) == [0.0] * 5 + [41.25]
     t, u2 = sm.joint_state_to_actuators(msg)
     assert t == 3.25
     np.testing.assert_allclose(u2, u6, rtol=1e-14, atol=0)
 
 
 def test_joint_state_matches_by_name_in_any_order():
-    msg = rc.actuators_to_joint_state(0.0, [1, 2, 3, 4, 5, 600])
+    msg = rc.actuators_to_joint_state(0.0, [1, 2, 3, 4, 5, 600, 30])
     order = [5, 2, 0, 4, 1, 3]
     shuffled = JointState(name=[msg.name[i] for i in order] + ['extra_joint'],
                           position=[msg.position[i] for i in order] + [9.0],
-                          velocity=[msg.velocity[i] for i in order] + [9.0])
+                          velocity=[msg.velocity[i] for i in order] + [9.0],
+                          effort=[msg.effort[i] for i in order] + [9.0])
     shuffled.header = msg.header
     _, u = sm.joint_state_to_actuators(shuffled)
-    np.testing.assert_allclose(u, [1, 2, 3, 4, 5, 600], rtol=1e-14)
+    np.testing.assert_allclose(u, [1, 2, 3, 4, 5, 600, 30], rtol=1e-14)
+    # a message without effort (recorded before the thrust existed) reads as thrust 0
+    shuffled.effort = []
+    _, u = sm.joint_state_to_actuators(shuffled)
+    np.testing.assert_allclose(u, [1, 2, 3, 4, 5, 600, 0], rtol=1e-14)
 
 
 def test_joint_state_errors():
-    good = rc.actuators_to_joint_state(0.0, np.zeros(6))
+    good = rc.actuators_to_joint_state(0.0, np.zeros(7))
     missing = JointState(name=list(good.name[:4]) + ['propeller'], position=[0.0] * 5,
                          velocity=[0.0] * 5)
     with pytest.raises(ConversionError, match='bow_plane_starboard'):
@@ -328,8 +335,12 @@ def test_joint_state_errors():
                        velocity=[0.0] * 7)
     with pytest.raises(ConversionError, match='rudder'):
         sm.joint_state_to_actuators(twice)
+    short_effort = JointState(name=list(good.name), position=[0.0] * 6, velocity=[0.0] * 6,
+                              effort=[0.0] * 5)
+    with pytest.raises(ConversionError, match='effort'):
+        sm.joint_state_to_actuators(short_effort)
     with pytest.raises(ConversionError, match='u6'):
-        rc.actuators_to_joint_state(0.0, np.zeros(5))
+        rc.actuators_to_joint_state(0.0, np.zeros(6))
     with pytest.raises(ConversionError, match='JointState'):
         sm.joint_state_to_actuators(rc.state_to_odometry(0.0, np.zeros(12)))
 

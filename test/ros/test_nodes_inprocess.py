@@ -300,7 +300,7 @@ def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_
     assert diff <= 1e-9 and dstd <= 1e-9
     assert np.allclose(res.cov, last.cov, rtol=0, atol=1e-12)
     # arrays for the batch pass: U[k] is the command in force at t[k]
-    assert res.Y.shape == (len(run.t), 12) and res.U.shape == (len(run.t), 6)
+    assert res.Y.shape == (len(run.t), 12) and res.U.shape == (len(run.t), 7)
     assert np.allclose(res.t, run.t, atol=1e-9)
     assert np.allclose(res.U, run.u) and np.allclose(res.Y, run.y)
     # and without a bag
@@ -410,7 +410,14 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
         assert float(kv[name + '_std']) > 0
         # the coefficients' random walk; the current is constant by default (current_walk 0)
         assert float(kv['Q_' + name]) > 0 or name.startswith('current_')
+        assert kv[name + '_verdict'] in ('identifiable', 'weak', 'not excited')
     assert float(kv['R_u']) == pytest.approx(0.01 ** 2)
+    # the live diagnosis (session/live_diagnosis.py): 20 s fill the 200-update window
+    verdicts, diagnosis = ident.session.diagnosis()
+    assert kv['consistent'] == {True: 'true', False: 'false', None: 'not judged'}[
+        diagnosis['consistent']]
+    assert kv['diagnosis'] == diagnosis['messages'][0]
+    assert kv['consistent'] == 'true' and kv['diagnosis'].startswith('consistent')
 
     client_save = probe.create_client(Trigger, '/identifier/save')
     client_reset = probe.create_client(Trigger, '/identifier/reset')
@@ -499,3 +506,45 @@ def test_a_silent_actuator_topic_is_warned_about_not_dropped(ctx, nodes, run):
     ident.on_timer()
     values = {v.key: v.value for v in ident.diagnostic_status().values}
     assert values['actuator_publishers'] == '0'
+
+
+def test_identifier_publishes_the_water_current(ctx, nodes):
+    """~/current (geometry_msgs/TwistWithCovarianceStamped) carries the estimated current and
+    its covariance from the estimate, in the world frame of ``frame``; no topic in still
+    water."""
+    from geometry_msgs.msg import TwistWithCovarianceStamped
+    run_c = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=10.0, T=0.05, seed=4,
+                     current=np.array([0.1, -0.05, 0.0]))
+    for frame, world in (('ned', 'odom_ned'), ('enu', 'odom')):
+        ident = IdentifierNode(context=ctx, parameter_overrides=_params(frame=frame))
+        probe = rclpy.create_node('probe_' + frame, context=ctx)
+        nodes += [ident, probe]
+        got = []
+        probe.create_subscription(TwistWithCovarianceStamped, '/identifier/current',
+                                  got.append, LATCHED)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(ident)
+        ex.add_node(probe)
+        assert _spin_until(ex, lambda: ident.pub_current.get_subscription_count() > 0)
+        events = _feed(ident, _ordered_messages(run_c, frame))
+        last = [e for e in events if e.kind == 'update' and e.good][-1]
+        assert _spin_until(ex, lambda: got and stamp_to_ns(got[-1].header.stamp)
+                           == last.stamp_ns)
+        msg = got[-1]
+        assert msg.header.frame_id == world
+        i_n, i_e = ident.names.index('current_n'), ident.names.index('current_e')
+        north, east = last.estimate[i_n], last.estimate[i_e]
+        lin = msg.twist.twist.linear
+        expect = (north, east, 0.0) if frame == 'ned' else (east, north, 0.0)
+        assert (lin.x, lin.y, lin.z) == pytest.approx(expect, abs=0.0)
+        C = np.array(msg.twist.covariance).reshape(6, 6)
+        block = last.cov[np.ix_([i_n, i_e], [i_n, i_e])]
+        if frame == 'enu':
+            block = block[::-1, ::-1]
+        assert np.array_equal(C[:2, :2], block)
+        assert np.all(C[2:, :] == 0.0) and np.all(C[:, 2:] == 0.0)
+        # 10 s of a turning run already place the current near the truth (0.1, -0.05)
+        assert abs(north - 0.1) < 0.03 and abs(east + 0.05) < 0.03
+    still = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
+    nodes.append(still)
+    assert still.pub_current is None      # the only place the topic is created

@@ -133,7 +133,7 @@ def test_array_api_rejects_unreadable_arrays_by_name(run):
 def test_array_api_copies_the_callers_arrays(run):
     """A caller may reuse its buffers: what the session keeps is its own copy."""
     reused, fresh = IdentSession(keep_arrays=True), IdentSession(keep_arrays=True)
-    u, x = np.empty(6), np.empty(12)
+    u, x = np.empty(7), np.empty(12)
     for k in range(40):
         stamp_ns = round(run.t[k] * 1e9)
         u[:] = run.u[k]
@@ -395,3 +395,22 @@ def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
         IdentSession(vehicle='remus100', warm_start=str(tmp_path / 'est.json'))
     with pytest.raises(ParameterError, match="parameter 'warm_start': .* holds"):
         IdentSession(coefficients=['Z_w'], warm_start=str(tmp_path / 'est.json'))
+
+
+def test_a_planar_vehicle_neither_reads_nor_screens_its_held_states():
+    """A ship's odometry may carry anything where it does not move (an importer's NaN for
+    heave, a measured roll): the session reads u v r x y psi and leaves the rest held."""
+    v = load_vehicle('kvlcc2_hsva')
+    run = simulate(Model(v), 'zigzag', duration=10.0, T=0.1, seed=1)
+    s = IdentSession(vehicle='kvlcc2_hsva', coefficients=['N_r'], sample_time=0.1)
+    assert list(np.flatnonzero(s.measured)) == [State.U, State.V, State.R, State.X, State.Y,
+                                                State.PSI]
+    held = [State.W, State.P, State.Q, State.Z, State.PHI, State.THETA]
+    for k in range(20):
+        stamp_ns = round(run.t[k] * 1e9)
+        assert s.add_command(stamp_ns, run.u[k]).kind != 'rejected'
+        y = run.y[k].copy()
+        y[[State.W, State.P, State.Q]] = math.nan
+        y[State.PHI] = 0.2
+        assert s.add_odometry(stamp_ns, y).kind == 'update'
+        assert np.all(s.stream.ekf.xa[held] == 0.0)

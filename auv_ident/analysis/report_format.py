@@ -1,0 +1,31 @@
+"""Formatting shared by the report's sections: matplotlib off-screen, figure files, Markdown
+table cells and tables."""
+
+
+def pyplot():
+    """matplotlib.pyplot on the off-screen Agg backend (reports are written on servers)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def save_figure(fig, path):
+    """Write fig as PNG (110 dpi) to path, close it, return path."""
+    fig.savefig(path, dpi=110)
+    pyplot().close(fig)
+    return path
+
+
+def cell(v):
+    """A table cell: 6 significant digits (the tests parse these back), '-' when unknown."""
+    if v is None:
+        return '-'
+    return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
+
+
+def markdown_table(header, rows):
+    """A Markdown table of a header and rows of cells (strings)."""
+    out = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    out += ['| ' + ' | '.join(r) + ' |' for r in rows]
+    return '\n'.join(out)

@@ -1,0 +1,84 @@
+"""The live identifier's diagnosis: what the running filter can say about its own error bars.
+
+Offline, ``identify`` judges a result by its refined residuals (core/diagnosis.py: residual-
+input cross-correlation, whiteness per channel, the refinement's convergence, a noise model).
+Live there is only the EKF: its innovations and its covariance. So the live diagnosis says
+
+- whether the innovations agree with the filter's noise model: the mean NIS per degree of
+  freedom over the health window (session/guard.py) against its chi-square band. Above the
+  band the filter is over-confident (noise larger or coloured, or the model wrong) and its
+  1-sigma do NOT hold: ``consistent`` false, said on the first line. Below the band it is
+  conservative (a note). While the window fills, nothing is judged yet.
+- per parameter, how well the data so far determine it, from the EKF covariance
+  (core/uncertainty.py :func:`verdicts_from_covariance`): 'identifiable', 'weak' (with the
+  correlated partner) or 'not excited' (its 1-sigma still above NOT_INFORMED_RATIO of the
+  prior's), with the excitation that would help (core/diagnosis.py). A water-current
+  component is judged on its 1-sigma in m/s (CURRENT_IDENTIFIABLE_STD), as offline.
+
+The live verdict cannot see coloured noise that keeps the NIS in its band, nor a bias from
+wrong fixed coefficients: `identify --bag` on the recorded run can (docs/method.md).
+"""
+import math
+
+import numpy as np
+
+from auv_ident.core.current import MAX_CURRENT_STD
+from auv_ident.core.diagnosis import excitation_advice
+from auv_ident.core.uncertainty import verdicts_from_covariance
+from auv_ident.session.guard import NIS_WINDOW
+
+NOT_INFORMED_RATIO = 0.9    # 1-sigma above this fraction of the prior's: the data told nothing
+CURRENT_IDENTIFIABLE_STD = MAX_CURRENT_STD    # m/s, as `identify`'s current check
+
+
+def live_verdicts(vehicle, names, estimate, cov, prior_std):
+    """Per identified parameter its verdict (core.uncertainty.verdicts_from_covariance) from the
+    filter covariance cov (p, p) and the prior 1-sigma prior_std (p,), with advice for the
+    ones that are not identifiable."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    informed = sd < NOT_INFORMED_RATIO * np.asarray(prior_std, dtype=float)
+    absolute = np.array([CURRENT_IDENTIFIABLE_STD if n.startswith('current_') else math.nan
+                         for n in names])
+    out = verdicts_from_covariance(cov, estimate, names, informed=informed,
+                                   absolute_std=absolute)
+    for name, d in out.items():
+        if d['verdict'] != 'identifiable':
+            d['advice'] = excitation_advice(vehicle, name)
+    return out
+
+
+def live_diagnosis(health, verdicts):
+    """{'consistent': True | False | None (not judged yet), 'messages': [first line, ...]}
+    from the filter's Health (session/guard.py judge_health) and live_verdicts()."""
+    m, (lo, hi), n = health.mean_nis_per_dof, health.band, health.window
+    notes = []
+    for name, d in verdicts.items():
+        if d['verdict'] == 'identifiable':
+            continue
+        partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
+                   if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
+        size = (f'1-sigma {d["crb_std"]:.2g} m/s' if name.startswith('current_')
+                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
+        notes.append(f'{name} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
+    if health.level == 'ERROR':
+        return {'consistent': False,
+                'messages': [f'NOT consistent: the filter is {health.message} (a reset or '
+                             'innovations far beyond the noise model): its error bars do not '
+                             'hold'] + notes}
+    if n < NIS_WINDOW or not math.isfinite(m):
+        return {'consistent': None,
+                'messages': [f'not judged yet: {n} of {NIS_WINDOW} updates in the window']
+                + notes}
+    if m > hi:
+        return {'consistent': False,
+                'messages': [f'NOT consistent: the innovations are larger than the filter '
+                             f'expects (mean NIS/dof {m:.3g} above its 99.9 % band '
+                             f'[{lo:.3g}, {hi:.3g}]): the sensor noise is larger or coloured, '
+                             'or the model is wrong; the error bars are too small. Identify '
+                             'the recorded run offline (identify --bag) for a noise model and '
+                             'honest error bars'] + notes}
+    head = ('consistent: the innovations agree with the noise model (mean NIS/dof '
+            f'{m:.3g} in [{lo:.3g}, {hi:.3g}])')
+    if m < lo:
+        head += '; below the band: the filter is conservative (error bars wider than needed)'
+    return {'consistent': True, 'messages': [head] + notes}

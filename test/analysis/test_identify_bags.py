@@ -1,0 +1,80 @@
+"""One model from several bags (`identify --bag A --bag B`): two simulated bags of the planar
+ship, identified together, recover the truth within their error bars."""
+import numpy as np
+import pytest
+
+from auv_ident.analysis.bag_identify import identify_bags
+from auv_ident.bags.reader import BagError
+from auv_ident.bags.sim_bag import write_run_bag
+from auv_ident.core.model import Model
+from auv_ident.core.simulate import simulate
+from auv_ident.core.state import N_STATE, State
+from auv_ident.vehicles import load_vehicle
+
+NAMES = 'Y_v,N_r,Y_dr,N_dr'
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    d = tmp_path_factory.mktemp('planar_bags')
+    m = Model(load_vehicle('kvlcc2_hsva'))
+    noise = np.full(N_STATE, 1e-3)
+    noise[[State.U, State.V]] = 0.003
+    noise[State.R] = 5e-4
+    noise[[State.X, State.Y]] = 0.01
+    paths = []
+    for seed in (4, 5):
+        run = simulate(m, 'zigzag', duration=60.0, T=0.1, seed=seed, noise_std=noise)
+        paths.append(write_run_bag(run, str(d / f'run{seed}')))
+    return paths
+
+
+def test_two_simulated_bags_give_one_model_within_its_error_bars(bags):
+    doc, table = identify_bags(bags, coefficients=NAMES, initial_offset=0.2)
+    assert 'from 2 bags together' in table
+    co = doc['coefficients']
+    assert sorted(co) == sorted(NAMES.split(','))
+    for name, c in co.items():
+        assert abs(c['estimate'] - c['truth']) < 4.0 * c['std'], (name, c)
+        assert abs(c['estimate'] - c['truth']) < 0.03 * abs(c['truth']), (name, c)
+    # (that the error bars use both runs: test/core/test_planar.py, on arrays)
+
+
+def test_bags_of_two_vehicles_are_refused(bags, tmp_path):
+    run = simulate(Model(load_vehicle('nps_auv2')), 'zigzag', duration=5.0, seed=1)
+    other = write_run_bag(run, str(tmp_path / 'auv'))
+    with pytest.raises(BagError, match='one model needs one vehicle'):
+        identify_bags([bags[0], other], coefficients='')
+
+
+def test_identify_command_takes_several_bags(bags, capsys):
+    from auv_ident.cli import main
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--coefficients', 'N_r',
+                 '--initial-offset', '0.1', '--no-refine']) == 0
+    out = capsys.readouterr().out
+    assert 'from 2 bags together' in out and 'N_r' in out
+    # what applies to one bag only is one clear error (exit status 2)
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--current', '0.1,0']) == 2
+    assert '--current, --current-down and --noise-mode apply to one bag' in \
+        capsys.readouterr().err
+
+
+def test_one_planar_bag_with_the_noise_model_and_the_diagnosis(bags):
+    """identify --bag on a planar vehicle: the noise model from the data and the diagnosis see
+    the held channels as unmeasured (no model for them, no verdict on them), the rest as usual."""
+    from auv_ident.analysis.bag_identify import identify_bag
+    doc, table = identify_bag(bags[0], coefficients=NAMES, initial_offset=0.2, current='none')
+    assert table.startswith('consistent'), table
+    for name, c in doc['coefficients'].items():
+        assert abs(c['estimate'] - c['truth']) < 4.0 * c['std'], (name, c)
+    modelled = {n for n, d in doc['noise_model']['channels'].items() if d is not None}
+    assert {'u', 'v', 'r', 'x', 'y', 'psi'} <= modelled
+    assert not modelled & {'w', 'p', 'q', 'z', 'phi', 'theta'}
+
+
+def test_noise_and_process_noise_options_are_checked(bags, capsys):
+    from auv_ident.cli import main
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--noise-std', '0.01,0.01']) == 2
+    assert '--noise-std' in capsys.readouterr().err
+    assert main(['identify', '--bag', bags[0], '--q-state', ','.join(['1e-4'] * 12)]) == 2
+    assert 'apply to several bags' in capsys.readouterr().err
