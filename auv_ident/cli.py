@@ -170,11 +170,17 @@ def cmd_montecarlo(args):
                        noise_mode='fixed' if args.fixed_noise else args.noise_mode,
                        maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
                        refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update,
-                       tau=args.tau, scheduler=args.scheduler)
+                       tau=args.tau, scheduler=args.scheduler, noise_level=args.noise_level,
+                       noise_tau=args.noise_tau, perturb=args.perturb)
     pr.close()
     print(f'{v.title}: {args.seeds} seeds x offsets {offsets}, manoeuvre {args.maneuver!r}, '
           f'{args.duration:.0f} s, noise adaptation {st["noise_mode"]}, '
-          + ('refined' if st['refined'] else 'EKF only') + f', wall {st["wall_s"]:.0f} s')
+          + ('refined' if st['refined'] else 'EKF only') + f', wall {st["wall_s"]:.0f} s'
+          + ('' if args.noise_level == 1.0 and args.noise_tau == 0.0 else
+             f'; sensor noise {args.noise_level:g}x the assumed, AR(1) tau {args.noise_tau:g} s '
+             '(not told)')
+          + ('' if not args.perturb else f'; truth: other coefficients x U(1 -+ '
+             f'{args.perturb:g}) (not told)'))
     print(ex.montecarlo_table(st))
     if args.json:
         results.write_json(args.json, st)
@@ -480,6 +486,15 @@ def build_parser():
     sp.add_argument('--jobs', type=int, default=2,
                     help='worker processes of the local Dask cluster (1: serially in this '
                          'process, no cluster); ignored with --scheduler')
+    sp.add_argument('--noise-level', dest='noise_level', type=float, default=1.0,
+                    help='the simulated sensor noise is this many times the one the filter '
+                         'assumes (not told to it)')
+    sp.add_argument('--noise-tau', dest='noise_tau', type=float, default=0.0,
+                    help='first-order correlation time of the simulated sensor noise, s '
+                         '(0: white)')
+    sp.add_argument('--perturb', type=float, default=0.0,
+                    help='truth vehicle: every coefficient not identified (added mass aside) '
+                         'x U(1 - P, 1 + P) per seed (not told)')
     scheduler_arg(sp)
     ident_args(sp)
     sp.set_defaults(func=cmd_montecarlo)

@@ -11,7 +11,7 @@ import numpy as np
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.current import parse_current
 from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.sensors import ar1_noise, DEFAULT_NOISE_STD, perturbed_values
 from auv_ident.core.simulate import simulate
 from auv_ident.core.state import Input
 from auv_ident.vehicles import load_vehicle
@@ -26,16 +26,34 @@ DEFAULT_MANEUVER = 'ident'
 def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
                        duration=DEFAULT_DURATION, rpm=None, refine_pass=True, hist_every=0,
                        mass_inverse='default', progress=None, process_std=None, current='none',
-                       sim_current=None, velocity_reference='ground'):
+                       sim_current=None, velocity_reference='ground', noise_level=1.0,
+                       noise_tau=0.0, perturb=0.0):
     """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
     if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
     core/current.py) and the velocity reference of the simulated sensor, with the noise model
-    from the data and a diagnosis (analysis/identification.py). Returns (Result, Run, Model)."""
+    from the data and a diagnosis (analysis/identification.py). Returns (Result, Run, Model).
+
+    Data the identifier's assumptions do not hold for (issue #14), neither told to it:
+    noise_level, noise_tau : the measurement noise is noise_level x cfg.noise_std, first-order
+        correlated with time constant noise_tau (s; core.sensors.ar1_noise), drawn from
+        default_rng([seed, 1]); 1.0 and 0 are the white noise the filter assumes
+    perturb : every coefficient but the identified ones (and added mass) is scaled by
+        U(1 - perturb, 1 + perturb) in the truth (default_rng([seed, 2]),
+        core.sensors.perturbed_values), the identifier keeps the file's values: a wrong
+        prior"""
     v = load_vehicle(vehicle_name)
-    truth = Model(v, mass_inverse=mass_inverse)
+    values = (perturbed_values(v, perturb, np.random.default_rng([seed, 2]), keep=names)
+              if perturb else None)
+    truth = Model(v, mass_inverse=mass_inverse, coefficient_values=values)
+    white = noise_level == 1.0 and noise_tau == 0.0
     run = simulate(truth, maneuver, duration=duration, seed=seed, rpm=rpm,
-                   noise_std=cfg.noise_std, process_std=process_std, current=sim_current,
+                   noise_std=cfg.noise_std if white else np.zeros(len(cfg.noise_std)),
+                   process_std=process_std, current=sim_current,
                    velocity_reference=velocity_reference)
+    if not white:
+        run.noise_std = noise_level * np.asarray(cfg.noise_std, dtype=float)
+        run.y = run.y + ar1_noise(np.random.default_rng([seed, 1]), len(run.t), run.noise_std,
+                                  noise_tau, run.T)
     opt = parse_current(current)
     m = Model(v, list(names) + opt.names, mass_inverse=mass_inverse, current=opt.fixed,
               velocity_reference=velocity_reference)
@@ -81,12 +99,13 @@ def _mc_case(args):
     """One Monte Carlo case (runs on a Dask worker, or in this process): its row of
     stats['runs']. The vehicle comes as its file's content (engine.VehicleText)."""
     (vehicle, names, noise_mode, offset, seed, maneuver, duration, rpm, refine_pass,
-     tau) = args
+     tau, noise_level, noise_tau, perturb) = args
     cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset, tau=tau)
     try:
         res, _, _ = identify_simulated(vehicle.local_path(), names, cfg, maneuver=maneuver,
                                        seed=seed, duration=duration, rpm=rpm,
-                                       refine_pass=refine_pass)
+                                       refine_pass=refine_pass, noise_level=noise_level,
+                                       noise_tau=noise_tau, perturb=perturb)
     except ArithmeticError as err:      # DomainError / DivergenceError: a diverged run
         return {'seed': seed, 'offset': offset, 'diverged': str(err)}
     e = res.estimate - res.truth
@@ -98,7 +117,9 @@ def _mc_case(args):
             'z': (e / res.std).tolist(), 'nees': nees,
             'ekf_error_pct': res.error_pct('ekf_estimate').tolist(),
             'ekf_z': ((res.ekf_estimate - res.truth) / res.ekf_std).tolist(),
-            'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s}
+            'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s,
+            'consistent': res.diagnosis['consistent'],
+            'noise_model_used': res.noise_model['used']}
 
 
 def _mc_warm_up(case):
@@ -108,8 +129,14 @@ def _mc_warm_up(case):
 
 def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
                maneuver=DEFAULT_MANEUVER, duration=DEFAULT_DURATION, rpm=None, refine_pass=True,
-               jobs=2, progress=None, tau=10.0, scheduler=None):
-    """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS.
+               jobs=2, progress=None, tau=10.0, scheduler=None, noise_level=1.0, noise_tau=0.0,
+               perturb=0.0):
+    """Seeds x initial offsets; statistics of |error| %, 3-sigma coverage, NEES and NIS, the
+    median |error|/sigma and how many results the diagnosis called consistent.
+
+    noise_level, noise_tau, perturb : data that contradict the filter's assumptions, not told
+    to it (identify_simulated): coloured noise of another level, a truth vehicle whose other
+    coefficients differ from the file's.
 
     The cases run as tasks on the Dask engine (analysis/engine.py): on the cluster at
     `scheduler` if given, else on a local cluster of `jobs` worker processes, or one after the
@@ -118,7 +145,7 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     from auv_ident.analysis import engine      # distributed is imported only when used
     vehicle = engine.VehicleText.read(vehicle_name)
     cases = [(vehicle, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
-              tau) for s in range(seeds) for off in offsets]
+              tau, noise_level, noise_tau, perturb) for s in range(seeds) for off in offsets]
     t0 = time.perf_counter()
     out = [None] * len(cases)
     serial = scheduler is None and jobs <= 1
@@ -139,6 +166,7 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     stats = {'vehicle': vehicle_name, 'coefficients': names, 'maneuver': maneuver,
              'duration_s': duration, 'seeds': seeds, 'offsets': list(offsets),
              'noise_mode': noise_mode, 'tau_s': tau, 'refined': refine_pass,
+             'noise_level': noise_level, 'noise_tau_s': noise_tau, 'perturb': perturb,
              'cases': len(out),
              'diverged': len(out) - len(ok), 'wall_s': time.perf_counter() - t0,
              'noise_std': DEFAULT_NOISE_STD.tolist(), 'per_coefficient': {}}
@@ -155,6 +183,9 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
                 'ekf_median_abs_error_pct': float(np.median(EE[:, i])),
                 'ekf_within_3sigma': float(np.mean(EZ[:, i] <= 3.0))}
         stats['within_3sigma_all'] = float(np.mean(Z <= 3.0))
+        stats['median_abs_z'] = float(np.median(Z))
+        stats['ekf_median_abs_z'] = float(np.median(EZ))
+        stats['consistent'] = int(sum(1 for r in ok if r['consistent']))
         stats['ekf_within_3sigma_all'] = float(np.mean(EZ <= 3.0))
         nees = np.array([r['nees'] for r in ok])
         stats['mean_nees'] = float(np.nanmean(nees))
@@ -180,6 +211,10 @@ def montecarlo_table(stats):
                      f'cases; mean NEES {stats["mean_nees"]:.2f} (expected '
                      f'{stats["nees_expected"]}); mean NIS/dof {stats["mean_nis_per_dof"]:.3f} '
                      '(expected 1)')
+        lines.append(f'median |error|/sigma {stats["median_abs_z"]:.2f} refined, '
+                     f'{stats["ekf_median_abs_z"]:.2f} EKF pass (an honest sigma gives ~0.67); '
+                     f'EKF pass within 3-sigma in {100 * stats["ekf_within_3sigma_all"]:.1f} %; '
+                     f'diagnosis consistent in {stats["consistent"]} of {len(stats["runs"]) - stats["diverged"]}')
     return '\n'.join(lines)
 
 

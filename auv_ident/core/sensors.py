@@ -23,3 +23,36 @@ DEFAULT_NOISE_STD = np.array([0.01, 0.01, 0.01, 0.001, 0.001, 0.001,
                               0.5, 0.5, 0.05, 0.002, 0.002, 0.005])
 DEFAULT_PROCESS_STD = np.array([1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4])
 DEFAULT_T = 0.05        # s, sample time (the paper's T)
+
+
+def ar1_noise(rng, n, std, tau, T):
+    """Coloured (first-order, AR(1)) measurement noise: (n, len(std)) samples at interval T (s)
+    with per-channel stationary 1-sigma std and correlation time tau (s; 0 gives white noise):
+    e_k = a e_(k-1) + sqrt(1 - a^2) w_k, a = exp(-T / tau), started stationary. What a
+    navigation solution or a DVL that averages over pings gives: consecutive samples share
+    most of their error."""
+    std = np.asarray(std, dtype=float)
+    w = rng.standard_normal((n, len(std)))
+    if tau <= 0.0:
+        return w * std
+    a = float(np.exp(-T / tau))
+    b = float(np.sqrt(1.0 - a * a))
+    e = np.empty_like(w)
+    e[0] = w[0]
+    for k in range(1, n):
+        e[k] = a * e[k - 1] + b * w[k]
+    return e * std
+
+
+def perturbed_values(vehicle, factor, rng, keep=()):
+    """The vehicle's coefficient values with every one not in `keep` (names) and not an
+    added-mass term scaled by U(1 - factor, 1 + factor): a truth vehicle that differs from the
+    file, as a real one differs from its prior (empirical formulas are 10-50 % off). Added
+    mass is left alone: it enters through M^-1, which some vehicles give literally."""
+    values = np.array(vehicle.values, dtype=float)
+    keep = {vehicle.names[vehicle.index(n)] for n in keep}
+    scale = rng.uniform(1.0 - factor, 1.0 + factor, len(values))
+    for i, c in enumerate(vehicle.coefficients):
+        if vehicle.names[i] not in keep and not c.is_added_mass:
+            values[i] *= scale[i]
+    return values
