@@ -136,6 +136,43 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     return stats, hist, out.white
 
 
+class FilterErrorResiduals:
+    """The filter-error method's residuals as a function of theta: for candidate values of the
+    model's parameters, the whitened innovations ``r_k = S_k^{-1/2} nu_k`` (N, 12) of a 12-state
+    EKF with those values fixed (NaN where a channel has no measurement). The refinement
+    minimises their sum of squares; the automatic selection (selection.py) differentiates them
+    with respect to every candidate coefficient.
+
+    model : Model whose theta are the parameters; cfg : FilterConfig (its noise, q_state and
+    measured channels are used); t, Y, U, T, max_step, max_bridge as for refine.
+    """
+
+    def __init__(self, model, cfg, t, Y, U, T=None, max_step=None,
+                 max_bridge=DEFAULT_MAX_BRIDGE):
+        t, Y, U = _record(t, Y, U)
+        T = nominal_sample_time(t) if T is None else T
+        self.model, self.Y, self.U = model, Y, U
+        fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
+                                 noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
+        state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
+                            coefficient_values=model.c, current=model.current,
+                            velocity_reference=model.velocity_reference)
+        f = AugmentedEKF(state_model, fixed_cfg, T)
+        self.settings = f.settings()
+        self.timeline = _timeline(f, t, Y, U, max_step, max_bridge)
+        self.x0, self.P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
+        self.out = K.new_outputs(N_STATE, Y.shape[0], want_white=True)
+        self.white = self.out.white
+
+    def __call__(self, theta):
+        """(ok, white): ok False when the filter stopped (the model left its domain or the
+        covariance failed); white (N, 12) is the buffer, overwritten by the next call."""
+        self.white[:] = np.nan
+        K.run_filter(self.x0, self.P0, self.Y, self.U, self.model.compiled_fixed(theta),
+                     self.settings, self.timeline, self.out)
+        return self.out.stats[0] == K.OK, self.white
+
+
 def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
            max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
     """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p,).
@@ -147,30 +184,18 @@ def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
     'converged' (bool), 'message' (the optimiser's), 'nfev'. cov is (J^T J)^-1 times the cost
     per residual when that exceeds 1 (the white-noise covariance; core/uncertainty.py has the
     one for coloured residuals)."""
-    t, Y, U = _record(t, Y, U)
-    T = nominal_sample_time(t) if T is None else T
     p = model.p
-    fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
-                             noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
-    state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
-                        coefficient_values=model.c, current=model.current,
-                        velocity_reference=model.velocity_reference)
-    f = AugmentedEKF(state_model, fixed_cfg, T)
-    settings = f.settings()
-    timeline = _timeline(f, t, Y, U, max_step, max_bridge)
-    N = Y.shape[0]
-    x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
-    out = K.new_outputs(N_STATE, N, want_white=True)
-    white = out.white
+    fer = FilterErrorResiduals(model, cfg, t, Y, U, T=T, max_step=max_step,
+                               max_bridge=max_bridge)
+    white = fer.white
     scale = parameter_scale(model, theta_start)
 
     def residuals(z):
         if progress is not None:
             progress()
         # theta enters through the coefficients of a 12-state filter
-        white[:] = np.nan
-        K.run_filter(x0, P0, Y, U, model.compiled_fixed(z * scale), settings, timeline, out)
-        if out.stats[0] != K.OK:
+        ok, _ = fer(z * scale)
+        if not ok:
             return np.full(white.size, 1e3)
         r = white.ravel()
         return np.where(np.isfinite(r), r, 0.0)

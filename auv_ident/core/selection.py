@@ -1,0 +1,428 @@
+"""Which coefficients to identify, chosen from the data (`--coefficients auto[,NAME,...]`).
+
+A vehicle file holds ~100 coefficients from empirical formulas, each 10-50 % off. Identifying
+a hand-picked few leaves the others at their prior values, and their errors bias the few (no
+error bar covers that bias; core/diagnosis.py says so). Identifying all of them fails the
+other way: most are not excited by a given run, and confounded sets give large, correlated
+errors. This module picks the largest set the run determines, in two passes:
+
+1. **Stepwise regression on the filter-error residuals** (Klein & Morelli 2006, "Aircraft
+   System Identification", ch. 5, written for the filter-error method of core/batch.py): at
+   the prior (the vehicle file's values), the whitened innovations r of a 12-state EKF over the
+   record and their sensitivities J to every candidate (finite differences: one filter run per
+   candidate, on the data's own trajectory, since the filter follows the measurements). Then,
+   starting from the coefficients the user named (always included) and the water current,
+   add one at a time the candidate that reduces the residual most (the largest partial F of
+   the linearised fit), if
+     - its partial F, with the variance of the score from its Newey-West long-run variance
+       (the residuals of a wrong prior are strongly correlated in time; a white-noise F would
+       count every sample as new information), is at least F_TO_ENTER, and
+     - the enlarged set stays identifiable: the candidate's relative Cramer-Rao 1-sigma
+       (linearised, white) is below REL_STD_MAX and its largest |correlation| with another
+       member at most CORRELATION_MAX, and no member chosen before loses either property.
+   Stop when no candidate qualifies. A candidate that fails the identifiability test is left
+   out for good (more members only widen the bounds); one below F_TO_ENTER may still enter
+   after others have.
+2. **Identify, re-assess, identify again**: the chosen set is identified (EKF pass and
+   filter-error refinement with the noise model from the data, core/noise_fit.py, started at
+   the prior), its covariance (sandwich when the residuals are coloured) re-checked with the
+   identified values, and the members that turned weak (relative 1-sigma >= REL_STD_MAX) or
+   strongly correlated (|rho| > CORRELATION_MAX) dropped one at a time, the worst first
+   (fixing a parameter is conditioning: the covariance of the rest is the inverse of their
+   block of the information matrix). If any was dropped, the rest are identified again,
+   started at the first identification's values.
+
+Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
+out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
+Coefficients the user named are always identified, whatever their figures (the diagnosis then
+calls them weak if they are).
+"""
+from dataclasses import dataclass, field, replace
+import math
+
+import numpy as np
+
+from .batch import FilterErrorResiduals, parameter_scale
+from .errors import ConfigError, DomainError
+from .noise_fit import identify_with_noise_model
+from .state import CURRENT_NAMES, N_STATE
+from .uncertainty import (bandwidth, CORRELATION_WEAK, long_run_variance,
+                          REL_STD_IDENTIFIABLE)
+
+AUTO = 'auto'
+F_TO_ENTER = 9.0            # partial F (long-run variance) a candidate needs: 3 sigma
+REL_STD_MAX = REL_STD_IDENTIFIABLE   # relative CRB 1-sigma of a member: below 5 %
+CORRELATION_MAX = CORRELATION_WEAK   # |correlation| between members: at most 0.95
+SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitivities
+PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
+
+
+def parse_request(vehicle, text):
+    """`--coefficients` text -> (auto, names).
+
+    'auto' alone: choose from the data; 'auto,A,B': choose, always including A and B; 'A,B':
+    exactly these; '': the vehicle's default set (names empty). Names are matched as
+    Vehicle.index matches them and returned as the file spells them. Raises ConfigError naming
+    an unknown coefficient, a name given twice, or 'auto' anywhere but first."""
+    tokens = [n.strip() for n in (text or '').split(',') if n.strip()]
+    auto = bool(tokens) and tokens[0].lower() == AUTO
+    rest = tokens[1:] if auto else tokens
+    if any(tok.lower() == AUTO for tok in rest):
+        raise ConfigError(f"coefficients {text!r}: 'auto' must come first (auto,NAME,...)")
+    names = []
+    for tok in rest:
+        if tok in CURRENT_NAMES:
+            raise ConfigError(f'coefficients: {tok!r} is the water current; choose it with '
+                              '--current')
+        name = vehicle.names[vehicle.index(tok)]
+        if name in names:
+            raise ConfigError(f'coefficients {text!r}: {name} is listed twice')
+        names.append(name)
+    return auto, names
+
+
+def candidate_coefficients(vehicle, mass_inverse):
+    """The coefficients the selection may choose, and the reasons of the others.
+
+    mass_inverse : the model's resolved choice ('exact' or 'mss_literal'); with the vehicle's
+    fixed literal M^-1 the added-mass coefficients cannot change the model.
+    Returns (candidates [names in file order], {name: reason})."""
+    cands, left = [], {}
+    for c, value in zip(vehicle.coefficients, vehicle.values):
+        if c.is_added_mass and mass_inverse == 'mss_literal':
+            left[c.name] = ("added mass: the vehicle's fixed (literal) mass inverse does not "
+                            'change with it')
+        elif value == 0.0:
+            left[c.name] = ('zero in the vehicle file: no prior to scale the search by (name '
+                            'it to identify it)')
+        else:
+            cands.append(c.name)
+    return cands, left
+
+
+def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=0.25):
+    """Filter-error residuals at theta and their sensitivities to every parameter.
+
+    model : Model whose theta are the parameters; cfg : FilterConfig (noise, channels)
+    theta : (p,) the values to linearise at (file units; current in m/s)
+    Returns (white (N, 12) whitened innovations, NaN = no measurement; J (N * 12, p) their
+    derivatives, zero rows where no measurement; failed: indices of parameters whose step took
+    the model out of its domain (their columns are zero)). Raises DomainError if the filter
+    fails at theta itself."""
+    fer = FilterErrorResiduals(model, cfg, t, Y, U, T=T, max_step=max_step,
+                               max_bridge=max_bridge)
+    theta = np.asarray(theta, dtype=float)
+    ok, w = fer(theta)
+    if not ok:
+        raise DomainError('the filter-error residuals cannot be computed at the vehicle '
+                          "file's values (the model leaves its domain on this record)")
+    white = w.copy()
+    r0 = np.nan_to_num(white.ravel())
+    scale = parameter_scale(model, theta)
+    J = np.zeros((r0.size, model.p))
+    failed = []
+    for i in range(model.p):
+        step = SENSITIVITY_STEP * scale[i]
+        th = theta.copy()
+        th[i] += step
+        ok, w = fer(th)
+        if not ok:
+            failed.append(i)
+            continue
+        J[:, i] = (np.nan_to_num(w.ravel()) - r0) / step
+    return white, J, failed
+
+
+def _set_figures(G, members, s2, prior):
+    """Linearised white-noise CRB of a set: (relative 1-sigma, largest |correlation|, index of
+    that partner) per member, from the information G[members, members] / s2. A member whose
+    prior is 0 (a current component) has relative 1-sigma 0 (judged by others only)."""
+    idx = np.asarray(members)
+    try:
+        cov = np.linalg.inv(G[np.ix_(idx, idx)]) * s2
+    except np.linalg.LinAlgError:
+        k = len(idx)
+        return np.full(k, math.inf), np.ones(k), np.zeros(k, dtype=int)
+    return _figures_of_cov(cov, prior[idx])
+
+
+def _figures_of_cov(cov, values):
+    """(relative 1-sigma, largest |correlation|, index of that partner) per parameter."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        rel = np.where(values != 0.0, sd / np.abs(values), 0.0)
+        corr = np.nan_to_num(cov / np.outer(sd, sd))
+    np.fill_diagonal(corr, 0.0)
+    corr = np.abs(corr)
+    partner = np.argmax(corr, axis=1) if len(sd) > 1 else np.zeros(len(sd), dtype=int)
+    return rel, corr[np.arange(len(sd)), partner] if len(sd) > 1 else np.zeros(1), partner
+
+
+def _hac_partial_f(J, r_set, J_set, proj, c, lags, n_samples):
+    """Partial F of candidate c with the long-run variance of its score: (j_perp^T r)^2 /
+    LRV(g), g_k = sum over the channels of sample k of j_perp * r (j_perp: c's sensitivity
+    with the members' part projected out)."""
+    j_perp = J[:, c] - (J_set @ proj if J_set.shape[1] else 0.0)
+    g = (j_perp * r_set).reshape(n_samples, N_STATE).sum(axis=1)
+    lrv = long_run_variance(g, lags)
+    return float(g.sum() ** 2 / lrv) if lrv > 0 else 0.0
+
+
+def consider_bias(G, members, left, sigma):
+    """Bias covariance of the members' estimates from the errors of the coefficients left at
+    their prior (Schmidt's consider analysis, linearised): with d_L ~ (0, diag(sigma_L^2)),
+    the least-squares estimate of the members moves by -G_SS^-1 G_SL d_L, whose covariance is
+    B B^T with B = G_SS^-1 G_SL diag(sigma_L). Returns B B^T (|members|, |members|)."""
+    S, L = np.asarray(members), np.asarray(left, dtype=int)
+    if L.size == 0:
+        return np.zeros((S.size, S.size))
+    B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
+    return B @ B.T
+
+
+def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
+    """The selection's objective: the expected squared relative error of the coefficients of
+    interest (of_interest: indices, the coefficients the user named), or, when none are named,
+    summed over every candidate coefficient of the model, PRIOR_REL_STD^2 for each left at its
+    prior. A member's expected squared error is its white-noise CRB variance plus the bias the
+    left-out ones cause (:func:`consider_bias`), over its value squared. Current components
+    count nothing."""
+    left = [c for c in pool_all if c not in set(members)]
+    S = np.asarray(members)
+    mse = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2 + np.diag(
+        consider_bias(G, members, left, sigma))
+    if len(of_interest):
+        pos = [members.index(i) for i in of_interest]
+        return float(np.sum(mse[pos] / prior[of_interest] ** 2))
+    coef = prior[S] != 0.0
+    return float(np.sum(mse[coef] / prior[S][coef] ** 2) + len(left) * PRIOR_REL_STD ** 2)
+
+
+def forward_stepwise(J, white, prior, names, forced, candidates, of_interest=()):
+    """Pass 1 of the module docstring on one linearisation.
+
+    J (N * 12, p), white (N, 12): sensitivities and residuals (sensitivities()); prior (p,)
+    the values they were taken at; names (p,); forced: indices always in the set (named
+    coefficients, current components); candidates: indices it may add.
+    Returns (chosen indices in order of entry, forced first; steps [{name, partial_f,
+    rel_std, max_correlation, expected_error}]; {name: reason} for the candidates left
+    out)."""
+    n_samples = white.shape[0]
+    r = np.nan_to_num(white.ravel())
+    n_res = int(np.count_nonzero(r))
+    G = J.T @ J
+    b = J.T @ r
+    rr = float(r @ r)
+    sigma = PRIOR_REL_STD * np.abs(prior)
+    members = list(forced)
+    pool_all = [c for c in candidates] + [c for c in forced if prior[c] != 0.0]
+    pool = [c for c in candidates if G[c, c] > 0.0]
+    reasons = {names[c]: 'no sensitivity: this run does not excite it'
+               for c in candidates if G[c, c] <= 0.0}
+    last = {}
+    steps = []
+    while pool:
+        if members:
+            G_inv = np.linalg.pinv(G[np.ix_(members, members)])
+            delta = G_inv @ b[members]
+            rss = rr - float(b[members] @ delta)
+            J_set = J[:, members]
+            r_set = r - J_set @ delta
+        else:
+            G_inv = np.zeros((0, 0))
+            rss, J_set, r_set = rr, np.zeros((r.size, 0)), r
+        s2 = max(1.0, max(rss, 1e-300) / max(1, n_res - len(members) - 1))
+        current = expected_error(G, members, pool_all, s2, prior, sigma, of_interest)
+        lags = bandwidth(r_set.reshape(n_samples, N_STATE))
+        cand = np.array(pool)
+        proj = G_inv @ G[np.ix_(members, cand)] if members else np.zeros((0, len(cand)))
+        norm = G[cand, cand] - np.einsum('ij,ij->j', G[np.ix_(members, cand)], proj)
+        cross = b[cand] - proj.T @ b[members] if members else b[cand]
+        with np.errstate(invalid='ignore', divide='ignore'):
+            f_white = np.where(norm > 0.0, cross ** 2 / norm / s2, 0.0)
+        added = False
+        for k in np.argsort(-f_white):
+            c = int(cand[k])
+            if f_white[k] < F_TO_ENTER:
+                last[c] = ('residual reduction too small: partial F (white) '
+                           f'{f_white[k]:.3g} < {F_TO_ENTER:g}')
+                continue
+            trial = members + [c]
+            rel, cmax, partner = _set_figures(G, trial, s2, prior)
+            if rel[-1] >= REL_STD_MAX:
+                reasons[names[c]] = (f'not identifiable: relative 1-sigma {100 * rel[-1]:.3g} % '
+                                     f'>= {100 * REL_STD_MAX:g} %')
+                pool.remove(c)
+                continue
+            if cmax[-1] > CORRELATION_MAX:
+                reasons[names[c]] = (f'correlated {cmax[-1]:.3f} with {names[trial[partner[-1]]]}'
+                                     f' (limit {CORRELATION_MAX:g})')
+                pool.remove(c)
+                continue
+            after = expected_error(G, trial, pool_all, s2, prior, sigma, of_interest)
+            if after >= current:
+                last[c] = ('would not lower the expected error of the model: it absorbs the '
+                           'errors of coefficients left at their prior (consider analysis, '
+                           f'{after:.3g} >= {current:.3g})')
+                continue
+            f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, lags, n_samples)
+            if f_hac < F_TO_ENTER:
+                last[c] = (f'residual reduction too small: partial F {f_hac:.3g} < '
+                           f'{F_TO_ENTER:g} (long-run variance)')
+                continue
+            members.append(c)
+            steps.append({'name': names[c], 'partial_f': f_hac, 'rel_std': float(rel[-1]),
+                          'max_correlation': float(cmax[-1]), 'expected_error': after})
+            pool.remove(c)
+            added = True
+            break
+        if not added:
+            break
+    for c in pool:
+        reasons[names[c]] = last.get(c, 'not reached')
+    return members, steps, reasons
+
+
+def prune(names, estimate, cov, keep_always):
+    """Pass 2: drop, one at a time and the worst first, the members that are weak (relative
+    1-sigma >= REL_STD_MAX) or strongly correlated (> CORRELATION_MAX) with the identified
+    values; the covariance of the rest is the inverse of their block of the information.
+    keep_always: names never dropped (named by the user, current components).
+    Returns (kept names, {dropped name: reason})."""
+    names = list(names)
+    est = np.asarray(estimate, dtype=float)
+    info = np.linalg.pinv(np.asarray(cov, dtype=float))
+    keep = list(range(len(names)))
+    dropped = {}
+    while True:
+        sub = np.linalg.pinv(info[np.ix_(keep, keep)])
+        values = np.array([0.0 if names[i] in CURRENT_NAMES else est[i] for i in keep])
+        rel, cmax, partner = _figures_of_cov(sub, values)
+        bad = [j for j, i in enumerate(keep) if names[i] not in keep_always
+               and (rel[j] >= REL_STD_MAX or cmax[j] > CORRELATION_MAX)]
+        if not bad:
+            return [names[i] for i in keep], dropped
+        j = max(bad, key=lambda j: rel[j])
+        i = keep[j]
+        if rel[j] >= REL_STD_MAX:
+            why = f'relative 1-sigma {100 * rel[j]:.3g} % >= {100 * REL_STD_MAX:g} %'
+        else:
+            why = (f'correlated {cmax[j]:.3f} with {names[keep[partner[j]]]} (limit '
+                   f'{CORRELATION_MAX:g})')
+        dropped[names[i]] = 'dropped after the first identification: ' + why
+        keep.pop(j)
+
+
+@dataclass
+class Selection:
+    """The outcome of the automatic choice.
+
+    chosen : the coefficients identified (named ones first, then in order of entry)
+    named : those the user named (always chosen)
+    left_out : {name: reason} for every other coefficient of the vehicle (file values kept)
+    steps : per coefficient added by the stepwise pass: partial F, relative CRB 1-sigma and
+        largest correlation when it entered
+    candidates : how many coefficients the selection could choose from
+    """
+
+    chosen: list
+    named: list
+    left_out: dict
+    steps: list = field(default_factory=list)
+    candidates: int = 0
+    consider_inflation: dict = field(default_factory=dict)
+
+    def document(self):
+        """JSON-ready dict (the result's `selection`)."""
+        return {'chosen': list(self.chosen), 'named': list(self.named),
+                'left_out': dict(self.left_out), 'steps': list(self.steps),
+                'candidates': int(self.candidates),
+                'consider_inflation': dict(self.consider_inflation),
+                'criteria': {'f_to_enter': F_TO_ENTER, 'rel_std_max': REL_STD_MAX,
+                             'correlation_max': CORRELATION_MAX,
+                             'prior_rel_std': PRIOR_REL_STD,
+                             'method': 'stepwise regression on the filter-error residuals '
+                                       '(partial F with the long-run variance), then '
+                                       'identify, re-assess and identify again'}}
+
+    def summary(self):
+        """Lines for the command line: the chosen set, then the left-out ones by reason."""
+        lines = [f'automatic selection: {len(self.chosen)} of {self.candidates} candidate '
+                 'coefficients chosen (' + ', '.join(self.chosen) + ')'
+                 + (f'; named: {", ".join(self.named)}' if self.named else '')]
+        groups = {}
+        for name, why in self.left_out.items():
+            key = why.split(':')[0].split(' (')[0]
+            groups.setdefault(key, []).append(name)
+        lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
+                     '`selection`):')
+        for key, members in groups.items():
+            lines.append(f'  {key}: {", ".join(members)}')
+        return lines
+
+
+def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
+                  max_step=None, max_bridge=0.25, progress=None):
+    """Choose the coefficients from the data and identify them (module docstring).
+
+    make_model : names -> Model identifying those coefficients (and the water current as the
+        caller wants it; the current components are always in the set)
+    cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
+    named : coefficients always identified (file spelling)
+    t, Y, U, T, max_step, max_bridge, refine_pass, progress : as identify_with_noise_model
+    Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
+    identification (estimate: the model's theta, coefficients then current)."""
+    named = list(named)
+    base = make_model([])
+    vehicle = base.vehicle
+    cands, left_out = candidate_coefficients(vehicle, base.mass_inverse)
+    for n in named:
+        left_out.pop(n, None)
+    pool = [n for n in cands if n not in named]
+    all_model = make_model(named + pool)
+    prior = all_model.theta_true
+    white, J, failed = sensitivities(all_model, cfg, t, Y, U, prior, T=T, max_step=max_step,
+                                     max_bridge=max_bridge)
+    names = all_model.theta_names
+    forced = list(range(len(named))) + list(range(all_model.p_coef, all_model.p))
+    for i in failed:
+        if i >= len(named) and i < all_model.p_coef:
+            left_out[names[i]] = 'a small change takes the model out of its domain'
+    cand_idx = [i for i in range(len(named), all_model.p_coef) if i not in failed]
+    members, steps, reasons = forward_stepwise(J, white, prior, names, forced, cand_idx,
+                                               of_interest=list(range(len(named))))
+    left_out.update(reasons)
+    chosen = [names[i] for i in members if i < all_model.p_coef]
+    G = J.T @ J
+    del J
+
+    def run(coefs, initial):
+        m = make_model(coefs)
+        c = replace(cfg, coefficients=list(coefs), initial=np.asarray(initial, dtype=float))
+        return (m,) + identify_with_noise_model(m, c, t, Y, U, T=T, refine_pass=refine_pass,
+                                                max_step=max_step, max_bridge=max_bridge,
+                                                progress=progress)
+
+    start = [vehicle.values[vehicle.index(n)] for n in chosen]
+    model, ekf_est, ekf_cov, est, cov, fit = run(chosen, start)
+    kept, dropped = prune(model.theta_names, est, cov, set(named) | set(CURRENT_NAMES))
+    if dropped:
+        left_out.update(dropped)
+        kept_coefs = [n for n in kept if n not in CURRENT_NAMES]
+        start = [est[model.theta_names.index(n)] for n in kept_coefs]
+        model, ekf_est, ekf_cov, est, cov, fit = run(kept_coefs, start)
+        chosen = kept_coefs
+    # error bars that cover the coefficients left at the file's values (consider analysis)
+    idx = [names.index(n) for n in model.theta_names]
+    left = [i for i in range(len(named), all_model.p_coef) if names[i] not in chosen]
+    bias = consider_bias(G, idx, left, PRIOR_REL_STD * np.abs(prior))
+    stat_sd = np.sqrt(np.diag(cov))
+    cov = cov + bias
+    inflation = np.sqrt(np.diag(cov)) / stat_sd
+    order = {n: i for i, n in enumerate(vehicle.names)}
+    left_out = dict(sorted(left_out.items(), key=lambda kv: order[kv[0]]))
+    sel = Selection(chosen=chosen, named=named, left_out=left_out,
+                    steps=[s for s in steps if s['name'] in chosen], candidates=len(cands),
+                    consider_inflation={n: float(inflation[i])
+                                        for i, n in enumerate(model.theta_names)})
+    return model, ekf_est, ekf_cov, est, cov, fit, sel
