@@ -44,6 +44,7 @@ import numpy as np
 
 from .batch import FilterErrorResiduals, parameter_scale
 from .errors import ConfigError, DomainError
+from .model import Model
 from .noise_fit import identify_with_noise_model
 from .state import CURRENT_NAMES, N_STATE
 from .uncertainty import (bandwidth, CORRELATION_WEAK, long_run_variance,
@@ -180,30 +181,27 @@ def consider_bias(G, members, left, sigma):
     return B @ B.T
 
 
-def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
-    """The selection's objective: the expected squared relative error of the coefficients of
-    interest (of_interest: indices, the coefficients the user named), or, when none are named,
-    summed over every candidate coefficient of the model, PRIOR_REL_STD^2 for each left at its
-    prior. A member's expected squared error is its white-noise CRB variance plus the bias the
-    left-out ones cause (:func:`consider_bias`), over its value squared. Current components
-    count nothing."""
+def expected_error(G, members, pool_all, s2, prior, sigma):
+    """The selection's objective: the expected squared relative error summed over every
+    coefficient of the model that has a prior (pool_all: the candidates, the named ones and
+    those only considered), PRIOR_REL_STD^2 for each left at its prior; a member's is its
+    white-noise CRB variance plus the bias the left-out ones cause (:func:`consider_bias`),
+    over its value squared. Current components count nothing."""
     left = [c for c in pool_all if c not in set(members)]
     S = np.asarray(members)
     mse = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2 + np.diag(
         consider_bias(G, members, left, sigma))
-    if len(of_interest):
-        pos = [members.index(i) for i in of_interest]
-        return float(np.sum(mse[pos] / prior[of_interest] ** 2))
     coef = prior[S] != 0.0
     return float(np.sum(mse[coef] / prior[S][coef] ** 2) + len(left) * PRIOR_REL_STD ** 2)
 
 
-def forward_stepwise(J, white, prior, names, forced, candidates, of_interest=()):
+def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=()):
     """Pass 1 of the module docstring on one linearisation.
 
     J (N * 12, p), white (N, 12): sensitivities and residuals (sensitivities()); prior (p,)
     the values they were taken at; names (p,); forced: indices always in the set (named
-    coefficients, current components); candidates: indices it may add.
+    coefficients, current components); candidates: indices it may add; consider_only:
+    indices never added whose prior errors count (added mass the model cannot change).
     Returns (chosen indices in order of entry, forced first; steps [{name, partial_f,
     rel_std, max_correlation, expected_error}]; {name: reason} for the candidates left
     out)."""
@@ -215,7 +213,8 @@ def forward_stepwise(J, white, prior, names, forced, candidates, of_interest=())
     rr = float(r @ r)
     sigma = PRIOR_REL_STD * np.abs(prior)
     members = list(forced)
-    pool_all = [c for c in candidates] + [c for c in forced if prior[c] != 0.0]
+    pool_all = (list(candidates) + list(consider_only)
+                + [c for c in forced if prior[c] != 0.0])
     pool = [c for c in candidates if G[c, c] > 0.0]
     reasons = {names[c]: 'no sensitivity: this run does not excite it'
                for c in candidates if G[c, c] <= 0.0}
@@ -232,7 +231,7 @@ def forward_stepwise(J, white, prior, names, forced, candidates, of_interest=())
             G_inv = np.zeros((0, 0))
             rss, J_set, r_set = rr, np.zeros((r.size, 0)), r
         s2 = max(1.0, max(rss, 1e-300) / max(1, n_res - len(members) - 1))
-        current = expected_error(G, members, pool_all, s2, prior, sigma, of_interest)
+        current = expected_error(G, members, pool_all, s2, prior, sigma)
         lags = bandwidth(r_set.reshape(n_samples, N_STATE))
         cand = np.array(pool)
         proj = G_inv @ G[np.ix_(members, cand)] if members else np.zeros((0, len(cand)))
@@ -259,7 +258,7 @@ def forward_stepwise(J, white, prior, names, forced, candidates, of_interest=())
                                      f' (limit {CORRELATION_MAX:g})')
                 pool.remove(c)
                 continue
-            after = expected_error(G, trial, pool_all, s2, prior, sigma, of_interest)
+            after = expected_error(G, trial, pool_all, s2, prior, sigma)
             if after >= current:
                 last[c] = ('would not lower the expected error of the model: it absorbs the '
                            'errors of coefficients left at their prior (consider analysis, '
@@ -383,14 +382,30 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
     prior = all_model.theta_true
     white, J, failed = sensitivities(all_model, cfg, t, Y, U, prior, T=T, max_step=max_step,
                                      max_bridge=max_bridge)
-    names = all_model.theta_names
+    names = list(all_model.theta_names)
     forced = list(range(len(named))) + list(range(all_model.p_coef, all_model.p))
     for i in failed:
         if i >= len(named) and i < all_model.p_coef:
             left_out[names[i]] = 'a small change takes the model out of its domain'
     cand_idx = [i for i in range(len(named), all_model.p_coef) if i not in failed]
+    # added mass the model cannot change (fixed literal M^-1) still has errors that bias the
+    # rest: its sensitivities from a model with the exact inverse, for the consider analysis
+    am = [c.name for c in vehicle.coefficients if c.is_added_mass and c.name in left_out
+          and c.name not in named]
+    consider_idx = []
+    if am:
+        am_model = Model(vehicle, am + list(base.current_names), mass_inverse='exact',
+                         current=base.current, velocity_reference=base.velocity_reference)
+        _, J_am, am_failed = sensitivities(am_model, cfg, t, Y, U, am_model.theta_true, T=T,
+                                           max_step=max_step, max_bridge=max_bridge)
+        keep_am = [i for i in range(len(am)) if i not in am_failed]
+        consider_idx = list(range(all_model.p, all_model.p + len(keep_am)))
+        J = np.hstack([J, J_am[:, keep_am]])
+        names += [am[i] for i in keep_am]
+        prior = np.concatenate([prior, am_model.theta_true[keep_am]])
+        del J_am
     members, steps, reasons = forward_stepwise(J, white, prior, names, forced, cand_idx,
-                                               of_interest=list(range(len(named))))
+                                               consider_only=consider_idx)
     left_out.update(reasons)
     chosen = [names[i] for i in members if i < all_model.p_coef]
     G = J.T @ J
@@ -414,7 +429,8 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
         chosen = kept_coefs
     # error bars that cover the coefficients left at the file's values (consider analysis)
     idx = [names.index(n) for n in model.theta_names]
-    left = [i for i in range(len(named), all_model.p_coef) if names[i] not in chosen]
+    left = [i for i in list(range(len(named), all_model.p_coef)) + consider_idx
+            if names[i] not in chosen]
     bias = consider_bias(G, idx, left, PRIOR_REL_STD * np.abs(prior))
     stat_sd = np.sqrt(np.diag(cov))
     cov = cov + bias
