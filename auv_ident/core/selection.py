@@ -48,7 +48,7 @@ from .model import Model
 from .noise_fit import identify_with_noise_model
 from .state import CURRENT_NAMES, N_STATE
 from .uncertainty import (bandwidth, CORRELATION_WEAK, long_run_variance,
-                          REL_STD_IDENTIFIABLE)
+                          REL_STD_IDENTIFIABLE, REL_STD_WEAK)
 
 AUTO = 'auto'
 F_TO_ENTER = 9.0            # partial F (long-run variance) a candidate needs: 3 sigma
@@ -159,14 +159,22 @@ def _figures_of_cov(cov, values):
     return rel, corr[np.arange(len(sd)), partner] if len(sd) > 1 else np.zeros(1), partner
 
 
-def _hac_partial_f(J, r_set, J_set, proj, c, lags, n_samples):
-    """Partial F of candidate c with the long-run variance of its score: (j_perp^T r)^2 /
-    LRV(g), g_k = sum over the channels of sample k of j_perp * r (j_perp: c's sensitivity
-    with the members' part projected out)."""
+def _hac_partial_f(J, r_set, J_set, proj, c, n_samples):
+    """Partial F (Wald) of candidate c with the Newey-West variance of its estimate: with
+    j_perp c's sensitivity with the members' part projected out, delta = j_perp^T r /
+    j_perp^T j_perp fitted, the scores g_k = sum over the channels of sample k of
+    j_perp * (r - delta j_perp) and F = delta^2 (j_perp^T j_perp)^2 / LRV(g). The scores are
+    taken after the fit (under the alternative): before it, a candidate's own effect in the
+    residuals would count as correlated noise and hide it."""
     j_perp = J[:, c] - (J_set @ proj if J_set.shape[1] else 0.0)
-    g = (j_perp * r_set).reshape(n_samples, N_STATE).sum(axis=1)
-    lrv = long_run_variance(g, lags)
-    return float(g.sum() ** 2 / lrv) if lrv > 0 else 0.0
+    jj = float(j_perp @ j_perp)
+    if jj <= 0.0:
+        return 0.0
+    delta = float(j_perp @ r_set) / jj
+    resid = (r_set - delta * j_perp).reshape(n_samples, N_STATE)
+    g = (j_perp.reshape(n_samples, N_STATE) * resid).sum(axis=1)
+    lrv = long_run_variance(g, bandwidth(resid))
+    return float(delta ** 2 * jj ** 2 / lrv) if lrv > 0 else 0.0
 
 
 def consider_bias(G, members, left, sigma):
@@ -186,12 +194,16 @@ def expected_error(G, members, pool_all, s2, prior, sigma):
     coefficient of the model that has a prior (pool_all: the candidates, the named ones and
     those only considered), PRIOR_REL_STD^2 for each left at its prior; a member's is its
     white-noise CRB variance plus the bias the left-out ones cause (:func:`consider_bias`),
-    over its value squared. Current components count nothing."""
+    over its value squared. Current components, and named coefficients the run does not
+    determine (CRB 1-sigma >= REL_STD_WEAK of the value: no choice helps them), count
+    nothing."""
     left = [c for c in pool_all if c not in set(members)]
     S = np.asarray(members)
-    mse = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2 + np.diag(
-        consider_bias(G, members, left, sigma))
-    coef = prior[S] != 0.0
+    var = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2
+    mse = var + np.diag(consider_bias(G, members, left, sigma))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        determined = var < (REL_STD_WEAK * prior[S]) ** 2
+    coef = (prior[S] != 0.0) & determined
     return float(np.sum(mse[coef] / prior[S][coef] ** 2) + len(left) * PRIOR_REL_STD ** 2)
 
 
@@ -232,7 +244,6 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             rss, J_set, r_set = rr, np.zeros((r.size, 0)), r
         s2 = max(1.0, max(rss, 1e-300) / max(1, n_res - len(members) - 1))
         current = expected_error(G, members, pool_all, s2, prior, sigma)
-        lags = bandwidth(r_set.reshape(n_samples, N_STATE))
         cand = np.array(pool)
         proj = G_inv @ G[np.ix_(members, cand)] if members else np.zeros((0, len(cand)))
         norm = G[cand, cand] - np.einsum('ij,ij->j', G[np.ix_(members, cand)], proj)
@@ -264,7 +275,7 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
                            'errors of coefficients left at their prior (consider analysis, '
                            f'{after:.3g} >= {current:.3g})')
                 continue
-            f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, lags, n_samples)
+            f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, n_samples)
             if f_hac < F_TO_ENTER:
                 last[c] = (f'residual reduction too small: partial F {f_hac:.3g} < '
                            f'{F_TO_ENTER:g} (long-run variance)')
