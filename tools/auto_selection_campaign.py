@@ -16,6 +16,9 @@ identified coefficient) and the median |error|/sigma. These are measurements, no
 
     PYTHONPATH=. .venv/bin/python tools/auto_selection_campaign.py [--out DIR] [--seeds 1,2,3]
         [--duration 600] [--reuse] [--methods auto,hand]
+
+With --reuse, bags and results already in --out are kept (a result with its command's wall
+time), so more seeds can be added to a campaign.
 """
 import argparse
 import json
@@ -49,8 +52,14 @@ def make_bag(out, seed, duration, reuse):
     return json.loads((out / 'truth.json').read_text())
 
 
-def identify(bag, coefficients, out_json):
-    """Run the command line; returns its JSON document with 'wall' (s), or a failure dict."""
+def identify(bag, coefficients, out_json, reuse=False):
+    """Run the command line; returns its JSON document with 'wall' (s, the command's, kept in
+    OUT.wall next to it), or a failure dict. reuse: take a result already made."""
+    wall_file = Path(str(out_json) + '.wall')
+    if reuse and Path(out_json).is_file() and wall_file.is_file():
+        doc = json.loads(Path(out_json).read_text())
+        doc['wall'] = float(wall_file.read_text())
+        return doc
     cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', 'nps_auv2', '--bag',
            str(bag), '--coefficients', coefficients, '--json', str(out_json)]
     env = dict(os.environ, PYTHONPATH=str(REPO))
@@ -61,6 +70,7 @@ def identify(bag, coefficients, out_json):
         return {'failed': True, 'stderr': p.stderr[-2000:], 'wall': wall}
     doc = json.loads(Path(out_json).read_text())
     doc['wall'] = wall
+    wall_file.write_text(f'{wall:.3f}\n')
     return doc
 
 
@@ -80,7 +90,8 @@ def main(argv=None):
     ap.add_argument('--seeds', default='1,2,3')
     ap.add_argument('--duration', type=float, default=600.0)
     ap.add_argument('--methods', default='auto,hand')
-    ap.add_argument('--reuse', action='store_true', help='keep bags already generated')
+    ap.add_argument('--reuse', action='store_true',
+                    help='keep bags and results already made (a rerun reprints the table)')
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
     methods = [m for m in args.methods.split(',') if m in METHODS]
@@ -97,7 +108,7 @@ def main(argv=None):
         out = Path(args.out) / f'seed{seed}'
         truth = make_bag(out, seed, args.duration, args.reuse)
         for m in methods:
-            doc = identify(out / 'bag', METHODS[m], out / f'{m}.json')
+            doc = identify(out / 'bag', METHODS[m], out / f'{m}.json', args.reuse)
             summary[f'{seed}/{m}'] = doc
             if doc.get('failed'):
                 last = doc['stderr'].strip().splitlines()[-1:] or ['?']
