@@ -189,31 +189,40 @@ def consider_bias(G, members, left, sigma):
     return B @ B.T
 
 
-def expected_error(G, members, pool_all, s2, prior, sigma):
-    """The selection's objective: the expected squared relative error summed over every
-    coefficient of the model that has a prior (pool_all: the candidates, the named ones and
-    those only considered), PRIOR_REL_STD^2 for each left at its prior; a member's is its
-    white-noise CRB variance plus the bias the left-out ones cause (:func:`consider_bias`),
-    over its value squared. Current components, and named coefficients the run does not
-    determine (CRB 1-sigma >= REL_STD_WEAK of the value: no choice helps them), count
-    nothing."""
+def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
+    """The selection's objective, from the expected squared relative error of a coefficient:
+    PRIOR_REL_STD^2 for one left at its prior, and for a member its white-noise CRB variance
+    plus the bias the left-out ones cause (:func:`consider_bias`), over its value squared.
+
+    of_interest : indices (members) whose errors are the objective, the coefficients the user
+        named; empty: the sum over every coefficient with a prior (pool_all: the candidates,
+        the named ones and those only considered), where named coefficients the run does not
+        determine (CRB 1-sigma >= REL_STD_WEAK of the value: no choice helps them) and the
+        current components count nothing.
+    """
     left = [c for c in pool_all if c not in set(members)]
     S = np.asarray(members)
     var = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2
     mse = var + np.diag(consider_bias(G, members, left, sigma))
+    if len(of_interest):
+        pos = [members.index(i) for i in of_interest]
+        return float(np.sum(mse[pos] / prior[S[pos]] ** 2))
     with np.errstate(invalid='ignore', divide='ignore'):
         determined = var < (REL_STD_WEAK * prior[S]) ** 2
     coef = (prior[S] != 0.0) & determined
     return float(np.sum(mse[coef] / prior[S][coef] ** 2) + len(left) * PRIOR_REL_STD ** 2)
 
 
-def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=()):
+def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(),
+                     named=()):
     """Pass 1 of the module docstring on one linearisation.
 
     J (N * 12, p), white (N, 12): sensitivities and residuals (sensitivities()); prior (p,)
     the values they were taken at; names (p,); forced: indices always in the set (named
     coefficients, current components); candidates: indices it may add; consider_only:
-    indices never added whose prior errors count (added mass the model cannot change).
+    indices never added whose prior errors count (added mass the model cannot change); named:
+    the forced coefficients the user named, whose expected error is the objective if the run
+    determines any of them (expected_error), else that of the whole model.
     Returns (chosen indices in order of entry, forced first; steps [{name, partial_f,
     rel_std, max_correlation, expected_error}]; {name: reason} for the candidates left
     out)."""
@@ -232,6 +241,14 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
                for c in candidates if G[c, c] <= 0.0}
     last = {}
     steps = []
+    if len(members):
+        var0 = np.diag(np.linalg.pinv(G[np.ix_(members, members)]))
+        s2_0 = max(1.0, (rr - float(b[members] @ np.linalg.pinv(
+            G[np.ix_(members, members)]) @ b[members])) / max(1, n_res - len(members)))
+        of_interest = [i for i in named if prior[i] != 0.0 and var0[members.index(i)] * s2_0
+                       < (REL_STD_WEAK * prior[i]) ** 2]
+    else:
+        of_interest = []
     while pool:
         if members:
             G_inv = np.linalg.pinv(G[np.ix_(members, members)])
@@ -243,7 +260,7 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             G_inv = np.zeros((0, 0))
             rss, J_set, r_set = rr, np.zeros((r.size, 0)), r
         s2 = max(1.0, max(rss, 1e-300) / max(1, n_res - len(members) - 1))
-        current = expected_error(G, members, pool_all, s2, prior, sigma)
+        current = expected_error(G, members, pool_all, s2, prior, sigma, of_interest)
         cand = np.array(pool)
         proj = G_inv @ G[np.ix_(members, cand)] if members else np.zeros((0, len(cand)))
         norm = G[cand, cand] - np.einsum('ij,ij->j', G[np.ix_(members, cand)], proj)
@@ -269,10 +286,10 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
                                      f' (limit {CORRELATION_MAX:g})')
                 pool.remove(c)
                 continue
-            after = expected_error(G, trial, pool_all, s2, prior, sigma)
+            after = expected_error(G, trial, pool_all, s2, prior, sigma, of_interest)
             if after >= current:
-                last[c] = ('would not lower the expected error of the model: it absorbs the '
-                           'errors of coefficients left at their prior (consider analysis, '
+                last[c] = ('would not lower the expected error: it absorbs the errors of '
+                           'coefficients left at their prior (consider analysis, '
                            f'{after:.3g} >= {current:.3g})')
                 continue
             f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, n_samples)
@@ -416,7 +433,8 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
         prior = np.concatenate([prior, am_model.theta_true[keep_am]])
         del J_am
     members, steps, reasons = forward_stepwise(J, white, prior, names, forced, cand_idx,
-                                               consider_only=consider_idx)
+                                               consider_only=consider_idx,
+                                               named=list(range(len(named))))
     left_out.update(reasons)
     chosen = [names[i] for i in members if i < all_model.p_coef]
     G = J.T @ J
