@@ -24,6 +24,7 @@ import argparse
 import json
 import os
 from pathlib import Path
+import resource
 import subprocess
 import sys
 import time
@@ -53,24 +54,30 @@ def make_bag(out, seed, duration, reuse):
 
 
 def identify(bag, coefficients, out_json, reuse=False):
-    """Run the command line; returns its JSON document with 'wall' (s, the command's, kept in
-    OUT.wall next to it), or a failure dict. reuse: take a result already made."""
+    """Run the command line; returns its JSON document with 'wall' and 'cpu' (s, the
+    command's wall-clock and CPU (user + system) time, kept in OUT.wall next to it), or a
+    failure dict. reuse: take a result already made."""
     wall_file = Path(str(out_json) + '.wall')
     if reuse and Path(out_json).is_file() and wall_file.is_file():
         doc = json.loads(Path(out_json).read_text())
-        doc['wall'] = float(wall_file.read_text())
+        times = wall_file.read_text().split()
+        doc['wall'] = float(times[0])
+        doc['cpu'] = float(times[1]) if len(times) > 1 else float('nan')
         return doc
     cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', 'nps_auv2', '--bag',
            str(bag), '--coefficients', coefficients, '--json', str(out_json)]
     env = dict(os.environ, PYTHONPATH=str(REPO))
     t0 = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if p.returncode != 0:
         return {'failed': True, 'stderr': p.stderr[-2000:], 'wall': wall}
     doc = json.loads(Path(out_json).read_text())
-    doc['wall'] = wall
-    wall_file.write_text(f'{wall:.3f}\n')
+    doc['wall'], doc['cpu'] = wall, cpu
+    wall_file.write_text(f'{wall:.3f} {cpu:.3f}\n')
     return doc
 
 
@@ -101,8 +108,8 @@ def main(argv=None):
     for m in methods:
         print(f'  {m}: --coefficients {METHODS[m]}')
     print(f'{"seed":<5}{"method":<7}{"n":>3}' + ''.join(f'{n:>16}' for n in PAPER_SET)
-          + f'{"wall s":>8}  diagnosis')
-    table = {m: {'five': [], 'all': [], 'wall': []} for m in methods}
+          + f'{"wall s":>8}{"cpu s":>7}  diagnosis')
+    table = {m: {'five': [], 'all': [], 'wall': [], 'cpu': []} for m in methods}
     summary = {}
     for seed in seeds:
         out = Path(args.out) / f'seed{seed}'
@@ -118,14 +125,16 @@ def main(argv=None):
             table[m]['five'].append([e[n] for n in PAPER_SET])
             table[m]['all'].extend(e.values())
             table[m]['wall'].append(doc['wall'])
+            table[m]['cpu'].append(doc['cpu'])
             diag = doc['diagnosis']
             verdict = ('consistent' if diag['consistent'] else 'NOT consistent')
             print(f'{seed:<5}{m:<7}{len(e):>3}'
                   + ''.join(f'{e[n][0]:>+9.2f}/{e[n][1]:>5.1f}' for n in PAPER_SET)
-                  + f'{doc["wall"]:>8.1f}  {verdict}')
+                  + f'{doc["wall"]:>8.1f}{doc["cpu"]:>7.1f}  {verdict}')
     print()
     print(f'{"method":<7}' + ''.join(f'{n:>9}' for n in PAPER_SET)
-          + f'{"3sig 5":>9}{"3sig all":>10}{"med z":>7}{"wall s":>8}   (median |error| %)')
+          + f'{"3sig 5":>9}{"3sig all":>10}{"med z":>7}{"wall s":>8}{"cpu s":>7}'
+          '   (median |error| %; median wall and CPU time of the command)')
     for m in methods:
         five = np.array(table[m]['five'])
         if five.size == 0:
@@ -135,11 +144,13 @@ def main(argv=None):
         z_all = np.array([z for _, z in table[m]['all']])
         print(f'{m:<7}' + ''.join(f'{v:>9.2f}' for v in med)
               + f'{100 * np.mean(z5 <= 3):>8.0f}%{100 * np.mean(z_all <= 3):>9.0f}%'
-              + f'{np.median(z5):>7.2f}{np.median(table[m]["wall"]):>8.1f}')
+              + f'{np.median(z5):>7.2f}{np.median(table[m]["wall"]):>8.1f}'
+              + f'{np.median(table[m]["cpu"]):>7.1f}')
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / 'campaign.json').write_text(json.dumps(summary, indent=1, default=str))
     print(f'(details in {Path(args.out) / "campaign.json"}; 3sig = truth within 3 sigma, of the '
-          'five and of every identified coefficient; med z = median |error|/sigma of the five)')
+          'five and of every identified coefficient; med z = median |error|/sigma of the five; '
+          f'load average at the end {os.getloadavg()[0]:.1f})')
     return 0
 
 
