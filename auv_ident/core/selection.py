@@ -138,7 +138,7 @@ def _set_figures(G, members, s2, prior):
     """Linearised white-noise CRB of a set: (relative 1-sigma, largest |correlation|, index of
     that partner) per member, from the information G[members, members] / s2. A member whose
     prior is 0 (a current component) has relative 1-sigma 0 (judged by others only)."""
-    idx = np.asarray(members)
+    idx = np.asarray(members, dtype=int)
     try:
         cov = np.linalg.inv(G[np.ix_(idx, idx)]) * s2
     except np.linalg.LinAlgError:
@@ -182,7 +182,7 @@ def consider_bias(G, members, left, sigma):
     their prior (Schmidt's consider analysis, linearised): with d_L ~ (0, diag(sigma_L^2)),
     the least-squares estimate of the members moves by -G_SS^-1 G_SL d_L, whose covariance is
     B B^T with B = G_SS^-1 G_SL diag(sigma_L). Returns B B^T (|members|, |members|)."""
-    S, L = np.asarray(members), np.asarray(left, dtype=int)
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
     if L.size == 0:
         return np.zeros((S.size, S.size))
     B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
@@ -201,7 +201,7 @@ def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
         current components count nothing.
     """
     left = [c for c in pool_all if c not in set(members)]
-    S = np.asarray(members)
+    S = np.asarray(members, dtype=int)
     var = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2
     mse = var + np.diag(consider_bias(G, members, left, sigma))
     if len(of_interest):

@@ -76,3 +76,14 @@ def test_auto_on_a_short_simulated_run_picks_the_wrong_excited_coefficients():
         assert abs(est[i] - truth) < 3.0 * np.sqrt(cov[i, i]), (name, est[i], truth)
     doc = sel.document()
     assert doc['chosen'] == sel.chosen and doc['left_out'] == sel.left_out
+
+
+def test_stepwise_with_nothing_forced():
+    """`auto` alone with the water current given: the set starts empty."""
+    rng = np.random.default_rng(7)
+    n = 300
+    J = rng.normal(size=(n * 12, 3))
+    r = J[:, 0] * 0.4 + J[:, 2] * 0.3 + rng.normal(size=n * 12)
+    members, steps, reasons = forward_stepwise(J, r.reshape(n, 12), np.full(3, 2.0),
+                                               ['A', 'none', 'B'], [], [0, 1, 2])
+    assert members == [0, 2] and list(reasons) == ['none']
