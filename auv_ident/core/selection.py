@@ -12,17 +12,21 @@ errors. This module picks the largest set the run determines, in two passes:
    record and their sensitivities J to every candidate (finite differences: one filter run per
    candidate, on the data's own trajectory, since the filter follows the measurements). Then,
    starting from the coefficients the user named (always included) and the water current,
-   add one at a time the candidate that reduces the residual most (the largest partial F of
-   the linearised fit), if
-     - its partial F, with the variance of the score from its Newey-West long-run variance
-       (the residuals of a wrong prior are strongly correlated in time; a white-noise F would
-       count every sample as new information), is at least F_TO_ENTER, and
-     - the enlarged set stays identifiable: the candidate's relative Cramer-Rao 1-sigma
-       (linearised, white) is below REL_STD_MAX and its largest |correlation| with another
-       member at most CORRELATION_MAX, and no member chosen before loses either property.
-   Stop when no candidate qualifies. A candidate that fails the identifiability test is left
-   out for good (more members only widen the bounds); one below F_TO_ENTER may still enter
-   after others have.
+   try the candidates in order of their residual reduction (the partial F of the linearised
+   fit, white) and add the first that
+     - reduces the residual significantly: partial F >= F_TO_ENTER, the variance of its
+       estimate from the Newey-West long-run variance of its scores (the residuals of a
+       wrong prior are strongly correlated in time; a white-noise F would count every sample
+       as new information);
+     - is identifiable in the enlarged set: relative Cramer-Rao 1-sigma (linearised, white)
+       below REL_STD_MAX and largest |correlation| with a member at most CORRELATION_MAX;
+     - lowers the expected error (:func:`expected_error`): of the named coefficients, or of
+       the whole model when none is named, counting for each coefficient its Cramer-Rao
+       variance plus the bias the coefficients left at their prior (PRIOR_REL_STD 1-sigma)
+       cause, by Schmidt's consider analysis. This keeps out a candidate that would mostly
+       absorb the errors of others.
+   Stop when none qualifies. A candidate that fails the identifiability test is left out for
+   good (more members only widen the bounds); the others may still enter after others have.
 2. **Identify, re-assess, identify again**: the chosen set is identified (EKF pass and
    filter-error refinement with the noise model from the data, core/noise_fit.py, started at
    the prior), its covariance (sandwich when the residuals are coloured) re-checked with the
@@ -31,6 +35,11 @@ errors. This module picks the largest set the run determines, in two passes:
    (fixing a parameter is conditioning: the covariance of the rest is the inverse of their
    block of the information matrix). If any was dropped, the rest are identified again,
    started at the first identification's values.
+
+Error bars: the final covariance adds the consider covariance of the coefficients left at the
+file's values (PRIOR_REL_STD 1-sigma each; added-mass terms a literal M^-1 cannot change
+included, their sensitivities from a model with the exact inverse), so that it covers the bias
+a wrong prior causes. Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
 
 Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
 out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
@@ -155,8 +164,11 @@ def _figures_of_cov(cov, values):
         corr = np.nan_to_num(cov / np.outer(sd, sd))
     np.fill_diagonal(corr, 0.0)
     corr = np.abs(corr)
-    partner = np.argmax(corr, axis=1) if len(sd) > 1 else np.zeros(len(sd), dtype=int)
-    return rel, corr[np.arange(len(sd)), partner] if len(sd) > 1 else np.zeros(1), partner
+    n = len(sd)
+    if n < 2:
+        return rel, np.zeros(n), np.zeros(n, dtype=int)
+    partner = np.argmax(corr, axis=1)
+    return rel, corr[np.arange(n), partner], partner
 
 
 def _hac_partial_f(J, r_set, J_set, proj, c, n_samples):
