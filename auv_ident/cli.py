@@ -119,7 +119,16 @@ def cmd_identify(args):
                                   current_down=args.current_down,
                                   velocity_reference=args.velocity_reference)
         print(table)
+        if args.estimate_out:
+            from auv_ident.session.estimate_file import estimate_document, write_estimate_json
+            names = list(doc['coefficients'])
+            write_estimate_json(args.estimate_out, estimate_document(
+                doc['vehicle'], names, [doc['coefficients'][n]['estimate'] for n in names],
+                doc['covariance'], None, doc['steps']))
+            print(f'wrote {args.estimate_out} (the identifier node\'s warm_start)')
     else:
+        if args.estimate_out:
+            raise AuvIdentError('--estimate-out needs --bag')
         v = load_vehicle(args.vehicle or 'nps_auv2')
         names = results.coefficient_list(v, args.coefficients)
         cfg = results.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
@@ -421,7 +430,9 @@ def build_parser():
 
     def ident_args(sp):
         sp.add_argument('--coefficients', default='',
-                        help="comma-separated names (default: the paper's set for the vehicle)")
+                        help="comma-separated names (default: the paper's set for the vehicle); "
+                             "identify --bag also takes auto (choose from the data) or "
+                             "auto,NAME,... (choose, always including NAME; docs/method.md)")
         sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                         choices=('fixed', 'paper', 'paper_q', 'matching'),
                         help='Q/R adaptation (docs/method.md); default fixed')
@@ -471,6 +482,9 @@ def build_parser():
     sp.add_argument('--max-command-age', dest='max_command_age', type=float, default=0.0,
                     help='bags: s, odometry whose command in force is older is rejected as '
                          "'stale command' (default 0: no limit, commands are held)")
+    sp.add_argument('--estimate-out', dest='estimate_out', metavar='FILE',
+                    help='bags: also write the coefficients as an estimate file, the identifier '
+                         "node's warm_start (e.g. the set --coefficients auto chose)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     ident_args(sp)
@@ -539,6 +553,9 @@ def build_parser():
     sp.add_argument('--holdout', type=float, default=0.25,
                     help='without --validate: fraction of the run held out at its end '
                          '(default 0.25)')
+    sp.add_argument('--estimate-out', dest='estimate_out', metavar='FILE',
+                    help='bags: also write the coefficients as an estimate file, the identifier '
+                         "node's warm_start (e.g. the set --coefficients auto chose)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     current_args(sp)

@@ -12,6 +12,7 @@ from auv_ident.core.diagnosis import assess
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current, split_current
 from auv_ident.core.model import Model
 from auv_ident.core.noise_fit import identify_with_noise_model
+from auv_ident.core.selection import identify_auto, parse_request
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import N_CURRENT, N_STATE, State
 from auv_ident.core.timing import with_command_changes
@@ -68,9 +69,10 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
     'ground')"""
     t0 = time.perf_counter()
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    meta_noise = _bag_truth_and_noise(path, None)[1]
     meta = bag_custom_data(path)
+    auto, names = parse_request(load_vehicle(vehicle or meta.get('auv_ident.vehicle')
+                                             or 'nps_auv2'), coefficients)
+    meta_noise = _bag_truth_and_noise(path, None)[1]
     if velocity_reference is None:
         velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
     rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
@@ -85,30 +87,50 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     if rr.accepted < 2:
         raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
                        f'(rejected: {dict(rr.reasons)})')
-    # the noise model from the data (core/noise_fit.py): with the configured noise right, the
-    # EKF pass is the replay's (the live node's) and the refinement starts from it
     t, Y, U = _exact_hold(rr)
     cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
                          initial_offset=initial_offset)
-    ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
-        model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
-        ekf_pass=(rr.estimate, rr.cov))
-    verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T,
-                                 rr.mean_nis_per_dof, refined=refine_pass)
+    selection = None
+    initial = rr.initial[:model.p_coef]
+    mean_nis = rr.mean_nis_per_dof
+    if auto:
+        # the replay only paired the samples (its EKF pass identified the named or default
+        # set); the coefficients come from the data (core/selection.py), started at the file
+        def make_model(coefs):
+            return Model(v, list(coefs) + list(rr.model.current_names),
+                         mass_inverse=rr.model.mass_inverse, current=rr.model.current,
+                         velocity_reference=rr.model.velocity_reference)
+        model, ekf_est, ekf_cov, est, cov, fit, selection = identify_auto(
+            make_model, cfg, t, Y, U, named=names, T=rr.T, refine_pass=refine_pass,
+            progress=progress)
+        truth = (model.theta_true[:model.p_coef]
+                 if meta.get('auv_ident.simulated') == 'true' else None)
+        initial = np.array([v.values[v.index(n)] for n in selection.chosen])
+        mean_nis = float('nan')     # the replay's filter identified another set
+    else:
+        # the noise model from the data (core/noise_fit.py): with the configured noise right,
+        # the EKF pass is the replay's (the live node's) and the refinement starts from it
+        ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
+            model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
+            ekf_pass=(rr.estimate, rr.cov))
+    verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T, mean_nis,
+                                 refined=refine_pass)
     est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov,
                                                         Y[:, State.PSI])
     res = Result(names=model.theta_names[:model.p_coef], estimate=est_c,
                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
-                 ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=rr.initial[:model.p_coef],
+                 ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
                  truth=truth, steps=rr.accepted, wall_s=time.perf_counter() - t0,
-                 mean_nis_per_dof=rr.mean_nis_per_dof, refined=refine_pass, current=cur)
+                 mean_nis_per_dof=mean_nis, refined=refine_pass, current=cur)
     head = (f'{v.title}: identified {", ".join(res.names)} from bag {path} '
             f'({rr.accepted} odometry samples used, {rr.rejected} rejected, {rr.commands} '
             f'actuator commands; frame {rr.frame})')
     if meta.get('auv_ident.simulated') == 'true':
         head += (f'\nsimulated by auv_ident: manoeuvre {meta.get("auv_ident.maneuver")!r}, seed '
                  f'{meta.get("auv_ident.seed")}; truth = the vehicle file values')
-    head += (f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
+    start = ('automatic selection, initial guesses at the vehicle file' if auto else
+             f'initial guesses {100 * initial_offset:+.0f} % from the vehicle file')
+    head += (f'\n{start}; noise '
              f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
                                               if refine_pass else 'EKF pass only'))
     over = ('ground (DVL bottom lock)' if velocity_reference == 'ground'
@@ -121,12 +143,15 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                                   'time_origin_ns': rr.time_origin_ns,
                                   'noise_model': fit.document(),
                                   'diagnosis': diagnosis, 'identifiability': verdicts,
-                                  'rejection_reasons': dict(rr.reasons)},
+                                  'rejection_reasons': dict(rr.reasons),
+                                  'selection': None if selection is None
+                                  else selection.document()},
                          current_truth=_bag_current_truth(meta))
     head = diagnosis['messages'][0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
              f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
-             + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
+             + ''.join('\n- ' + m for m in diagnosis['messages'][1:])
+             + ('' if selection is None else '\n' + '\n'.join(selection.summary())))
     return doc, table
 
 

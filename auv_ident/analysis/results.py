@@ -14,6 +14,9 @@ DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R win
 def coefficient_list(vehicle, text):
     """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
     names = [n.strip() for n in (text or '').split(',') if n.strip()]
+    if names and names[0].lower() == 'auto':
+        raise ConfigError("--coefficients auto chooses from a recorded run: use it with "
+                          "identify --bag (a simulated run: simulate --out BAGDIR first)")
     names = names or list(vehicle.identify_default)
     if not names:
         raise ConfigError(f'no coefficients chosen and {vehicle.name} has no identify_default')

@@ -140,6 +140,60 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     return stats, hist, out.white
 
 
+class FilterErrorResiduals:
+    """The filter-error method's residuals as a function of theta: for candidate values of the
+    model's parameters, the whitened innovations ``r_k = S_k^{-1/2} nu_k`` of a 12-state EKF
+    with those values fixed (NaN where a channel has no measurement), over one run or several
+    runs of the vehicle (each filtered from its own first measurement; their innovations
+    stacked in order, run i in rows bounds[i]:bounds[i + 1] of ``white``). The refinement
+    minimises their sum of squares; the automatic selection (selection.py) differentiates them
+    with respect to every candidate coefficient.
+
+    model : Model whose theta are the parameters; cfg : FilterConfig (its noise, q_state and
+    measured channels are used); runs : a list of (t, Y, U) records (as for run_ekf); T (s) the
+    nominal sample time (None: the first run's median interval); max_step, max_bridge as for
+    run_ekf.
+    """
+
+    def __init__(self, model, cfg, runs, T=None, max_step=None,
+                 max_bridge=DEFAULT_MAX_BRIDGE):
+        runs = [_record(*r) for r in runs]
+        if not runs:
+            raise DimensionError('the filter-error residuals need at least one run')
+        T = nominal_sample_time(runs[0][0]) if T is None else T
+        self.model = model
+        fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
+                                 noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
+        state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
+                            coefficient_values=model.c, current=model.current,
+                            velocity_reference=model.velocity_reference)
+        f = AugmentedEKF(state_model, fixed_cfg, T)
+        self.settings = f.settings()
+        # per run: (Y, U, timeline, x0, P0, outputs)
+        self.legs = []
+        for t, Y, U in runs:
+            timeline = _timeline(f, t, Y, U, max_step, max_bridge)
+            x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
+            self.legs.append((Y, U, timeline, x0, P0,
+                              K.new_outputs(N_STATE, Y.shape[0], want_white=True)))
+        self.bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
+        self.white = (self.legs[0][5].white if len(self.legs) == 1
+                      else np.full((int(self.bounds[-1]), N_STATE), np.nan))
+
+    def __call__(self, theta):
+        """(ok, white): ok False when a filter stopped (the model left its domain or the
+        covariance failed); white (sum N, 12) is the buffer, overwritten by the next call."""
+        cm = self.model.compiled_fixed(theta)
+        for i, (Y, U, timeline, x0, P0, out) in enumerate(self.legs):
+            out.white[:] = np.nan
+            K.run_filter(x0, P0, Y, U, cm, self.settings, timeline, out)
+            if out.stats[0] != K.OK:
+                return False, self.white
+            if len(self.legs) > 1:
+                self.white[self.bounds[i]:self.bounds[i + 1]] = out.white
+        return True, self.white
+
+
 def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
            max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
     """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p,).
@@ -163,43 +217,19 @@ def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
     residual vector is the runs' whitened innovations stacked in order (so 'white' of details
     is (sum N, 12) and 'J' (sum N * 12, p)), and the covariance uses all of them. T (s): the
     nominal sample time (None: the first run's median interval). Otherwise as refine()."""
-    runs = [_record(*r) for r in runs]
-    if not runs:
-        raise DimensionError('refinement needs at least one run')
-    T = nominal_sample_time(runs[0][0]) if T is None else T
     p = model.p
-    fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
-                             noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
-    state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
-                        coefficient_values=model.c, current=model.current,
-                        velocity_reference=model.velocity_reference)
-    f = AugmentedEKF(state_model, fixed_cfg, T)
-    settings = f.settings()
-    # per run: (Y, U, timeline, x0, P0, outputs); the whitened innovations of run i are rows
-    # bounds[i]:bounds[i + 1] of `white`
-    legs = []
-    for t, Y, U in runs:
-        timeline = _timeline(f, t, Y, U, max_step, max_bridge)
-        x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
-        legs.append((Y, U, timeline, x0, P0, K.new_outputs(N_STATE, Y.shape[0],
-                                                           want_white=True)))
-    white = (legs[0][5].white if len(legs) == 1
-             else np.full((sum(r[1].shape[0] for r in runs), N_STATE), np.nan))
-    bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
+    fer = FilterErrorResiduals(model, cfg, runs, T=T, max_step=max_step,
+                               max_bridge=max_bridge)
+    white = fer.white
     scale = parameter_scale(model, theta_start)
 
     def residuals(z):
         if progress is not None:
             progress()
         # theta enters through the coefficients of a 12-state filter
-        cm = model.compiled_fixed(z * scale)
-        for i, (Y, U, timeline, x0, P0, out) in enumerate(legs):
-            out.white[:] = np.nan
-            K.run_filter(x0, P0, Y, U, cm, settings, timeline, out)
-            if out.stats[0] != K.OK:
-                return np.full(white.size, 1e3)
-            if len(legs) > 1:
-                white[bounds[i]:bounds[i + 1]] = out.white
+        ok, _ = fer(z * scale)
+        if not ok:
+            return np.full(white.size, 1e3)
         r = white.ravel()
         return np.where(np.isfinite(r), r, 0.0)
 

@@ -159,6 +159,17 @@ def bandwidth(white, max_lag=None):
     return int(min(cap, max(1, math.ceil(best))))
 
 
+def long_run_variance(g, lags):
+    """Long-run variance of one series of scores g (N,) (NaN-free), the Newey-West estimate
+    with Bartlett weights: sum_k g_k^2 + 2 sum_{l=1..L} (1 - l/(L+1)) sum_k g_k g_{k-l}
+    (:func:`sandwich_covariance`'s B for one parameter; lags L in samples)."""
+    g = np.asarray(g, dtype=float)
+    lags = int(max(0, min(lags, g.shape[0] - 1)))
+    ac = _lagged_products(g, g, lags)
+    w = 1.0 - np.arange(lags + 1) / (lags + 1.0)
+    return float(ac[0] + 2.0 * np.sum(w[1:] * ac[1:]))
+
+
 def sandwich_covariance(J, white, lags=None):
     """Coefficient covariance of the least-squares fit, valid under correlated residuals.
 

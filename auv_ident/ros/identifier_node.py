@@ -82,7 +82,9 @@ previous complete file). ``warm_start`` starts a later run from it.
 
 Parameters (``config/identifier.yaml`` documents each with units and default; read once at
 start-up, declared read-only)
-    ``vehicle`` ('nps_auv2'), ``coefficients`` (empty = the vehicle's identify_default),
+    ``vehicle`` ('nps_auv2'), ``coefficients`` (empty = the vehicle's identify_default, or the
+    warm-start file's list: the route for a set chosen from the data by ``identify --bag
+    --coefficients auto --estimate-out FILE``; 'auto' itself is a parameter error saying so),
     ``initial`` (empty = file value * (1 + initial_offset)), ``initial_offset`` (0.5),
     ``noise_mode`` ('fixed' | 'paper' | 'paper_q' | 'matching'), ``tau`` (10.0 s), ``lam``
     (the paper's lambda, 2e-3; ``lambda`` would shadow a Python keyword in code),

@@ -200,6 +200,12 @@ def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
             names = w_names
     if not names:
         names = list(vehicle.identify_default)
+    if str(names[0]).strip().lower() == 'auto':
+        raise ParameterError('coefficients', "'auto' chooses the coefficients from a whole "
+                             'record, offline: record a run, then `auv_ident identify --bag BAG '
+                             '--coefficients auto --estimate-out FILE`, and start the identifier '
+                             'with warm_start:=FILE (it identifies the chosen set from the '
+                             'offline values)')
     for n in names:
         if n in CURRENT_NAMES:
             raise ParameterError('coefficients', f'{n!r} is the water current: choose it with '

@@ -1,0 +1,67 @@
+"""`--coefficients auto[,NAME,...]` end to end: identify --bag on an independent bag whose truth
+differs from the vehicle file, the JSON `selection` block, the estimate file for the live
+node, and the errors (an unknown name; 'auto' where only a fixed set is possible)."""
+import json
+from pathlib import Path
+import sys
+
+import pytest
+
+from auv_ident.cli import main
+from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import ParameterError
+from auv_ident.vehicles import load_vehicle
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from independent_data import DataConfig, generate  # noqa: E402
+
+
+@pytest.fixture(scope='module')
+def perturbed_bag(tmp_path_factory):
+    out = tmp_path_factory.mktemp('auto') / 'run'
+    return generate(DataConfig(duration=120.0, seed=5, odom_rate=20.0, commands='periodic',
+                               perturb=0.2), out)
+
+
+@pytest.mark.slow
+def test_auto_with_a_name_lists_every_coefficient_as_chosen_or_left_out(perturbed_bag, tmp_path,
+                                                                        capsys):
+    out, est = tmp_path / 'auto.json', tmp_path / 'estimate.json'
+    rc = main(['identify', '--vehicle', 'nps_auv2', '--bag', str(perturbed_bag.bag),
+               '--coefficients', 'auto,K_v', '--json', str(out), '--estimate-out', str(est)])
+    text = capsys.readouterr().out
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    sel = doc['selection']
+    v = load_vehicle('nps_auv2')
+    assert sel['named'] == ['K_v'] and sel['chosen'][0] == 'K_v'
+    assert len(sel['chosen']) > 1                  # a wrong prior: the data ask for more
+    assert list(doc['coefficients']) == sel['chosen']
+    assert set(sel['chosen']).isdisjoint(sel['left_out'])
+    assert set(sel['chosen']) | set(sel['left_out']) == set(v.names)
+    assert all(isinstance(r, str) and r for r in sel['left_out'].values())
+    assert sel['criteria']['rel_std_max'] == 0.05 and sel['criteria']['correlation_max'] == 0.95
+    assert 'automatic selection:' in text and 'left out (vehicle file values kept' in text
+    # every left-out coefficient is named in the printed text, none silently valued
+    for name in sel['left_out']:
+        assert name in text
+    warm = json.loads(est.read_text())
+    assert warm['vehicle'] == 'nps_auv2' and warm['coefficients'] == sel['chosen']
+    session = IdentSession(vehicle='nps_auv2', warm_start=str(est))
+    assert session.names[:len(sel['chosen'])] == sel['chosen']
+
+
+def test_an_unknown_name_after_auto_is_one_clear_error(perturbed_bag, capsys):
+    rc = main(['identify', '--vehicle', 'nps_auv2', '--bag', str(perturbed_bag.bag),
+               '--coefficients', 'auto,Z_ds,Q_xyz'])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "unknown coefficient 'Q_xyz'" in err and 'Traceback' not in err
+
+
+def test_auto_where_the_set_is_fixed_says_how_to_get_it(capsys):
+    rc = main(['identify', '--vehicle', 'nps_auv2', '--simulate', 'ident', '--duration', '10',
+               '--coefficients', 'auto'])
+    assert rc == 2 and 'identify --bag' in capsys.readouterr().err
+    with pytest.raises(ParameterError, match='warm_start'):
+        IdentSession(vehicle='nps_auv2', coefficients=['auto'])
