@@ -48,6 +48,7 @@ DEG = 180.0 / np.pi
 CSV_CHANNELS = ('u', 'v', 'r', 'U', 'psi')      # validation.csv, SI: m/s, m/s, rad/s, m/s, rad
 BIAS_BOUND_DEG = 3.0        # the rudder-neutral diagnosis searches a bias within +-this
 BIAS_TOL_DEG = 0.02
+SWITCH_TOL_DEG = 1.0        # deg: a zig-zag's rudder reversals lie this close to one heading
 
 
 # ------------------------------------------------------------------------------ the model file
@@ -114,6 +115,11 @@ def load_model(path, vehicle=None):
     cur = doc.get('current')
     current = (None if not cur else np.array([cur['north'], cur['east'], cur['down']], float))
     bags = list(doc.get('bags') or ([doc['bag']] if doc.get('bag') else []))
+    # identify --json records the paths as given: relative ones may be the model file's
+    here = os.path.dirname(os.path.abspath(path))
+    bags = [b if os.path.isabs(b) or os.path.exists(b)
+            or not os.path.exists(os.path.join(here, b)) else os.path.join(here, b)
+            for b in map(str, bags)]
     return SavedModel(path=str(path), vehicle=v, names=names, estimate=np.array(est),
                       std=np.array(std), current=current, bags=[str(b) for b in bags],
                       noise_std=_twelve(doc, 'noise_std', path),
@@ -181,6 +187,15 @@ def detect_zigzag(run):
         return None, str(err)
     if not m.check_times or not m.overshoots_deg:
         return None, 'the heading never passes the switch angle and turns back'
+    # a zig-zag reverses the rudder when the heading passes the switch angle: a rudder
+    # sequence timed otherwise (e.g. our simulator's 'zigzag', legs of fixed length) reverses
+    # it at headings that differ by far more than the heading noise and the gear's delay
+    spread = float(np.max(np.abs(np.array(m.onset_deviation_deg) - m.switch_deg)))
+    if m.nominal[1] <= 0 or len(m.rudder_onsets) > len(m.check_times) or spread > SWITCH_TOL_DEG:
+        return None, ('the rudder is not reversed when the heading passes one switch angle '
+                      f'(heading deviations at the reversals differ by up to {spread:.1f} deg '
+                      f'from their median {m.switch_deg:.1f} deg): a timed rudder sequence, '
+                      'not a zig-zag')
     return m, None
 
 
@@ -367,10 +382,6 @@ def _clean(d):
 
 def _f(v, fmt='.2f'):
     return mv._cell(None if v is None else float(v), fmt)
-
-
-def _list(vals):
-    return ', '.join(_f(v) for v in vals) or '-'
 
 
 def zigzag_lines(zz):
