@@ -153,3 +153,49 @@ def test_a_timed_rudder_sequence_is_not_a_zigzag(runs, tmp_path, capsys):
     assert zz == {'detected': False, 'reason': zz['reason']} and 'not a zig-zag' in zz['reason']
     assert doc['validation']['channels']['r']['fit_percent'] > 80.0
     assert not (out / 'zigzag.png').exists()
+
+
+# --------------------------------------------------------------------- the real HSVA runs
+
+NOISE_STD = '0.003,0.003,1,1,1,5e-4,0.005,0.005,1,1,1,0.001'     # docs/kvlcc2.md
+Q_STATE = '2e-4,2e-4,0,0,0,2e-4,1e-4,1e-4,0,0,0,1e-5'
+GOALS = {'Z_20_10_P': (90.0, 90.0), 'Z_10_10_P': (75.0, 70.0)}    # issue #20: r / U fit %
+
+
+@pytest.mark.slow
+def test_kvlcc2_mirror_split_from_bags(tmp_path, capsys):
+    """docs/kvlcc2.md 'A real ship from basin data': import the four HSVA runs, identify the
+    two starboard ones to model.json, report --model on each port run. The goals of issue #20:
+    free-run yaw rate and speed fit, and the closed-loop first / second overshoot within 1 / 3
+    deg of the measured, far better than the captive-test prior (about 90 s)."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from kvlcc2_data import require_runs, run_path, RUNS
+    require_runs(RUNS)
+    bags = {}
+    for r in RUNS:
+        bags[r] = str(tmp_path / r)
+        assert main(['import', '--format', 'hsva', str(run_path(r)), '--out', bags[r]]) == 0
+    model = str(tmp_path / 'model.json')
+    assert main(['identify', '--bag', bags['Z_10_10_S'], '--bag', bags['Z_20_10_S'],
+                 '--initial-offset', '0', '--noise-std', NOISE_STD, '--q-state', Q_STATE,
+                 '--json', model]) == 0
+    for r, (goal_r, goal_u) in GOALS.items():
+        out = tmp_path / f'rep_{r}'
+        assert main(['report', '--model', model, '--vehicle', VEHICLE, '--validate', bags[r],
+                     '--out', str(out)]) == 0
+        val = json.loads((out / 'result.json').read_text())['validation']
+        fit_r, fit_u = val['channels']['r'], val['derived_channels']['U']
+        assert fit_r['fit_percent'] >= goal_r and fit_u['fit_percent'] >= goal_u, (r, fit_r,
+                                                                                  fit_u)
+        assert fit_r['fit_percent'] > fit_r['fit_percent_prior'] + 15.0
+        zz = val['zigzag']
+        assert zz['detected'] and zz['first'] == 'port'
+        o = zz['overshoot_deg']
+        assert abs(o['predicted'][0] - o['measured'][0]) <= 1.0, (r, o)
+        assert abs(o['predicted'][1] - o['measured'][1]) <= 3.0, (r, o)
+        # the prior's first overshoot is further off (its second is 2.4x the measured, or
+        # missing: the prior has not turned back by the end of the 10/10 run)
+        assert (abs(o['prior'][0] - o['measured'][0])
+                > abs(o['predicted'][0] - o['measured'][0]) + 1.0), (r, o)
+        assert zz['gear']['identified_from'] == [bags['Z_10_10_S'], bags['Z_20_10_S']]
