@@ -285,12 +285,14 @@ def rudder_bias(saved, val):
 # -------------------------------------------------------------------------------- the files
 
 def _series(val, X, ch):
-    """(N,) SI series of channel ch ('U' or a state name) of X, angles as angle_channels."""
+    """(N,) SI series of channel ch ('U' or a state name) of X (val.Y: the measurement), the
+    angles as scored (angle_channels: the measurement unwrapped, a prediction moved by whole
+    turns onto it)."""
     if ch == 'U':
         return mv.speed_series(X)
     i = mv.STATE_NAMES.index(ch)
-    return angle_channels(val.Y, X)[1][:, i] if X is not val.Y else angle_channels(
-        val.Y, val.Y)[0][:, i]
+    Ym, Xp = angle_channels(val.Y, X)
+    return (Ym if X is val.Y else Xp)[:, i]
 
 
 def write_csv(path, val):
