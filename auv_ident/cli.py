@@ -228,9 +228,48 @@ def _report_methods(text):
     return parse_methods('' if text.strip() == 'all' else text)
 
 
+def cmd_model_report(args):
+    """report --model MODEL.json --validate BAG: a saved model judged on an unseen run."""
+    from auv_ident.analysis.model_report import make_model_report
+    if args.simulate or args.bag or args.methods:
+        raise AuvIdentError('report --model judges a saved model: --simulate, --bag and '
+                            '--methods do not apply (the model says what it was identified '
+                            'from)')
+    if not args.validate:
+        raise AuvIdentError('report --model needs --validate BAG: a run the model never saw')
+    ident = [b.strip() for b in (args.ident_bags or '').split(',') if b.strip()] or None
+    out = make_model_report(args.out, args.model, args.validate, vehicle=args.vehicle,
+                            ident_bags=ident,
+                            command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    val = out['result']['validation']
+    fits = {ch: val['channels'][ch] for ch in ('r', 'psi') if ch in val['channels']}
+    fits.update(val.get('derived_channels') or {})
+    print(f"model {args.model} on {val['source']}: free-run fit % (identified / prior) "
+          + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
+                      for ch, d in fits.items()))
+    zz = val['zigzag']
+    if zz['detected']:
+        o = zz['overshoot_deg']
+        print(f"closed-loop {zz['test']} zig-zag, overshoots (deg) measured / identified / "
+              'prior: ' + '; '.join(
+                  '/'.join(_pct(o[k][i]) if i < len(o[k]) else '-'
+                           for k in ('measured', 'predicted', 'prior'))
+                  for i in range(len(o['measured']))))
+    else:
+        print(f"not a zig-zag run: {zz['reason']}")
+    b = val.get('rudder_bias_diagnosis')
+    if b:
+        print(f"diagnosis (not scored): rudder bias {b['bias_deg']:+.2f} deg fits the yaw rate "
+              f"best ({b['r_fit_percent_with_bias']:.1f} %)")
+    print(f"report: {out['report']}, {out['html']}, {out['csv']}")
+    return 0
+
+
 def cmd_report(args):
     from auv_ident.analysis.results import doc_table
     from auv_ident.analysis.report import make_report
+    if args.model:
+        return cmd_model_report(args)
     out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
                       bag=args.bag, seed=args.seed, duration=args.duration,
                       coefficients=args.coefficients, noise_mode=args.noise_mode,
@@ -553,9 +592,13 @@ def build_parser():
     sp.add_argument('--holdout', type=float, default=0.25,
                     help='without --validate: fraction of the run held out at its end '
                          '(default 0.25)')
-    sp.add_argument('--estimate-out', dest='estimate_out', metavar='FILE',
-                    help='bags: also write the coefficients as an estimate file, the identifier '
-                         "node's warm_start (e.g. the set --coefficients auto chose)")
+    sp.add_argument('--model', metavar='MODEL.json',
+                    help='judge this saved model (identify --json) on --validate BAG instead '
+                         'of identifying: free run, closed-loop zig-zag, rudder diagnosis '
+                         '(docs/kvlcc2.md)')
+    sp.add_argument('--ident-bags', dest='ident_bags', metavar='A,B',
+                    help='with --model: the bags the steering gear and thrust model are '
+                         "identified from (default: the model's identification bags)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     current_args(sp)

@@ -155,16 +155,25 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     return doc, table
 
 
-def bag_source(path, vehicle=None, coefficients='', velocity_reference=None):
+def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noise_std=None,
+               q_state=None):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
     pairs them estimates the current (so that its innovation gate judges samples with it); the
-    caller's model says what to do with the current."""
+    caller's model says what to do with the current. noise_std, q_state : (12,) the
+    measurement and per-step state process noise 1-sigma the replay's gate judges samples with
+    (None: the messages' and the default; a real run needs the noise its identification used,
+    docs/kvlcc2.md, or the gate rejects its samples)."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
     meta = bag_custom_data(path)
     vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
+    given = {} if noise_std is None else {'noise_source': 'parameter'}
+    if q_state is not None:
+        given['q_state'] = np.asarray(q_state, dtype=float)
     rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=_bag_truth_and_noise(path, None)[1], velocity_reference=vr)
+                    noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
+                               else np.asarray(noise_std, dtype=float)),
+                    velocity_reference=vr, **given)
     v = load_vehicle(rr.vehicle)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth, _, meta = _bag_truth_and_noise(path, Model(v, names))

@@ -23,7 +23,7 @@ such a channel is not scored.
 
 ROS-free; matplotlib only inside :func:`fig_measured` (report_format.pyplot).
 """
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import os
 
 import numpy as np
@@ -34,7 +34,8 @@ from auv_ident.core.model import Model
 from auv_ident.core.prediction import (angle_channels, DEFAULT_MAX_STEP, fit_percent, free_run,
                                        rmse, theil)
 from auv_ident.core.angles import wrap_angle
-from auv_ident.core.state import EULER, Input, N_STATE, NU_NAMES, STATE_NAMES, STATE_UNITS
+from auv_ident.core.state import (EULER, Input, N_STATE, NU_NAMES, State, STATE_NAMES,
+                                  STATE_UNITS)
 from auv_ident.core.trim import initial_state
 
 DEFAULT_HOLDOUT = 0.25          # fraction of the identification run held out (its final part)
@@ -191,6 +192,20 @@ def _scores(Y, X, idx):
     return out
 
 
+def speed_series(X):
+    """(N,) m/s, the total speed U = sqrt(u^2 + v^2) of states X (N, 12) (NaN where u or v
+    is): the speed a ship's log and its prime system use."""
+    X = np.asarray(X, dtype=float)
+    return np.hypot(X[:, State.U], X[:, State.V])
+
+
+def _speed_scores(Y, X):
+    """fit %, RMSE (m/s) and Theil of the total speed U of prediction X against Y."""
+    y, y_hat = speed_series(Y), speed_series(X)
+    return {'fit_percent': fit_percent(y, y_hat), 'rmse': rmse(y, y_hat),
+            'theil': theil(y, y_hat)}
+
+
 def _failed_at(t, Y, X):
     """Time (s) of the first measured sample the prediction does not reach, or None."""
     lost = np.any(np.isfinite(Y), axis=1) & ~np.all(np.isfinite(X), axis=1)
@@ -212,6 +227,9 @@ class RunValidation:
     prediction : {'K1': {'horizon_samples', 'horizon_s', 'channels': {channel: {'fit_percent',
         'rmse', ... with the same suffixes}}}, ...}
     failed_at : {model: s or None}, where a free run left the model's domain
+    derived : {'U': {'fit_percent', ... as channels}}: the total speed U = sqrt(u^2 + v^2)
+        (m/s) of the free runs, when the run measures u and v (a ship's speed, which its prime
+        system scales by; :func:`speed_series`)
     """
 
     source: str
@@ -228,11 +246,14 @@ class RunValidation:
     current: object = None
     velocity_reference: str = 'ground'
     x0_window: float = 0.0
+    derived: dict = field(default_factory=dict)
 
     def mean_fit(self, model='identified', names=NU_NAMES):
         """Mean fit % over the channels `names` (u v w p q r by default); NaN channels (not
         measured, or a constant measurement) left out."""
-        vals = [self.channels[n]['fit_percent' + SUFFIX[model]] for n in names]
+        # a planar vehicle's run does not measure w, p, q: not channels here
+        vals = [self.channels[n]['fit_percent' + SUFFIX[model]] for n in names
+                if n in self.channels]
         vals = [v for v in vals if v is not None and np.isfinite(v)]
         return float(np.mean(vals)) if vals else float('nan')
 
@@ -257,7 +278,8 @@ class RunValidation:
                'units': dict(zip(STATE_NAMES, STATE_UNITS)),
                'mean_fit_percent_nu': {m: self.mean_fit(m) for m in models},
                'failed_at_s': dict(self.failed_at),
-               'channels': self.channels, 'prediction': self.prediction}
+               'channels': self.channels, 'derived_channels': self.derived,
+               'prediction': self.prediction}
         return clean(doc)
 
 
@@ -336,6 +358,14 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
             for ch in channels.values():
                 for key in ('fit_percent', 'rmse', 'theil'):
                     ch[key + SUFFIX[name]] = float('nan')
+    derived = {}
+    if State.U in measured_idx and State.V in measured_idx:
+        derived['U'] = {}
+        for name, X in free.items():
+            at = failed[name]
+            sc = ({'fit_percent': float('nan'), 'rmse': float('nan'), 'theil': float('nan')}
+                  if at is not None else _speed_scores(Y, X))
+            derived['U'].update({k + SUFFIX[name]: v for k, v in sc.items()})
     dt = float(np.median(np.diff(t[np.any(np.isfinite(Y), axis=1)])))
     prediction = {f'K{K}': {'horizon_samples': K, 'horizon_s': K * dt,
                             'channels': merged(k_step[K])} for K in horizons}
@@ -343,17 +373,23 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
                          k_step=k_step, channels=channels, prediction=prediction,
                          failed_at=failed,
                          current=None if current is None else np.asarray(current, float),
-                         velocity_reference=velocity_reference, x0_window=float(x0_window))
+                         velocity_reference=velocity_reference, x0_window=float(x0_window),
+                         derived=derived)
 
 
-def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=None, **kwargs):
+def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=None,
+                    noise_std=None, q_state=None, **kwargs):
     """validate_on_run on a bag's measurements (paired as for identification:
     bag_identify.bag_source); the truth flies too when the bag is our simulator's (its truth is
     the vehicle file). velocity_reference: None for what the bag says (else 'ground');
-    kwargs: validate_on_run's horizons, max_step, x0_window. Returns (RunValidation, Source)."""
+    noise_std, q_state: (12,) the noise the pairing replay judges the samples with (the
+    identification's, so that a real run's samples are not rejected against the messages'
+    far smaller noise; None: the messages' and the default); kwargs: validate_on_run's
+    horizons, max_step, x0_window. Returns (RunValidation, Source)."""
     from auv_ident.analysis.bag_identify import bag_source
     run = bag_source(bag, vehicle=vehicle.path, coefficients=','.join(names),
-                     velocity_reference=velocity_reference)
+                     velocity_reference=velocity_reference, noise_std=noise_std,
+                     q_state=q_state)
     val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
                           source=run.description, velocity_reference=run.velocity_reference,
                           include_truth=run.truth is not None, truth_current=run.current_truth,
@@ -404,7 +440,7 @@ def markdown_lines(vd, held_out_fraction=None):
             L += ['', f'**The {MODEL_LABELS[m]} model left its domain at t = {at:.1f} s: its '
                       'free-run scores are not given.**']
     mean = vd['mean_fit_percent_nu']
-    L += ['', 'Mean fit over u v w p q r: '
+    L += ['', 'Mean fit over the measured ones of u v w p q r: '
           + ', '.join(f'{MODEL_LABELS[m]} {_cell(mean[m], ".1f")} %' for m in models) + '.', '']
     header = ['channel'] + [f'fit % {MODEL_LABELS[m]}' for m in models] \
         + [f'RMSE {MODEL_LABELS[m]}' for m in models] \
@@ -417,6 +453,11 @@ def markdown_lines(vd, held_out_fraction=None):
                              else d['rmse' + SUFFIX[m]] * DISPLAY_SCALE[i]) for m in models]
                     + [_cell(d['theil' + SUFFIX[m]], '.3f') for m in models]
                     + [DISPLAY_UNITS[i]])
+    for ch, d in (vd.get('derived_channels') or {}).items():     # U = sqrt(u^2 + v^2)
+        rows.append([f'{ch} (derived)'] + [_cell(d['fit_percent' + SUFFIX[m]], '.2f')
+                                           for m in models]
+                    + [_cell(d['rmse' + SUFFIX[m]]) for m in models]
+                    + [_cell(d['theil' + SUFFIX[m]], '.3f') for m in models] + ['m/s'])
     L += markdown_table(header, rows).split('\n')
     keys = list(vd['prediction'])
     L += ['', '### K-step-ahead prediction', '',

@@ -104,16 +104,18 @@ def thrust_table(models, names):
     return '\n'.join(lines)
 
 
-def closed_loop(run, f, ident, ideal, step=0.05):
+def closed_loop(run, f, ident, ideal, step=0.05, x0=None, **sim):
     """Measured and simulated measures of a run: the model f (x, u) -> x_dot from the run's
-    first measured state, with the run's test, side and order time of the first execute, once
-    through the identified gear and once with the ideal helm. Returns (measured, with gear,
-    ideal) ZigzagMeasures and the two ZigzagSimulations."""
+    first measured state (or x0 (12,) at t = 0), with the run's test, side and order time of
+    the first execute, once through the identified gear and once with the ideal helm (None:
+    not simulated). sim: simulate_zigzag's thrust, thrust_index, inputs, n_inputs. Returns
+    (measured, with gear, ideal) ZigzagMeasures and the two ZigzagSimulations."""
     m = measured_measures(run, ident)
     kw = dict(rudder_deg=m.nominal[0], switch_deg=m.nominal[1], duration=float(run.t[-1]),
-              first=m.first, execute_time=m.execute_time, step=step)
-    sim_g = simulate_zigzag(f, run.x[0], gear=ident.gear, **kw)
-    sim_i = simulate_zigzag(f, run.x[0], gear=ideal, **kw)
+              first=m.first, execute_time=m.execute_time, step=step, **sim)
+    x0 = run.x[0] if x0 is None else x0
+    sim_g = simulate_zigzag(f, x0, gear=ident.gear, **kw)
+    sim_i = None if ideal is None else simulate_zigzag(f, x0, gear=ideal, **kw)
     return m, sim_g, sim_i
 
 
