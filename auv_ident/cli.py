@@ -91,10 +91,10 @@ def cmd_identify(args):
     mode = 'fixed' if args.fixed_noise else args.noise_mode
     if args.bag and len(args.bag) > 1:
         from auv_ident.analysis.bag_identify import identify_bags
-        if args.current not in ('estimate', 'none') or args.current_down or mode != 'fixed':
-            raise AuvIdentError('several bags are identified in still water with the fixed '
-                                'noise of their messages: --current, --current-down and '
-                                '--noise-mode apply to one bag')
+        if mode != 'fixed':
+            raise AuvIdentError('several bags are identified with the fixed noise of their '
+                                'messages and the noise model from the data: --noise-mode '
+                                'applies to one bag')
         doc, table = identify_bags(args.bag, vehicle=args.vehicle,
                                    coefficients=args.coefficients,
                                    initial_offset=args.initial_offset,
@@ -103,7 +103,12 @@ def cmd_identify(args):
                                    max_command_age=args.max_command_age,
                                    velocity_reference=args.velocity_reference,
                                    noise_std=_twelve(args.noise_std, '--noise-std'),
-                                   q_state=_twelve(args.q_state, '--q-state'))
+                                   q_state=_twelve(args.q_state, '--q-state'),
+                                   # one current per run is not estimated: the default
+                                   # ('estimate') means still water with several bags
+                                   current=('none' if args.current == 'estimate'
+                                            else args.current),
+                                   current_down=args.current_down)
         print(table)
     elif args.noise_std or args.q_state:
         raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
