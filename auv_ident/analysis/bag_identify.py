@@ -282,7 +282,9 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
                                   'noise_std': [float(x) for x in noise],
                                   'q_state': [float(x) for x in cfg.q_state],
                                   'replayed_with_noise_model': again,
-                                  'rejection_reasons': _reasons(rrs)})
+                                  'rejection_reasons': _reasons(rrs)},
+                         current_truth=_common([_bag_current_truth(bag_custom_data(p))
+                                                for p in paths]))
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
             f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
@@ -307,6 +309,13 @@ def _replayed_note(again, rejected):
             f'{again["first_samples"]} odometry samples as outliers (more than '
             f'{100 * REPLAY_REJECT_LIMIT:g} %): replayed with the noise model read off the '
             f'accepted samples; {rejected} rejected then')
+
+
+def _common(values):
+    """The value all bags agree on (arrays), else None."""
+    if any(x is None for x in values) or any(not np.array_equal(x, values[0]) for x in values):
+        return None
+    return values[0]
 
 
 def _reasons(rrs):
