@@ -412,7 +412,7 @@ def build_parser():
                         help='the water current: estimate it with the coefficients (default: '
                              'every AUV runs in one, and 0.1 m/s left out biases the '
                              'coefficients beyond their error bars), none (still water), or a '
-                             'known current in m/s NED')
+                             'known current in m/s NED; several bags: none (default) or known')
         sp.add_argument('--current-down', dest='current_down', action='store_true',
                         help='estimate the down component of the current too')
         sp.add_argument('--velocity-reference', dest='velocity_reference', default=None,
@@ -429,10 +429,12 @@ def build_parser():
                          'several runs of the vehicle')
     sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
                     help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
-                         'psi; m/s, rad/s, m, rad) instead of the messages\'')
+                         'psi; m/s, rad/s, m, rad) to start from instead of the messages\' '
+                         '(the noise model from the data still applies)')
     sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
-                    help='several bags: 12 per-step state process-noise 1-sigmas instead of '
-                         'the default (an AUV\'s: a real ship needs far more, docs/kvlcc2.md)')
+                    help='several bags: 12 per-step state process-noise 1-sigmas to start '
+                         'from instead of the default (an AUV\'s; model error far above it is '
+                         'matched from the data, docs/method.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',
