@@ -173,6 +173,9 @@ def _replays(paths, replay, cfg_of):
         if rr.accepted < 2:
             raise BagError(f'{p}: only {rr.accepted} odometry samples could be used '
                            f'(rejected: {dict(rr.reasons)})')
+        if rr.vehicle != rrs[0].vehicle:
+            raise BagError(f'{p}: vehicle {rr.vehicle!r}, the other bags\' is '
+                           f'{rrs[0].vehicle!r}: one model needs one vehicle')
     rejected = sum(rr.rejected for rr in rrs)
     total = rejected + sum(rr.accepted for rr in rrs)
     noise = np.median(np.array([rr.noise_std for rr in rrs]), axis=0)
@@ -182,9 +185,10 @@ def _replays(paths, replay, cfg_of):
     cfg = cfg_of(model, noise)
     pre = fit_noise_runs(model, cfg, [_exact_hold(rr) for rr in rrs], T=rrs[0].T)
     again = [replay(p, pre.effective_std, pre.effective_q, 'parameter') for p in paths]
-    return again, noise, {'first_rejected': int(rejected), 'first_samples': int(total),
-                   'noise_std': [float(x) for x in pre.effective_std],
-                   'q_state': [float(x) for x in pre.effective_q]}
+    note = {'first_rejected': int(rejected), 'first_samples': int(total),
+            'noise_std': [float(x) for x in pre.effective_std],
+            'q_state': [float(x) for x in pre.effective_q]}
+    return again, noise, note
 
 
 def _identified(model, cfg, records, T, refine_pass, progress, ekf_pass=None):
@@ -255,10 +259,6 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
 
     rrs, noise, again = _replays(paths, replay, cfg_of)
     model = rrs[0].model
-    for p, rr in zip(paths, rrs):
-        if rr.vehicle != model.vehicle.name:
-            raise BagError(f'{p}: vehicle {rr.vehicle!r}, the other bags\' is '
-                           f'{model.vehicle.name!r}: one model needs one vehicle')
     v = load_vehicle(model.vehicle.name)
     rejected = sum(rr.rejected for rr in rrs)
     cfg = cfg_of(model, noise)
@@ -298,8 +298,9 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     head = diagnosis['messages'][0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
              f'NIS/dof {res.mean_nis_per_dof:.3f} (the reported EKF pass; with the configured '
-             f'noise {fit.configured_pass["mean_nis_per_dof"]:.4g}), refined cost per residual '
-             f'{fit.refine_cost:.3f}, wall {res.wall_s:.2f} s'
+             f'noise {fit.configured_pass["mean_nis_per_dof"]:.4g})'
+             + (f', refined cost per residual {fit.refine_cost:.3f}' if refine_pass else '')
+             + f', wall {res.wall_s:.2f} s'
              + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
     return doc, table
 
