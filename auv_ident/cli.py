@@ -91,10 +91,10 @@ def cmd_identify(args):
     mode = 'fixed' if args.fixed_noise else args.noise_mode
     if args.bag and len(args.bag) > 1:
         from auv_ident.analysis.bag_identify import identify_bags
-        if args.current not in ('estimate', 'none') or args.current_down or mode != 'fixed':
-            raise AuvIdentError('several bags are identified in still water with the fixed '
-                                'noise of their messages: --current, --current-down and '
-                                '--noise-mode apply to one bag')
+        if mode != 'fixed':
+            raise AuvIdentError('several bags are identified with the fixed noise of their '
+                                'messages and the noise model from the data: --noise-mode '
+                                'applies to one bag')
         doc, table = identify_bags(args.bag, vehicle=args.vehicle,
                                    coefficients=args.coefficients,
                                    initial_offset=args.initial_offset,
@@ -103,7 +103,12 @@ def cmd_identify(args):
                                    max_command_age=args.max_command_age,
                                    velocity_reference=args.velocity_reference,
                                    noise_std=_twelve(args.noise_std, '--noise-std'),
-                                   q_state=_twelve(args.q_state, '--q-state'))
+                                   q_state=_twelve(args.q_state, '--q-state'),
+                                   # one current per run is not estimated: the default
+                                   # ('estimate') means still water with several bags
+                                   current=('none' if args.current == 'estimate'
+                                            else args.current),
+                                   current_down=args.current_down)
         print(table)
     elif args.noise_std or args.q_state:
         raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
@@ -490,7 +495,7 @@ def build_parser():
                         help='the water current: estimate it with the coefficients (default: '
                              'every AUV runs in one, and 0.1 m/s left out biases the '
                              'coefficients beyond their error bars), none (still water), or a '
-                             'known current in m/s NED')
+                             'known current in m/s NED; several bags: none (default) or known')
         sp.add_argument('--current-down', dest='current_down', action='store_true',
                         help='estimate the down component of the current too')
         sp.add_argument('--velocity-reference', dest='velocity_reference', default=None,
@@ -507,10 +512,12 @@ def build_parser():
                          'several runs of the vehicle')
     sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
                     help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
-                         'psi; m/s, rad/s, m, rad) instead of the messages\'')
+                         'psi; m/s, rad/s, m, rad) to start from instead of the messages\' '
+                         '(the noise model from the data still applies)')
     sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
-                    help='several bags: 12 per-step state process-noise 1-sigmas instead of '
-                         'the default (an AUV\'s: a real ship needs far more, docs/kvlcc2.md)')
+                    help='several bags: 12 per-step state process-noise 1-sigmas to start '
+                         'from instead of the default (an AUV\'s; model error far above it is '
+                         'matched from the data, docs/method.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
     sp.add_argument('--noise-source', dest='noise_source', default='message',

@@ -7,11 +7,11 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.batch import identify_runs, Result
+from auv_ident.core.batch import Result
 from auv_ident.core.diagnosis import assess
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current, split_current
 from auv_ident.core.model import Model
-from auv_ident.core.noise_fit import identify_with_noise_model
+from auv_ident.core.noise_fit import fit_noise_runs, identify_runs_with_noise_model
 from auv_ident.core.selection import identify_auto, parse_request
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import N_CURRENT, N_STATE, State
@@ -58,9 +58,11 @@ def _exact_hold(rr):
 def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
                  refine_pass=True, progress=None, noise_source='message', max_command_age=None,
                  current=DEFAULT_CURRENT, current_down=False, velocity_reference=None):
-    """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag), then the
-    batch refinement on the paired arrays at their stamps. Returns (JSON document, printable
-    table).
+    """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag, made again
+    with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
+    model, the batch refinement on the paired arrays at their stamps, identifiability and the
+    diagnosis; with coefficients 'auto[,NAME,...]' the set is chosen from the data
+    (core/selection.py). Returns (JSON document, printable table).
 
     noise_source, max_command_age : as IdentSession (the message covariances are the noise
     where they are usable; a held command stays in force however old)
@@ -75,21 +77,24 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     meta_noise = _bag_truth_and_noise(path, None)[1]
     if velocity_reference is None:
         velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
-                    initial_offset=initial_offset, noise_std=meta_noise,
-                    noise_source=noise_source, max_command_age=max_command_age,
-                    current=current, current_down=current_down,
-                    velocity_reference=velocity_reference)
+
+    def replay(p, noise, q, source):
+        return replay_bag(p, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
+                          initial_offset=initial_offset,
+                          noise_std=meta_noise if noise is None else noise,
+                          noise_source=source or noise_source, q_state=q,
+                          max_command_age=max_command_age, current=current,
+                          current_down=current_down, velocity_reference=velocity_reference)
+
+    def cfg_of(model, noise):
+        return ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
+                              noise_std=noise, initial_offset=initial_offset)
+
+    (rr,), noise, again = _replays([path], replay, cfg_of)
     v = load_vehicle(rr.vehicle)
     model = rr.model
     truth, _, meta = _bag_truth_and_noise(path, model)
-    noise = rr.noise_std
-    if rr.accepted < 2:
-        raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
-                       f'(rejected: {dict(rr.reasons)})')
-    t, Y, U = _exact_hold(rr)
-    cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
-                         initial_offset=initial_offset)
+    rec = _exact_hold(rr)
     selection = None
     initial = rr.initial[:model.p_coef]
     mean_nis = rr.mean_nis_per_dof
@@ -100,28 +105,31 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
             return Model(v, list(coefs) + list(rr.model.current_names),
                          mass_inverse=rr.model.mass_inverse, current=rr.model.current,
                          velocity_reference=rr.model.velocity_reference)
+        t, Y, U = rec
         model, ekf_est, ekf_cov, est, cov, fit, selection = identify_auto(
-            make_model, cfg, t, Y, U, named=names, T=rr.T, refine_pass=refine_pass,
-            progress=progress)
+            make_model, cfg_of(model, noise), t, Y, U, named=names, T=rr.T,
+            refine_pass=refine_pass, progress=progress)
         truth = (model.theta_true[:model.p_coef]
                  if meta.get('auv_ident.simulated') == 'true' else None)
         initial = np.array([v.values[v.index(n)] for n in selection.chosen])
         mean_nis = float('nan')     # the replay's filter identified another set
+        verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T, mean_nis,
+                                     refined=refine_pass)
+        est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov,
+                                                            Y[:, State.PSI])
     else:
         # the noise model from the data (core/noise_fit.py): with the configured noise right,
         # the EKF pass is the replay's (the live node's) and the refinement starts from it
-        ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
-            model, cfg, t, Y, U, T=rr.T, refine_pass=refine_pass, progress=progress,
-            ekf_pass=(rr.estimate, rr.cov))
-    verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T, mean_nis,
-                                 refined=refine_pass)
-    est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov,
-                                                        Y[:, State.PSI])
+        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit = _identified(
+            model, cfg_of(model, noise), [rec], rr.T, refine_pass, progress,
+            ekf_pass=None if again else (rr.estimate, rr.cov))
     res = Result(names=model.theta_names[:model.p_coef], estimate=est_c,
                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
                  truth=truth, steps=rr.accepted, wall_s=time.perf_counter() - t0,
                  mean_nis_per_dof=mean_nis, refined=refine_pass, current=cur)
+    if again is not None:
+        diagnosis['messages'].append(_replayed_note(again, rr.rejected))
     head = (f'{v.title}: identified {", ".join(res.names)} from bag {path} '
             f'({rr.accepted} odometry samples used, {rr.rejected} rejected, {rr.commands} '
             f'actuator commands; frame {rr.frame})')
@@ -144,6 +152,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                                   'noise_model': fit.document(),
                                   'diagnosis': diagnosis, 'identifiability': verdicts,
                                   'rejection_reasons': dict(rr.reasons),
+                                  'replayed_with_noise_model': again,
                                   'selection': None if selection is None
                                   else selection.document()},
                          current_truth=_bag_current_truth(meta))
@@ -187,70 +196,174 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
                   time_origin_ns=rr.time_origin_ns)
 
 
+REPLAY_REJECT_LIMIT = 0.02     # a replay rejecting more than this fraction is made again
+
+
+def _replays(paths, replay, cfg_of):
+    """Replay every bag (replay(path, noise_std, q_state, noise_source) -> ReplayResult); if
+    they reject more than REPLAY_REJECT_LIMIT of their odometry (a first pass whose configured
+    noise is far too small for the data throws away good samples as outliers), replay them
+    again with the noise model read off the accepted samples (core/noise_fit.py: the effective
+    measurement noise and, for model error, the matched process noise).
+
+    cfg_of(model, noise) -> FilterConfig of the configured noise. Returns (replays, the
+    configured noise (12,) (the first replays' median), note: None or {'first_rejected',
+    'first_samples', 'noise_std', 'q_state'} of the replay made again)."""
+    rrs = [replay(p, None, None, None) for p in paths]
+    for p, rr in zip(paths, rrs):
+        if rr.accepted < 2:
+            raise BagError(f'{p}: only {rr.accepted} odometry samples could be used '
+                           f'(rejected: {dict(rr.reasons)})')
+        if rr.vehicle != rrs[0].vehicle:
+            raise BagError(f'{p}: vehicle {rr.vehicle!r}, the other bags\' is '
+                           f'{rrs[0].vehicle!r}: one model needs one vehicle')
+    rejected = sum(rr.rejected for rr in rrs)
+    total = rejected + sum(rr.accepted for rr in rrs)
+    noise = np.median(np.array([rr.noise_std for rr in rrs]), axis=0)
+    if rejected <= REPLAY_REJECT_LIMIT * total:
+        return rrs, noise, None
+    model = rrs[0].model
+    cfg = cfg_of(model, noise)
+    pre = fit_noise_runs(model, cfg, [_exact_hold(rr) for rr in rrs], T=rrs[0].T)
+    again = [replay(p, pre.effective_std, pre.effective_q, 'parameter') for p in paths]
+    note = {'first_rejected': int(rejected), 'first_samples': int(total),
+            'noise_std': [float(x) for x in pre.effective_std],
+            'q_state': [float(x) for x in pre.effective_q]}
+    return again, noise, note
+
+
+def _identified(model, cfg, records, T, refine_pass, progress, ekf_pass=None):
+    """The noise model, EKF pass, refinement, identifiability and diagnosis of one or several
+    paired records (identify_bag's and identify_bags' shared path). Returns (estimate, cov,
+    ekf estimate, ekf cov, current, verdicts, diagnosis, NoiseFit)."""
+    ekf_est, ekf_cov, est, cov, fit = identify_runs_with_noise_model(
+        model, cfg, records, T=T, refine_pass=refine_pass, progress=progress,
+        ekf_pass=ekf_pass)
+    U = np.concatenate([r[2] for r in records])
+    nis = (fit.ekf_run or fit.configured_pass)['mean_nis_per_dof']
+    verdicts, diagnosis = assess(model.vehicle, model.theta_names, est, cov, fit, U, T, nis,
+                                 refined=refine_pass)
+    psi = np.concatenate([r[1][:, State.PSI] for r in records])
+    est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov, psi)
+    return est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit
+
+
 def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
                   progress=None, noise_source='message', max_command_age=None,
-                  velocity_reference=None, noise_std=None, q_state=None):
-    """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle
-    (core.batch.identify_runs: the EKF pass over the runs in turn, each from its own first
-    measurement with the coefficients carried; the refinement on all runs' innovations
-    stacked). Each bag is replayed as the identifier would have read it (its accepted
-    measurements, its commands held, the noise of its messages); the filter then runs with
-    that noise fixed, the median over the bags per channel, in still water (current 'none').
-    Not (yet) over several runs: the noise model from the data and the diagnosis of
-    identify_bag. noise_std, q_state : (12,) the measurement and per-step state process noise
-    1-sigma (the states' units) instead of the messages' and the default (an AUV's): real
-    runs with filtered channels and a model far from exact need both (docs/kvlcc2.md).
+                  velocity_reference=None, noise_std=None, q_state=None, current='none',
+                  current_down=False):
+    """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle,
+    by identify_bag's steps over all of them: each bag replayed as the identifier would have
+    read it (its accepted measurements, its commands held, the noise of its messages; made
+    again with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT, see
+    _replays), then the noise model from all runs' innovations, the EKF pass over the runs in
+    turn and the refinement on all of them with it (core.noise_fit.
+    identify_runs_with_noise_model), the sandwich covariance within each run,
+    identifiability and the diagnosis (printed first, and in the JSON as identify_bag's).
+
+    noise_std, q_state : (12,) the measurement and per-step state process noise 1-sigma (the
+        states' units) to start from instead of the messages' (median over the bags) and the
+        default; the noise model from the data still applies
+    current, current_down : 'none' (still water, default) or a known current 'N,E[,D]' in m/s
+        that all runs flew in; one current per run is not estimated
     Returns (JSON document, printable table)."""
     t0 = time.perf_counter()
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    records, noises, rejected, model, vrefs = [], [], 0, None, set()
-    for path in paths:
-        meta = bag_custom_data(path)
-        vref = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
-        vrefs.add(vref)
-        rr = replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
-                        initial_offset=initial_offset,
-                        noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
-                                   else noise_std),
-                        noise_source=noise_source if noise_std is None else 'parameter',
-                        q_state=q_state, max_command_age=max_command_age,
-                        current='none', velocity_reference=vref)
-        if rr.accepted < 2:
-            raise BagError(f'{path}: only {rr.accepted} odometry samples could be used '
-                           f'(rejected: {dict(rr.reasons)})')
-        if model is not None and rr.vehicle != model.vehicle.name:
-            raise BagError(f'{path}: vehicle {rr.vehicle!r}, the other bags\' is '
-                           f'{model.vehicle.name!r}: one model needs one vehicle')
-        model = model or rr.model
-        records.append(_exact_hold(rr))
-        noises.append(rr.noise_std)
-        rejected += rr.rejected
+    if str(current).strip().lower() == 'estimate':
+        raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); one '
+                       'current per run is not estimated')
+    vrefs = {velocity_reference or bag_custom_data(p).get('auv_ident.velocity_reference',
+                                                          'ground') for p in paths}
     if len(vrefs) > 1:
         raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
                        'give --velocity-reference')
+    vref = vrefs.pop()
+
+    def replay(path, noise, q, source):
+        given = noise_std if noise is None else noise
+        return replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
+                          initial_offset=initial_offset,
+                          noise_std=_bag_truth_and_noise(path, None)[1] if given is None
+                          else given,
+                          noise_source=source or (noise_source if noise_std is None
+                                                  else 'parameter'),
+                          q_state=q_state if q is None else q,
+                          max_command_age=max_command_age, current=current,
+                          current_down=current_down, velocity_reference=vref)
+
+    def cfg_of(model, noise):
+        cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
+                             noise_std=noise, initial_offset=initial_offset)
+        if q_state is not None:
+            cfg.q_state = np.asarray(q_state, dtype=float)
+        return cfg
+
+    rrs, noise, again = _replays(paths, replay, cfg_of)
+    model = rrs[0].model
     v = load_vehicle(model.vehicle.name)
-    noise = np.median(np.array(noises), axis=0)
-    cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed', noise_std=noise,
-                         initial_offset=initial_offset)
-    if q_state is not None:
-        cfg.q_state = np.asarray(q_state, dtype=float)
+    rejected = sum(rr.rejected for rr in rrs)
+    cfg = cfg_of(model, noise)
+    records = [_exact_hold(rr) for rr in rrs]
+    est, cov, ekf_est, ekf_cov, cur, verdicts, diagnosis, fit = _identified(
+        model, cfg, records, rrs[0].T, refine_pass, progress)
     truths = [_bag_truth_and_noise(p, model)[0] for p in paths]
     truth = truths[0] if all(tr is not None for tr in truths) else None
-    res = identify_runs(model, records, cfg, refine_pass=refine_pass, truth=truth,
-                        progress=progress)
-    res.wall_s = time.perf_counter() - t0
+    steps = sum(len(r[0]) for r in records)
+    run = fit.ekf_run
+    res = Result(names=model.theta_names[:model.p_coef], estimate=est,
+                 std=np.sqrt(np.diag(cov)), cov=cov, ekf_estimate=ekf_est,
+                 ekf_std=np.sqrt(np.diag(ekf_cov)), initial=rrs[0].initial[:model.p_coef],
+                 truth=truth, steps=steps, wall_s=time.perf_counter() - t0,
+                 mean_nis_per_dof=run['mean_nis_per_dof'], refined=refine_pass, current=cur,
+                 noise_model=fit.document(), identifiability=verdicts, diagnosis=diagnosis)
+    if again is not None:
+        diagnosis['messages'].append(_replayed_note(again, rejected))
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
                                   'noise_mode': 'fixed', 'noise_source': noise_source,
                                   'noise_std': [float(x) for x in noise],
-                                  'q_state': [float(x) for x in cfg.q_state]})
+                                  'q_state': [float(x) for x in cfg.q_state],
+                                  'replayed_with_noise_model': again,
+                                  'rejection_reasons': _reasons(rrs)},
+                         current_truth=_common([_bag_current_truth(bag_custom_data(p))
+                                                for p in paths]))
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
-            f'({", ".join(str(p) for p in paths)}; {res.steps} samples, {rejected} rejected)'
-            f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; noise '
-            + ('fixed at the messages\' (median over the bags)' if noise_std is None
-               else 'as given') + ('' if q_state is None else ', state process noise as given')
-            + '; ' +
-            ('EKF pass over the runs in turn + batch refinement on all of them'
-             if refine_pass else 'EKF pass over the runs in turn'))
+            f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
+            f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
+            'configured noise ' + ('the messages\' (median over the bags)' if noise_std is None
+                                   else 'as given')
+            + ('' if q_state is None else ', state process noise as given')
+            + ', then the noise model from the data; '
+            + ('EKF pass over the runs in turn + batch refinement on all of them'
+               if refine_pass else 'EKF pass over the runs in turn')
+            + f'\nwater current: {parse_current(current, current_down).describe()}')
+    head = diagnosis['messages'][0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
-             f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s')
+             f'NIS/dof {res.mean_nis_per_dof:.3f} (the reported EKF pass; with the configured '
+             f'noise {fit.configured_pass["mean_nis_per_dof"]:.4g})'
+             + (f', refined cost per residual {fit.refine_cost:.3f}' if refine_pass else '')
+             + f', wall {res.wall_s:.2f} s'
+             + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
     return doc, table
+
+
+def _replayed_note(again, rejected):
+    return (f'the replay with the configured noise rejected {again["first_rejected"]} of '
+            f'{again["first_samples"]} odometry samples as outliers (more than '
+            f'{100 * REPLAY_REJECT_LIMIT:g} %): replayed with the noise model read off the '
+            f'accepted samples; {rejected} rejected then')
+
+
+def _common(values):
+    """The value all bags agree on (arrays), else None."""
+    if any(x is None for x in values) or any(not np.array_equal(x, values[0]) for x in values):
+        return None
+    return values[0]
+
+
+def _reasons(rrs):
+    """The rejection reasons of several replays, summed."""
+    out = {}
+    for rr in rrs:
+        for k, n in rr.reasons.items():
+            out[k] = out.get(k, 0) + int(n)
+    return out

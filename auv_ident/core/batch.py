@@ -140,6 +140,28 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     return stats, hist, out.white
 
 
+def run_ekf_runs(f, runs, hist_every=0, want_white=False, max_step=None,
+                 max_bridge=DEFAULT_MAX_BRIDGE):
+    """run_ekf over several runs in turn: each run starts its vehicle states from its own first
+    measurement, the coefficients (and any identified current) from where the previous run
+    left them, with their covariance (AugmentedEKF.set_prior). runs: list of (t, Y, U).
+
+    Returns (stats (5,) summed over the runs (stats[0] the last status), the last run's
+    histories, the list of each run's whitened innovations (N_i, 12) (None each without
+    want_white))."""
+    total = np.zeros(5)
+    whites = []
+    for i, (t, Y, U) in enumerate(runs):
+        if i > 0:       # carry the coefficients' estimate and covariance into the next run
+            f.set_prior(f.theta, f.theta_cov)
+        stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=want_white,
+                                     max_step=max_step, max_bridge=max_bridge)
+        total[1:] += stats[1:]
+        total[0] = stats[0]
+        whites.append(white.copy() if want_white else None)
+    return total, hist, whites
+
+
 class FilterErrorResiduals:
     """The filter-error method's residuals as a function of theta: for candidate values of the
     model's parameters, the whitened innovations ``r_k = S_k^{-1/2} nu_k`` of a 12-state EKF
@@ -291,13 +313,9 @@ def identify_runs(model, runs, cfg, T=None, refine_pass=True, hist_every=0, trut
     T = nominal_sample_time(runs[0][0]) if T is None else T
     f = AugmentedEKF(model, cfg, T)
     initial = f.theta0[:model.p_coef].copy()     # the first run's start (set_prior moves it)
-    steps, nis, dof = 0, 0.0, 0.0
-    for i, (t, Y, U) in enumerate(runs):
-        if i > 0:       # carry the coefficients' estimate and covariance into the next run
-            f.set_prior(f.theta, f.theta_cov)
-        stats, hist, _ = run_ekf(f, t, Y, U, hist_every=hist_every, max_step=max_step,
-                                 max_bridge=max_bridge)
-        steps, nis, dof = steps + int(stats[1]), nis + stats[2], dof + stats[3]
+    stats, hist, _ = run_ekf_runs(f, runs, hist_every=hist_every, max_step=max_step,
+                                  max_bridge=max_bridge)
+    steps, nis, dof = int(stats[1]), stats[2], stats[3]
     ekf_est, ekf_cov = f.theta, f.theta_cov
     est, cov = ekf_est, ekf_cov
     if refine_pass and model.p > 0:

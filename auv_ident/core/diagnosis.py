@@ -24,7 +24,8 @@ import numpy as np
 
 from .current import MAX_CURRENT_STD
 from .state import INPUT_NAMES, STATE_NAMES
-from .uncertainty import identifiability, input_correlation
+from .uncertainty import (identifiability, input_correlation, LJUNG_BOX_LAGS, split_rows,
+                          with_gaps)
 from .vehicle import EQUATIONS
 
 XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
@@ -141,11 +142,23 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
     """Identifiability and diagnosis of an identification made with
     core.noise_fit.identify_with_noise_model (its NoiseFit holds the refined residuals and
     their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt (s): its
-    sample time. Returns (verdicts or None, diagnosis dict)."""
+    sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals): the
+    cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
+    lag pairs a residual of one run with an input of another. Returns (verdicts or None,
+    diagnosis dict)."""
     verdicts = xcorr = None
     if fit is not None and fit.white is not None:
         lags = max(1, int(round(XCORR_SECONDS / dt)))
-        xcorr = input_correlation(fit.white, U, lags, STATE_NAMES, INPUT_NAMES)
+        white, U = fit.white, np.asarray(U, dtype=float)
+        if fit.bounds is not None and len(fit.bounds) > 2:
+            if U.shape[0] != white.shape[0]:
+                raise ValueError(f'U has {U.shape[0]} rows, the stacked residuals '
+                                 f'{white.shape[0]}')
+            # input_correlation's autocorrelations reach 4 max(lags, LJUNG_BOX_LAGS) lags
+            gap = 4 * max(lags, LJUNG_BOX_LAGS) + 1
+            white = with_gaps(split_rows(white, fit.bounds), gap)
+            U = with_gaps(split_rows(U, fit.bounds), gap)
+        xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
                                         cov)
     return verdicts, diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined)

@@ -170,7 +170,27 @@ def long_run_variance(g, lags):
     return float(ac[0] + 2.0 * np.sum(w[1:] * ac[1:]))
 
 
-def sandwich_covariance(J, white, lags=None):
+def with_gaps(parts, gap):
+    """The arrays of several runs (each (N_i, ...)) stacked with `gap` rows of NaN between
+    consecutive runs: autocorrelations and cross-correlations over at most `gap` lags
+    (autocorrelation(), input_correlation(), which skip NaN samples) then never pair samples
+    of different runs. One run: returned as it is (a float copy)."""
+    parts = [np.asarray(a, dtype=float) for a in parts]
+    if len(parts) == 1:
+        return parts[0].copy()
+    pad = np.full((int(gap),) + parts[0].shape[1:], np.nan)
+    out = [parts[0]]
+    for a in parts[1:]:
+        out.extend((pad, a))
+    return np.concatenate(out)
+
+
+def split_rows(a, bounds):
+    """The list of a[bounds[i]:bounds[i + 1]]: stacked runs back into one array per run."""
+    return [a[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+
+
+def sandwich_covariance(J, white, lags=None, bounds=None):
     """Coefficient covariance of the least-squares fit, valid under correlated residuals.
 
     Parameters
@@ -179,6 +199,9 @@ def sandwich_covariance(J, white, lags=None):
         with respect to the coefficients
     white : (N, m) the residuals at the solution (NaN = missing; those rows of J count zero)
     lags : lag window L in samples (default :func:`bandwidth`)
+    bounds : None (one run) or the sample indices where the stacked runs start and end
+        ([0, N_1, N_1 + N_2, ..., N]): the lagged score products are summed within each run
+        only (independent runs share no correlation)
 
     Returns
     -------
@@ -195,14 +218,20 @@ def sandwich_covariance(J, white, lags=None):
     Jk = np.asarray(J, dtype=float).reshape(n, m, p) * ok[:, :, None]
     g = np.einsum('kmp,km->kp', Jk, r)              # (N, p) scores
     A = np.einsum('kmp,kmq->pq', Jk, Jk)
+    bounds = [0, n] if bounds is None else [int(b) for b in bounds]
+    if bounds[0] != 0 or bounds[-1] != n or np.any(np.diff(bounds) < 0):
+        raise ValueError(f'bounds {bounds} must rise from 0 to the {n} samples')
     if lags is None:
-        lags = bandwidth(white)
+        # bandwidth() looks at lag 1 only: one NaN row between runs keeps it within each run
+        lags = bandwidth(with_gaps(split_rows(white, bounds), 1),
+                         max_lag=max(1, int(MAX_BANDWIDTH_FRACTION * n)))
     lags = int(max(0, min(lags, n - 1)))
     B = g.T @ g
-    for lag in range(1, lags + 1):
-        w = 1.0 - lag / (lags + 1.0)
-        G = g[lag:].T @ g[:-lag]
-        B += w * (G + G.T)
+    for gs in split_rows(g, bounds):
+        for lag in range(1, min(lags, gs.shape[0] - 1) + 1):
+            w = 1.0 - lag / (lags + 1.0)
+            G = gs[lag:].T @ gs[:-lag]
+            B += w * (G + G.T)
     A_inv = np.linalg.inv(A)
     cov = A_inv @ B @ A_inv
     cov = 0.5 * (cov + cov.T)

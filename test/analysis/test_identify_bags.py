@@ -54,9 +54,8 @@ def test_identify_command_takes_several_bags(bags, capsys):
     out = capsys.readouterr().out
     assert 'from 2 bags together' in out and 'N_r' in out
     # what applies to one bag only is one clear error (exit status 2)
-    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--current', '0.1,0']) == 2
-    assert '--current, --current-down and --noise-mode apply to one bag' in \
-        capsys.readouterr().err
+    assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--noise-mode', 'paper']) == 2
+    assert '--noise-mode applies to one bag' in capsys.readouterr().err
 
 
 def test_one_planar_bag_with_the_noise_model_and_the_diagnosis(bags):

@@ -62,8 +62,9 @@ def test_identified_from_both_starboard_runs_predicts_the_port_runs():
 @pytest.mark.slow
 def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     """`import --format hsva` then `identify --bag A --bag B` with the real-data noise gives
-    the coefficients of identify_runs on the arrays of test/kvlcc2_data.py (same samples, same
-    filter settings: the bags keep every value in float64)."""
+    the coefficients of the same steps on the arrays of test/kvlcc2_data.py (the noise model
+    from the data, core.noise_fit.identify_runs_with_noise_model; same samples, same filter
+    settings: the bags keep every value in float64)."""
     require_runs(('Z_10_10_S', 'Z_20_10_S'))
     from auv_ident.analysis.bag_identify import identify_bags
     from auv_ident.cli import main
@@ -77,11 +78,19 @@ def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     v = load_vehicle(tool.VEHICLE)
     runs = [load_run(r) for r in tool.TRAIN]
     cfg = tool.config(v, v.identify_default, tool.measurement_noise(runs[0][1], runs[0][0]))
-    want = identify_runs(Model(v, v.identify_default), runs, cfg)
+    from auv_ident.analysis.results import make_config
+    from auv_ident.core.noise_fit import identify_runs_with_noise_model
+    # the filter settings of the bag path (its prior: the vehicle file's values, p0_rel 1;
+    # every channel fused, the unmeasured ones as the zeros the bags hold at 1-sigma 1): the
+    # noise model is read off the EKF pass, so that pass must be the same
+    bag_cfg = make_config(v.identify_default, noise_mode='fixed', initial_offset=0.0,
+                          noise_std=cfg.noise_std)
+    bag_cfg.q_state = cfg.q_state
+    _, _, want, _, _ = identify_runs_with_noise_model(Model(v, v.identify_default), bag_cfg,
+                                                      [(t, np.nan_to_num(Y), U)
+                                                       for t, Y, U in runs])
     doc, _ = identify_bags(bags, initial_offset=0.0, noise_std=cfg.noise_std,
                            q_state=cfg.q_state)
     assert doc['rejected'] == 0
-    got = np.array([doc['coefficients'][n]['estimate'] for n in want.names])
-    # (the EKF pass starts from a wider prior here, p0_rel 1 instead of 0.5: the refinement
-    # reaches the same optimum)
-    np.testing.assert_allclose(got, want.estimate, rtol=1e-3)
+    got = np.array([doc['coefficients'][n]['estimate'] for n in v.identify_default])
+    np.testing.assert_allclose(got, want, rtol=1e-3)
