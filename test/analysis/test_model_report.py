@@ -157,8 +157,6 @@ def test_a_timed_rudder_sequence_is_not_a_zigzag(runs, tmp_path, capsys):
 
 # --------------------------------------------------------------------- the real HSVA runs
 
-NOISE_STD = '0.003,0.003,1,1,1,5e-4,0.005,0.005,1,1,1,0.001'     # docs/kvlcc2.md
-Q_STATE = '2e-4,2e-4,0,0,0,2e-4,1e-4,1e-4,0,0,0,1e-5'
 GOALS = {'Z_20_10_P': (90.0, 90.0), 'Z_10_10_P': (75.0, 70.0)}    # issue #20: r / U fit %
 
 
@@ -177,9 +175,10 @@ def test_kvlcc2_mirror_split_from_bags(tmp_path, capsys):
         bags[r] = str(tmp_path / r)
         assert main(['import', '--format', 'hsva', str(run_path(r)), '--out', bags[r]]) == 0
     model = str(tmp_path / 'model.json')
+    # no hand-given noise: the noise model and the process noise come from the data
+    # (analysis/bag_identify.py identify_bags)
     assert main(['identify', '--bag', bags['Z_10_10_S'], '--bag', bags['Z_20_10_S'],
-                 '--initial-offset', '0', '--noise-std', NOISE_STD, '--q-state', Q_STATE,
-                 '--json', model]) == 0
+                 '--vehicle', VEHICLE, '--json', model]) == 0
     for r, (goal_r, goal_u) in GOALS.items():
         out = tmp_path / f'rep_{r}'
         assert main(['report', '--model', model, '--vehicle', VEHICLE, '--validate', bags[r],

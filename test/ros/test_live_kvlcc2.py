@@ -89,10 +89,13 @@ def test_live_identifier_on_the_hsva_run_ends_near_the_offline_model(tmp_path, r
     print(f'live steps {live["steps"]} of 3801 samples\n' + report)
     # every sample reached the node and was used, as in the offline replay
     assert live['steps'] >= 3801 - 5, (live['steps'], ierr[-2000:])
-    # the node runs the offline EKF pass live (the replay is its session): the same estimate
-    # (measured: equal to 6 digits, 2026-11-25)
-    ekf_std = np.array([c['ekf_std'] for c in names.values()])
-    assert np.all(np.abs(est - ekf) <= 0.01 * ekf_std), report
+    # the node runs the replay's EKF pass live (the replay is its session); the offline EKF
+    # pass is that same pass only when the configured noise held: offline, the noise model
+    # from the data (core/noise_fit.py) replaces it when the data contradict it, as these
+    # filtered real data do, so then the offline pass differs from the live one
+    if not doc['noise_model']['used']:
+        ekf_std = np.array([c['ekf_std'] for c in names.values()])
+        assert np.all(np.abs(est - ekf) <= 0.01 * ekf_std), report
     # and ends within the offline (refined) model's 3-sigma for every coefficient (measured:
     # largest N_vv, -2.5 sigma; X_vr, X_rr, N_v, Y_vv about 1 sigma)
     assert np.all(np.abs(z) <= 3.0), report
