@@ -392,7 +392,11 @@ def test_exception_in_with_block_still_finalises(tmp_path):
 
 
 _CHILD = textwrap.dedent('''
-    import sys, time
+    import signal, sys, time
+    # a process started in the background of a non-interactive shell inherits SIGINT ignored
+    # (POSIX), and Python then leaves it ignored: this test is about the writer, so the child
+    # takes SIGINT as an interactive program does
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from rclpy.serialization import serialize_message
     from rosgraph_msgs.msg import Clock
     from auv_ident.bags.writer import BagWriter
@@ -437,7 +441,12 @@ def test_sigint_finalises_bag(tmp_path, child):
     path = tmp_path / 'sigint'
     proc = child(path)
     proc.send_signal(signal.SIGINT)
-    proc.wait(timeout=20)
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail('the writer did not finish 20 s after SIGINT; its stderr: '
+                    + proc.communicate()[1][-3000:])
     assert (path / 'metadata.yaml').is_file()
     times = [ns for _, ns, _ in read_bag(path)]
     assert times[:100] == list(range(100)) and times == list(range(len(times)))
