@@ -122,7 +122,10 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
 
 
 def _fmt(v, width=12):
-    return f'{v:>{width}.6g}' if v is not None else f'{"-":>{width}}'
+    """A right-aligned table cell, always with a space before it (a 12-character value such as
+    -0.000977573 would otherwise run into the cell on its left)."""
+    text = f'{v:.6g}' if v is not None else '-'
+    return ' ' + text.rjust(width - 1) if len(text) >= width else text.rjust(width)
 
 
 def result_table(vehicle, res, doc=None):
