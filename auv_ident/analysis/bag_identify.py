@@ -4,17 +4,17 @@ import time
 import numpy as np
 
 from auv_ident.analysis import results as ex
+from auv_ident.analysis.identification import diagnosed, identify_records
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.bags.replay import bag_custom_data, replay_bag
 from auv_ident.core.batch import Result
-from auv_ident.core.diagnosis import assess
-from auv_ident.core.current import DEFAULT_CURRENT, parse_current, split_current
+from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model import Model
-from auv_ident.core.noise_fit import fit_noise_runs, identify_runs_with_noise_model
+from auv_ident.core.noise_fit import fit_noise_runs
 from auv_ident.core.selection import identify_auto, parse_request
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import N_CURRENT, N_STATE, State
+from auv_ident.core.state import N_CURRENT, N_STATE
 from auv_ident.core.timing import with_command_changes
 from auv_ident.vehicles import load_vehicle
 
@@ -113,14 +113,12 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                  if meta.get('auv_ident.simulated') == 'true' else None)
         initial = np.array([v.values[v.index(n)] for n in selection.chosen])
         mean_nis = float('nan')     # the replay's filter identified another set
-        verdicts, diagnosis = assess(v, model.theta_names, est, cov, fit, U, rr.T, mean_nis,
-                                     refined=refine_pass)
-        est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov,
-                                                            Y[:, State.PSI])
+        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis = diagnosed(
+            model, [rec], rr.T, fit, ekf_est, ekf_cov, est, cov, mean_nis, refine_pass)
     else:
         # the noise model from the data (core/noise_fit.py): with the configured noise right,
         # the EKF pass is the replay's (the live node's) and the refinement starts from it
-        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit = _identified(
+        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit = identify_records(
             model, cfg_of(model, noise), [rec], rr.T, refine_pass, progress,
             ekf_pass=None if again else (rr.estimate, rr.cov))
     res = Result(names=model.theta_names[:model.p_coef], estimate=est_c,
@@ -232,22 +230,6 @@ def _replays(paths, replay, cfg_of):
     return again, noise, note
 
 
-def _identified(model, cfg, records, T, refine_pass, progress, ekf_pass=None):
-    """The noise model, EKF pass, refinement, identifiability and diagnosis of one or several
-    paired records (identify_bag's and identify_bags' shared path). Returns (estimate, cov,
-    ekf estimate, ekf cov, current, verdicts, diagnosis, NoiseFit)."""
-    ekf_est, ekf_cov, est, cov, fit = identify_runs_with_noise_model(
-        model, cfg, records, T=T, refine_pass=refine_pass, progress=progress,
-        ekf_pass=ekf_pass)
-    U = np.concatenate([r[2] for r in records])
-    nis = (fit.ekf_run or fit.configured_pass)['mean_nis_per_dof']
-    verdicts, diagnosis = assess(model.vehicle, model.theta_names, est, cov, fit, U, T, nis,
-                                 refined=refine_pass)
-    psi = np.concatenate([r[1][:, State.PSI] for r in records])
-    est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov, psi)
-    return est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit
-
-
 def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
                   progress=None, noise_source='message', max_command_age=None,
                   velocity_reference=None, noise_std=None, q_state=None, current='none',
@@ -304,7 +286,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     rejected = sum(rr.rejected for rr in rrs)
     cfg = cfg_of(model, noise)
     records = [_exact_hold(rr) for rr in rrs]
-    est, cov, ekf_est, ekf_cov, cur, verdicts, diagnosis, fit = _identified(
+    est, cov, ekf_est, ekf_cov, cur, verdicts, diagnosis, fit = identify_records(
         model, cfg, records, rrs[0].T, refine_pass, progress)
     truths = [_bag_truth_and_noise(p, model)[0] for p in paths]
     truth = truths[0] if all(tr is not None for tr in truths) else None

@@ -2,9 +2,11 @@
 the batch refinement with error bars the residuals support, identifiability and the diagnosis.
 
 `identify --simulate`, `report` and `montecarlo` go through :func:`identify_with_diagnosis`;
-`identify --bag` makes the same calls around the bag replay (analysis/bag_identify.py), whose
-EKF pass is the live node's. So every result carries `noise_model`, `identifiability` and a
-`diagnosis` whose first message says whether the error bars can be trusted.
+`identify --bag` (one bag or several) goes through :func:`identify_records` around the bag
+replay (analysis/bag_identify.py), whose EKF pass is the live node's, and `--coefficients
+auto` through :func:`diagnosed` after its own identification. So every result carries
+`noise_model`, `identifiability` and a `diagnosis` whose first message says whether the error
+bars can be trusted.
 """
 import time
 
@@ -13,9 +15,41 @@ import numpy as np
 from auv_ident.core.batch import Result
 from auv_ident.core.current import split_current
 from auv_ident.core.diagnosis import assess
-from auv_ident.core.noise_fit import identify_with_noise_model
+from auv_ident.core.noise_fit import identify_runs_with_noise_model
 from auv_ident.core.state import State
 from auv_ident.core.timing import nominal_sample_time
+
+
+def diagnosed(model, records, T, fit, ekf_est, ekf_cov, est, cov, mean_nis_per_dof,
+              refine_pass):
+    """Identifiability and diagnosis (core.diagnosis.assess) of an identification of the
+    paired records [(t, Y, U), ...] made with the noise model (its NoiseFit `fit`), and the
+    water current split off the estimates (core.current.split_current). Returns (estimate,
+    cov, ekf estimate, ekf cov, current, verdicts, diagnosis) of the coefficients."""
+    U = np.concatenate([np.asarray(r[2]) for r in records])
+    verdicts, diagnosis = assess(model.vehicle, model.theta_names, est, cov, fit, U, T,
+                                 mean_nis_per_dof, refined=refine_pass)
+    psi = np.concatenate([np.asarray(r[1])[:, State.PSI] for r in records])
+    est_c, cov_c, ekf_c, ekf_cov_c, cur = split_current(model, est, cov, ekf_est, ekf_cov, psi)
+    return est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis
+
+
+def identify_records(model, cfg, records, T, refine_pass=True, progress=None, ekf_pass=None,
+                     hist_every=0, configured_nis=False):
+    """The noise model, EKF pass, refinement (core.noise_fit.identify_runs_with_noise_model),
+    identifiability and diagnosis (:func:`diagnosed`) of one or several paired records.
+
+    ekf_pass : (estimate, covariance) of an EKF pass already made with the configured noise
+    configured_nis : judge by the mean NIS/dof of the pass with the configured noise (what the
+        live node sees) instead of that of the EKF pass reported
+    Returns (estimate, cov, ekf estimate, ekf cov, current, verdicts, diagnosis, NoiseFit)."""
+    ekf_est, ekf_cov, est, cov, fit = identify_runs_with_noise_model(
+        model, cfg, records, T=T, refine_pass=refine_pass, progress=progress,
+        ekf_pass=ekf_pass, hist_every=hist_every)
+    nis = (fit.configured_pass if configured_nis
+           else fit.ekf_run or fit.configured_pass)['mean_nis_per_dof']
+    return diagnosed(model, records, T, fit, ekf_est, ekf_cov, est, cov, nis,
+                     refine_pass) + (fit,)
 
 
 def identify_with_diagnosis(model, cfg, t, Y, U, T=None, refine_pass=True, hist_every=0,
@@ -30,14 +64,10 @@ def identify_with_diagnosis(model, cfg, t, Y, U, T=None, refine_pass=True, hist_
     node would see)."""
     t0 = time.perf_counter()
     T = nominal_sample_time(t) if T is None else T
-    ekf_est, ekf_cov, est, cov, fit = identify_with_noise_model(
-        model, cfg, t, Y, U, T=T, refine_pass=refine_pass, progress=progress,
-        hist_every=hist_every)
+    est_c, cov_c, ekf_c, ekf_cov_c, current, verdicts, diagnosis, fit = identify_records(
+        model, cfg, [(t, Y, U)], T, refine_pass=refine_pass, progress=progress,
+        hist_every=hist_every, configured_nis=True)
     nis = fit.configured_pass['mean_nis_per_dof']
-    verdicts, diagnosis = assess(model.vehicle, model.theta_names, est, cov, fit, U, T, nis,
-                                 refined=refine_pass)
-    est_c, cov_c, ekf_c, ekf_cov_c, current = split_current(model, est, cov, ekf_est, ekf_cov,
-                                                            np.asarray(Y)[:, State.PSI])
     run = fit.ekf_run
     res = Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
