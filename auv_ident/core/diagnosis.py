@@ -61,16 +61,41 @@ def excitation_advice(vehicle, name):
                                                   'multiplies')
 
 
-def coefficient_verdicts(vehicle, names, estimate, J, cov):
-    """identifiability() of the run with the excitation advice for the weak ones."""
-    # a water-current component may be ~0: judged by its 1-sigma in m/s, not relative to it
-    absolute = np.array([MAX_CURRENT_STD if n.startswith('current_') else math.nan
-                         for n in names])
-    out = identifiability(J, estimate, names, cov=cov, absolute_std=absolute)
-    for name, d in out.items():
+def current_std_limits(names):
+    """(p,) per parameter the 1-sigma (m/s) to judge it by instead of the relative one: a
+    water-current component may be ~0, so it is judged in m/s (MAX_CURRENT_STD); NaN for a
+    coefficient (judged relative to its value)."""
+    return np.array([MAX_CURRENT_STD if n.startswith('current_') else math.nan
+                     for n in names])
+
+
+def with_advice(vehicle, verdicts):
+    """The verdicts (core/uncertainty.py) with the excitation advice for the weak ones."""
+    for name, d in verdicts.items():
         if d['verdict'] != 'identifiable':
             d['advice'] = excitation_advice(vehicle, name)
-    return out
+    return verdicts
+
+
+def weak_notes(verdicts):
+    """One line per parameter that is not identifiable: its verdict, its 1-sigma (m/s for a
+    current component, else % of its value), a correlation above 0.9, and the advice."""
+    notes = []
+    for n, d in verdicts.items():
+        if d['verdict'] == 'identifiable':
+            continue
+        partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
+                   if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
+        size = (f'1-sigma {d["crb_std"]:.2g} m/s' if n.startswith('current_')
+                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
+        notes.append(f'{n} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
+    return notes
+
+
+def coefficient_verdicts(vehicle, names, estimate, J, cov):
+    """identifiability() of the run with the excitation advice for the weak ones."""
+    return with_advice(vehicle, identifiability(J, estimate, names, cov=cov,
+                                                absolute_std=current_std_limits(names)))
 
 
 def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=None,
@@ -123,12 +148,7 @@ def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=
     if math.isfinite(mean_nis_per_dof):
         checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
     if verdicts:
-        weak = {n: d for n, d in verdicts.items() if d['verdict'] != 'identifiable'}
-        for n, d in weak.items():
-            partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
-                       if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
-            notes.append(f'{n} is {d["verdict"]} (1-sigma {100 * d["rel_std"]:.2g} % of its '
-                         f'value{partner}): {d["advice"]}')
+        notes.extend(weak_notes(verdicts))
     consistent = not problems
     head = ('consistent: the data agree with the assumptions of the identification; the '
             'error bars hold' if consistent else

@@ -13,7 +13,7 @@ Live there is only the EKF: its innovations and its covariance. So the live diag
   (core/uncertainty.py :func:`verdicts_from_covariance`): 'identifiable', 'weak' (with the
   correlated partner) or 'not excited' (its 1-sigma still above NOT_INFORMED_RATIO of the
   prior's), with the excitation that would help (core/diagnosis.py). A water-current
-  component is judged on its 1-sigma in m/s (CURRENT_IDENTIFIABLE_STD), as offline.
+  component is judged on its 1-sigma in m/s (core.diagnosis.current_std_limits), as offline.
 
 The live verdict cannot see coloured noise that keeps the NIS in its band, nor a bias from
 wrong fixed coefficients: `identify --bag` on the recorded run can (docs/method.md).
@@ -22,13 +22,11 @@ import math
 
 import numpy as np
 
-from auv_ident.core.current import MAX_CURRENT_STD
-from auv_ident.core.diagnosis import excitation_advice
+from auv_ident.core.diagnosis import current_std_limits, weak_notes, with_advice
 from auv_ident.core.uncertainty import verdicts_from_covariance
 from auv_ident.session.guard import NIS_WINDOW
 
 NOT_INFORMED_RATIO = 0.9    # 1-sigma above this fraction of the prior's: the data told nothing
-CURRENT_IDENTIFIABLE_STD = MAX_CURRENT_STD    # m/s, as `identify`'s current check
 
 
 def live_verdicts(vehicle, names, estimate, cov, prior_std):
@@ -37,29 +35,15 @@ def live_verdicts(vehicle, names, estimate, cov, prior_std):
     ones that are not identifiable."""
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     informed = sd < NOT_INFORMED_RATIO * np.asarray(prior_std, dtype=float)
-    absolute = np.array([CURRENT_IDENTIFIABLE_STD if n.startswith('current_') else math.nan
-                         for n in names])
-    out = verdicts_from_covariance(cov, estimate, names, informed=informed,
-                                   absolute_std=absolute)
-    for name, d in out.items():
-        if d['verdict'] != 'identifiable':
-            d['advice'] = excitation_advice(vehicle, name)
-    return out
+    return with_advice(vehicle, verdicts_from_covariance(
+        cov, estimate, names, informed=informed, absolute_std=current_std_limits(names)))
 
 
 def live_diagnosis(health, verdicts):
     """{'consistent': True | False | None (not judged yet), 'messages': [first line, ...]}
     from the filter's Health (session/guard.py judge_health) and live_verdicts()."""
     m, (lo, hi), n = health.mean_nis_per_dof, health.band, health.window
-    notes = []
-    for name, d in verdicts.items():
-        if d['verdict'] == 'identifiable':
-            continue
-        partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
-                   if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
-        size = (f'1-sigma {d["crb_std"]:.2g} m/s' if name.startswith('current_')
-                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
-        notes.append(f'{name} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
+    notes = weak_notes(verdicts)
     if health.level == 'ERROR':
         return {'consistent': False,
                 'messages': [f'NOT consistent: the filter is {health.message} (a reset or '
