@@ -214,7 +214,8 @@ def montecarlo_table(stats):
         lines.append(f'median |error|/sigma {stats["median_abs_z"]:.2f} refined, '
                      f'{stats["ekf_median_abs_z"]:.2f} EKF pass (an honest sigma gives ~0.67); '
                      f'EKF pass within 3-sigma in {100 * stats["ekf_within_3sigma_all"]:.1f} %; '
-                     f'diagnosis consistent in {stats["consistent"]} of {len(stats["runs"]) - stats["diverged"]}')
+                     f'diagnosis consistent in {stats["consistent"]} of '
+                     f'{len(stats["runs"]) - stats["diverged"]}')
     return '\n'.join(lines)
 
 

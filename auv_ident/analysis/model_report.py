@@ -32,7 +32,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from auv_ident.analysis import validation as mv
-from auv_ident.analysis.report_format import markdown_table, pyplot, save_figure
+from auv_ident.analysis.report_format import (finite_cell, markdown_table,
+                                              package_versions, pyplot, save_figure)
 from auv_ident.analysis.report_html import write_html
 from auv_ident.analysis.results import write_json
 from auv_ident.analysis.zigzag import closed_loop
@@ -329,8 +330,8 @@ def fig_free_run(path, val, title):
             ax.plot(val.t, scale * _series(val, val.free[name], ch), label=f'{name} model',
                     **style)
         ax.set_ylabel(f'{ch} ({unit})')
-        ax.set_title(f'{ch}: fit % identified {mv._cell(d.get("fit_percent"), ".1f")}, prior '
-                     f'{mv._cell(d.get("fit_percent_prior"), ".1f")}', fontsize=8)
+        ax.set_title(f'{ch}: fit % identified {finite_cell(d.get("fit_percent"), ".1f")}, prior '
+                     f'{finite_cell(d.get("fit_percent_prior"), ".1f")}', fontsize=8)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel('time (s)')
     axes[0].legend(fontsize=7, markerscale=4)
@@ -383,7 +384,7 @@ def _clean(d):
 
 
 def _f(v, fmt='.2f'):
-    return mv._cell(None if v is None else float(v), fmt)
+    return finite_cell(None if v is None else float(v), fmt)
 
 
 def zigzag_lines(zz):
@@ -484,7 +485,6 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     Returns dict with 'report', 'html', 'json', 'csv', 'figures', 'result'.
     """
     from auv_ident.analysis.bag_identify import bag_source
-    from auv_ident.analysis.report import _versions
     saved = load_model(model_path, vehicle)
     refuse_identification_bag(saved.bags, validate_bag)
     ident_bags = list(ident_bags) if ident_bags else saved.bags
@@ -519,7 +519,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     prior = v.values
     doc = {'model': str(model_path), 'vehicle': v.name, 'vehicle_title': v.title,
            'identification_bags': saved.bags, 'gear_and_thrust_bags': ident_bags,
-           'validation_bag': str(validate_bag), 'command': command, 'versions': _versions(),
+           'validation_bag': str(validate_bag), 'command': command, 'versions': package_versions(),
            'coefficients': {n: {'estimate': float(e), 'std': float(s),
                                 'prior': float(prior[v.index(n)])}
                             for n, e, s in zip(saved.names, saved.estimate, saved.std)},

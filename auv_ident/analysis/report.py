@@ -7,16 +7,15 @@ noise covariances. ROS-free; matplotlib is imported inside the plotting code (Ag
 importing this module never touches a display.
 """
 import os
-import platform
 
 import numpy as np
 
-from auv_ident import __version__
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
 from auv_ident.analysis.identification import identify_with_diagnosis
 from auv_ident.analysis.report_format import (cell as _num, markdown_table as _table,
-                                              pyplot as _plt, save_figure as _save)
+                                              package_versions, pyplot as _plt,
+                                              save_figure as _save)
 from auv_ident.analysis.report_noise import (diagnosis_lines, fig_innovation_autocorrelation,
                                              identifiability_markdown, noise_model_markdown)
 from auv_ident.analysis import validation as mv
@@ -285,15 +284,6 @@ def fig_noise(path, res, noise_mode):
 
 # ---------------------------------------------------------------------------------- markdown
 
-def _versions():
-    import matplotlib
-    import numba
-    import scipy
-    return {'auv_ident': __version__, 'numpy': np.__version__, 'scipy': scipy.__version__,
-            'numba': numba.__version__, 'matplotlib': matplotlib.__version__,
-            'python': platform.python_version()}
-
-
 def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
     v = src.vehicle
     co = doc['coefficients']
@@ -413,9 +403,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
                 current_down=False, sim_current=None, velocity_reference=None,
                 validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
-    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate against the measurements of a held-out run
-    (and, when the truth is known, against the true model on a held-out manoeuvre), write the
-    report: report.md, report.html (self-contained), result.json and PNG figures.
+    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
+    against the measurements of a held-out run (and, when the truth is known, against the true
+    model on a held-out manoeuvre), write the report: report.md, report.html (self-contained), result.json and PNG figures.
 
     Parameters
     ----------
@@ -515,7 +505,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
              'noise_mode': noise_mode, 'source': src.description,
              'current_option': opt.describe(), 'velocity_reference': src.velocity_reference,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
-             'versions': _versions(), 'command': command,
+             'versions': package_versions(), 'command': command,
              'validation': val_doc, 'validation_true_model': true_doc}
     if methods_doc is not None:
         extra['methods'] = methods_doc['methods']

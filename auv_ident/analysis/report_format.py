@@ -1,5 +1,10 @@
 """Formatting shared by the report's sections: matplotlib off-screen, figure files, Markdown
-table cells and tables."""
+table cells and tables, and the versions a report records."""
+import platform
+
+import numpy as np
+
+from auv_ident import __version__
 
 
 def pyplot():
@@ -22,6 +27,21 @@ def cell(v):
     if v is None:
         return '-'
     return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
+
+
+def finite_cell(v, fmt='.4g'):
+    """A table cell of a float that may be missing or non-finite: '-' then."""
+    return '-' if v is None or not np.isfinite(v) else format(v, fmt)
+
+
+def package_versions():
+    """The versions of the package and of what its numbers depend on (a report records them)."""
+    import matplotlib
+    import numba
+    import scipy
+    return {'auv_ident': __version__, 'numpy': np.__version__, 'scipy': scipy.__version__,
+            'numba': numba.__version__, 'matplotlib': matplotlib.__version__,
+            'python': platform.python_version()}
 
 
 def markdown_table(header, rows):

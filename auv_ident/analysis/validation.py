@@ -28,7 +28,8 @@ import os
 
 import numpy as np
 
-from auv_ident.analysis.report_format import markdown_table, pyplot, save_figure
+from auv_ident.analysis.report_format import (finite_cell, markdown_table, pyplot,
+                                              save_figure)
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import Model
 from auv_ident.core.prediction import (angle_channels, DEFAULT_MAX_STEP, fit_percent, free_run,
@@ -406,10 +407,6 @@ DISPLAY_UNITS = ('m/s',) * 3 + ('deg/s',) * 3 + ('m',) * 3 + ('deg',) * 3
 MODEL_LABELS = {'identified': 'identified', 'prior': 'prior (vehicle file)', 'truth': 'true'}
 
 
-def _cell(v, fmt='.4g'):
-    return '-' if v is None or not np.isfinite(v) else format(v, fmt)
-
-
 def markdown_lines(vd, held_out_fraction=None):
     """The report's section on the validation against measurements (lines), from the
     `validation` document (RunValidation.document)."""
@@ -441,23 +438,24 @@ def markdown_lines(vd, held_out_fraction=None):
                       'free-run scores are not given.**']
     mean = vd['mean_fit_percent_nu']
     L += ['', 'Mean fit over the measured ones of u v w p q r: '
-          + ', '.join(f'{MODEL_LABELS[m]} {_cell(mean[m], ".1f")} %' for m in models) + '.', '']
+          + ', '.join(f'{MODEL_LABELS[m]} {finite_cell(mean[m], ".1f")} %' for m in models)
+          + '.', '']
     header = ['channel'] + [f'fit % {MODEL_LABELS[m]}' for m in models] \
         + [f'RMSE {MODEL_LABELS[m]}' for m in models] \
         + [f'Theil {MODEL_LABELS[m]}' for m in models] + ['RMSE unit']
     rows = []
     for ch, d in vd['channels'].items():
         i = STATE_NAMES.index(ch)
-        rows.append([ch] + [_cell(d['fit_percent' + SUFFIX[m]], '.2f') for m in models]
-                    + [_cell(None if d['rmse' + SUFFIX[m]] is None
+        rows.append([ch] + [finite_cell(d['fit_percent' + SUFFIX[m]], '.2f') for m in models]
+                    + [finite_cell(None if d['rmse' + SUFFIX[m]] is None
                              else d['rmse' + SUFFIX[m]] * DISPLAY_SCALE[i]) for m in models]
-                    + [_cell(d['theil' + SUFFIX[m]], '.3f') for m in models]
+                    + [finite_cell(d['theil' + SUFFIX[m]], '.3f') for m in models]
                     + [DISPLAY_UNITS[i]])
     for ch, d in (vd.get('derived_channels') or {}).items():     # U = sqrt(u^2 + v^2)
-        rows.append([f'{ch} (derived)'] + [_cell(d['fit_percent' + SUFFIX[m]], '.2f')
+        rows.append([f'{ch} (derived)'] + [finite_cell(d['fit_percent' + SUFFIX[m]], '.2f')
                                            for m in models]
-                    + [_cell(d['rmse' + SUFFIX[m]]) for m in models]
-                    + [_cell(d['theil' + SUFFIX[m]], '.3f') for m in models] + ['m/s'])
+                    + [finite_cell(d['rmse' + SUFFIX[m]]) for m in models]
+                    + [finite_cell(d['theil' + SUFFIX[m]], '.3f') for m in models] + ['m/s'])
     L += markdown_table(header, rows).split('\n')
     keys = list(vd['prediction'])
     L += ['', '### K-step-ahead prediction', '',
@@ -476,7 +474,7 @@ def markdown_lines(vd, held_out_fraction=None):
             d = vd['prediction'][k]['channels'][ch]
             for m in models:
                 v = d['rmse' + SUFFIX[m]]
-                row.append(_cell(None if v is None else v * DISPLAY_SCALE[i]))
+                row.append(finite_cell(None if v is None else v * DISPLAY_SCALE[i]))
         rows.append(row + [DISPLAY_UNITS[i]])
     return L + markdown_table(header, rows).split('\n')
 
@@ -504,8 +502,9 @@ def fig_measured(path, val, channels, title):
         ax.plot(t[ok], DISPLAY_SCALE[i] * Yu[ok, i], '.', color='0.45', ms=1.5, zorder=0,
                 label='measured')
         d = val.channels.get(ch, {})
-        fits = ', '.join(f'{MODEL_LABELS[m]} {_cell(d.get("fit_percent" + SUFFIX[m]), ".1f")}'
-                         for m in val.free)
+        fits = ', '.join(
+            f'{MODEL_LABELS[m]} {finite_cell(d.get("fit_percent" + SUFFIX[m]), ".1f")}'
+            for m in val.free)
         ax.set_title(f'{ch}: fit % {fits}', fontsize=8)
         ax.set_ylabel(f'{ch} ({DISPLAY_UNITS[i]})')
         ax.grid(alpha=0.3)
