@@ -16,10 +16,17 @@ The water current's identified components (core/current.py) are parameters of bo
 like the coefficients: random-walk states of the augmented EKF, and constants of the
 maximum-likelihood fit (scaled in m/s, where the coefficients are scaled by their size).
 
+Finite differences run on threads (:func:`difference_threads`): the compiled filter releases
+the GIL, so the columns of a Jacobian (one filter run each) share the machine's cores; the
+numbers are the same as one thread gives.
+
 Time is what the stamps say: both passes take the sample times t and cross each interval by
 the rules of timing.py (RK4 steps of at most max_step with the command held, a restart of the
 vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
 """
+from concurrent.futures import ThreadPoolExecutor
+import os
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -191,29 +198,94 @@ class FilterErrorResiduals:
                             velocity_reference=model.velocity_reference)
         f = AugmentedEKF(state_model, fixed_cfg, T)
         self.settings = f.settings()
-        # per run: (Y, U, timeline, x0, P0, outputs)
+        # per run: (Y, U, timeline, x0, P0)
         self.legs = []
         for t, Y, U in runs:
             timeline = _timeline(f, t, Y, U, max_step, max_bridge)
             x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
-            self.legs.append((Y, U, timeline, x0, P0,
-                              K.new_outputs(N_STATE, Y.shape[0], want_white=True)))
+            self.legs.append((Y, U, timeline, x0, P0))
         self.bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
-        self.white = (self.legs[0][5].white if len(self.legs) == 1
-                      else np.full((int(self.bounds[-1]), N_STATE), np.nan))
+        self._local = threading.local()     # each thread fills its own output buffers
+        self.white = self._buffers()[1]
+
+    def _buffers(self):
+        """This thread's (filter outputs per run, stacked whitened innovations (sum N, 12))."""
+        buffers = getattr(self._local, 'buffers', None)
+        if buffers is None:
+            outs = [K.new_outputs(N_STATE, leg[0].shape[0], want_white=True)
+                    for leg in self.legs]
+            white = (outs[0].white if len(outs) == 1
+                     else np.full((int(self.bounds[-1]), N_STATE), np.nan))
+            buffers = self._local.buffers = (outs, white)
+        return buffers
 
     def __call__(self, theta):
         """(ok, white): ok False when a filter stopped (the model left its domain or the
-        covariance failed); white (sum N, 12) is the buffer, overwritten by the next call."""
+        covariance failed); white (sum N, 12) is the calling thread's buffer (``self.white``
+        for the thread that built this object), overwritten by its next call."""
         cm = self.model.compiled_fixed(theta)
-        for i, (Y, U, timeline, x0, P0, out) in enumerate(self.legs):
+        outs, white = self._buffers()
+        for i, ((Y, U, timeline, x0, P0), out) in enumerate(zip(self.legs, outs)):
             out.white[:] = np.nan
             K.run_filter(x0, P0, Y, U, cm, self.settings, timeline, out)
             if out.stats[0] != K.OK:
-                return False, self.white
-            if len(self.legs) > 1:
-                self.white[self.bounds[i]:self.bounds[i + 1]] = out.white
-        return True, self.white
+                return False, white
+            if len(outs) > 1:
+                white[self.bounds[i]:self.bounds[i + 1]] = out.white
+        return True, white
+
+    def vector(self, theta):
+        """The residual vector at theta (sum N * 12,), a new array: 0 where no measurement,
+        None when a filter stopped. Safe to call from several threads at once."""
+        ok, white = self(theta)
+        return np.nan_to_num(white.ravel()) if ok else None
+
+    def forward_differences(self, theta, steps, threads=None):
+        """Forward-difference derivatives of the residual vector with respect to each
+        parameter: column i = (r(theta + steps[i] e_i) - r(theta)) / steps[i], the columns
+        computed on `threads` threads (None: :func:`difference_threads`).
+
+        Returns (r (sum N * 12,) at theta, J (sum N * 12, p), failed: indices whose step took
+        the model out of its domain, their columns zero). Raises DomainError if the filter
+        fails at theta itself."""
+        theta = np.asarray(theta, dtype=float)
+        r0 = self.vector(theta)
+        if r0 is None:
+            raise DomainError('the filter-error residuals cannot be computed at the given '
+                              'parameters (the model leaves its domain on this record)')
+
+        def column(i):
+            th = theta.copy()
+            th[i] += steps[i]
+            return self.vector(th)
+
+        J = np.zeros((r0.size, theta.size))
+        failed = []
+        with ThreadPoolExecutor(threads or difference_threads()) as pool:
+            for i, r in enumerate(pool.map(column, range(theta.size))):
+                if r is None:
+                    failed.append(i)
+                else:
+                    J[:, i] = (r - r0) / steps[i]
+        return r0, J, failed
+
+
+def difference_threads():
+    """Threads for finite differences: the CPUs this process may run on, or the
+    AUV_IDENT_THREADS environment variable (a positive integer) when set."""
+    text = os.environ.get('AUV_IDENT_THREADS', '').strip()
+    if text:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ConfigError(f'AUV_IDENT_THREADS={text!r}: expected a positive integer')
+        return n
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:          # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
@@ -244,20 +316,20 @@ def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
                                max_bridge=max_bridge)
     white = fer.white
     scale = parameter_scale(model, theta_start)
+    lock = threading.Lock()
 
     def residuals(z):
         if progress is not None:
-            progress()
+            with lock:          # the Jacobian's columns are evaluated on several threads
+                progress()
         # theta enters through the coefficients of a 12-state filter
-        ok, _ = fer(z * scale)
-        if not ok:
-            return np.full(white.size, 1e3)
-        r = white.ravel()
-        return np.where(np.isfinite(r), r, 0.0)
+        r = fer.vector(z * scale)
+        return np.full(white.size, 1e3) if r is None else r
 
     z0 = theta_start / scale
-    sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p), max_nfev=max_nfev * p,
-                        diff_step=1e-5)
+    with ThreadPoolExecutor(difference_threads()) as pool:
+        sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p),
+                            max_nfev=max_nfev * p, diff_step=1e-5, workers=pool.map)
     J = sol.jac / scale[None, :]
     n_res = np.count_nonzero(sol.fun)
     s2 = 2.0 * sol.cost / max(1, n_res - p)

@@ -537,7 +537,8 @@ def restart_states(xa, P, x0, sd0):
         P[i, i] = sd0[i] * sd0[i]
 
 
-@njit(cache=True)
+# nogil: the finite differences of batch.py run one filter per thread
+@njit(cache=True, nogil=True)
 def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):
     """Run the filter over samples k = 0..N-1: update with Y[0], then for each k > 0 cross the
     interval as `timeline` says (time updates with U[k-1] held, or a restart of the vehicle

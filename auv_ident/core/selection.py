@@ -122,24 +122,13 @@ def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=
     fer = FilterErrorResiduals(model, cfg, [(t, Y, U)], T=T, max_step=max_step,
                                max_bridge=max_bridge)
     theta = np.asarray(theta, dtype=float)
-    ok, w = fer(theta)
-    if not ok:
+    steps = SENSITIVITY_STEP * parameter_scale(model, theta)
+    try:
+        r0, J, failed = fer.forward_differences(theta, steps)
+    except DomainError:
         raise DomainError('the filter-error residuals cannot be computed at the vehicle '
-                          "file's values (the model leaves its domain on this record)")
-    white = w.copy()
-    r0 = np.nan_to_num(white.ravel())
-    scale = parameter_scale(model, theta)
-    J = np.zeros((r0.size, model.p))
-    failed = []
-    for i in range(model.p):
-        step = SENSITIVITY_STEP * scale[i]
-        th = theta.copy()
-        th[i] += step
-        ok, w = fer(th)
-        if not ok:
-            failed.append(i)
-            continue
-        J[:, i] = (np.nan_to_num(w.ravel()) - r0) / step
+                          "file's values (the model leaves its domain on this record)") from None
+    white = fer.white.copy()
     return white, J, failed
 
 
