@@ -142,8 +142,8 @@ def write_table(path, rows):
 def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, scheduler=None,
                  workers=2, progress_bar=None, warm_up=True, worker_env=None):
     """Identify every bag of `bags` (folder or glob, see find_bags) on the engine; write
-    OUT/campaign.csv (every TABLE_EVERY_S s, and at the end) and OUT/trends.png. Bags with an 'ok' row in an
-    existing OUT/campaign.csv are skipped.
+    OUT/campaign.csv (every TABLE_EVERY_S s, and at the end) and OUT/trends.png. Bags with an
+    'ok' row in an existing OUT/campaign.csv are skipped.
 
     vehicle : name or path of a vehicle file (its content goes to the workers), or None: the
     vehicle each bag's metadata names. progress_bar : progress_bar(number of bags to

@@ -1,7 +1,7 @@
 """Experiments over the core: identify a simulated run, tables, JSON, Monte Carlo statistics.
 
-ROS-free (bags come in through analysis/bag_identify.py). Every figure printed here can be reproduced with
-the command shown next to it in docs/.
+ROS-free (bags come in through analysis/bag_identify.py). Every figure printed here can be
+reproduced with the command shown next to it in docs/.
 """
 import contextlib
 import time
