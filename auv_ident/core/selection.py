@@ -384,9 +384,10 @@ class Selection:
             groups.setdefault(key, []).append(name)
         if self.consider_inflation:
             worst = max(self.consider_inflation, key=self.consider_inflation.get)
+            ratio = self.consider_inflation[worst]
             lines.append("error bars include the errors of the coefficients left at the file's "
                          f'values ({100 * PRIOR_REL_STD:g} % 1-sigma each, consider analysis): up '
-                         f'to {self.consider_inflation[worst]:.3g}x the statistical ones ({worst})')
+                         f'to {ratio:.3g}x the statistical ones ({worst})')
         lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
                      '`selection`):')
         for key, members in groups.items():
