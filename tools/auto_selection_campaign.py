@@ -1,22 +1,24 @@
-"""Campaign: `--coefficients auto,<paper's five>` against a hand-picked 20-coefficient set on
-bags the identifier did not make (test/independent_data.py), with a truth vehicle whose other
-coefficients are 0.8-1.2x the vehicle file's.
+"""Campaign: `--coefficients auto,<the vehicle's default set>` against a hand-picked
+20-coefficient set (NPS AUV II) on bags the identifier did not make (test/independent_data.py),
+with a truth vehicle whose other coefficients are 0.8-1.2x the vehicle file's.
 
-Per seed: one 600 s NPS AUV II bag (20 Hz odometry, white noise at the documented level,
-commands periodic at 20 Hz, every coefficient but the paper's five scaled by U(0.8, 1.2),
-added mass included), then
+Per seed: one 600 s bag of the vehicle (20 Hz odometry, white noise at the documented level,
+commands periodic at 20 Hz, every coefficient but the default set (the vehicle file's
+identify_default; NPS AUV II: the paper's five) scaled by U(0.8, 1.2), added mass included),
+then
 
-    python -m auv_ident identify --vehicle nps_auv2 --bag BAG --coefficients SET --json OUT
+    python -m auv_ident identify --vehicle V --bag BAG --coefficients SET --json OUT
 
-for SET = auto,Z_ds,Z_q,Z_w,M_ds,K_v and the hand-picked HAND_SET (and, with --methods
-auto,hand,five, the paper's five alone: does the diagnosis flag them?). Errors are against the
-bag's truth.json. Printed: per seed the paper's five (error % / |error|/1-sigma), the wall
-time of the command and the diagnosis; then per method the median |error| % of each of the
-five, the share of (seed, coefficient) cases with the truth within 3 sigma (the five, and every
-identified coefficient) and the median |error|/sigma. These are measurements, not assertions.
+for SET = auto,<default set> and, for NPS AUV II, the hand-picked HAND_SET (and, with --methods
+auto,hand,five, the default set alone: does the diagnosis flag it?). Errors are against the
+bag's truth.json. Printed: per seed the default set (error % / |error|/1-sigma), the wall
+time of the command and the diagnosis; then per method the median |error| % of each of them,
+the share of (seed, coefficient) cases with the truth within 3 sigma (the default set, and
+every identified coefficient) and the median |error|/sigma. These are measurements, not
+assertions.
 
-    PYTHONPATH=. .venv/bin/python tools/auto_selection_campaign.py [--out DIR] [--seeds 1,2,3]
-        [--duration 600] [--reuse] [--methods auto,hand]
+    PYTHONPATH=. .venv/bin/python tools/auto_selection_campaign.py [--vehicle nps_auv2]
+        [--out DIR] [--seeds 1,2,3] [--duration 600] [--reuse] [--methods auto,hand]
 
 With --reuse, bags and results already in --out are kept (a result with its command's wall
 time), so more seeds can be added to a campaign.
@@ -37,25 +39,33 @@ sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
 from independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.vehicles import load_vehicle  # noqa: E402
 
-PAPER_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
-HAND_SET = PAPER_SET + ('Y_v', 'Y_r', 'Y_dr', 'N_v', 'N_r', 'N_dr', 'M_uw', 'M_uq', 'K_p',
-                        'Z_dsn', 'X_vv', 'K_vw', 'Z_vv', 'M_vv', 'N_vw')
-METHODS = {'auto': 'auto,' + ','.join(PAPER_SET), 'hand': ','.join(HAND_SET),
-           'five': ','.join(PAPER_SET)}
+# NPS AUV II's hand-picked set: the paper's five and fifteen more
+HAND_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v', 'Y_v', 'Y_r', 'Y_dr', 'N_v', 'N_r', 'N_dr',
+            'M_uw', 'M_uq', 'K_p', 'Z_dsn', 'X_vv', 'K_vw', 'Z_vv', 'M_vv', 'N_vw')
 
 
-def make_bag(out, seed, duration, reuse):
-    """The seed's bag (perturbed truth, paper's five kept); returns its truth.json document."""
+def method_sets(vehicle, default_set):
+    """{method: --coefficients text}: 'auto' (auto plus the default set), 'five' (the default
+    set alone; named after NPS AUV II's five) and, for NPS AUV II, 'hand'."""
+    sets = {'auto': 'auto,' + ','.join(default_set), 'five': ','.join(default_set)}
+    if vehicle == 'nps_auv2':
+        sets['hand'] = ','.join(HAND_SET)
+    return sets
+
+
+def make_bag(out, vehicle, default_set, seed, duration, reuse):
+    """The seed's bag (perturbed truth, the default set kept); returns its truth.json."""
     if not (reuse and (out / 'truth.json').is_file()):
-        cfg = DataConfig(vehicle='nps_auv2', duration=duration, seed=seed, rpm=500.0,
+        cfg = DataConfig(vehicle=vehicle, duration=duration, seed=seed, rpm=500.0,
                          odom_rate=20.0, commands='periodic', command_rate=20.0, perturb=0.2,
-                         perturb_keep=PAPER_SET)
+                         perturb_keep=tuple(default_set))
         generate(cfg, out, overwrite=True)
     return json.loads((out / 'truth.json').read_text())
 
 
-def identify(bag, coefficients, out_json, reuse=False):
+def identify(vehicle, bag, coefficients, out_json, reuse=False):
     """Run the command line; returns its JSON document with 'wall' and 'cpu' (s, the
     command's wall-clock and CPU (user + system) time, kept in OUT.wall next to it), or a
     failure dict. reuse: take a result already made."""
@@ -66,7 +76,7 @@ def identify(bag, coefficients, out_json, reuse=False):
         doc['wall'] = float(times[0])
         doc['cpu'] = float(times[1]) if len(times) > 1 else float('nan')
         return doc
-    cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', 'nps_auv2', '--bag',
+    cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', vehicle, '--bag',
            str(bag), '--coefficients', coefficients, '--json', str(out_json)]
     env = dict(os.environ, PYTHONPATH=str(REPO))
     t0 = time.perf_counter()
@@ -95,6 +105,7 @@ def errors(doc, truth):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--vehicle', default='nps_auv2')
     ap.add_argument('--out', default='/tmp/auv_ident_auto_selection')
     ap.add_argument('--seeds', default='1,2,3')
     ap.add_argument('--duration', type=float, default=600.0)
@@ -103,10 +114,17 @@ def main(argv=None):
                     help='keep bags and results already made (a rerun reprints the table)')
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
-    methods = [m for m in args.methods.split(',') if m in METHODS]
-    print(f'NPS AUV II, {args.duration:.0f} s, 20 Hz, white noise, truth vehicle: every '
-          'coefficient but the paper\'s five x U(0.8, 1.2) (added mass too); load average at '
-          f'start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores')
+    vehicle = load_vehicle(args.vehicle)
+    PAPER_SET = tuple(vehicle.identify_default)
+    METHODS = method_sets(args.vehicle, PAPER_SET)
+    methods = [m.strip() for m in args.methods.split(',') if m.strip()]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        ap.error(f'--methods: {", ".join(unknown)} not available for {args.vehicle} '
+                 f'(available: {", ".join(METHODS)})')
+    print(f'{vehicle.title}, {args.duration:.0f} s, 20 Hz, white noise, truth vehicle: '
+          f'every coefficient but {", ".join(PAPER_SET)} x U(0.8, 1.2) (added mass too); load '
+          f'average at start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores')
     for m in methods:
         print(f'  {m}: --coefficients {METHODS[m]}')
     print(f'{"seed":<5}{"method":<7}{"n":>3}' + ''.join(f'{n:>16}' for n in PAPER_SET)
@@ -115,9 +133,9 @@ def main(argv=None):
     summary = {}
     for seed in seeds:
         out = Path(args.out) / f'seed{seed}'
-        truth = make_bag(out, seed, args.duration, args.reuse)
+        truth = make_bag(out, args.vehicle, PAPER_SET, seed, args.duration, args.reuse)
         for m in methods:
-            doc = identify(out / 'bag', METHODS[m], out / f'{m}.json', args.reuse)
+            doc = identify(args.vehicle, out / 'bag', METHODS[m], out / f'{m}.json', args.reuse)
             summary[f'{seed}/{m}'] = doc
             if doc.get('failed'):
                 last = doc['stderr'].strip().splitlines()[-1:] or ['?']
