@@ -16,7 +16,10 @@ What a worker needs travels with the task or with the cluster registration:
   its first task, so that a worker compiles (or loads from its own numba cache) once, and no
   task's wall time carries the compilation;
 - ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST in the environment of the workers it starts (the
-  identification creates no ROS node, but nothing spawned here may leave loopback if it did).
+  identification creates no ROS node, but nothing spawned here may leave loopback if it did);
+- AUV_IDENT_THREADS in the same environment: the usable CPUs shared out among the local
+  workers (:func:`difference_threads_env`), as each identification runs its finite
+  differences on that many threads (core/batch.py).
 """
 import asyncio
 import contextlib
@@ -30,6 +33,7 @@ import time
 from distributed import as_completed, Client, get_worker, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from auv_ident.core.batch import difference_threads
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.vehicles import resolve_vehicle_path
 
@@ -122,6 +126,15 @@ def worker_address():
         return ''
 
 
+def difference_threads_env(workers):
+    """AUV_IDENT_THREADS for each of `workers` local workers: the usable CPUs shared out
+    (at least 1), so that the threaded finite differences of core/batch.py do not put more
+    threads on the machine than it has cores; {} when the user set AUV_IDENT_THREADS."""
+    if os.environ.get('AUV_IDENT_THREADS', '').strip():
+        return {}
+    return {'AUV_IDENT_THREADS': str(max(1, difference_threads() // max(1, workers)))}
+
+
 def local_cluster(workers, silence_logs=logging.ERROR, env=None):
     """A distributed.LocalCluster of `workers` single-threaded worker processes, everything on
     127.0.0.1, no dashboard. The scheduler still serves its small HTTP API (health, metrics):
@@ -129,7 +142,7 @@ def local_cluster(workers, silence_logs=logging.ERROR, env=None):
     environment variables for the workers (tools/campaign_bench.py: empty compile caches)."""
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         host=LOOPBACK, dashboard_address=None,
-                        env=dict(WORKER_ENV, **(env or {})),
+                        env=dict(WORKER_ENV, **difference_threads_env(workers), **(env or {})),
                         silence_logs=silence_logs,
                         scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})
 

@@ -275,3 +275,16 @@ def test_campaign_on_a_real_dask_scheduler_and_worker(archive, tmp_path):
                 except subprocess.TimeoutExpired:
                     p.kill()
         log.close()
+
+
+def test_local_workers_share_the_cores_for_the_finite_differences(cluster, monkeypatch):
+    """Each of the 2 local workers gets AUV_IDENT_THREADS = usable CPUs // 2 (at least 1): the
+    threaded Jacobians of core/batch.py then do not oversubscribe the machine; a value the
+    user set is left alone."""
+    from distributed import Client
+    with Client(cluster) as client:
+        seen = set(client.run(lambda: os.environ.get('AUV_IDENT_THREADS')).values())
+    cpus = len(os.sched_getaffinity(0))
+    assert seen == {str(max(1, cpus // 2))}
+    monkeypatch.setenv('AUV_IDENT_THREADS', '3')
+    assert engine.difference_threads_env(2) == {}
