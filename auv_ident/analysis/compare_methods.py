@@ -40,6 +40,7 @@ from auv_ident.core.output_error import DEFAULT_SEGMENT_S, output_error
 from auv_ident.core.prediction import angle_channels, fit_percent, free_run
 from auv_ident.core.state import State, STATE_NAMES
 from auv_ident.core.ukf import run_ukf
+from auv_ident.analysis.report_format import finite_cell
 from auv_ident.analysis.results import make_config
 
 METHODS = ('ekf', 'ukf', 'filter_error', 'output_error', 'equation_error')
@@ -255,14 +256,6 @@ def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, dura
     return source, validation
 
 
-def _cell(x, fmt):
-    """x formatted, or '-' as wide as the format asks."""
-    if x is not None:
-        return format(x, fmt)
-    width = ''.join(ch for ch in fmt.split('.')[0] if ch.isdigit())
-    return format('-', '>' + width) if width else '-'
-
-
 def methods_table(doc):
     """The printable comparison: per coefficient and method estimate, 1-sigma, error %; per
     method wall time and validation fit % of the main channels."""
@@ -282,8 +275,9 @@ def methods_table(doc):
             if 'refused' in c:
                 lines.append(f'{"":<12}{m:<16}{"refused":>12}  {c["refused"]}')
                 continue
-            lines.append(f'{"":<12}{m:<16}{_cell(c["estimate"], ">12.6g")}'
-                         f'{_cell(c["std"], ">12.3g")}{_cell(c["error_pct"], ">+10.3f")}')
+            lines.append(f'{"":<12}{m:<16}{finite_cell(c["estimate"], ">12.6g")}'
+                         f'{finite_cell(c["std"], ">12.3g")}'
+                         f'{finite_cell(c["error_pct"], ">+10.3f")}')
     lines.append('fit % of each model run open loop over the validation run:')
     lines.append(f'{"method":<16}{"wall s":>8}  ' + ' '.join(f'{ch:>6}' for ch in TABLE_CHANNELS))
     for m in methods:
@@ -291,11 +285,11 @@ def methods_table(doc):
         if 'error' in e:
             lines.append(f'{m:<16}{e["wall_s"]:>8.2f}  failed: {e["error"]}')
             continue
-        fits = ' '.join(f'{_cell(e["fit_percent"].get(ch), ">6.1f")}' for ch in TABLE_CHANNELS)
+        fits = ' '.join(finite_cell(e['fit_percent'].get(ch), '>6.1f') for ch in TABLE_CHANNELS)
         lines.append(f'{m:<16}{e["wall_s"]:>8.2f}  {fits}')
     for ref, fits in (doc.get('reference_fit_percent') or {}).items():
         lines.append(f'{"(" + ref + ")":<16}{"":>8}  '
-                     + ' '.join(f'{_cell(fits.get(ch), ">6.1f")}' for ch in TABLE_CHANNELS))
+                     + ' '.join(f'{finite_cell(fits.get(ch), ">6.1f")}' for ch in TABLE_CHANNELS))
     for m in methods:
         notes = doc['methods'][m].get('notes')
         if notes:
@@ -322,7 +316,7 @@ def methods_markdown(doc):
             if 'refused' in c or c['estimate'] is None:
                 cells.append('refused' if 'refused' in c else '-')
                 continue
-            cell = f'{c["estimate"]:.6g} ± {_cell(c["std"], ".2g")}'
+            cell = f'{c["estimate"]:.6g} ± {finite_cell(c["std"], ".2g")}'
             if c['error_pct'] is not None:
                 z = ((c['estimate'] - doc['truth'][n]) / c['std']) if c['std'] else None
                 cell += f' ({c["error_pct"]:+.2f} %' + (f', {z:+.1f} σ)' if z is not None
@@ -335,7 +329,7 @@ def methods_markdown(doc):
     rows = [(m, e['fit_percent']) for m, e in doc['methods'].items() if 'error' not in e]
     rows += [(f'({ref})', fits) for ref, fits in (doc.get('reference_fit_percent') or {}).items()]
     for label, fits in rows:
-        lines.append(f'| {label} | ' + ' | '.join(_cell(fits.get(ch), '.1f')
+        lines.append(f'| {label} | ' + ' | '.join(finite_cell(fits.get(ch), '.1f')
                                                  for ch in TABLE_CHANNELS) + ' |')
     refused = [f'{m}: {n} refused ({c["refused"]})' for m, e in doc['methods'].items()
                for n, c in e.get('coefficients', {}).items() if 'refused' in c]

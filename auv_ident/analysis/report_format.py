@@ -30,8 +30,12 @@ def cell(v):
 
 
 def finite_cell(v, fmt='.4g'):
-    """A table cell of a float that may be missing or non-finite: '-' then."""
-    return '-' if v is None or not np.isfinite(v) else format(v, fmt)
+    """A table cell of a float that may be missing or non-finite: '-' then, right-aligned to
+    the width the format asks for (so that fixed-width text tables keep their columns)."""
+    if v is not None and np.isfinite(v):
+        return format(v, fmt)
+    width = ''.join(ch for ch in fmt.split('.')[0] if ch.isdigit())
+    return format('-', '>' + width) if width else '-'
 
 
 def package_versions():
