@@ -18,21 +18,21 @@ from auv_ident.core.state import N_CURRENT, N_STATE
 from auv_ident.core.timing import with_command_changes
 from auv_ident.vehicles import load_vehicle
 
-def _bag_truth_and_noise(path, model):
-    """Truth (the vehicle file's values, and the current it flew in) only for bags our
-    simulator wrote; the noise 1-sigma stored with them, else the default sensor suite."""
-    meta = bag_custom_data(path)
-    simulated = meta.get('auv_ident.simulated') == 'true'
-    noise = DEFAULT_NOISE_STD.copy()
-    if 'auv_ident.noise_std' in meta:
-        try:
-            vals = np.array([float(v) for v in meta['auv_ident.noise_std'].split()])
-            if vals.shape == (N_STATE,) and np.all(vals > 0):
-                noise = vals
-        except ValueError:
-            pass
-    truth = (model.theta_true[:model.p_coef] if simulated and model is not None else None)
-    return truth, noise, meta
+def _meta_noise(meta):
+    """(12,) the sensor noise 1-sigma a bag's custom data (bag_custom_data) stores (bags our
+    simulator wrote), else the default sensor suite's."""
+    try:
+        vals = np.array([float(v) for v in meta.get('auv_ident.noise_std', '').split()])
+    except ValueError:
+        vals = np.zeros(0)
+    return vals if vals.shape == (N_STATE,) and np.all(vals > 0) else DEFAULT_NOISE_STD.copy()
+
+
+def _meta_truth(meta, model):
+    """The model's coefficients as the truth (the vehicle file's values) for a bag our
+    simulator wrote (its custom data says so), else None: another program's bag has no
+    known truth."""
+    return model.theta_true[:model.p_coef] if meta.get('auv_ident.simulated') == 'true' else None
 
 
 def _bag_current_truth(meta):
@@ -74,7 +74,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     meta = bag_custom_data(path)
     auto, names = parse_request(load_vehicle(vehicle or meta.get('auv_ident.vehicle')
                                              or 'nps_auv2'), coefficients)
-    meta_noise = _bag_truth_and_noise(path, None)[1]
+    meta_noise = _meta_noise(meta)
     if velocity_reference is None:
         velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
 
@@ -93,7 +93,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     (rr,), noise, again = _replays([path], replay, cfg_of)
     v = load_vehicle(rr.vehicle)
     model = rr.model
-    truth, _, meta = _bag_truth_and_noise(path, model)
+    truth = _meta_truth(meta, model)
     rec = _exact_hold(rr)
     selection = None
     initial = rr.initial[:model.p_coef]
@@ -178,12 +178,12 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
     if q_state is not None:
         given['q_state'] = np.asarray(q_state, dtype=float)
     rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
+                    noise_std=(_meta_noise(meta) if noise_std is None
                                else np.asarray(noise_std, dtype=float)),
                     velocity_reference=vr, **given)
     v = load_vehicle(rr.vehicle)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
-    truth, _, meta = _bag_truth_and_noise(path, Model(v, names))
+    truth = _meta_truth(meta, Model(v, names))
     noise = rr.noise_std
     t, Y, U = _exact_hold(rr)
     return Source(vehicle=v, names=names, t=t, Y=Y, U=U, T=rr.T,
@@ -254,8 +254,9 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     if str(current).strip().lower() == 'estimate':
         raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); one '
                        'current per run is not estimated')
-    vrefs = {velocity_reference or bag_custom_data(p).get('auv_ident.velocity_reference',
-                                                          'ground') for p in paths}
+    metas = {p: bag_custom_data(p) for p in paths}
+    vrefs = {velocity_reference or metas[p].get('auv_ident.velocity_reference', 'ground')
+             for p in paths}
     if len(vrefs) > 1:
         raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
                        'give --velocity-reference')
@@ -265,8 +266,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
         given = noise_std if noise is None else noise
         return replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
                           initial_offset=initial_offset,
-                          noise_std=_bag_truth_and_noise(path, None)[1] if given is None
-                          else given,
+                          noise_std=_meta_noise(metas[path]) if given is None else given,
                           noise_source=source or (noise_source if noise_std is None
                                                   else 'parameter'),
                           q_state=q_state if q is None else q,
@@ -288,7 +288,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     records = [_exact_hold(rr) for rr in rrs]
     est, cov, ekf_est, ekf_cov, cur, verdicts, diagnosis, fit = identify_records(
         model, cfg, records, rrs[0].T, refine_pass, progress)
-    truths = [_bag_truth_and_noise(p, model)[0] for p in paths]
+    truths = [_meta_truth(metas[p], model) for p in paths]
     truth = truths[0] if all(tr is not None for tr in truths) else None
     steps = sum(len(r[0]) for r in records)
     run = fit.ekf_run
@@ -306,8 +306,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
                                   'q_state': [float(x) for x in cfg.q_state],
                                   'replayed_with_noise_model': again,
                                   'rejection_reasons': _reasons(rrs)},
-                         current_truth=_common([_bag_current_truth(bag_custom_data(p))
-                                                for p in paths]))
+                         current_truth=_common([_bag_current_truth(metas[p]) for p in paths]))
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
             f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
