@@ -39,8 +39,9 @@ from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.core.vehicle import P_FIN, P_NMAX
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
-from auv_ident.session.guard import (COV_BLOWUP_FACTOR, Event, GUARD_FACTOR, GUARD_PROBATION,
-                                     GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
+from auv_ident.session.guard import (checked_coefficients, COV_BLOWUP_FACTOR, Event,
+                                     GUARD_FACTOR, GUARD_PROBATION, GUARD_SECONDS,
+                                     GUARD_WINDOW, GuardWindow,
                                      GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
                                      LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
@@ -425,10 +426,7 @@ class IdentSession:
         covariance."""
         if f is getattr(self, '_R_filter', None) and np.array_equal(r, self._R_now):
             return
-        if self.cfg.mode == 'fixed':
-            np.fill_diagonal(f.R, r)
-        np.fill_diagonal(f.R0, r)
-        f.noise_std = np.sqrt(r)
+        f.use_measurement_variances(r)
         self._R_filter, self._R_now = f, r
 
     def _command(self, stamp_ns, u6):
@@ -475,7 +473,7 @@ class IdentSession:
         try:
             out = stream.add_measurement(t, y)
             if out.accepted:
-                est, cov, std = self._checked_coefficients(f, t)
+                est, cov, std = checked_coefficients(f, t, self.names, self._blowup_std)
         except (DomainError, DivergenceError) as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         code = out.code
@@ -531,29 +529,6 @@ class IdentSession:
         reason = 'odom: ' + (out.reason + '; ' if out.reason else '') + why + ': not taken as good'
         return Event('update', reason, stamp_ns, est, std, cov, nis, dof, 'guard', False)
 
-    def _checked_coefficients(self, f, t):
-        """(estimate, covariance, std) of the coefficients after an accepted update; raises
-        DivergenceError if they are unusable (non-finite, not positive definite, blown up).
-
-        Per message, so on lists where numpy's per-call overhead would dominate; the decisions
-        are those of the numpy forms (core.filter.is_positive_definite and so on)."""
-        est, cov = f.theta, f.theta_cov
-        var = cov.diagonal()
-        isfinite = math.isfinite
-        if not (all(map(isfinite, est.tolist())) and all(map(isfinite, cov.ravel().tolist()))
-                and _has_cholesky(cov) and min(var.tolist()) > 0):
-            raise DivergenceError(f'non-finite or non-positive-definite coefficient '
-                                  f'covariance after the update at {t:.9f} s')
-        std = np.sqrt(var)
-        if any(map(operator.gt, std.tolist(), self._blowup_std)):
-            blown = np.flatnonzero(std > self.blowup_std)
-            raise DivergenceError(
-                'coefficient covariance blew up: 1-sigma of ' + ', '.join(
-                    f'{self.names[i]} = {math.sqrt(var[i]):.3g}'
-                    for i in blown) + f' above {COV_BLOWUP_FACTOR:g}x its '
-                f'prior (p0_rel |initial guess|) at {t:.9f} s')
-        return est, cov, std
-
     def _guard_reset(self, t, stamp_ns):
         self.guard_resets += 1
         window = self._guard_window
@@ -598,16 +573,6 @@ class IdentSession:
         prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
         verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
         return verdicts, live_diagnosis(self.health() if health is None else health, verdicts)
-
-
-def _has_cholesky(P):
-    """True if the finite matrix P has a Cholesky factor (numpy's, as
-    core.filter.is_positive_definite, whose finiteness check the caller did)."""
-    try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        return False
-    return True
 
 
 def _integer_stamp(stamp_ns):
