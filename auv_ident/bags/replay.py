@@ -120,8 +120,10 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
     """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
-    Returns the list of (stamp_ns, estimate, std) of the accepted updates. The session's
-    one-time notices (e.g. message covariances not usable) are logged as warnings."""
+    Returns the list of (stamp_ns, estimate, std) of the accepted updates (with coefficients
+    ['auto', ...] their length changes once, at the switch). The session's one-time notices
+    (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
+    as info (an error if it failed)."""
     updates = []
     for topic, _, msg in messages:
         if topic == actuator_topic:
@@ -138,6 +140,10 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
             for text in session.notices:
                 log.warning(text)
             session.notices.clear()
+        if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
+            for level, text in session.auto.news:
+                (log.error if level == 'error' else log.info)(text)
+            session.auto.news.clear()
     return updates
 
 def session_result(session, updates, settings=None):

@@ -87,7 +87,7 @@ def parse_request(vehicle, text):
     for tok in rest:
         if tok in CURRENT_NAMES:
             raise ConfigError(f'coefficients: {tok!r} is the water current; choose it with '
-                              '--current')
+                              'the current setting (--current)')
         name = vehicle.names[vehicle.index(tok)]
         if name in names:
             raise ConfigError(f'coefficients {text!r}: {name} is listed twice')
@@ -407,7 +407,8 @@ class Selection:
             worst = max(self.consider_inflation, key=self.consider_inflation.get)
             lines.append('error bars include the errors of the coefficients left at the file\'s '
                          f'values ({100 * PRIOR_REL_STD:g} % 1-sigma each, consider analysis): up '
-                         f'to {self.consider_inflation[worst]:.3g}x the statistical ones ({worst})')
+                         f'to {self.consider_inflation[worst]:.3g}x the statistical ones '
+                         f'({worst})')
         lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
                      '`selection`):')
         for key, members in groups.items():

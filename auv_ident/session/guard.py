@@ -60,6 +60,9 @@ RESET_COV_INFLATION = 4.0   # coefficient covariance factor when a reset restart
 COV_BLOWUP_FACTOR = 100.0   # a coefficient 1-sigma above this x p0_rel |theta0|: divergence
 NIS_CAP = 1e300             # a non-finite NIS enters the guard window as this
 
+# codes of StreamIdentifier outcomes for which an update was computed (fused or gated)
+FUSED_CODES = frozenset(('', 'repaired', 'outlier'))
+
 # Health rule (judge_health)
 NIS_WINDOW = 200          # updates in the running NIS window (10 s at 20 Hz)
 NIS_BAND_PROB = 0.999     # two-sided chi-square band of the window's mean NIS per dof
