@@ -27,8 +27,8 @@ these steps (:attr:`AutoChoice.state` in brackets):
    reaches the chosen filter once. The estimate's names and length change, once.
 4. (``failed``) The choice or the feeding raised: the model left its domain, the chosen
    filter diverged on the record (a core error, or its divergence guard fired), or anything
-   else. The running set stays. The reason is kept for the caller to log once and for
-   /diagnostics.
+   else; or the data chose no coefficient at all ('auto' alone). The running set stays. The
+   reason is kept for the caller to log once and for /diagnostics.
 
 Why pass 1 only: pass 2 identifies the set twice with the batch refinement (tens of s of CPU,
 docs/accuracy.md) to drop the members that identification finds weak or correlated. Live, the
@@ -61,7 +61,12 @@ COMMAND, COMMAND_REJECTED, ODOMETRY = range(3)
 
 
 class ChoiceFailed(AuvIdentError):
-    """The chosen set's filter could not take the kept record; the message says why."""
+    """The choice cannot be taken; the message says why. selection: the Selection if the
+    choice itself was made (its left-out reasons stay visible)."""
+
+    def __init__(self, message, selection=None):
+        super().__init__(message)
+        self.selection = selection
 
 
 def run_inline(work):
@@ -213,6 +218,11 @@ def choose_and_feed(job):
     selection, _ = choose_coefficients(job.make_model, cfg, t, Y, U, named=job.named, T=job.T,
                                        max_bridge=job.max_bridge)
     choice_wall_s = time.perf_counter() - start
+    if not selection.chosen:
+        # 'auto' alone on data that determine no coefficient: a filter of the current alone
+        # (or of nothing) would tell less than the running default set, which stays
+        raise ChoiceFailed('the data chose no coefficient (every candidate left out, reasons '
+                           'in auto_left_out_<name>)', selection)
     model = job.make_model(selection.chosen)
     vehicle = model.vehicle
     initial = np.array([job.running.get(n, vehicle.values[vehicle.index(n)])
@@ -350,6 +360,7 @@ class AutoChoice:
         dropped."""
         self.state = FAILED
         self.reason = failure_text(err)
+        self.selection = getattr(err, 'selection', None)
         self.kept = None
         self.news.append(('error', f'automatic choice of coefficients failed: {self.reason}; '
                                    'the running set stays'))
@@ -405,6 +416,8 @@ class AutoChoice:
         doc['data_s'] = self.window_data_s if math.isfinite(self.window_data_s) else None
         if self.state == FAILED:
             doc['error'] = self.reason
+            if self.selection is not None:
+                doc['left_out'] = dict(self.selection.left_out)
             return doc
         doc.update(self.selection.document())
         doc.update({'choice_wall_s': self.choice_wall_s, 'job_wall_s': self.job_wall_s,

@@ -190,6 +190,22 @@ def test_a_failed_choice_keeps_the_running_set_and_says_why(record, monkeypatch)
     assert s.document()['selection']['error'] == auto.reason
 
 
+def test_a_choice_of_no_coefficient_keeps_the_default_set_with_the_reasons(record):
+    """'auto' alone on 20 s that determine no coefficient: nothing to switch to (a filter of
+    the current alone would say less than the default set); every coefficient's reason stays
+    visible."""
+    data, messages = record
+    s = IdentSession(coefficients=['auto'], auto_window=20.0)
+    _feed(s, messages)
+    auto = s.auto
+    assert auto.state == 'failed' and auto.reason.startswith('the data chose no coefficient')
+    assert s.names == list(load_vehicle('nps_auv2').identify_default) + CURRENT
+    kv = dict(auto.diagnostic_values())
+    assert kv['auto_chosen'] == '' and int(kv['auto_left_out_count']) == len(
+        load_vehicle('nps_auv2').names)
+    assert s.document()['selection']['left_out'] == auto.selection.left_out
+
+
 BAD = [
     ('auto_window', 0.0, "parameter 'auto_window': 0.0 must be a positive finite number"),
     ('auto_window', -5.0, "must be a positive finite number"),
