@@ -67,7 +67,7 @@ def one_window(messages, named, window):
     if a.state != 'chosen':
         return f'{window:6.0f} s: {a.state} {a.reason}'
     sel = a.selection
-    return (f'{window:6.0f} s: {a.samples - 0:5d} samples fed at the switch; choice '
+    return (f'{window:6.0f} s: {a.samples:5d} samples fed at the switch; choice '
             f'{a.choice_wall_s:6.2f} s wall, job (choice + feeding) {a.job_wall_s:6.2f} s wall, '
             f'{cpu[0]:6.2f} s CPU; {len(sel.chosen)} chosen: {", ".join(sel.chosen)}')
 

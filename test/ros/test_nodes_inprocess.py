@@ -140,6 +140,8 @@ def test_identifier_parameter_overrides(ctx, nodes):
     (IdentifierNode, 'vehicle', 'nope'),
     (IdentifierNode, 'noise_std', [0.01] * 11 + [-0.01]),
     (IdentifierNode, 'coefficients', ['Z_w', 'Z_nonsense']),
+    (IdentifierNode, 'coefficients', ['Z_w', 'auto']),
+    (IdentifierNode, 'auto_window', -1.0),
     (IdentifierNode, 'sample_time', 0.0),
     (IdentifierNode, 'measured', ['u', 'speed']),
     (IdentifierNode, 'frame', 'nwu'),
