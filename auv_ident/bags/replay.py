@@ -141,10 +141,14 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
                 log.warning(text)
             session.notices.clear()
         if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
-            for level, text in session.auto.news:
-                (log.error if level == 'error' else log.info)(text)
-            session.auto.news.clear()
+            _log_choice_news(session.auto)
     return updates
+
+
+def _log_choice_news(auto):
+    for level, text in auto.news:
+        (log.error if level == 'error' else log.info)(text)
+    auto.news.clear()
 
 def session_result(session, updates, settings=None):
     """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
@@ -210,6 +214,8 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
     warner = ReplayWarnings() if warn else None
     try:
         updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
+        if session.poll_choice():   # an 'auto' window that filled with the last message
+            _log_choice_news(session.auto)
     finally:
         if warner is not None:
             warner.summary()

@@ -308,14 +308,15 @@ class IdentifierNode(Node):
         for level, text in auto.news:
             self._emit(level, text)
         auto.news.clear()
+        switched = self.session.names is not self.names
+        if switched:
+            self._lay_out()
         if not self.context.ok():   # shutting down
             return
-        if self.session.names is not self.names:
-            self._lay_out()
-            good = self.session.last_good
-            if good is not None:
-                self.publish_estimate(Event('update', '', good.stamp_ns, good.estimate,
-                                            good.std, good.cov, good=True))
+        good = self.session.last_good
+        if switched and good is not None:
+            self.publish_estimate(Event('update', '', good.stamp_ns, good.estimate, good.std,
+                                        good.cov, good=True))
         if diagnostics:
             self.publish_diagnostics()
 

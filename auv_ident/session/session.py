@@ -343,7 +343,8 @@ class IdentSession:
             entries=list(auto.kept), noise_variances=self.noise_default, T=self.T,
             max_gap=self.max_gap, gate=self.gate, max_bridge=self.max_bridge,
             max_command_age=self.max_command_age, guard_on=self.guard_on))
-        self.poll_choice()      # an inline runner has finished already
+        # not switched here even if the runner has finished (inline): the message being
+        # handled is the running filter's to the end; the next one (or poll_choice) switches
 
     def poll_choice(self):
         """Switch to the chosen set if the choice has finished (auto_choice.py, step 3), or

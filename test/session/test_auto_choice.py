@@ -14,6 +14,7 @@ import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.bags.reader import read_bag
+from auv_ident.bags.replay import replay_bag
 from auv_ident.core.errors import DomainError
 from auv_ident.session import auto_choice
 from auv_ident.session.auto_choice import run_in_thread
@@ -62,6 +63,8 @@ def test_publishes_while_choosing_then_switches_without_losing_a_sample(record):
             s.on_actuators(msg)
             continue
         events.append(s.on_odom(msg))
+        # names, last good estimate and estimate file agree after every message
+        assert s.last_good is None or len(s.last_good.estimate) == len(s.names)
         if s.auto.state == 'choosing' and len(events) == 200:
             lines.append(s.diagnosis()[1]['messages'][0])
     # before the switch the named coefficient (and the current) is published, from the start
@@ -123,6 +126,18 @@ def test_the_chosen_set_ends_where_an_offline_identify_of_it_ends(record):
     live_std = np.sqrt(np.diag(cov))[:p]
     z = np.abs(live[:p] - offline) / live_std
     assert np.all(z < 3.0), dict(zip(s.coefficient_names, np.round(z, 2)))
+
+
+def test_a_bag_replays_with_the_choice_as_the_node_makes_it(record):
+    """replay_bag (identify --bag's EKF pass, the node's logic offline) takes the same
+    coefficients [auto, NAME] and ends on the chosen set, as the session fed by hand."""
+    data, messages = record
+    res = replay_bag(data.bag, coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    _feed(s, messages)
+    assert res.names == s.names and len(res.names) > 3
+    assert res.accepted == len(data.odom_stamp_ns) and res.rejected == 0
+    assert np.array_equal(res.estimate, s.last_good.estimate)
 
 
 def test_auto_alone_identifies_the_default_set_while_choosing():
