@@ -22,7 +22,9 @@ the last good estimate and the health windows (session/guard.py). The identifier
 (``ros/identifier_node.py``) and :func:`auv_ident.bags.replay.replay_bag` both drive one
 IdentSession with the messages in arrival (log-time) order, so the same message sequence
 gives identical events and estimates online and offline. The estimate file (``~/save``,
-``warm_start``) is session/estimate_file.py.
+``warm_start``) is session/estimate_file.py. With ``coefficients`` ['auto', ...] the session
+also keeps the accepted messages of the first ``auto_window`` s and switches, once, to the set
+chosen from them (session/auto_choice.py; :meth:`IdentSession.poll_choice`).
 """
 from collections import Counter
 import math
