@@ -15,7 +15,7 @@ from auv_ident.core.noise_fit import fit_noise_runs
 from auv_ident.core.selection import identify_auto, parse_request
 from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import N_CURRENT, N_STATE
-from auv_ident.core.timing import with_command_changes
+from auv_ident.session.record import exact_hold
 from auv_ident.vehicles import load_vehicle
 
 def _meta_noise(meta):
@@ -50,9 +50,7 @@ def _exact_hold(rr):
     """(t, Y, U) of a replay for the batch methods: the samples with a command, and the
     command changes between them as samples without a measurement (timing.with_command_changes:
     the exact zero-order hold the EKF pass followed)."""
-    ok = np.all(np.isfinite(rr.U), axis=1)
-    t, Y, U, _ = with_command_changes(rr.t[ok], rr.Y[ok], rr.U[ok], rr.t_cmd, rr.U_cmd)
-    return t, Y, U
+    return exact_hold(rr.t, rr.Y, rr.U, rr.t_cmd, rr.U_cmd)
 
 
 def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,

@@ -4,7 +4,6 @@ The identifier node and :func:`replay_bag` both drive one
 :class:`auv_ident.session.session.IdentSession` with the messages in arrival (log-time) order,
 so the same message sequence gives identical estimates online and offline.
 """
-import bisect
 from collections import Counter
 from dataclasses import dataclass, field
 import logging
@@ -14,8 +13,8 @@ import numpy as np
 import yaml
 
 from auv_ident.bags.reader import bag_topics, BagError, read_bag
-from auv_ident.core.state import N_INPUT
 from auv_ident.session.estimate_file import estimate_document
+from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
 
 log = logging.getLogger('auv_ident.replay')
@@ -121,8 +120,10 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
     """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
-    Returns the list of (stamp_ns, estimate, std) of the accepted updates. The session's
-    one-time notices (e.g. message covariances not usable) are logged as warnings."""
+    Returns the list of (stamp_ns, estimate, std) of the accepted updates (with coefficients
+    ['auto', ...] their length changes once, at the switch). The session's one-time notices
+    (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
+    as info (an error if it failed)."""
     updates = []
     for topic, _, msg in messages:
         if topic == actuator_topic:
@@ -139,23 +140,19 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
             for text in session.notices:
                 log.warning(text)
             session.notices.clear()
+        if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
+            _log_choice_news(session.auto)
     return updates
+
+
+def _log_choice_news(auto):
+    for level, text in auto.news:
+        (log.error if level == 'error' else log.info)(text)
+    auto.news.clear()
 
 def session_result(session, updates, settings=None):
     """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
-    cmd = sorted(session.commands, key=lambda c: c[0])   # stable: later same-stamp one last
-    by_stamp = {}
-    for tc, uc in cmd:
-        by_stamp[tc] = uc
-    cmd_t = [c[0] for c in cmd]
-    t = np.array([m[0] for m in session.measurements], dtype=float)
-    Y = (np.array([m[1] for m in session.measurements], dtype=float)
-         if session.measurements else np.zeros((0, 12)))
-    U = np.full((len(t), N_INPUT), np.nan)
-    for k, tk in enumerate(t):
-        i = bisect.bisect_right(cmd_t, tk)
-        if i > 0:
-            U[k] = cmd[i - 1][1]
+    t, Y, U, t_cmd, U_cmd = paired(session.commands, session.measurements)
     est, cov = session.current()
     if session.last_good is not None:
         est, cov = session.last_good.estimate, session.last_good.cov
@@ -167,12 +164,9 @@ def session_result(session, updates, settings=None):
         commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
         t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),
         T=session.T, settings=dict(settings or {}),
-        noise_std=(np.sqrt(np.median(np.array(session.variances), axis=0)) if session.variances
-                   else np.sqrt(session.noise_default)),
+        noise_std=median_noise_std(session.variances, session.noise_default),
         time_origin_ns=int(session.time_origin_ns or 0),
-        t_cmd=np.array(sorted(by_stamp), dtype=float),
-        U_cmd=(np.array([by_stamp[tc] for tc in sorted(by_stamp)], dtype=float) if by_stamp
-               else np.zeros((0, N_INPUT))), model=session.model)
+        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model)
 
 def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
                actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
@@ -220,6 +214,8 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
     warner = ReplayWarnings() if warn else None
     try:
         updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
+        if session.poll_choice():   # an 'auto' window that filled with the last message
+            _log_choice_news(session.auto)
     finally:
         if warner is not None:
             warner.summary()

@@ -264,6 +264,16 @@ class AugmentedEKF:
         sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
 
+    def use_measurement_variances(self, r):
+        """Make r (12,) the measurement variances (state units squared): R itself in the
+        'fixed' mode, R0 in the adaptive ones (the reference the adaptation starts from and is
+        bounded by), and the start-up covariance's (noise_std). For a caller whose noise
+        changes per message (the session's message covariances)."""
+        if self.mode == K.MODES['fixed']:
+            np.fill_diagonal(self.R, r)
+        np.fill_diagonal(self.R0, r)
+        self.noise_std = np.sqrt(r)
+
     def reference_std(self):
         """(n,) 1-sigma scale of each augmented state: noise_std on measured channels, the
         start-up 1-sigma of unmeasured ones, the parameters' prior scale (p0_rel |theta0| for

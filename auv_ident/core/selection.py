@@ -36,6 +36,10 @@ errors. This module picks the largest set the run determines, in two passes:
    block of the information matrix). If any was dropped, the rest are identified again,
    started at the first identification's values.
 
+Pass 1 alone is :func:`choose_coefficients`: the live identifier (session/auto_choice.py) runs
+only it, on its first `auto_window` seconds, and lets its filter identify the chosen set;
+:func:`identify_auto` runs both passes.
+
 Error bars: the final covariance adds the consider covariance of the coefficients left at the
 file's values (PRIOR_REL_STD 1-sigma each; added-mass terms a literal M^-1 cannot change
 included, their sensitivities from a model with the exact inverse), so that it covers the bias
@@ -83,7 +87,7 @@ def parse_request(vehicle, text):
     for tok in rest:
         if tok in CURRENT_NAMES:
             raise ConfigError(f'coefficients: {tok!r} is the water current; choose it with '
-                              '--current')
+                              'the current setting (--current)')
         name = vehicle.names[vehicle.index(tok)]
         if name in names:
             raise ConfigError(f'coefficients {text!r}: {name} is listed twice')
@@ -110,8 +114,10 @@ def candidate_coefficients(vehicle, mass_inverse):
     return cands, left
 
 
-def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=0.25):
-    """Filter-error residuals at theta and their sensitivities to every parameter.
+def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=0.25,
+                  threads=None):
+    """Filter-error residuals at theta and their sensitivities to every parameter (one filter
+    run per parameter, on `threads` threads: None = core.batch.difference_threads()).
 
     model : Model whose theta are the parameters; cfg : FilterConfig (noise, channels)
     theta : (p,) the values to linearise at (file units; current in m/s)
@@ -124,7 +130,7 @@ def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=
     theta = np.asarray(theta, dtype=float)
     steps = SENSITIVITY_STEP * parameter_scale(model, theta)
     try:
-        r0, J, failed = fer.forward_differences(theta, steps)
+        r0, J, failed = fer.forward_differences(theta, steps, threads=threads)
     except DomainError:
         raise DomainError('the filter-error residuals cannot be computed at the vehicle '
                           "file's values (the model leaves its domain on this record)") from None
@@ -351,6 +357,10 @@ class Selection:
     steps : per coefficient added by the stepwise pass: partial F, relative CRB 1-sigma and
         largest correlation when it entered
     candidates : how many coefficients the selection could choose from
+    consider_inflation : per identified parameter, its final 1-sigma over the statistical one
+        (identify_auto; empty when the set was only chosen)
+    reassessed : True when pass 2 ran (identify_auto); False for pass 1 alone
+        (:func:`choose_coefficients`, the live identifier's choice)
     """
 
     chosen: list
@@ -359,6 +369,7 @@ class Selection:
     steps: list = field(default_factory=list)
     candidates: int = 0
     consider_inflation: dict = field(default_factory=dict)
+    reassessed: bool = True
 
     def document(self):
         """JSON-ready dict (the result's `selection`)."""
@@ -370,8 +381,9 @@ class Selection:
                              'correlation_max': CORRELATION_MAX,
                              'prior_rel_std': PRIOR_REL_STD,
                              'method': 'stepwise regression on the filter-error residuals '
-                                       '(partial F with the long-run variance), then '
-                                       'identify, re-assess and identify again'}}
+                                       '(partial F with the long-run variance)'
+                                       + (', then identify, re-assess and identify again'
+                                          if self.reassessed else ' (no re-assessment)')}}
 
     def summary(self):
         """Lines for the command line: the chosen set, then the left-out ones by reason."""
@@ -395,17 +407,36 @@ class Selection:
         return lines
 
 
-def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
-                  max_step=None, max_bridge=0.25, progress=None):
-    """Choose the coefficients from the data and identify them (module docstring).
+@dataclass
+class Linearisation:
+    """What pass 1 linearised, for the consider analysis of the final error bars.
 
-    make_model : names -> Model identifying those coefficients (and the water current as the
-        caller wants it; the current components are always in the set)
-    cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
-    named : coefficients always identified (file spelling)
-    t, Y, U, T, max_step, max_bridge, refine_pass, progress : as identify_with_noise_model
-    Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
-    identification (estimate: the model's theta, coefficients then current)."""
+    G : (q, q) information J^T J of the whitened residuals at the prior, over every parameter
+        the pass saw (the named and candidate coefficients, the current components, then the
+        added mass only considered)
+    names : (q,) their names; prior : (q,) the values the sensitivities were taken at
+    left_candidates : indices of the coefficients whose errors bias the set when they are left
+        at their prior (the candidates and the considered added mass)
+    """
+
+    G: np.ndarray
+    names: list
+    prior: np.ndarray
+    left_candidates: list
+
+
+def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=None,
+                        max_bridge=0.25, threads=None):
+    """Pass 1 of the module docstring alone: which coefficients the record asks for.
+
+    The part of :func:`identify_auto` that chooses; the live identifier (session/auto_choice.py)
+    runs only this and lets its filter identify the set. Costs one filter run over the record
+    per candidate (and per added-mass term the model cannot change), then the stepwise pass.
+
+    make_model, cfg, named, t, Y, U, T, max_step, max_bridge : as identify_auto
+    threads : threads for the sensitivities (None: every usable CPU; the live node asks for 1)
+    Returns (Selection of the chosen set, every other coefficient left out with its reason,
+    Linearisation). Raises DomainError if the filter leaves the model's domain at the prior."""
     named = list(named)
     base = make_model([])
     vehicle = base.vehicle
@@ -416,7 +447,7 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
     all_model = make_model(named + pool)
     prior = all_model.theta_true
     white, J, failed = sensitivities(all_model, cfg, t, Y, U, prior, T=T, max_step=max_step,
-                                     max_bridge=max_bridge)
+                                     max_bridge=max_bridge, threads=threads)
     names = list(all_model.theta_names)
     forced = list(range(len(named))) + list(range(all_model.p_coef, all_model.p))
     for i in failed:
@@ -432,7 +463,8 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
         am_model = Model(vehicle, am + list(base.current_names), mass_inverse='exact',
                          current=base.current, velocity_reference=base.velocity_reference)
         _, J_am, am_failed = sensitivities(am_model, cfg, t, Y, U, am_model.theta_true, T=T,
-                                           max_step=max_step, max_bridge=max_bridge)
+                                           max_step=max_step, max_bridge=max_bridge,
+                                           threads=threads)
         keep_am = [i for i in range(len(am)) if i not in am_failed]
         consider_idx = list(range(all_model.p, all_model.p + len(keep_am)))
         J = np.hstack([J, J_am[:, keep_am]])
@@ -444,8 +476,35 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
                                                named=list(range(len(named))))
     left_out.update(reasons)
     chosen = [names[i] for i in members if i < all_model.p_coef]
-    G = J.T @ J
-    del J
+    lin = Linearisation(G=J.T @ J, names=names, prior=prior,
+                        left_candidates=list(range(len(named), all_model.p_coef))
+                        + consider_idx)
+    sel = Selection(chosen=chosen, named=named, left_out=_in_file_order(vehicle, left_out),
+                    steps=steps, candidates=len(cands), reassessed=False)
+    return sel, lin
+
+
+def _in_file_order(vehicle, reasons):
+    order = {n: i for i, n in enumerate(vehicle.names)}
+    return dict(sorted(reasons.items(), key=lambda kv: order[kv[0]]))
+
+
+def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
+                  max_step=None, max_bridge=0.25, progress=None):
+    """Choose the coefficients from the data and identify them (module docstring).
+
+    make_model : names -> Model identifying those coefficients (and the water current as the
+        caller wants it; the current components are always in the set)
+    cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
+    named : coefficients always identified (file spelling)
+    t, Y, U, T, max_step, max_bridge, refine_pass, progress : as identify_with_noise_model
+    Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
+    identification (estimate: the model's theta, coefficients then current)."""
+    named = list(named)
+    sel, lin = choose_coefficients(make_model, cfg, t, Y, U, named=named, T=T,
+                                   max_step=max_step, max_bridge=max_bridge)
+    vehicle = make_model([]).vehicle
+    chosen, left_out = sel.chosen, dict(sel.left_out)
 
     def run(coefs, initial):
         m = make_model(coefs)
@@ -464,17 +523,15 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
         model, ekf_est, ekf_cov, est, cov, fit = run(kept_coefs, start)
         chosen = kept_coefs
     # error bars that cover the coefficients left at the file's values (consider analysis)
+    names = lin.names
     idx = [names.index(n) for n in model.theta_names]
-    left = [i for i in list(range(len(named), all_model.p_coef)) + consider_idx
-            if names[i] not in chosen]
-    bias = consider_bias(G, idx, left, PRIOR_REL_STD * np.abs(prior))
+    left = [i for i in lin.left_candidates if names[i] not in chosen]
+    bias = consider_bias(lin.G, idx, left, PRIOR_REL_STD * np.abs(lin.prior))
     stat_sd = np.sqrt(np.diag(cov))
     cov = cov + bias
     inflation = np.sqrt(np.diag(cov)) / stat_sd
-    order = {n: i for i, n in enumerate(vehicle.names)}
-    left_out = dict(sorted(left_out.items(), key=lambda kv: order[kv[0]]))
-    sel = Selection(chosen=chosen, named=named, left_out=left_out,
-                    steps=[s for s in steps if s['name'] in chosen], candidates=len(cands),
-                    consider_inflation={n: float(inflation[i])
-                                        for i, n in enumerate(model.theta_names)})
+    sel = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
+                  steps=[s for s in sel.steps if s['name'] in chosen], reassessed=True,
+                  consider_inflation={n: float(inflation[i])
+                                      for i, n in enumerate(model.theta_names)})
     return model, ekf_est, ekf_cov, est, cov, fit, sel

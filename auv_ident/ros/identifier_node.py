@@ -19,7 +19,10 @@ Publications
         consistent; during a divergence nothing is published, so the latched value stays the
         last good estimate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
-        (vehicle file's units); velocity = 1-sigma; effort empty.
+        (vehicle file's units); velocity = 1-sigma; effort empty. The names and their number
+        are fixed for the run, except once with ``coefficients`` [auto, ...] (below): at the
+        switch to the chosen set, name, position, velocity and the covariance's layout get the
+        new set and length; a subscriber must read the names of every message.
     ``~/covariance`` std_msgs/Float64MultiArray, with each estimate: layout.dim[0] = label
         'row:' + comma-joined names, size p, stride p*p; dim[1] = 'col:' + names, size p,
         stride p; data = the p x p covariance, row-major.
@@ -53,7 +56,13 @@ Publications
     last_error, mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis,
     last_dof, last_stamp (of the last good estimate), then per coefficient <name> and
     <name>_std of the last good estimate (repr floats), R_<channel> (adapted measurement
-    variance of u ... psi) and Q_<name> (coefficient random-walk variance).
+    variance of u ... psi) and Q_<name> (coefficient random-walk variance). With
+    ``coefficients`` [auto, ...] also auto_state ('choosing', 'chosen' or 'failed'),
+    auto_window_s, auto_data_s (s of odometry kept, or the choice was made from),
+    auto_named, auto_chosen (comma-joined), auto_left_out_count, auto_choice_wall_s,
+    auto_error (why a choice failed) and auto_left_out_<name> (every left-out coefficient's
+    reason); the diagnosis's first line says 'choosing coefficients from the data (X of Y
+    s)' until the switch.
 
 Services (std_srvs/srv/Trigger)
     ``~/reset``: restart the filter from the start-up configuration (initial guesses or warm
@@ -75,7 +84,9 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/session/session.py) of the last good estimate.
+null, "steps": accepted updates}`` (auv_ident/session/session.py) of the last good estimate;
+with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
+JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
 Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady
 clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
@@ -83,9 +94,9 @@ previous complete file). ``warm_start`` starts a later run from it.
 Parameters (``config/identifier.yaml`` documents each with units and default; read once at
 start-up, declared read-only)
     ``vehicle`` ('nps_auv2'), ``coefficients`` (empty = the vehicle's identify_default, or the
-    warm-start file's list: the route for a set chosen from the data by ``identify --bag
-    --coefficients auto --estimate-out FILE``; 'auto' itself is a parameter error saying so),
-    ``initial`` (empty = file value * (1 + initial_offset)), ``initial_offset`` (0.5),
+    warm-start file's list; [auto] or [auto, NAME, ...] = chosen from the data, below),
+    ``auto_window`` (120.0 s), ``initial`` (empty = file value * (1 + initial_offset); with
+    [auto] for the running set), ``initial_offset`` (0.5),
     ``noise_mode`` ('fixed' | 'paper' | 'paper_q' | 'matching'), ``tau`` (10.0 s), ``lam``
     (the paper's lambda, 2e-3; ``lambda`` would shadow a Python keyword in code),
     ``noise_std`` (12, DEFAULT_NOISE_STD), ``q_state`` (12, DEFAULT_Q_STATE), ``p0_rel``
@@ -98,6 +109,17 @@ start-up, declared read-only)
     ('message'), ``save_path`` (''), ``warm_start`` (''). An empty list means the default
     (ROS turns ``[]`` into "not set"). Bad values (or types) print one line naming the
     parameter and exit with status 2 (ros/toolkit.py).
+
+Coefficients chosen from the data (``coefficients`` [auto] or [auto, NAME, ...], as offline
+``identify --bag --coefficients auto[,NAME,...]``; auv_ident/session/auto_choice.py): the node
+identifies and publishes the named coefficients (none named: identify_default) while it keeps
+the accepted odometry and commands of the first ``auto_window`` s; then core/selection.py's
+stepwise pass chooses the set from them in a worker thread (the callbacks go on identifying
+and keeping messages), a filter of the chosen set is fed the kept record, and the node switches
+to it at the next message or 1 Hz tick: logged (the set, every left-out coefficient by reason),
+then published at once. A choice that fails is logged once as an error and the running set
+stays. 'auto' with ``warm_start`` is a parameter error (the file fixes the set). Cost and
+figures: docs/ros.md.
 
 Executor and latency: rclpy's EventsExecutor (ros/toolkit.py spin); the estimate and
 covariance messages are built once and refilled per update. docs/latency.md has the measured
@@ -126,6 +148,7 @@ from auv_ident.core.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (declare_parameters, DIAGNOSTICS_QOS, LATCHED_QOS,
                                    optional_list, Param, run_node, spin, STREAM_QOS)
+from auv_ident.session.auto_choice import AUTO_WINDOW_S, run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S
 from auv_ident.session.session import Event, IdentSession
@@ -150,7 +173,11 @@ def _names(name, value):
 _PARAMETERS = (
     Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path'),
     Param('coefficients', Parameter.Type.STRING_ARRAY,
-          "coefficients to identify; empty = the vehicle file's identify_default", _names),
+          "coefficients to identify; empty = the vehicle file's identify_default; [auto] or "
+          '[auto, NAME, ...] = chosen from the first auto_window s of data, NAME always '
+          'included', _names),
+    Param('auto_window', AUTO_WINDOW_S, 'seconds of accepted odometry the coefficients [auto] '
+                                        'choice is made from [s]'),
     Param('initial', Parameter.Type.DOUBLE_ARRAY,
           "initial guesses, same order [vehicle file's units]; empty = truth * (1 + "
           'initial_offset)', _names),
@@ -209,7 +236,9 @@ class IdentifierNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         settings = declare_parameters(self, _PARAMETERS)
         self.save_path = settings.pop('save_path')
-        self.session = IdentSession(**settings)      # ParameterError names a bad parameter
+        # ParameterError names a bad parameter; an 'auto' choice runs in a worker thread, so
+        # that the callbacks go on taking (and keeping) messages while it runs
+        self.session = IdentSession(**settings, auto_runner=run_in_thread)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
@@ -217,16 +246,9 @@ class IdentifierNode(Node):
         self._odom_at_last_check = 0
         self._saved_steps = 0
         self._last_autosave = time.monotonic()
-        self.names = list(self.session.names)
-        p = len(self.names)
-        joined = ','.join(self.names)
-        # Built once and refilled per update: names and layout never change.
         self._estimate = JointState()
-        self._estimate.name = list(self.names)
         self._covariance = Float64MultiArray()
-        self._covariance.layout.dim = [
-            MultiArrayDimension(label='row:' + joined, size=p, stride=p * p),
-            MultiArrayDimension(label='col:' + joined, size=p, stride=p)]
+        self._lay_out()
         # Load (or compile) the EKF now, before subscribing: a publisher that waits for our
         # subscriptions then never finds us busy with numba.
         self.session.warm_up()
@@ -236,8 +258,6 @@ class IdentifierNode(Node):
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                      DIAGNOSTICS_QOS)
         # the water current, when estimated: ~/current (module docstring, docs/current.md)
-        self._current_index = [self.names.index(n) if n in self.names else -1
-                               for n in CURRENT_NAMES]
         self.pub_current = None
         if any(i >= 0 for i in self._current_index):
             self._current = TwistWithCovarianceStamped()
@@ -258,7 +278,47 @@ class IdentifierNode(Node):
         self.get_logger().info(
             f'identifying {", ".join(self.names)} of {self.session.vehicle.name} '
             f'(noise mode {settings["noise_mode"]}, frame {self.session.frame}, initial '
-            f'{np.array2string(self.session.theta0, precision=5)})')
+            f'{np.array2string(self.session.theta0, precision=5)})'
+            + ('' if self.session.auto is None else
+               f'; coefficients [auto]: the set is chosen from the first '
+               f'{self.session.auto.window_s:g} s of data, then identified instead'))
+
+    def _lay_out(self):
+        """Names and layout of the published estimate and covariance, from the session's
+        parameters. Built once and refilled per update: they change only when an 'auto' choice
+        switches the set (once)."""
+        self.names = self.session.names
+        p = len(self.names)
+        joined = ','.join(self.names)
+        self._estimate.name = list(self.names)
+        self._covariance.layout.dim = [
+            MultiArrayDimension(label='row:' + joined, size=p, stride=p * p),
+            MultiArrayDimension(label='col:' + joined, size=p, stride=p)]
+        self._current_index = [self.names.index(n) if n in self.names else -1
+                               for n in CURRENT_NAMES]
+
+    def _follow_choice(self, diagnostics=True):
+        """After a session call: log what the 'auto' choice has to say (it started, switched
+        or failed) and then publish the diagnostics at once (unless diagnostics is False: the
+        caller does); once it switched the set, lay the messages out anew and publish the
+        chosen set's last good estimate at once (its subscribers see the new length)."""
+        auto = self.session.auto
+        if not auto.news:
+            return
+        for level, text in auto.news:
+            self._emit(level, text)
+        auto.news.clear()
+        switched = self.session.names is not self.names
+        if switched:
+            self._lay_out()
+        if not self.context.ok():   # shutting down
+            return
+        good = self.session.last_good
+        if switched and good is not None:
+            self.publish_estimate(Event('update', '', good.stamp_ns, good.estimate, good.std,
+                                        good.cov, good=True))
+        if diagnostics:
+            self.publish_diagnostics()
 
     # -- messages --
 
@@ -309,6 +369,8 @@ class IdentifierNode(Node):
             ev = self.session.on_actuators(msg)
         except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
             return self._internal_error('actuators', err)
+        if self.session.auto is not None:
+            self._follow_choice()
         self._report(ev)
         return ev
 
@@ -318,6 +380,8 @@ class IdentifierNode(Node):
             ev = self.session.on_odom(msg)
         except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
             ev = self._internal_error('odom', err)
+        if self.session.auto is not None:
+            self._follow_choice()
         if ev.kind == 'update' and ev.good:
             self.publish_estimate(ev)
         self._report(ev)
@@ -364,8 +428,8 @@ class IdentifierNode(Node):
         """~/current: the estimated water current in the world frame of ``frame`` (NED north,
         east, down; ENU east, north, up), twist.linear, with its covariance in the linear block
         (row-major 6x6; the angular part is 0 with covariance 0: the current model is
-        irrotational, Fossen 2021 sec. 10.3). A component that is not estimated (down, by default) is 0 with variance 0:
-        it is given, not measured."""
+        irrotational, Fossen 2021 sec. 10.3). A component that is not estimated (down, by
+        default) is 0 with variance 0: it is given, not measured."""
         ned = np.zeros(3)
         C = np.zeros((3, 3))
         for a, i in enumerate(self._current_index):
@@ -425,6 +489,8 @@ class IdentifierNode(Node):
         for name, v, sd in zip(self.names, est, std):
             values += [(name, num(v)), (name + '_std', num(sd)),
                        (name + '_verdict', verdicts[name]['verdict'])]
+        if s.auto is not None:
+            values += s.auto.diagnostic_values()
         values += [('R_' + n, num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
         values += [('Q_' + n, num(v)) for n, v in zip(self.names, np.diag(f.Q)[12:])]
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
@@ -452,6 +518,10 @@ class IdentifierNode(Node):
         """1 Hz: /diagnostics, the actuator topic's publisher check, and the autosave of the
         estimate file."""
         self.actuator_publishers = self.check_actuator_publisher()
+        if self.session.auto is not None:
+            # a choice that finished while no message arrived switches now
+            self.session.poll_choice()
+            self._follow_choice(diagnostics=False)
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S

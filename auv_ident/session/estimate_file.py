@@ -12,6 +12,10 @@ updates arrive; always the session's last good estimate, IdentSession.document()
      "stamp": 123.45,                       # s, odometry stamp of the last update (null: none)
      "stamp_ns": 123450000000,              # the same stamp in integer ns (null: none)
      "steps": 2400}                         # accepted odometry updates since start-up
+
+With coefficients ['auto', ...] the identifier adds "selection" (session/auto_choice.py
+AutoChoice.document(): the state of the live choice and, once made, the offline JSON's
+selection block); warm_start reads only the keys above.
 """
 import json
 import os

@@ -41,9 +41,11 @@ from collections import deque
 from dataclasses import dataclass
 from functools import lru_cache
 import math
+import operator
 
 import numpy as np
 
+from auv_ident.core.errors import DivergenceError
 from auv_ident.core.filter import is_positive_definite
 from auv_ident.core.state import N_STATE
 
@@ -57,6 +59,9 @@ GUARD_PROBATION = 10.0      # after a reset: good only once the window median NI
 RESET_COV_INFLATION = 4.0   # coefficient covariance factor when a reset restarts from last good
 COV_BLOWUP_FACTOR = 100.0   # a coefficient 1-sigma above this x p0_rel |theta0|: divergence
 NIS_CAP = 1e300             # a non-finite NIS enters the guard window as this
+
+# codes of StreamIdentifier outcomes for which an update was computed (fused or gated)
+FUSED_CODES = frozenset(('', 'repaired', 'outlier'))
 
 # Health rule (judge_health)
 NIS_WINDOW = 200          # updates in the running NIS window (10 s at 20 Hz)
@@ -310,3 +315,39 @@ def judge_health(nis_window, guard_inconsistent, since_reset, started, estimate,
     if full and np.all(rel < CONVERGED_REL_STD):
         return Health('OK', 'converged', m, band, n)
     return Health('OK', 'converging', m, band, n)
+
+
+def checked_coefficients(f, t, names, std_limits):
+    """(estimate, covariance, std) of filter f's parameters after an accepted update at t (s);
+    raises DivergenceError if they are unusable: non-finite, not positive definite, or a
+    1-sigma above its limit (std_limits, a list of floats: COV_BLOWUP_FACTOR x the prior
+    scale), naming the parameters (names).
+
+    Per message, so on lists where numpy's per-call overhead would dominate; the decisions
+    are those of the numpy forms (core.filter.is_positive_definite and so on)."""
+    est, cov = f.theta, f.theta_cov
+    var = cov.diagonal()
+    isfinite = math.isfinite
+    if not (all(map(isfinite, est.tolist())) and all(map(isfinite, cov.ravel().tolist()))
+            and _has_cholesky(cov) and min(var.tolist()) > 0):
+        raise DivergenceError(f'non-finite or non-positive-definite coefficient '
+                              f'covariance after the update at {t:.9f} s')
+    std = np.sqrt(var)
+    if any(map(operator.gt, std.tolist(), std_limits)):
+        blown = np.flatnonzero(std > np.array(std_limits))
+        raise DivergenceError(
+            'coefficient covariance blew up: 1-sigma of ' + ', '.join(
+                f'{names[i]} = {math.sqrt(var[i]):.3g}'
+                for i in blown) + f' above {COV_BLOWUP_FACTOR:g}x its '
+            f'prior (p0_rel |initial guess|) at {t:.9f} s')
+    return est, cov, std
+
+
+def _has_cholesky(P):
+    """True if the finite matrix P has a Cholesky factor (numpy's, as
+    core.filter.is_positive_definite, whose finiteness check the caller did)."""
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return False
+    return True

@@ -56,6 +56,7 @@ Non-finite values pass through unchanged: the caller decides (see :func:`is_fini
 Bad input raises :class:`ConversionError` naming the field.
 """
 import math
+import operator
 
 import numpy as np
 
@@ -133,6 +134,23 @@ def stamp_to_sec(stamp):
     """Return a builtin_interfaces/Time as float seconds (correctly rounded)."""
     # int / int true division is correctly rounded; sec + nanosec * 1e-9 is not.
     return stamp_to_ns(stamp) / NS_PER_S
+
+
+def integer_stamp(stamp_ns):
+    """stamp_ns as an int (any integer type); ConversionError if it is not an integer."""
+    try:
+        return operator.index(stamp_ns)
+    except TypeError:
+        raise ConversionError(f'stamp_ns must be an integer number of ns, got '
+                              f'{stamp_ns!r}') from None
+
+
+def header_stamp_ns(msg):
+    """A message's header.stamp in integer ns, or None if it cannot be read."""
+    try:
+        return stamp_to_ns(msg.header.stamp)
+    except (AttributeError, TypeError, ValueError):
+        return None
 
 
 def sec_to_ns(t_sec):

@@ -22,11 +22,12 @@ the last good estimate and the health windows (session/guard.py). The identifier
 (``ros/identifier_node.py``) and :func:`auv_ident.bags.replay.replay_bag` both drive one
 IdentSession with the messages in arrival (log-time) order, so the same message sequence
 gives identical events and estimates online and offline. The estimate file (``~/save``,
-``warm_start``) is session/estimate_file.py.
+``warm_start``) is session/estimate_file.py. With ``coefficients`` ['auto', ...] the session
+also keeps the accepted messages of the first ``auto_window`` s and switches, once, to the set
+chosen from them (session/auto_choice.py; :meth:`IdentSession.poll_choice`).
 """
 from collections import Counter
 import math
-import operator
 
 import numpy as np
 
@@ -38,18 +39,21 @@ from auv_ident.core.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
 from auv_ident.core.stream import StreamIdentifier
 from auv_ident.core.vehicle import P_FIN, P_NMAX
+from auv_ident.session.auto_choice import AUTO_WINDOW_S, AutoChoice, ChoiceJob
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
-from auv_ident.session.guard import (COV_BLOWUP_FACTOR, Event, GUARD_FACTOR, GUARD_PROBATION,
-                                     GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
+from auv_ident.session.guard import (checked_coefficients, COV_BLOWUP_FACTOR, Event,
+                                     FUSED_CODES, GUARD_FACTOR, GUARD_PROBATION, GUARD_SECONDS,
+                                     GUARD_WINDOW, GuardWindow,
                                      GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
                                      LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
-from auv_ident.session.messages import (_as_vector, ConversionError, joint_state_to_actuators,
-                                        NS_PER_S, odometry_state, odometry_variances,
-                                        stamp_to_ns)
+from auv_ident.session.messages import (_as_vector, ConversionError, header_stamp_ns,
+                                        integer_stamp, joint_state_to_actuators, NS_PER_S,
+                                        odometry_state, odometry_variances)
 from auv_ident.session.screening import (command_problem, frame_problem,
                                          implausible_states, nonfinite_states)
-from auv_ident.session.settings import (choice, coefficient_list, FRAMES, MASS_INVERSES,
+from auv_ident.session.settings import (choice, coefficient_list, coefficient_request,
+                                        FRAMES, MASS_INVERSES,
                                         max_command_age as command_age_limit, noise_model,
                                         NOISE_MODES, NOISE_SOURCES, ParameterError, positive,
                                         relative_offset, timing, vehicle_named)
@@ -57,8 +61,6 @@ from auv_ident.session.settings import (choice, coefficient_list, FRAMES, MASS_I
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
 
-# codes of StreamIdentifier outcomes for which an update was computed (fused or gated)
-_FUSED_CODES = frozenset(('', 'repaired', 'outlier'))
 # stamps from this on (~11.6 days after 1970) are wall-clock times: the session then counts
 # time from the whole second of the first stamp (IdentSession docstring)
 TIME_ORIGIN_MIN_NS = 10 ** 15
@@ -75,7 +77,11 @@ class IdentSession:
     ----------
     vehicle : str, vehicle name or YAML path
     coefficients : sequence of str, coefficients to identify (empty: the vehicle's
-        identify_default, or the warm-start file's list)
+        identify_default, or the warm-start file's list), or ['auto', NAME, ...]: chosen from
+        the first auto_window s of data, NAME always included (session/auto_choice.py)
+    auto_window : s of accepted odometry the 'auto' choice is made from (> 0)
+    auto_runner : work -> concurrent.futures.Future that runs the choice (auto_choice.py:
+        run_inline, the default, or run_in_thread, the node's)
     initial : sequence of float, initial guesses (empty: truth * (1 + initial_offset))
     initial_offset : float, relative start offset when `initial` is empty
     noise_mode : one of settings.NOISE_MODES ('fixed', 'paper', 'paper_q', 'matching')
@@ -127,7 +133,8 @@ class IdentSession:
                  max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
                  max_bridge=None, max_command_age=None, noise_source='message',
                  current=DEFAULT_CURRENT, current_down=False, velocity_reference='ground',
-                 current_sd0=DEFAULT_CURRENT_SD0, current_walk=0.0):
+                 current_sd0=DEFAULT_CURRENT_SD0, current_walk=0.0,
+                 auto_window=AUTO_WINDOW_S, auto_runner=None):
         self.vehicle = vehicle_named(vehicle)
         self.frame = choice('frame', frame, FRAMES)
         choice('mass_inverse', mass_inverse, MASS_INVERSES)
@@ -144,6 +151,11 @@ class IdentSession:
         # a planar vehicle's held states are not measurements (core/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
+        auto, coefficients = coefficient_request(self.vehicle, coefficients)
+        auto_window = positive('auto_window', auto_window)
+        if auto and warm_start:
+            raise ParameterError('warm_start', "coefficients ['auto', ...] chooses the set from "
+                                 'the data; a warm-start file fixes it: give one or the other')
         warm = load_estimate_json(warm_start) if warm_start else None
         canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
                                                       warm_start, warm)
@@ -156,10 +168,9 @@ class IdentSession:
                                          VELOCITY_REFERENCES)
         current_sd0 = positive('current_sd0', current_sd0)
         current_walk = positive('current_walk', current_walk, allow_zero=True)
+        self._mass_inverse = mass_inverse
         try:
-            self.model = Model(self.vehicle, canon + self.current_option.names,
-                               mass_inverse=mass_inverse, current=self.current_option.fixed,
-                               velocity_reference=self.velocity_reference)
+            self.model = self._model_of(canon)
         except ConfigError as err:
             raise ParameterError('mass_inverse', str(err)) from None
 
@@ -217,6 +228,14 @@ class IdentSession:
         self._after_reset = False   # a fault reset, and the guard window not yet full since
         self._reset_from_good = False   # the last reset started from last_good, none good since
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
+        # coefficients ['auto', ...]: the live choice (None: the set is fixed)
+        self.auto = AutoChoice(coefficients, auto_window, auto_runner) if auto else None
+
+    def _model_of(self, coefficients):
+        """The Model identifying these coefficients with the session's current settings."""
+        return Model(self.vehicle, list(coefficients) + self.current_option.names,
+                     mass_inverse=self._mass_inverse, current=self.current_option.fixed,
+                     velocity_reference=self.velocity_reference)
 
     # -- filter lifecycle --
 
@@ -306,8 +325,57 @@ class IdentSession:
         """The estimate file's dict of the best estimate (the last good one, else the prior)."""
         est, cov = self.best()
         stamp = self.last_good.stamp_ns if self.last_good is not None else None
-        return estimate_document(self.vehicle.name, self.names, est, cov, stamp,
-                                 self.odom_accepted)
+        doc = estimate_document(self.vehicle.name, self.names, est, cov, stamp,
+                                self.odom_accepted)
+        if self.auto is not None:
+            doc['selection'] = self.auto.document()
+        return doc
+
+    # -- coefficients ['auto', ...] (session/auto_choice.py) --
+
+    def _start_choice(self):
+        """The window is full: hand the choice to the runner, with a snapshot of what it
+        needs (it may run in another thread; it reads nothing the session changes)."""
+        running = {}
+        if self.last_good is not None:
+            running = dict(zip(self.coefficient_names, self.last_good.estimate.tolist()))
+        auto = self.auto
+        auto.start(ChoiceJob(
+            make_model=self._model_of, cfg=self.cfg, named=auto.named, running=running,
+            entries=list(auto.kept), noise_variances=self.noise_default, T=self.T,
+            max_gap=self.max_gap, gate=self.gate, max_bridge=self.max_bridge,
+            max_command_age=self.max_command_age, guard_on=self.guard_on))
+        # not switched here even if the runner has finished (inline): the message being
+        # handled is the running filter's to the end; the next one (or poll_choice) switches
+
+    def poll_choice(self):
+        """Switch to the chosen set if the choice has finished (auto_choice.py, step 3), or
+        record its failure. Called before every message; the node also calls it from its
+        timer. Returns True if the state changed (chosen or failed)."""
+        auto = self.auto
+        if auto is None or not auto.running:
+            return False
+        try:
+            result = auto.finished()
+        except Exception as err:                 # noqa: BLE001 - the running set stays
+            auto.fail(err)
+            return True
+        if result is None:
+            return False
+        f = result.chosen_filter
+        self.model, self.cfg, self.stream = result.model, result.cfg, f.stream
+        self.names = list(self.model.theta_names)
+        self.coefficient_names = list(result.selection.chosen)
+        self.theta0 = self.stream.ekf.theta0.copy()
+        self.blowup_std = COV_BLOWUP_FACTOR * self.stream.ekf.prior_scale
+        self._blowup_std = self.blowup_std.tolist()
+        self._nis_window, self._guard_window = f.nis_window, f.guard_window
+        self.last_good, self.warm_cov = f.last_good, None
+        # the resets and probation were the running filter's; the chosen one had none
+        self._since_error, self._after_reset, self._reset_from_good = None, False, False
+        self.last_nis, self.last_dof = float(self.stream.ekf.nis), int(self.stream.ekf.dof)
+        auto.chose(result, None if f.last_good is None else f.last_good.stamp_ns)
+        return True
 
     # -- the array API --
 
@@ -319,7 +387,7 @@ class IdentSession:
             order; copied
         """
         try:
-            stamp_ns = _integer_stamp(stamp_ns)
+            stamp_ns = integer_stamp(stamp_ns)
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err))
         try:
@@ -341,7 +409,7 @@ class IdentSession:
             noise_source 'message' where finite and positive
         """
         try:
-            stamp_ns = _integer_stamp(stamp_ns)
+            stamp_ns = integer_stamp(stamp_ns)
         except ConversionError as err:
             return self._reject('odom', 'conversion', str(err))
         try:
@@ -359,7 +427,7 @@ class IdentSession:
 
     def on_actuators(self, msg):
         """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
-        stamp_ns = _stamp_ns(msg)
+        stamp_ns = header_stamp_ns(msg)
         try:
             _, u6 = joint_state_to_actuators(msg)
         except ConversionError as err:
@@ -368,7 +436,7 @@ class IdentSession:
 
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement (in the `frame` convention). Returns an Event."""
-        stamp_ns = _stamp_ns(msg)
+        stamp_ns = header_stamp_ns(msg)
         try:
             _, x12 = odometry_state(msg, self.frame)
         except ConversionError as err:
@@ -386,7 +454,10 @@ class IdentSession:
         else:
             self.cmd_rejected += 1
             if stamp_ns is not None and code != 'zero stamp':
-                self.stream.command_rejected(self._time(stamp_ns))
+                t = self._time(stamp_ns)
+                self.stream.command_rejected(t)
+                if self.auto is not None and self.auto.kept is not None:
+                    self.auto.keep_command_rejected(t)
         self.reasons[f'{what}: {code}'] += 1
         return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
@@ -425,14 +496,13 @@ class IdentSession:
         covariance."""
         if f is getattr(self, '_R_filter', None) and np.array_equal(r, self._R_now):
             return
-        if self.cfg.mode == 'fixed':
-            np.fill_diagonal(f.R, r)
-        np.fill_diagonal(f.R0, r)
-        f.noise_std = np.sqrt(r)
+        f.use_measurement_variances(r)
         self._R_filter, self._R_now = f, r
 
     def _command(self, stamp_ns, u6):
         """add_command after reading: stamp_ns int, u6 a (7,) float array of our own."""
+        if self.auto is not None and self.auto.running:
+            self.poll_choice()
         zero = self._zero_stamp('actuators', stamp_ns)
         if zero is not None:
             return zero
@@ -445,11 +515,15 @@ class IdentSession:
             return self._reject('actuators', out.code, out.reason, stamp_ns)
         if self.keep_arrays:
             self.commands.append((t, u6))
+        if self.auto is not None and self.auto.kept is not None:
+            self.auto.keep_command(t, u6)
         self.cmd_accepted += 1
         return Event('command', '', stamp_ns)
 
     def _odometry(self, stamp_ns, x12, frame_id, child_frame_id, variances=None):
         """add_odometry after reading: stamp_ns int, x12 a (12,) float array of our own."""
+        if self.auto is not None and self.auto.running:
+            self.poll_choice()
         zero = self._zero_stamp('odom', stamp_ns)
         if zero is not None:
             return zero
@@ -475,11 +549,11 @@ class IdentSession:
         try:
             out = stream.add_measurement(t, y)
             if out.accepted:
-                est, cov, std = self._checked_coefficients(f, t)
+                est, cov, std = checked_coefficients(f, t, self.names, self._blowup_std)
         except (DomainError, DivergenceError) as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         code = out.code
-        fused = code in _FUSED_CODES      # an update was computed
+        fused = code in FUSED_CODES      # an update was computed
         if code == 'repaired':
             self.repairs += 1
         elif code == 'time jump':
@@ -503,6 +577,10 @@ class IdentSession:
         if self.keep_arrays:
             self.measurements.append((t, y))
             self.variances.append(self.noise_default if r is None else r)
+        auto = self.auto
+        if (auto is not None and auto.kept is not None
+                and auto.keep_odometry(t, stamp_ns, y, r, code)):
+            self._start_choice()
         if sustained:
             return self._guard_reset(t, stamp_ns)
         if (self._after_reset and len(window) >= GUARD_WINDOW
@@ -530,29 +608,6 @@ class IdentSession:
                    'chi-square band')
         reason = 'odom: ' + (out.reason + '; ' if out.reason else '') + why + ': not taken as good'
         return Event('update', reason, stamp_ns, est, std, cov, nis, dof, 'guard', False)
-
-    def _checked_coefficients(self, f, t):
-        """(estimate, covariance, std) of the coefficients after an accepted update; raises
-        DivergenceError if they are unusable (non-finite, not positive definite, blown up).
-
-        Per message, so on lists where numpy's per-call overhead would dominate; the decisions
-        are those of the numpy forms (core.filter.is_positive_definite and so on)."""
-        est, cov = f.theta, f.theta_cov
-        var = cov.diagonal()
-        isfinite = math.isfinite
-        if not (all(map(isfinite, est.tolist())) and all(map(isfinite, cov.ravel().tolist()))
-                and _has_cholesky(cov) and min(var.tolist()) > 0):
-            raise DivergenceError(f'non-finite or non-positive-definite coefficient '
-                                  f'covariance after the update at {t:.9f} s')
-        std = np.sqrt(var)
-        if any(map(operator.gt, std.tolist(), self._blowup_std)):
-            blown = np.flatnonzero(std > self.blowup_std)
-            raise DivergenceError(
-                'coefficient covariance blew up: 1-sigma of ' + ', '.join(
-                    f'{self.names[i]} = {math.sqrt(var[i]):.3g}'
-                    for i in blown) + f' above {COV_BLOWUP_FACTOR:g}x its '
-                f'prior (p0_rel |initial guess|) at {t:.9f} s')
-        return est, cov, std
 
     def _guard_reset(self, t, stamp_ns):
         self.guard_resets += 1
@@ -597,30 +652,10 @@ class IdentSession:
         est, cov = self.best()
         prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
         verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
-        return verdicts, live_diagnosis(self.health() if health is None else health, verdicts)
+        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts)
+        if self.auto is not None:
+            # while choosing or after a failure the set is provisional: that comes first
+            line = self.auto.diagnosis_line(self.coefficient_names)
+            diagnosis['messages'].insert(0 if self.auto.state != 'chosen' else 1, line)
+        return verdicts, diagnosis
 
-
-def _has_cholesky(P):
-    """True if the finite matrix P has a Cholesky factor (numpy's, as
-    core.filter.is_positive_definite, whose finiteness check the caller did)."""
-    try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
-def _integer_stamp(stamp_ns):
-    """stamp_ns as an int (any integer type); ConversionError if it is not an integer."""
-    try:
-        return operator.index(stamp_ns)
-    except TypeError:
-        raise ConversionError(f'stamp_ns must be an integer number of ns, got '
-                              f'{stamp_ns!r}') from None
-
-
-def _stamp_ns(msg):
-    try:
-        return stamp_to_ns(msg.header.stamp)
-    except (AttributeError, TypeError, ValueError):
-        return None

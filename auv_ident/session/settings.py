@@ -14,6 +14,7 @@ import numpy as np
 
 from auv_ident.core.ekf import MODES
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.selection import AUTO, parse_request
 from auv_ident.core.state import CURRENT_NAMES, N_STATE, STATE_NAMES
 from auv_ident.session.messages import FRAMES
 from auv_ident.vehicles import load_vehicle
@@ -26,11 +27,11 @@ MAX_SAMPLE_TIME = 1.0   # s: one RK4 step of the model over a longer one is not 
 MAX_SUBSTEPS = 20000    # max_gap / sample_time: the longest bridge of one gap
 MAX_BRIDGE_S = 0.25     # s, default max_bridge: longest gap bridged by time updates
 
-__all__ = ['choice', 'coefficient_list', 'FRAMES', 'MASS_INVERSES', 'MAX_BRIDGE_S',
-           'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'max_command_age', 'measured_mask', 'noise_model', 'NOISE_MODES',
-           'NOISE_SOURCES',
-           'number', 'ParameterError', 'positive', 'relative_offset', 'sigmas', 'timing',
-           'vector', 'vehicle_named']
+__all__ = ['choice', 'coefficient_list', 'coefficient_request', 'FRAMES', 'MASS_INVERSES',
+           'MAX_BRIDGE_S', 'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'max_command_age',
+           'measured_mask', 'noise_model', 'NOISE_MODES', 'NOISE_SOURCES', 'number',
+           'ParameterError', 'positive', 'relative_offset', 'sigmas', 'timing', 'vector',
+           'vehicle_named']
 
 
 class ParameterError(ConfigError):
@@ -173,6 +174,21 @@ def vehicle_named(name):
         raise ParameterError('vehicle', str(err)) from None
 
 
+def coefficient_request(vehicle, coefficients):
+    """(auto, names) of the `coefficients` setting: ['auto'] or ['auto', NAME, ...] asks for
+    the set to be chosen from the data, NAME always included (session/auto_choice.py), with
+    the offline `--coefficients auto[,NAME,...]` semantics (core.selection.parse_request:
+    'auto' first, names as the vehicle file spells them, none twice, no current component);
+    any other list is returned as given (auto False) for :func:`coefficient_list`."""
+    names = [str(n) for n in (coefficients or ())]
+    if not any(n.strip().lower() == AUTO for n in names):
+        return False, names
+    try:
+        return parse_request(vehicle, ','.join(names))
+    except ConfigError as err:
+        raise ParameterError('coefficients', str(err)) from None
+
+
 def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
     """Return (names, initial guesses or None, warm-start covariance or None).
 
@@ -200,12 +216,6 @@ def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
             names = w_names
     if not names:
         names = list(vehicle.identify_default)
-    if str(names[0]).strip().lower() == 'auto':
-        raise ParameterError('coefficients', "'auto' chooses the coefficients from a whole "
-                             'record, offline: record a run, then `auv_ident identify --bag BAG '
-                             '--coefficients auto --estimate-out FILE`, and start the identifier '
-                             'with warm_start:=FILE (it identifies the chosen set from the '
-                             'offline values)')
     for n in names:
         if n in CURRENT_NAMES:
             raise ParameterError('coefficients', f'{n!r} is the water current: choose it with '

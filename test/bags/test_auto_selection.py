@@ -1,6 +1,7 @@
 """`--coefficients auto[,NAME,...]` end to end: identify --bag on an independent bag whose truth
 differs from the vehicle file, the JSON `selection` block, the estimate file for the live
-node, and the errors (an unknown name; 'auto' where only a fixed set is possible)."""
+node, and the errors (an unknown name; 'auto' where only a fixed set is possible). The live
+node's own [auto] is test/session/test_auto_choice.py."""
 import json
 from pathlib import Path
 import sys
@@ -9,7 +10,6 @@ import pytest
 
 from auv_ident.cli import main
 from auv_ident.session.session import IdentSession
-from auv_ident.session.settings import ParameterError
 from auv_ident.vehicles import load_vehicle
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -63,5 +63,3 @@ def test_auto_where_the_set_is_fixed_says_how_to_get_it(capsys):
     rc = main(['identify', '--vehicle', 'nps_auv2', '--simulate', 'ident', '--duration', '10',
                '--coefficients', 'auto'])
     assert rc == 2 and 'identify --bag' in capsys.readouterr().err
-    with pytest.raises(ParameterError, match='warm_start'):
-        IdentSession(vehicle='nps_auv2', coefficients=['auto'])

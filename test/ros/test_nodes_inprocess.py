@@ -140,6 +140,8 @@ def test_identifier_parameter_overrides(ctx, nodes):
     (IdentifierNode, 'vehicle', 'nope'),
     (IdentifierNode, 'noise_std', [0.01] * 11 + [-0.01]),
     (IdentifierNode, 'coefficients', ['Z_w', 'Z_nonsense']),
+    (IdentifierNode, 'coefficients', ['Z_w', 'auto']),
+    (IdentifierNode, 'auto_window', -1.0),
     (IdentifierNode, 'sample_time', 0.0),
     (IdentifierNode, 'measured', ['u', 'speed']),
     (IdentifierNode, 'frame', 'nwu'),
@@ -548,3 +550,66 @@ def test_identifier_publishes_the_water_current(ctx, nodes):
     still = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
     nodes.append(still)
     assert still.pub_current is None      # the only place the topic is created
+
+
+def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
+    """coefficients [auto, Z_ds] with auto_window 5 s: /diagnostics says 'choosing' while the
+    first 5 s are kept (the named set published meanwhile), then 'chosen' with the set and
+    every left-out coefficient's reason; ~/estimate and ~/covariance carry the chosen set
+    (a new length), the estimate file its selection block. The choice runs in the node's
+    worker thread."""
+    v = load_vehicle('nps_auv2')
+    c = v.values.copy()
+    for name, factor in (('Z_w', 1.3), ('N_r', 0.75), ('M_uq', 1.25)):  # a wrong prior
+        c[v.index(name)] *= factor
+    run_p = simulate(Model(v, coefficient_values=c), 'ident', duration=20.0, T=0.05, seed=3)
+    save = tmp_path / 'est.json'
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(
+        coefficients=['auto', 'Z_ds'], auto_window=5.0, save_path=str(save)))
+    probe = rclpy.create_node('probe', context=ctx)
+    nodes += [ident, probe]
+    diags, estimates, covariances = [], [], []
+    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
+    probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+    probe.create_subscription(Float64MultiArray, '/identifier/covariance', covariances.append,
+                              LATCHED)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ident)
+    ex.add_node(probe)
+    assert ident.names == ['Z_ds', 'current_n', 'current_e']
+    assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0)
+
+    def auto_values():
+        return {kv.key: kv.value for kv in diags[-1].status[0].values} if diags else {}
+
+    messages = _ordered_messages(run_p)
+    split = [i for i, m in enumerate(messages) if m[0] == ODOM_TOPIC][39] + 1     # 2 s
+    _feed(ident, messages[:split])
+    assert _spin_until(ex, lambda: auto_values().get('auto_state') == 'choosing'
+                       and estimates)
+    kv = auto_values()
+    assert kv['auto_window_s'] == '5.0' and kv['auto_chosen'] == ''
+    assert kv['auto_named'] == 'Z_ds'
+    kept_s = ident.session.auto.data_s
+    assert kept_s == pytest.approx(1.95)
+    assert kv['diagnosis'] == (f'choosing coefficients from the data ({kept_s:.1f} of 5 s); '
+                               'identifying Z_ds meanwhile')
+    assert list(estimates[-1].name) == ['Z_ds', 'current_n', 'current_e']
+    _feed(ident, messages[split:])
+    assert _spin_until(ex, lambda: auto_values().get('auto_state') == 'chosen', timeout=30.0)
+    kv = auto_values()
+    chosen = kv['auto_chosen'].split(',')
+    sel = ident.session.auto.selection
+    assert chosen == sel.chosen and chosen[0] == 'Z_ds' and len(chosen) > 1
+    assert int(kv['auto_left_out_count']) == len(sel.left_out) == len(v.names) - len(chosen)
+    assert all(kv['auto_left_out_' + n] == why for n, why in sel.left_out.items())
+    assert kv['diagnosis_1'].startswith('coefficients chosen from 5.0 s of data')
+    names = chosen + ['current_n', 'current_e']
+    assert ident.names == names
+    assert _spin_until(ex, lambda: list(estimates[-1].name) == names and len(
+        covariances[-1].data) == len(names) ** 2)
+    assert covariances[-1].layout.dim[0].label == 'row:' + ','.join(names)
+    ok, _ = ident.save()
+    doc = json.loads(save.read_text())
+    assert ok and doc['coefficients'] == names and doc['selection']['state'] == 'chosen'
+    assert doc['selection']['left_out'] == sel.left_out

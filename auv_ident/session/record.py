@@ -1,0 +1,61 @@
+"""A session's accepted messages as the arrays the batch methods take.
+
+The identifier keeps the commands and the measurements it accepted in arrival order (replay_bag
+with keep_arrays, the live automatic choice's window: session/auto_choice.py). The batch methods
+(core/batch.py, core/selection.py) want one record on the sample grid instead: :func:`paired`
+pairs every measurement with the command in force at its stamp (the streaming identifier's
+rule, core/stream.py), and :func:`exact_hold` inserts the command changes between samples as
+rows without a measurement, so that a batch filter follows the same zero-order hold as the
+streaming one (core.timing.with_command_changes).
+"""
+import bisect
+
+import numpy as np
+
+from auv_ident.core.state import N_INPUT, N_STATE
+from auv_ident.core.timing import with_command_changes
+
+
+def paired(commands, measurements):
+    """(t, Y, U, t_cmd, U_cmd) of accepted messages.
+
+    commands : [(t, u (7,)), ...] in arrival order; measurements : [(t, y (12,)), ...]
+    Returns t (N,), Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in force at t[k]
+    (latest stamp <= t[k]; NaN rows where there is none yet), and the commands by stamp,
+    t_cmd (M,), U_cmd (M, 7), where a later message with the same stamp wins."""
+    cmd = sorted(commands, key=lambda c: c[0])   # stable: a later same-stamp one last
+    by_stamp = {}
+    for tc, uc in cmd:
+        by_stamp[tc] = uc
+    cmd_t = [c[0] for c in cmd]
+    t = np.array([m[0] for m in measurements], dtype=float)
+    Y = (np.array([m[1] for m in measurements], dtype=float) if measurements
+         else np.zeros((0, N_STATE)))
+    U = np.full((len(t), N_INPUT), np.nan)
+    for k, tk in enumerate(t):
+        i = bisect.bisect_right(cmd_t, tk)
+        if i > 0:
+            U[k] = cmd[i - 1][1]
+    stamps = sorted(by_stamp)
+    U_cmd = (np.array([by_stamp[tc] for tc in stamps], dtype=float) if stamps
+             else np.zeros((0, N_INPUT)))
+    return t, Y, U, np.array(stamps, dtype=float), U_cmd
+
+
+def exact_hold(t, Y, U, t_cmd, U_cmd):
+    """(t, Y, U) for the batch methods: the samples with a command, and the command changes
+    between them as samples without a measurement (the exact zero-order hold the streaming
+    filter followed)."""
+    ok = np.all(np.isfinite(U), axis=1)
+    t2, Y2, U2, _ = with_command_changes(t[ok], Y[ok], U[ok], t_cmd, U_cmd)
+    return t2, Y2, U2
+
+
+def median_noise_std(variances, default_variances):
+    """(12,) the measurement 1-sigma the filter used over a record, per channel: the square
+    root of the median of the R diagonals of its accepted updates (the messages' covariances
+    with noise_source 'message'), or of default_variances (noise_std squared) if there were
+    none."""
+    if len(variances) == 0:
+        return np.sqrt(np.asarray(default_variances, dtype=float))
+    return np.sqrt(np.median(np.array(variances), axis=0))
