@@ -475,8 +475,9 @@ def build_parser():
     def ident_args(sp):
         sp.add_argument('--coefficients', default='',
                         help="comma-separated names (default: the paper's set for the vehicle); "
-                             "identify --bag also takes auto (choose from the data) or "
-                             "auto,NAME,... (choose, always including NAME; docs/method.md)")
+                             "identify --bag and report also take auto (choose from the "
+                             "data) or auto,NAME,... (choose, always including NAME; "
+                             "docs/method.md)")
         sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                         choices=('fixed', 'paper', 'paper_q', 'matching'),
                         help='Q/R adaptation (docs/method.md); default fixed')
