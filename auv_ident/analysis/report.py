@@ -431,7 +431,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
     """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
     against the measurements of a held-out run (and, when the truth is known, against the true
-    model on a held-out manoeuvre), write the report: report.md, report.html (self-contained), result.json and PNG figures.
+    model on a held-out manoeuvre), write the report: report.md, report.html (self-contained),
+    result.json and PNG figures.
 
     Parameters
     ----------
