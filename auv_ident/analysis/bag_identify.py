@@ -91,7 +91,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                               noise_std=noise, initial_offset=initial_offset)
 
     (rr,), noise, again = _replays([path], replay, cfg_of)
-    v = load_vehicle(rr.vehicle)
+    v = rr.model.vehicle      # the replay's (a YAML path stays that file)
     model = rr.model
     truth, _, meta = _bag_truth_and_noise(path, model)
     rec = _exact_hold(rr)
@@ -181,7 +181,7 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
                     noise_std=(_bag_truth_and_noise(path, None)[1] if noise_std is None
                                else np.asarray(noise_std, dtype=float)),
                     velocity_reference=vr, **given)
-    v = load_vehicle(rr.vehicle)
+    v = rr.model.vehicle      # the replay's (a YAML path stays that file)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth, _, meta = _bag_truth_and_noise(path, Model(v, names))
     noise = rr.noise_std
@@ -282,7 +282,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
 
     rrs, noise, again = _replays(paths, replay, cfg_of)
     model = rrs[0].model
-    v = load_vehicle(model.vehicle.name)
+    v = model.vehicle
     rejected = sum(rr.rejected for rr in rrs)
     cfg = cfg_of(model, noise)
     records = [_exact_hold(rr) for rr in rrs]
