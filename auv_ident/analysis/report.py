@@ -299,6 +299,7 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          f'- coefficients ({doc["units"]}): {", ".join(co)}',
          f'- water current: {doc["current_option"]}; velocities over '
          f'{doc["velocity_reference"]}',
+         f'- mass inverse: {doc["mass_inverse"]} (every model of this report)',
          f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
          '(filter-error maximum likelihood)',
          '- configured sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi '
@@ -428,7 +429,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
                 current_down=False, sim_current=None, velocity_reference=None,
-                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
+                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None,
+                mass_inverse='default'):
     """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
     against the measurements of a held-out run (and, when the truth is known, against the true
     model on a held-out manoeuvre), write the report: report.md, report.html (self-contained),
@@ -459,6 +461,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
         same identification data and validate on the same held-out run: result.json gets
         `methods` and report.md a section "Methods side by side" (None: not run)
+    mass_inverse : M^-1 of every model of the report, identified, prior and true ('default':
+        the vehicle file's; 'exact' lets the added-mass coefficients be identified and chosen
+        by auto; core.vehicle.Vehicle.with_mass_inverse)
 
     Returns
     -------
@@ -476,7 +481,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     full = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
                           seed=seed, duration=duration,
                           coefficients=','.join(tokens[1:]) if auto else coefficients,
-                          sim_current=sim_current, velocity_reference=velocity_reference)
+                          sim_current=sim_current, velocity_reference=velocity_reference,
+                          mass_inverse=mass_inverse)
     named = parse_request(full.vehicle, coefficients)[1] if auto else None
     # fail before the long identification if the validation would not be held out
     if _same_maneuver(validation_maneuver, full.maneuver):
@@ -485,7 +491,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     v = full.vehicle
     if validate_bag:
         run = bag_source(validate_bag, vehicle=v.path, coefficients=','.join(full.names),
-                         velocity_reference=velocity_reference or full.velocity_reference)
+                         velocity_reference=velocity_reference or full.velocity_reference,
+                         mass_inverse=v.mass_inverse)
         mv.refuse_identification_run(full, run)
         src, holdout = full, None
     else:
@@ -550,6 +557,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     extra = {'maneuver': src.maneuver, 'seed': src.seed,
              'duration_s': float(src.t[-1] - src.t[0]),
              'noise_mode': noise_mode, 'source': src.description,
+             'mass_inverse': v.mass_inverse,
              'current_option': opt.describe(), 'velocity_reference': src.velocity_reference,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': package_versions(), 'command': command,

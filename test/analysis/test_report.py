@@ -253,3 +253,19 @@ def test_report_auto_needs_a_recorded_run(tmp_path, capsys):
     rc = main(['report', '--simulate', 'ident', '--duration', '10', '--coefficients', 'auto',
                '--out', str(tmp_path)])
     assert rc == 2 and 'report --bag' in capsys.readouterr().err
+
+
+def test_report_mass_inverse_applies_to_every_model(tmp_path):
+    """report --mass-inverse exact: an added-mass coefficient is identified, and the models
+    flown in the validation form M^-1 the same way (result.json and report.md say it)."""
+    data = generate(DataConfig(seed=5, duration=40.0, odom_rate=20.0), tmp_path / 'gen')
+    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
+                    mass_inverse='exact', progress=False)
+    doc = r['result']
+    assert doc['mass_inverse'] == 'exact' and list(doc['coefficients']) == ['Z_w', 'Z_wdot']
+    assert doc['validation']['mean_fit_percent_nu']['identified'] > 30
+    assert '- mass inverse: exact (every model of this report)' in open(
+        r['report'], encoding='utf-8').read()
+    with pytest.raises(ConfigError, match='mass-inverse exact'):
+        make_report(str(tmp_path / 'literal'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
+                    progress=False)
