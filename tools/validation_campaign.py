@@ -36,9 +36,15 @@ like the others (analysis.validation.validate_on_run, B's initial state and comm
 water): with ``identified`` the vehicle file with the identified coefficients at their truth
 values (= the truth vehicle), with ``all`` the whole truth vehicle file (truth_vehicle.yaml).
 
+With --mass-inverse exact the report command gets --mass-inverse exact: the identified and
+the prior model form M^-1 = inv(M_RB + M_A) (NPS AUV II's file: MSS's literal inverse, the same
+to 2e-3), so that added-mass coefficients can be identified (and chosen by auto); the reports
+and campaign.json are then SET-exact and campaign-exact.json.
+
     PYTHONPATH=. .venv/bin/python tools/validation_campaign.py [--out DIR]
         [--sets paper,twenty,auto] [--seeds 1,2] [--prior-error identified|all]
-        [--duration 600] [--validation-duration 300] [--case a|b] [--reuse]
+        [--mass-inverse default|exact] [--duration 600] [--validation-duration 300]
+        [--case a|b] [--reuse]
 
 With --reuse, bags already generated are kept (reports are always made again).
 """
@@ -129,19 +135,27 @@ def _rel_errors(values, truth, names):
             if n in truth and truth[n] != 0.0}
 
 
+def label(set_name, args):
+    """The set's name in the tables and its reports' directory (SET, or SET-exact)."""
+    return set_name if args.mass_inverse == 'default' else f'{set_name}-{args.mass_inverse}'
+
+
 def run_case(set_name, seed, args):
     a_dir, b_dir = make_bags(set_name, seed, args)
-    out = case_dir(args) / set_name / f'seed{seed}'
+    out = case_dir(args) / label(set_name, args) / f'seed{seed}'
     coefficients = ','.join(SETS[set_name])
     cmd = [sys.executable, '-m', 'auv_ident', 'report', '--bag', str(a_dir / 'bag'),
            '--vehicle', 'nps_auv2', '--coefficients', coefficients,
            '--validate', str(b_dir / 'bag'), '--out', str(out / 'report')]
+    if args.mass_inverse != 'default':
+        cmd += ['--mass-inverse', args.mass_inverse]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)),
                        capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if p.returncode:
-        return {'set': set_name, 'seed': seed, 'failed': p.stderr.strip()[-500:], 'wall': wall}
+        return {'set': label(set_name, args), 'seed': seed, 'failed': p.stderr.strip()[-500:],
+                'wall': wall}
     doc = json.loads((out / 'report' / 'result.json').read_text())
     truth_doc = json.loads((a_dir / 'truth.json').read_text())
     truth, file_values = truth_doc['coefficients'], truth_doc['file_coefficients']
@@ -158,7 +172,8 @@ def run_case(set_name, seed, args):
         vals = [v for v in vals if v is not None]
         return float(np.mean(vals)) if len(vals) == len(ch_names) else None
 
-    return {'set': set_name, 'seed': seed, 'prior_error': args.prior_error, 'wall': wall,
+    return {'set': label(set_name, args), 'seed': seed, 'prior_error': args.prior_error,
+            'mass_inverse': doc['mass_inverse'], 'wall': wall,
             'identified': ident, 'n_identified': len(ident),
             'mean_fit': {'identified': val['mean_fit_percent_nu']['identified'],
                          'prior': val['mean_fit_percent_nu']['prior'],
@@ -197,6 +212,9 @@ def main(argv=None):
                     choices=PRIOR_ERRORS,
                     help='which coefficients of the truth vehicle differ from the file: the '
                          'identified ones (default) or all')
+    ap.add_argument('--mass-inverse', dest='mass_inverse', default='default',
+                    choices=('default', 'exact'),
+                    help="the report's --mass-inverse (default: the vehicle file's)")
     ap.add_argument('--duration', type=float, default=600.0, help='s, identification run A')
     ap.add_argument('--validation-duration', type=float, default=300.0, help='s, run B')
     ap.add_argument('--case', default='a', choices=sorted(CASES))
@@ -214,23 +232,23 @@ def main(argv=None):
         for s in sets:
             rows.append(run_case(s, int(seed), args))
             r = rows[-1]
-            print(f'done: {s} seed {seed}, wall {r["wall"]:.0f} s'
+            print(f'done: {label(s, args)} seed {seed}, wall {r["wall"]:.0f} s'
                   + (' FAILED' if 'failed' in r else ''), file=sys.stderr, flush=True)
     which = ('the identified coefficients x U(0.8, 1.2), the others as in the file'
              if args.prior_error == 'identified' else
              'every coefficient x U(0.8, 1.2) (added mass too, exact M^-1)')
     print(f'NPS AUV II truth vehicles: {which}; case {args.case} {CASES[args.case]}; A '
           f'{args.duration:.0f} s (identified), B {args.validation_duration:.0f} s (validated; '
-          'seed + 100, same truth vehicle)')
-    print(f'{"set":<7}{"seed":>5}{"n":>4}  {"mean fit u..r ident/prior/true":>31}  {"gain":>5}'
+          f'seed + 100, same truth vehicle); models\' M^-1: {args.mass_inverse}')
+    print(f'{"set":<11}{"seed":>5}{"n":>4}  {"mean fit u..r ident/prior/true":>31}  {"gain":>5}'
           f'  {"r fit ident/prior/true":>23}  {"x..psi ident/prior/true":>23}  '
           f'{"max|err| % ident/file":>21}  {"wall s":>6}')
     for r in rows:
         if 'failed' in r:
-            print(f'{r["set"]:<7}{r["seed"]:>5}  FAILED: {r["failed"]}')
+            print(f'{r["set"]:<11}{r["seed"]:>5}  FAILED: {r["failed"]}')
             continue
         m, e = r['mean_fit'], r['max_abs_error_pct']
-        print(f'{r["set"]:<7}{r["seed"]:>5}{r["n_identified"]:>4}  {_three(m):>31}  '
+        print(f'{r["set"]:<11}{r["seed"]:>5}{r["n_identified"]:>4}  {_three(m):>31}  '
               f'{_f(m["identified"] - m["prior"], "5.1f")}  {_three(r["r_fit"]):>23}  '
               f'{_three(r["pose_mean_fit"]):>23}  '
               f'{_f(e["identified"], "8.2f")} / {_f(e["prior"], "5.1f")}  {r["wall"]:6.0f}')
@@ -240,7 +258,8 @@ def main(argv=None):
         print('    K=100 RMSE x, y, psi (ident/prior): '
               + ', '.join(f'{ch} {r["k100"][ch][0]:.3g}/{r["k100"][ch][1]:.3g}'
                           for ch in ('x', 'y', 'psi')))
-    out = case_dir(args) / 'campaign.json'
+    out = case_dir(args) / ('campaign.json' if args.mass_inverse == 'default'
+                            else f'campaign-{args.mass_inverse}.json')
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=1))
     print(f'(details in {out}; reports in {case_dir(args)}/SET/seedN/report)')
