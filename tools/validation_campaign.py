@@ -36,6 +36,14 @@ like the others (analysis.validation.validate_on_run, B's initial state and comm
 water): with ``identified`` the vehicle file with the identified coefficients at their truth
 values (= the truth vehicle), with ``all`` the whole truth vehicle file (truth_vehicle.yaml).
 
+Where the limit lies: run B is also written with its noise-free truth states
+(truth_states.npz), and per model the free run's mean fit over u v w p q r against them is
+given ("noise-free"), with the fit of the noise-free states against the measurements (the
+"noise ceiling": what a perfect model scores on the measured data). The identified and prior
+free runs for this are flown again as the report flies them (the same function, the estimates
+and identified current of result.json); ``report_reproduced`` in campaign.json is the largest
+difference of their measured fits from the report's.
+
 With --mass-inverse exact the report command gets --mass-inverse exact: the identified and
 the prior model form M^-1 = inv(M_RB + M_A) (NPS AUV II's file: MSS's literal inverse, the same
 to 2e-3), so that added-mass coefficients can be identified (and chosen by auto); the reports
@@ -65,6 +73,7 @@ sys.path.insert(0, str(REPO))
 from independent_data import DataConfig, generate  # noqa: E402
 from auv_ident.analysis.bag_identify import bag_source  # noqa: E402
 from auv_ident.analysis.validation import validate_on_run  # noqa: E402
+from auv_ident.core.prediction import fit_percent  # noqa: E402
 from auv_ident.core.state import NU_NAMES, STATE_NAMES  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
@@ -111,22 +120,49 @@ def make_bags(set_name, seed, args):
         generate(DataConfig(vehicle='nps_auv2', duration=args.duration, seed=seed, perturb=0.2,
                             perturb_keep=keep, **CASES[args.case]), a_dir, overwrite=True)
     truth_vehicle = str(a_dir / 'truth_vehicle.yaml')
-    if not (args.reuse and (b_dir / 'truth.json').is_file()):
+    if not (args.reuse and (b_dir / 'truth.json').is_file()
+            and (b_dir / 'truth_states.npz').is_file()):
         generate(DataConfig(vehicle=truth_vehicle, duration=args.validation_duration,
-                            seed=seed + 100, **CASES[args.case]), b_dir, overwrite=True)
+                            seed=seed + 100, write_states=True, **CASES[args.case]), b_dir,
+                 overwrite=True)
     return a_dir, b_dir
 
 
 def true_model_validation(a_dir, b_dir, names, truth, prior_error, coefficients):
     """The true model flown through run B as validate_on_run flies the others (module
-    docstring); returns its RunValidation (scores under 'identified')."""
+    docstring); returns B's run (bag_source) and the model's RunValidation (scores under
+    'identified')."""
     run = bag_source(str(b_dir / 'bag'), vehicle='nps_auv2', coefficients=coefficients)
     if prior_error == 'all':        # the whole truth vehicle file, added mass and M^-1 too
         vehicle, names, values = load_vehicle(str(a_dir / 'truth_vehicle.yaml')), [], []
     else:                           # the file with the identified coefficients' truth values
         vehicle, values = load_vehicle('nps_auv2'), [truth[n] for n in names]
-    return validate_on_run(vehicle, list(names), np.asarray(values, dtype=float), None,
-                           run.t, run.Y, run.U, source='B')
+    return run, validate_on_run(vehicle, list(names), np.asarray(values, dtype=float), None,
+                                run.t, run.Y, run.U, source='B')
+
+
+def noise_free_fits(run, vals, states_path):
+    """Mean fit % over u v w p q r of each model's free run against run B's noise-free truth
+    states, and of those states against the measurements (the noise ceiling).
+
+    run : B's bag_source; vals : {model: (RunValidation, its key in .free)} flown on run.
+    Returns {model: fit, ..., 'noise_ceiling': fit}."""
+    z = np.load(states_path)
+    stamp, x_true = z['stamp_ns'], z['x_true']
+    val = next(iter(vals.values()))[0]
+    stamps = int(run.time_origin_ns) + np.round(val.t * 1e9).astype(np.int64)
+    idx = np.clip(np.searchsorted(stamp, stamps), 0, len(stamp) - 1)
+    ok = np.any(np.isfinite(val.Y), axis=1) & (np.abs(stamp[idx] - stamps) < 1000)
+    X = np.full_like(val.Y, np.nan)
+    X[ok] = x_true[idx[ok]]
+    nu = [STATE_NAMES.index(n) for n in NU_NAMES]
+
+    def mean_fit(ref, pred):
+        return float(np.mean([fit_percent(ref[ok, i], pred[ok, i]) for i in nu]))
+
+    out = {m: mean_fit(X, v.free[key]) for m, (v, key) in vals.items()}
+    out['noise_ceiling'] = mean_fit(val.Y, X)
+    return out
 
 
 def _rel_errors(values, truth, names):
@@ -163,8 +199,22 @@ def run_case(set_name, seed, args):
     errs = _rel_errors({n: c['estimate'] for n, c in doc['coefficients'].items()}, truth, ident)
     prior_errs = _rel_errors(file_values, truth, ident)
     val = doc['validation']
-    best = true_model_validation(a_dir, b_dir, ident, truth, args.prior_error,
-                                 ','.join(named(set_name)))
+    run, best = true_model_validation(a_dir, b_dir, ident, truth, args.prior_error,
+                                      ','.join(named(set_name)))
+    # the identified and the prior model flown again as the report flew them
+    cur = doc['current']
+    again = validate_on_run(
+        load_vehicle('nps_auv2').with_mass_inverse(doc['mass_inverse']), ident,
+        np.array([c['estimate'] for c in doc['coefficients'].values()]),
+        None if not cur else [cur['north'], cur['east'], cur['down']], run.t, run.Y, run.U,
+        source='B')
+    reproduced = max(abs(again.channels[ch]['fit_percent' + sfx] - d['fit_percent' + sfx])
+                     for ch, d in val['channels'].items() for sfx in ('', '_prior')
+                     if d['fit_percent' + sfx] is not None)
+    noise_free = noise_free_fits(run, {'identified': (again, 'identified'),
+                                       'prior': (again, 'prior'),
+                                       'true': (best, 'identified')},
+                                 b_dir / 'truth_states.npz')
 
     def mean(ch_names, suffix):
         vals = [val['channels'][c]['fit_percent' + suffix] for c in ch_names
@@ -191,6 +241,7 @@ def run_case(set_name, seed, args):
             'errors_pct': errs, 'prior_errors_pct': prior_errs,
             'k100': {ch: (d['rmse'], d['rmse_prior'])
                      for ch, d in val['prediction']['K100']['channels'].items()},
+            'noise_free_mean_fit': noise_free, 'report_reproduced': reproduced,
             'consistent': doc['diagnosis']['consistent'],
             'command': ' '.join(cmd[1:])}
 
@@ -255,6 +306,9 @@ def main(argv=None):
         print('    fit % per channel (ident/prior/true): '
               + ', '.join(f'{ch} {_three(d, ".1f")}' for ch, d in r['fit'].items()
                           if ch in NU_NAMES))
+        nf = r['noise_free_mean_fit']
+        print(f'    noise-free mean fit u..r (ident/prior/true): {_three(nf, ".1f")}; noise '
+              f'ceiling {nf["noise_ceiling"]:.1f}')
         print('    K=100 RMSE x, y, psi (ident/prior): '
               + ', '.join(f'{ch} {r["k100"][ch][0]:.3g}/{r["k100"][ch][1]:.3g}'
                           for ch in ('x', 'y', 'psi')))
