@@ -122,15 +122,16 @@ def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=10
 def _log_axis(ax, values=None):
     """Log y axis labelled 0.01, 0.02, 0.05, ... (not 2x10^-2), limits around `values`."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-    ax.set_yscale('log')
-    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f'{y:g}'))
-    ax.yaxis.set_minor_formatter(NullFormatter())
     if values is not None:
+        # limits first: flat, equal lines (fixed noise) would give the log scale a zero range
         v = np.asarray(values, dtype=float)
         v = v[np.isfinite(v) & (v > 0)]
         if v.size:
             ax.set_ylim(v.min() / 2.5, v.max() * 2.5)
+    ax.set_yscale('log')
+    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f'{y:g}'))
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def _coef_unit(vehicle):
