@@ -477,9 +477,8 @@ def build_parser():
     def ident_args(sp):
         sp.add_argument('--coefficients', default='',
                         help="comma-separated names (default: the paper's set for the vehicle); "
-                             "identify --bag and report also take auto (choose from the "
-                             "data) or auto,NAME,... (choose, always including NAME; "
-                             "docs/method.md)")
+                             "with --bag also auto or auto,NAME,... (chosen from the data, "
+                             "NAME always included; docs/method.md)")
         sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                         choices=('fixed', 'paper', 'paper_q', 'matching'),
                         help='Q/R adaptation (docs/method.md); default fixed')
@@ -588,7 +587,7 @@ def build_parser():
     sp.add_argument('--bag')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0)
-    sp.add_argument('--coefficients', default='')
+    sp.add_argument('--coefficients', default='', help='names, or with --bag auto[,NAME,...]')
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
