@@ -108,7 +108,8 @@ def cmd_identify(args):
                                    # ('estimate') means still water with several bags
                                    current=('none' if args.current == 'estimate'
                                             else args.current),
-                                   current_down=args.current_down)
+                                   current_down=args.current_down,
+                                   mass_inverse=args.mass_inverse)
         print(table)
     elif args.noise_std or args.q_state:
         raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
@@ -122,7 +123,8 @@ def cmd_identify(args):
                                   noise_source=args.noise_source,
                                   max_command_age=args.max_command_age, current=args.current,
                                   current_down=args.current_down,
-                                  velocity_reference=args.velocity_reference)
+                                  velocity_reference=args.velocity_reference,
+                                  mass_inverse=args.mass_inverse)
         print(table)
         if args.estimate_out:
             from auv_ident.session.estimate_file import estimate_document, write_estimate_json
@@ -283,7 +285,7 @@ def cmd_report(args):
                       sim_current=_sim_current(args.sim_current),
                       velocity_reference=args.velocity_reference,
                       validate_bag=args.validate, holdout=args.holdout,
-                      methods=_report_methods(args.methods))
+                      methods=_report_methods(args.methods), mass_inverse=args.mass_inverse)
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{args.noise_mode}")
@@ -475,8 +477,8 @@ def build_parser():
     def ident_args(sp):
         sp.add_argument('--coefficients', default='',
                         help="comma-separated names (default: the paper's set for the vehicle); "
-                             "identify --bag also takes auto (choose from the data) or "
-                             "auto,NAME,... (choose, always including NAME; docs/method.md)")
+                             "with --bag also auto or auto,NAME,... (chosen from the data, "
+                             "NAME always included; docs/method.md)")
         sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                         choices=('fixed', 'paper', 'paper_q', 'matching'),
                         help='Q/R adaptation (docs/method.md); default fixed')
@@ -585,7 +587,7 @@ def build_parser():
     sp.add_argument('--bag')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0)
-    sp.add_argument('--coefficients', default='')
+    sp.add_argument('--coefficients', default='', help='names, or with --bag auto[,NAME,...]')
     sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
                     choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')

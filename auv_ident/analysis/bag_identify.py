@@ -55,7 +55,8 @@ def _exact_hold(rr):
 
 def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
                  refine_pass=True, progress=None, noise_source='message', max_command_age=None,
-                 current=DEFAULT_CURRENT, current_down=False, velocity_reference=None):
+                 current=DEFAULT_CURRENT, current_down=False, velocity_reference=None,
+                 mass_inverse='default'):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag, made again
     with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
     model, the batch refinement on the paired arrays at their stamps, identifiability and the
@@ -67,7 +68,9 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     current, current_down : the water current (IdentSession's settings of the same names:
     'estimate' by default, 'none', or a known 'N,E[,D]' in m/s)
     velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
-    'ground')"""
+    'ground')
+    mass_inverse : 'default' (the vehicle file's), 'exact' or 'mss_literal' (core.model.Model;
+    with 'exact' the added-mass coefficients can be identified, and `auto` may choose them)"""
     t0 = time.perf_counter()
     meta = bag_custom_data(path)
     auto, names = parse_request(load_vehicle(vehicle or meta.get('auv_ident.vehicle')
@@ -82,14 +85,15 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
                           noise_std=meta_noise if noise is None else noise,
                           noise_source=source or noise_source, q_state=q,
                           max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=velocity_reference)
+                          current_down=current_down, velocity_reference=velocity_reference,
+                          mass_inverse=mass_inverse)
 
     def cfg_of(model, noise):
         return ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
                               noise_std=noise, initial_offset=initial_offset)
 
     (rr,), noise, again = _replays([path], replay, cfg_of)
-    v = load_vehicle(rr.vehicle)
+    v = rr.model.vehicle      # the replay's (a YAML path stays that file)
     model = rr.model
     truth = _meta_truth(meta, model)
     rec = _exact_hold(rr)
@@ -143,6 +147,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
              f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
                                   'noise_mode': noise_mode, 'noise_source': noise_source,
+                                  'mass_inverse': model.mass_inverse,
                                   'noise_std': [float(x) for x in noise],
                                   'time_origin_ns': rr.time_origin_ns,
                                   'noise_model': fit.document(),
@@ -161,14 +166,16 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
 
 
 def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noise_std=None,
-               q_state=None):
+               q_state=None, mass_inverse='default'):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
     pairs them estimates the current (so that its innovation gate judges samples with it); the
     caller's model says what to do with the current. noise_std, q_state : (12,) the
     measurement and per-step state process noise 1-sigma the replay's gate judges samples with
     (None: the messages' and the default; a real run needs the noise its identification used,
-    docs/kvlcc2.md, or the gate rejects its samples)."""
+    docs/kvlcc2.md, or the gate rejects its samples). mass_inverse : the replay model's M^-1
+    ('default': the vehicle file's; core.model.Model), which the Source's vehicle then says
+    (Vehicle.with_mass_inverse), so that every Model made of it forms M^-1 so."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
     meta = bag_custom_data(path)
     vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
@@ -178,8 +185,9 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
     rr = replay_bag(path, vehicle=vehicle, coefficients=names,
                     noise_std=(_meta_noise(meta) if noise_std is None
                                else np.asarray(noise_std, dtype=float)),
-                    velocity_reference=vr, **given)
-    v = load_vehicle(rr.vehicle)
+                    velocity_reference=vr, mass_inverse=mass_inverse, **given)
+    # the replay's vehicle (a YAML path stays that file), forming M^-1 as the replay did
+    v = rr.model.vehicle.with_mass_inverse(rr.model.mass_inverse)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth = _meta_truth(meta, Model(v, names))
     noise = rr.noise_std
@@ -231,7 +239,7 @@ def _replays(paths, replay, cfg_of):
 def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
                   progress=None, noise_source='message', max_command_age=None,
                   velocity_reference=None, noise_std=None, q_state=None, current='none',
-                  current_down=False):
+                  current_down=False, mass_inverse='default'):
     """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle,
     by identify_bag's steps over all of them: each bag replayed as the identifier would have
     read it (its accepted measurements, its commands held, the noise of its messages; made
@@ -246,6 +254,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
         default; the noise model from the data still applies
     current, current_down : 'none' (still water, default) or a known current 'N,E[,D]' in m/s
         that all runs flew in; one current per run is not estimated
+    mass_inverse : as identify_bag
     Returns (JSON document, printable table)."""
     t0 = time.perf_counter()
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
@@ -269,7 +278,8 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
                                                   else 'parameter'),
                           q_state=q_state if q is None else q,
                           max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=vref)
+                          current_down=current_down, velocity_reference=vref,
+                          mass_inverse=mass_inverse)
 
     def cfg_of(model, noise):
         cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
@@ -280,7 +290,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
 
     rrs, noise, again = _replays(paths, replay, cfg_of)
     model = rrs[0].model
-    v = load_vehicle(model.vehicle.name)
+    v = model.vehicle
     rejected = sum(rr.rejected for rr in rrs)
     cfg = cfg_of(model, noise)
     records = [_exact_hold(rr) for rr in rrs]
@@ -300,6 +310,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
         diagnosis['messages'].append(_replayed_note(again, rejected))
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
                                   'noise_mode': 'fixed', 'noise_source': noise_source,
+                                  'mass_inverse': model.mass_inverse,
                                   'noise_std': [float(x) for x in noise],
                                   'q_state': [float(x) for x in cfg.q_state],
                                   'replayed_with_noise_model': again,

@@ -65,16 +65,18 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
 
 def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None,
-                sim_current=None, velocity_reference=None):
+                sim_current=None, velocity_reference=None, mass_inverse='default'):
     """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
     NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
-    or what a bag of our simulator says)."""
+    or what a bag of our simulator says). mass_inverse: M^-1 of the model that simulates or
+    pairs the run ('default': the vehicle file's; core.model.Model); the Source's vehicle
+    then says it (its `mass_inverse`), so that every Model made of it uses it."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
     if bag:
         return bag_source(bag, vehicle=vehicle, coefficients=coefficients,
-                          velocity_reference=velocity_reference)
-    v = load_vehicle(vehicle or 'nps_auv2')
+                          velocity_reference=velocity_reference, mass_inverse=mass_inverse)
+    v = load_vehicle(vehicle or 'nps_auv2').with_mass_inverse(mass_inverse)
     names = coefficient_list(v, coefficients)
     vr = velocity_reference or 'ground'
     run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,

@@ -1,10 +1,11 @@
 """One identification as every command reports it: the noise model from the data, the EKF pass,
 the batch refinement with error bars the residuals support, identifiability and the diagnosis.
 
-`identify --simulate`, `report` and `montecarlo` go through :func:`identify_with_diagnosis`;
-`identify --bag` (one bag or several) goes through :func:`identify_records` around the bag
-replay (analysis/bag_identify.py), whose EKF pass is the live node's, and `--coefficients
-auto` through :func:`diagnosed` after its own identification. So every result carries
+`identify --simulate`, `report` and `montecarlo` go through :func:`identify_with_diagnosis`
+(`report --coefficients auto` through :func:`identify_auto_with_diagnosis`); `identify --bag`
+(one bag or several) goes through :func:`identify_records` around the bag replay
+(analysis/bag_identify.py), whose EKF pass is the live node's, and `--coefficients auto`
+through :func:`diagnosed` after its own identification. So every result carries
 `noise_model`, `identifiability` and a `diagnosis` whose first message says whether the error
 bars can be trusted.
 """
@@ -16,6 +17,7 @@ from auv_ident.core.batch import Result
 from auv_ident.core.current import split_current
 from auv_ident.core.diagnosis import assess
 from auv_ident.core.noise_fit import identify_runs_with_noise_model
+from auv_ident.core.selection import identify_auto
 from auv_ident.core.state import State
 from auv_ident.core.timing import nominal_sample_time
 
@@ -64,18 +66,45 @@ def identify_with_diagnosis(model, cfg, t, Y, U, T=None, refine_pass=True, hist_
     node would see)."""
     t0 = time.perf_counter()
     T = nominal_sample_time(t) if T is None else T
-    est_c, cov_c, ekf_c, ekf_cov_c, current, verdicts, diagnosis, fit = identify_records(
-        model, cfg, [(t, Y, U)], T, refine_pass=refine_pass, progress=progress,
-        hist_every=hist_every, configured_nis=True)
+    out = identify_records(model, cfg, [(t, Y, U)], T, refine_pass=refine_pass,
+                           progress=progress, hist_every=hist_every, configured_nis=True)
+    return _result(model, out, refine_pass, truth, t0)
+
+
+def identify_auto_with_diagnosis(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
+                                 hist_every=0, truth_of=None, progress=None):
+    """:func:`identify_with_diagnosis` with the coefficients chosen from the data
+    (`--coefficients auto[,NAME,...]`, core.selection.identify_auto): the same Result, of the
+    chosen set, judged the same way (its mean_nis_per_dof that of the chosen set's pass with
+    the configured noise).
+
+    make_model : names -> Model identifying them (and the water current as wanted)
+    named : coefficients always identified
+    truth_of : names -> their true values (None: truth unknown)
+    Returns (Result, Model of the chosen set, core.selection.Selection)."""
+    t0 = time.perf_counter()
+    T = nominal_sample_time(t) if T is None else T
+    model, ekf_est, ekf_cov, est, cov, fit, selection = identify_auto(
+        make_model, cfg, t, Y, U, named=named, T=T, refine_pass=refine_pass,
+        progress=progress, hist_every=hist_every)
     nis = fit.configured_pass['mean_nis_per_dof']
+    out = diagnosed(model, [(t, Y, U)], T, fit, ekf_est, ekf_cov, est, cov, nis,
+                    refine_pass) + (fit,)
+    truth = None if truth_of is None else truth_of(selection.chosen)
+    return _result(model, out, refine_pass, truth, t0), model, selection
+
+
+def _result(model, identified, refine_pass, truth, t0):
+    """The Result of identify_records' output `identified` (module docstring)."""
+    est_c, cov_c, ekf_c, ekf_cov_c, current, verdicts, diagnosis, fit = identified
     run = fit.ekf_run
-    res = Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
-                 std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
-                 ekf_std=np.sqrt(np.diag(ekf_cov_c)),
-                 initial=run['theta0'][:model.p_coef].copy(),
-                 truth=None if truth is None else np.asarray(truth, float),
-                 steps=run['steps'], wall_s=time.perf_counter() - t0, mean_nis_per_dof=nis,
-                 refined=refine_pass, history=run['hist'], R_final=run['R'], Q_final=run['Q'],
-                 current=current, noise_model=fit.document(), identifiability=verdicts,
-                 diagnosis=diagnosis)
-    return res
+    return Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
+                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
+                  ekf_std=np.sqrt(np.diag(ekf_cov_c)),
+                  initial=run['theta0'][:model.p_coef].copy(),
+                  truth=None if truth is None else np.asarray(truth, float),
+                  steps=run['steps'], wall_s=time.perf_counter() - t0,
+                  mean_nis_per_dof=fit.configured_pass['mean_nis_per_dof'],
+                  refined=refine_pass, history=run['hist'], R_final=run['R'],
+                  Q_final=run['Q'], current=current, noise_model=fit.document(),
+                  identifiability=verdicts, diagnosis=diagnosis)

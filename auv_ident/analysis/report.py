@@ -6,13 +6,15 @@ held out from identification (Figs. 4-5), plus the filter's consistency (NIS) an
 noise covariances. ROS-free; matplotlib is imported inside the plotting code (Agg backend), so
 importing this module never touches a display.
 """
+from dataclasses import replace
 import os
 
 import numpy as np
 
 from auv_ident.analysis import experiments as ex
 from auv_ident.analysis import results
-from auv_ident.analysis.identification import identify_with_diagnosis
+from auv_ident.analysis.identification import (identify_auto_with_diagnosis,
+                                               identify_with_diagnosis)
 from auv_ident.analysis.report_format import (cell as _num, markdown_table as _table,
                                               package_versions, pyplot as _plt,
                                               save_figure as _save)
@@ -23,6 +25,7 @@ from auv_ident.analysis.report_html import write_html
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model import Model
+from auv_ident.core.selection import AUTO, parse_request
 from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.trim import initial_state
 from auv_ident.core.angles import wrap_angle
@@ -119,15 +122,16 @@ def validate(vehicle, names, estimate, maneuver='steps', duration=200.0, seed=10
 def _log_axis(ax, values=None):
     """Log y axis labelled 0.01, 0.02, 0.05, ... (not 2x10^-2), limits around `values`."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-    ax.set_yscale('log')
-    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f'{y:g}'))
-    ax.yaxis.set_minor_formatter(NullFormatter())
     if values is not None:
+        # limits first: flat, equal lines (fixed noise) would give the log scale a zero range
         v = np.asarray(values, dtype=float)
         v = v[np.isfinite(v) & (v > 0)]
         if v.size:
             ax.set_ylim(v.min() / 2.5, v.max() * 2.5)
+    ax.set_yscale('log')
+    ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f'{y:g}'))
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def _coef_unit(vehicle):
@@ -296,6 +300,7 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          f'- coefficients ({doc["units"]}): {", ".join(co)}',
          f'- water current: {doc["current_option"]}; velocities over '
          f'{doc["velocity_reference"]}',
+         f'- mass inverse: {doc["mass_inverse"]} (every model of this report)',
          f'- noise adaptation: {doc["noise_mode"]}; EKF pass + batch refinement '
          '(filter-error maximum likelihood)',
          '- configured sensor noise 1-sigma (u v w m/s, p q r rad/s, x y z m, phi theta psi '
@@ -321,6 +326,7 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
                     [[n, _num(c['initial']), _num(c['ekf_estimate']), _num(c['ekf_std']),
                       _num(c['ekf_error_pct']), _num(c['estimate']), _num(c['error_pct'])]
                      for n, c in co.items()]))
+    L += _selection_markdown(doc)
     L += _current_markdown(doc)
     L += noise_model_markdown(doc)
     L += identifiability_markdown(doc)
@@ -367,6 +373,28 @@ def _true_model_markdown(doc, src, val_error):
     return L
 
 
+def _selection_markdown(doc):
+    """The report's section on the automatic choice of coefficients (lines), empty when the
+    coefficients were named (`--coefficients auto[,NAME,...]`, core/selection.py)."""
+    sel = doc.get('selection')
+    if not sel:
+        return []
+    L = ['', '## Automatic selection', '',
+         f'{len(sel["chosen"])} of {sel["candidates"]} candidate coefficients chosen from the '
+         'identification data (' + sel['criteria']['method'] + '): '
+         + ', '.join(sel['chosen'])
+         + (f'; always included (named): {", ".join(sel["named"])}' if sel['named'] else '')
+         + '. The others keep the vehicle file\'s values; the error bars include their '
+         f'errors ({100 * sel["criteria"]["prior_rel_std"]:g} % 1-sigma each, consider '
+         'analysis).', '']
+    groups = {}     # by the reason's kind, as Selection.summary (figures in result.json)
+    for name, why in sel['left_out'].items():
+        groups.setdefault(why.split(':')[0].split(' (')[0], []).append(name)
+    L.append(_table(['left out (file values kept)', 'reason (per coefficient in result.json '
+                     '`selection`)'], [[', '.join(names), why] for why, names in groups.items()]))
+    return L
+
+
 def _current_markdown(doc):
     """The report's water-current section (lines), empty when no current was identified or
     given."""
@@ -402,7 +430,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                 coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
                 validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
                 current_down=False, sim_current=None, velocity_reference=None,
-                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None):
+                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None,
+                mass_inverse='default'):
     """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
     against the measurements of a held-out run (and, when the truth is known, against the true
     model on a held-out manoeuvre), write the report: report.md, report.html (self-contained),
@@ -411,7 +440,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     Parameters
     ----------
     out_dir : str, created if missing
-    vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source
+    vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source;
+        with a bag, coefficients may also be 'auto[,NAME,...]': the set is chosen from the
+        identification data (core/selection.py) and validated, result.json gets `selection`
     noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
     command : the command line that produced the report (quoted in report.md)
     validation_maneuver, validation_duration : held-out manoeuvre and its length (s) of the
@@ -431,6 +462,9 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
         same identification data and validate on the same held-out run: result.json gets
         `methods` and report.md a section "Methods side by side" (None: not run)
+    mass_inverse : M^-1 of every model of the report, identified, prior and true ('default':
+        the vehicle file's; 'exact' lets the added-mass coefficients be identified and chosen
+        by auto; core.vehicle.Vehicle.with_mass_inverse)
 
     Returns
     -------
@@ -441,9 +475,16 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     from auv_ident.analysis.bag_identify import bag_source
     mv.refuse_same_bag(bag, validate_bag)        # before anything is loaded or written
     opt = parse_current(current, current_down)
+    # 'auto[,NAME,...]' (a bag): the source is paired for the named (or the default) set, the
+    # set to identify is chosen from the identification data below
+    tokens = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    auto = bool(bag) and bool(tokens) and tokens[0].lower() == AUTO
     full = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                          seed=seed, duration=duration, coefficients=coefficients,
-                          sim_current=sim_current, velocity_reference=velocity_reference)
+                          seed=seed, duration=duration,
+                          coefficients=','.join(tokens[1:]) if auto else coefficients,
+                          sim_current=sim_current, velocity_reference=velocity_reference,
+                          mass_inverse=mass_inverse)
+    named = parse_request(full.vehicle, coefficients)[1] if auto else None
     # fail before the long identification if the validation would not be held out
     if _same_maneuver(validation_maneuver, full.maneuver):
         raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
@@ -451,7 +492,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     v = full.vehicle
     if validate_bag:
         run = bag_source(validate_bag, vehicle=v.path, coefficients=','.join(full.names),
-                         velocity_reference=velocity_reference or full.velocity_reference)
+                         velocity_reference=velocity_reference or full.velocity_reference,
+                         mass_inverse=v.mass_inverse)
         mv.refuse_identification_run(full, run)
         src, holdout = full, None
     else:
@@ -463,11 +505,23 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
-    model = Model(v, list(src.names) + opt.names, current=opt.fixed,
-                  velocity_reference=src.velocity_reference)
-    res = identify_with_diagnosis(model, cfg, src.t, src.Y, src.U, T=src.T, refine_pass=True,
-                                  hist_every=hist_every, truth=src.truth,
-                                  progress=bar.update if bar else None)
+
+    def make_model(names):
+        return Model(v, list(names) + opt.names, current=opt.fixed,
+                     velocity_reference=src.velocity_reference)
+    selection = None
+    if auto:
+        def truth_of(names):    # known for a simulated source (the vehicle file)
+            return None if src.truth is None else Model(v, list(names)).theta_true[:len(names)]
+        res, _, selection = identify_auto_with_diagnosis(
+            make_model, cfg, src.t, src.Y, src.U, named=named, T=src.T, refine_pass=True,
+            hist_every=hist_every, truth_of=truth_of, progress=bar.update if bar else None)
+        # from here on the source identifies the chosen set (validation, methods, report)
+        src = replace(src, names=list(res.names), truth=res.truth)
+    else:
+        res = identify_with_diagnosis(make_model(src.names), cfg, src.t, src.Y, src.U, T=src.T,
+                                      refine_pass=True, hist_every=hist_every, truth=src.truth,
+                                      progress=bar.update if bar else None)
     if bar:
         bar.close()
 
@@ -504,10 +558,12 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     extra = {'maneuver': src.maneuver, 'seed': src.seed,
              'duration_s': float(src.t[-1] - src.t[0]),
              'noise_mode': noise_mode, 'source': src.description,
+             'mass_inverse': v.mass_inverse,
              'current_option': opt.describe(), 'velocity_reference': src.velocity_reference,
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': package_versions(), 'command': command,
-             'validation': val_doc, 'validation_true_model': true_doc}
+             'validation': val_doc, 'validation_true_model': true_doc,
+             'selection': None if selection is None else selection.document()}
     if methods_doc is not None:
         extra['methods'] = methods_doc['methods']
         extra['methods_reference_fit_percent'] = methods_doc.get('reference_fit_percent')

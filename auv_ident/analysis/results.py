@@ -16,7 +16,8 @@ def coefficient_list(vehicle, text):
     names = [n.strip() for n in (text or '').split(',') if n.strip()]
     if names and names[0].lower() == 'auto':
         raise ConfigError("--coefficients auto chooses from a recorded run: use it with "
-                          "identify --bag (a simulated run: simulate --out BAGDIR first)")
+                          "identify --bag or report --bag (a simulated run: simulate --out "
+                          "BAGDIR first)")
     names = names or list(vehicle.identify_default)
     if not names:
         raise ConfigError(f'no coefficients chosen and {vehicle.name} has no identify_default')

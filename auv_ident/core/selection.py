@@ -490,14 +490,15 @@ def _in_file_order(vehicle, reasons):
 
 
 def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
-                  max_step=None, max_bridge=0.25, progress=None):
+                  max_step=None, max_bridge=0.25, progress=None, hist_every=0):
     """Choose the coefficients from the data and identify them (module docstring).
 
     make_model : names -> Model identifying those coefficients (and the water current as the
         caller wants it; the current components are always in the set)
     cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
     named : coefficients always identified (file spelling)
-    t, Y, U, T, max_step, max_bridge, refine_pass, progress : as identify_with_noise_model
+    t, Y, U, T, max_step, max_bridge, refine_pass, progress, hist_every : as
+        identify_with_noise_model (the histories are those of the final identification)
     Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
     identification (estimate: the model's theta, coefficients then current)."""
     named = list(named)
@@ -511,7 +512,7 @@ def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
         c = replace(cfg, coefficients=list(coefs), initial=np.asarray(initial, dtype=float))
         return (m,) + identify_with_noise_model(m, c, t, Y, U, T=T, refine_pass=refine_pass,
                                                 max_step=max_step, max_bridge=max_bridge,
-                                                progress=progress)
+                                                progress=progress, hist_every=hist_every)
 
     start = [vehicle.values[vehicle.index(n)] for n in chosen]
     model, ekf_est, ekf_cov, est, cov, fit = run(chosen, start)

@@ -9,7 +9,7 @@ ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
 """
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import yaml
@@ -110,6 +110,20 @@ class Vehicle:
             return hits[0]
         raise ConfigError(f'unknown coefficient {name!r} for vehicle {self.name!r}; '
                           f'known: {", ".join(self.names)}')
+
+    def with_mass_inverse(self, mass_inverse):
+        """This vehicle with M^-1 formed as `mass_inverse`: 'default' (as its file says: this
+        vehicle), 'exact' (inv(M_RB + M_A), which the added-mass coefficients change) or
+        'mss_literal' (MSS's hard-coded inverse); a copy, so that every Model made of it (one
+        not given its own mass_inverse) uses that M^-1."""
+        if mass_inverse in ('default', self.mass_inverse):
+            return self
+        if mass_inverse not in ('exact', 'mss_literal'):
+            raise ConfigError(f'mass_inverse = {mass_inverse!r}; use default, exact or '
+                              'mss_literal')
+        if mass_inverse == 'mss_literal' and self.Minv_literal is None:
+            raise ConfigError(f'vehicle {self.name!r} has no MSS literal inverse')
+        return replace(self, mass_inverse=mass_inverse)
 
     def mass_matrix(self, c=None):
         """M = M_RB + M_A for coefficient values c (file values by default), (6, 6)."""

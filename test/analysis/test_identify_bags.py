@@ -1,7 +1,9 @@
 """One model from several bags (`identify --bag A --bag B`): two simulated bags of the planar
-ship, identified together, recover the truth within their error bars."""
+ship, identified together, recover the truth within their error bars; and a vehicle given as a
+YAML path is that file for the bag paths."""
 import numpy as np
 import pytest
+import yaml
 
 from auv_ident.analysis.bag_identify import identify_bags
 from auv_ident.bags.reader import BagError
@@ -77,3 +79,26 @@ def test_noise_and_process_noise_options_are_checked(bags, capsys):
     assert '--noise-std' in capsys.readouterr().err
     assert main(['identify', '--bag', bags[0], '--q-state', ','.join(['1e-4'] * 12)]) == 2
     assert 'apply to several bags' in capsys.readouterr().err
+
+
+def test_a_vehicle_given_as_a_yaml_path_is_that_file(bags, tmp_path):
+    """--vehicle PATH with bags: the file at PATH is the model (its name need not be a shipped
+    vehicle's, and a shipped vehicle of the same name does not replace it), for one bag, for
+    several and for the arrays of report/compare-methods (bag_source)."""
+    from auv_ident.analysis.bag_identify import bag_source, identify_bag
+    from auv_ident.vehicles import resolve_vehicle_path
+    raw = yaml.safe_load(open(resolve_vehicle_path('kvlcc2_hsva'), encoding='utf-8'))
+    file_n_r = float(raw['coefficients']['N_r'][0])
+    raw['name'] = 'my_ship'
+    raw['coefficients']['N_r'][0] = 2.0 * file_n_r
+    path = tmp_path / 'my_ship.yaml'
+    path.write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
+    doc, _ = identify_bag(bags[0], vehicle=str(path), coefficients='N_r', initial_offset=0.1,
+                          current='none', refine_pass=False)
+    assert doc['vehicle'] == 'my_ship'
+    assert doc['coefficients']['N_r']['initial'] == pytest.approx(2.2 * file_n_r)
+    doc, _ = identify_bags(bags, vehicle=str(path), coefficients='N_r', initial_offset=0.1,
+                           refine_pass=False)
+    assert doc['vehicle'] == 'my_ship'
+    src = bag_source(bags[0], vehicle=str(path), coefficients='N_r')
+    assert src.vehicle.name == 'my_ship' and src.truth[0] == pytest.approx(2.0 * file_n_r)

@@ -15,6 +15,7 @@ from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.experiments import load_source
 from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.report import make_report, validate
+from auv_ident.cli import main
 from independent_data import DataConfig, generate
 
 FIGURES = ('convergence', 'measured_speeds', 'measured_pose', 'validation_positions',
@@ -216,3 +217,55 @@ def test_report_with_methods_side_by_side(tmp_path):
     md = open(r['report'], encoding='utf-8').read()
     assert md.index('## Methods side by side') < md.index('## Figures')
     assert '| ekf |' in md and '| equation_error |' in md
+
+
+def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set(tmp_path):
+    """`report --bag A --coefficients auto,NAME --validate B`: the set is chosen from A
+    (core/selection.py), identified, and the chosen set (not only NAME) flies in the validation
+    on B; result.json has `selection`, report.md its section."""
+    truth = generate(DataConfig(seed=7, duration=60.0, odom_rate=20.0, commands='periodic',
+                                perturb=0.2), tmp_path / 'A')
+    generate(DataConfig(vehicle=truth.truth_vehicle, seed=107, duration=30.0, odom_rate=20.0,
+                        commands='periodic'), tmp_path / 'B')
+    rc = main(['report', '--bag', str(tmp_path / 'A' / 'bag'), '--vehicle', 'nps_auv2',
+               '--coefficients', 'auto,K_v', '--validate', str(tmp_path / 'B' / 'bag'),
+               '--out', str(tmp_path / 'report')])
+    assert rc == 0
+    doc = json.loads((tmp_path / 'report' / 'result.json').read_text())
+    sel = doc['selection']
+    assert sel['named'] == ['K_v'] and sel['chosen'][0] == 'K_v' and len(sel['chosen']) > 1
+    assert list(doc['coefficients']) == sel['chosen']
+    assert set(sel['chosen']) | set(sel['left_out']) == set(load_vehicle('nps_auv2').names)
+    vd = doc['validation']
+    assert vd['models'] == ['identified', 'prior'] and vd['holdout_fraction'] is None
+    assert vd['source'].startswith(f'bag {tmp_path / "B" / "bag"}')
+    # the identified model is the file with the chosen set's estimates: it flies differently
+    # from the prior on B
+    ch = vd['channels']
+    assert any(abs(d['fit_percent'] - d['fit_percent_prior']) > 0.1 for d in ch.values())
+    md = (tmp_path / 'report' / 'report.md').read_text()
+    assert '## Automatic selection' in md and ', '.join(sel['chosen']) in md
+    # the EKF histories are the chosen set's (the convergence figure)
+    assert (tmp_path / 'report' / 'convergence.png').is_file()
+
+
+def test_report_auto_needs_a_recorded_run(tmp_path, capsys):
+    rc = main(['report', '--simulate', 'ident', '--duration', '10', '--coefficients', 'auto',
+               '--out', str(tmp_path)])
+    assert rc == 2 and 'report --bag' in capsys.readouterr().err
+
+
+def test_report_mass_inverse_applies_to_every_model(tmp_path):
+    """report --mass-inverse exact: an added-mass coefficient is identified, and the models
+    flown in the validation form M^-1 the same way (result.json and report.md say it)."""
+    data = generate(DataConfig(seed=5, duration=40.0, odom_rate=20.0), tmp_path / 'gen')
+    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
+                    mass_inverse='exact', progress=False)
+    doc = r['result']
+    assert doc['mass_inverse'] == 'exact' and list(doc['coefficients']) == ['Z_w', 'Z_wdot']
+    assert doc['validation']['mean_fit_percent_nu']['identified'] > 30
+    assert '- mass inverse: exact (every model of this report)' in open(
+        r['report'], encoding='utf-8').read()
+    with pytest.raises(ConfigError, match='mass-inverse exact'):
+        make_report(str(tmp_path / 'literal'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
+                    progress=False)

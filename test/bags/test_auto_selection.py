@@ -63,3 +63,20 @@ def test_auto_where_the_set_is_fixed_says_how_to_get_it(capsys):
     rc = main(['identify', '--vehicle', 'nps_auv2', '--simulate', 'ident', '--duration', '10',
                '--coefficients', 'auto'])
     assert rc == 2 and 'identify --bag' in capsys.readouterr().err
+
+
+def test_mass_inverse_option_reaches_the_bag_identification(perturbed_bag, tmp_path, capsys):
+    """identify --bag --mass-inverse exact: the replay and the identification form M^-1
+    exactly, so an added-mass coefficient can be identified (with the vehicle file's literal
+    inverse it is one clear error naming the option)."""
+    out = tmp_path / 'am.json'
+    rc = main(['identify', '--vehicle', 'nps_auv2', '--bag', str(perturbed_bag.bag),
+               '--coefficients', 'Z_w,Z_wdot', '--mass-inverse', 'exact', '--no-refine',
+               '--json', str(out)])
+    assert rc == 0, capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    assert doc['mass_inverse'] == 'exact' and list(doc['coefficients']) == ['Z_w', 'Z_wdot']
+    capsys.readouterr()
+    rc = main(['identify', '--vehicle', 'nps_auv2', '--bag', str(perturbed_bag.bag),
+               '--coefficients', 'Z_w,Z_wdot', '--no-refine'])
+    assert rc == 2 and '--mass-inverse exact' in capsys.readouterr().err

@@ -192,6 +192,22 @@ def test_added_mass_identification_needs_exact_inverse():
     assert m.theta_true.tolist() == [v.coefficients[v.index('Z_wdot')].value] == [-0.24]
 
 
+def test_a_vehicle_with_another_mass_inverse_is_a_copy_every_model_follows():
+    v = load_vehicle('nps_auv2')
+    assert v.with_mass_inverse('default') is v and v.with_mass_inverse('mss_literal') is v
+    exact = v.with_mass_inverse('exact')
+    assert exact is not v and exact.mass_inverse == 'exact' and v.mass_inverse == 'mss_literal'
+    assert Model(exact).mass_inverse == 'exact' and Model(exact, ['Z_wdot']).p == 1
+    x = np.zeros(12)
+    x[0] = 1.5
+    u = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 500.0, 0.0])
+    np.testing.assert_array_equal(Model(exact).f(x, u), Model(v, mass_inverse='exact').f(x, u))
+    with pytest.raises(ConfigError, match='no MSS literal inverse'):
+        load_vehicle('remus100').with_mass_inverse('mss_literal')
+    with pytest.raises(ConfigError, match='use default, exact or mss_literal'):
+        v.with_mass_inverse('approximate')
+
+
 def test_importing_the_core_does_not_import_rclpy():
     code = ('import sys, pkgutil, importlib, auv_ident.core as c\n'
             'for m in pkgutil.iter_modules(c.__path__):\n'
