@@ -177,7 +177,8 @@ def test_cli_report_validates_on_another_bag(cli_report, capsys):
                                            'rmse_prior', 'theil', 'theil_prior'}
     assert set(vd['prediction']) == {'K1', 'K10', 'K100'}
     # the truth is the file: both models follow B's yaw rate closely
-    assert vd['channels']['r']['fit_percent'] > 80 and vd['channels']['r']['fit_percent_prior'] > 80
+    r_fit = vd['channels']['r']
+    assert r_fit['fit_percent'] > 80 and r_fit['fit_percent_prior'] > 80
 
 
 def test_cli_report_refuses_the_identification_bag_in_one_line(cli_report, capsys, tmp_path):

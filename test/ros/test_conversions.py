@@ -1,4 +1,5 @@
-"""Tests of auv_ident.session.messages and auv_ident.ros.conversions: rotations, frames, covariances, JointState, stamps."""
+"""Tests of auv_ident.session.messages and auv_ident.ros.conversions: rotations, frames,
+covariances, JointState, stamps."""
 import math
 
 from builtin_interfaces.msg import Time
