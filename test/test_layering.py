@@ -181,3 +181,14 @@ def test_no_module_is_a_god_module():
     long = {str(p.relative_to(PKG.parent)): n for p in _sources()
             if (n := len(p.read_text(encoding='utf-8').splitlines())) > 700}
     assert not long, f'modules over 700 lines: {long}'
+
+
+def test_python_lines_fit_in_99_columns():
+    """The house limit (setup.cfg [flake8] max-line-length), on the package, tests and tools."""
+    root = PKG.parent
+    files = [p for d in ('auv_ident', 'test', 'tools') for p in (root / d).rglob('*.py')
+             if '__pycache__' not in p.parts]
+    long = [f'{p.relative_to(root)}:{i}' for p in files
+            for i, line in enumerate(p.read_text(encoding='utf-8').splitlines(), 1)
+            if len(line) > 99]
+    assert files and not long, f'lines over 99 columns: {long}'
