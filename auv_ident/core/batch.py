@@ -25,6 +25,7 @@ the rules of timing.py (RK4 steps of at most max_step with the command held, a r
 vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
 """
 from concurrent.futures import ThreadPoolExecutor
+import inspect
 import os
 import threading
 import time
@@ -270,6 +271,9 @@ class FilterErrorResiduals:
         return r0, J, failed
 
 
+LEAST_SQUARES_WORKERS = 'workers' in inspect.signature(least_squares).parameters
+
+
 def difference_threads():
     """Threads for finite differences: the CPUs this process may run on, or the
     AUV_IDENT_THREADS environment variable (a positive integer) when set."""
@@ -328,8 +332,11 @@ def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
 
     z0 = theta_start / scale
     with ThreadPoolExecutor(difference_threads()) as pool:
+        # scipy >= 1.16 evaluates the Jacobian's columns with `workers`; an older scipy (e.g.
+        # Ubuntu 24.04's python3-scipy under `ros2 run`) does them one after the other
+        threads = {'workers': pool.map} if LEAST_SQUARES_WORKERS else {}
         sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p),
-                            max_nfev=max_nfev * p, diff_step=1e-5, workers=pool.map)
+                            max_nfev=max_nfev * p, diff_step=1e-5, **threads)
     J = sol.jac / scale[None, :]
     n_res = np.count_nonzero(sol.fun)
     s2 = 2.0 * sol.cost / max(1, n_res - p)

@@ -61,3 +61,15 @@ def test_thread_count_defaults_to_the_usable_cpus(monkeypatch):
     assert difference_threads() == len(batch.os.sched_getaffinity(0))
     monkeypatch.setenv('AUV_IDENT_THREADS', '3')
     assert difference_threads() == 3
+
+
+def test_refinement_without_scipy_workers_gives_the_same(record, monkeypatch):
+    """An older scipy (no least_squares(workers=...), e.g. Ubuntu 24.04's under ros2 run):
+    the Jacobian's columns one after the other, the same numbers."""
+    v, run, cfg = record
+    model = Model(v, NAMES)
+    start = model.theta_true * 1.1
+    threaded = refine(model, cfg, run.t, run.y, run.u, start, T=run.T, max_nfev=5)
+    monkeypatch.setattr(batch, 'LEAST_SQUARES_WORKERS', False)
+    serial = refine(model, cfg, run.t, run.y, run.u, start, T=run.T, max_nfev=5)
+    assert np.array_equal(threaded[0], serial[0]) and np.array_equal(threaded[1], serial[1])
