@@ -94,6 +94,23 @@ def _feed(node, messages):
     return events
 
 
+def _probe_identifier(ctx, nodes, ident):
+    """A probe node subscribed to the identifier's estimate, covariance and /diagnostics, and
+    an executor spinning both (the fixture destroys them). Returns (executor, probe,
+    estimates, covariances, diagnostics): the last three lists the probe's callbacks fill."""
+    probe = rclpy.create_node('probe', context=ctx)
+    nodes += [ident, probe]
+    estimates, covariances, diags = [], [], []
+    probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+    probe.create_subscription(Float64MultiArray, '/identifier/covariance', covariances.append,
+                              LATCHED)
+    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ident)
+    ex.add_node(probe)
+    return ex, probe, estimates, covariances, diags
+
+
 # --- parameters ------------------------------------------------------------------------------
 
 
@@ -230,15 +247,7 @@ def test_simulator_publishes_the_run(ctx, nodes):
 
 def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_path):
     ident = IdentifierNode(context=ctx)
-    probe = rclpy.create_node('probe', context=ctx)
-    nodes += [ident, probe]
-    estimates, covariances = [], []
-    probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
-    probe.create_subscription(Float64MultiArray, '/identifier/covariance', covariances.append,
-                              LATCHED)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(ident)
-    ex.add_node(probe)
+    ex, probe, estimates, covariances, _ = _probe_identifier(ctx, nodes, ident)
     assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0
                        and ident.pub_covariance.get_subscription_count() > 0)
     messages = _ordered_messages(run)
@@ -390,13 +399,7 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
 def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     save = tmp_path / 'est.json'
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(save_path=str(save)))
-    probe = rclpy.create_node('probe', context=ctx)
-    nodes += [ident, probe]
-    diags = []
-    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(ident)
-    ex.add_node(probe)
+    ex, probe, _, _, diags = _probe_identifier(ctx, nodes, ident)
     assert ident.diagnostic_status().message == 'waiting for data'
     _feed(ident, _ordered_messages(run))
     assert _spin_until(ex, lambda: diags, timeout=5.0)   # the 1 Hz timer
@@ -566,16 +569,7 @@ def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
     save = tmp_path / 'est.json'
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(
         coefficients=['auto', 'Z_ds'], auto_window=5.0, save_path=str(save)))
-    probe = rclpy.create_node('probe', context=ctx)
-    nodes += [ident, probe]
-    diags, estimates, covariances = [], [], []
-    probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
-    probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
-    probe.create_subscription(Float64MultiArray, '/identifier/covariance', covariances.append,
-                              LATCHED)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(ident)
-    ex.add_node(probe)
+    ex, _, estimates, covariances, diags = _probe_identifier(ctx, nodes, ident)
     assert ident.names == ['Z_ds', 'current_n', 'current_e']
     assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0)
 
