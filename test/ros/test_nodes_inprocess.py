@@ -550,6 +550,11 @@ def test_identifier_publishes_the_water_current(ctx, nodes):
         assert np.all(C[2:, :] == 0.0) and np.all(C[:, 2:] == 0.0)
         # 10 s of a turning run already place the current near the truth (0.1, -0.05)
         assert abs(north - 0.1) < 0.03 and abs(east + 0.05) < 0.03
+        # gone before the next frame's pair: its latched ~/current, of the same stamps, would
+        # otherwise reach the next probe too
+        for node in (ident, probe):
+            nodes.remove(node)
+            node.destroy_node()
     still = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
     nodes.append(still)
     assert still.pub_current is None      # the only place the topic is created
