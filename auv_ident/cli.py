@@ -10,11 +10,11 @@ import sys
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
-from auv_ident.core.state import Input
+from auv_ident.core.model.state import Input
 
 
 def _model(args, theta_names=()):
-    from auv_ident.core.model import Model
+    from auv_ident.core.model.hydrodynamics import Model
     from auv_ident.vehicles import load_vehicle
     return Model(load_vehicle(args.vehicle), theta_names,
                  mass_inverse=getattr(args, 'mass_inverse', 'default'))
@@ -22,19 +22,19 @@ def _model(args, theta_names=()):
 
 def _sim_current(text):
     """--current N,E[,D] of simulate: (3,) m/s NED, or None."""
-    from auv_ident.core.current import parse_current
+    from auv_ident.core.model.current import parse_current
     if text is None:
         return None
     opt = parse_current(text, what='--current')
     if opt.estimate:
-        raise AuvIdentError('simulate --current takes N,E[,D] in m/s (the water\'s velocity, '
+        raise AuvIdentError("simulate --current takes N,E[,D] in m/s (the water's velocity, "
                             'NED), not "estimate"')
     return opt.fixed
 
 
 def cmd_simulate(args):
-    from auv_ident.core.sensors import DEFAULT_PROCESS_STD
-    from auv_ident.core.simulate import save_run_csv, simulate
+    from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD
+    from auv_ident.core.simulation.simulate import save_run_csv, simulate
     m = _model(args)
     run = simulate(m, args.maneuver, duration=args.duration, T=args.dt, seed=args.seed,
                    rpm=args.rpm, process_std=DEFAULT_PROCESS_STD if args.process_noise else None,
@@ -55,7 +55,7 @@ def cmd_simulate(args):
         if args.out.endswith('.csv'):
             save_run_csv(run, args.out)
         else:
-            from auv_ident.bags.sim_bag import write_run_bag
+            from auv_ident.offline.sim_bag import write_run_bag
             write_run_bag(run, args.out, command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
         print(f'wrote {args.out}')
     return 0
@@ -82,9 +82,8 @@ def _twelve(text, option):
 
 
 def cmd_identify(args):
-    from auv_ident.analysis import experiments as ex
-    from auv_ident.analysis import results
-    from auv_ident.core.current import parse_current
+    from auv_ident.analysis import experiments as ex, results
+    from auv_ident.core.model.current import parse_current
     from auv_ident.vehicles import load_vehicle
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
@@ -132,7 +131,7 @@ def cmd_identify(args):
             write_estimate_json(args.estimate_out, estimate_document(
                 doc['vehicle'], names, [doc['coefficients'][n]['estimate'] for n in names],
                 doc['covariance'], None, doc['steps']))
-            print(f'wrote {args.estimate_out} (the identifier node\'s warm_start)')
+            print(f"wrote {args.estimate_out} (the identifier node's warm_start)")
     else:
         if args.estimate_out:
             raise AuvIdentError('--estimate-out needs --bag')
@@ -175,8 +174,7 @@ def cmd_identify(args):
 
 
 def cmd_montecarlo(args):
-    from auv_ident.analysis import experiments as ex
-    from auv_ident.analysis import results
+    from auv_ident.analysis import experiments as ex, results
     from auv_ident.vehicles import load_vehicle
     v = load_vehicle(args.vehicle)
     names = results.coefficient_list(v, args.coefficients)
@@ -273,8 +271,8 @@ def cmd_model_report(args):
 
 
 def cmd_report(args):
-    from auv_ident.analysis.results import doc_table
     from auv_ident.analysis.report import make_report
+    from auv_ident.analysis.results import doc_table
     if args.model:
         return cmd_model_report(args)
     out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
@@ -359,8 +357,8 @@ def cmd_bag_repair(args):
 
 
 def cmd_import(args):
-    from auv_ident.bags.import_bag import write_imported_bag
-    from auv_ident.bags.importers import read_csv_run, read_hsva
+    from auv_ident.offline.import_bag import write_imported_bag
+    from auv_ident.offline.importers import read_csv_run, read_hsva
     if args.format == 'hsva':
         if args.columns:
             raise AuvIdentError('--columns is for --format csv (HSVA files have a fixed layout)')
@@ -391,7 +389,7 @@ OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
 def cmd_derivatives(args):
-    from auv_ident.core.model import OK, STATUS_TEXT
+    from auv_ident.core.model.hydrodynamics import OK, STATUS_TEXT
     m = _model(args)
     bad = 0
     with open(args.input, newline='', encoding='utf-8') as fin, \
@@ -514,11 +512,11 @@ def build_parser():
                          'several runs of the vehicle')
     sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
                     help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
-                         'psi; m/s, rad/s, m, rad) to start from instead of the messages\' '
+                         "psi; m/s, rad/s, m, rad) to start from instead of the messages' "
                          '(the noise model from the data still applies)')
     sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
                     help='several bags: 12 per-step state process-noise 1-sigmas to start '
-                         'from instead of the default (an AUV\'s; model error far above it is '
+                         "from instead of the default (an AUV's; model error far above it is "
                          'matched from the data, docs/method.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')

@@ -1,12 +1,13 @@
 """Vehicle files by name: where the `config/` folder is (source tree, colcon install, pip
 prefix) and :func:`load_vehicle`. The core reads a vehicle from a path
-(:func:`auv_ident.core.vehicle.vehicle_from_file`); finding it by name needs the ament index of
+(:func:`auv_ident.core.model.vehicle.vehicle_from_file`); finding it by name needs the ament index
+of
 a ROS install, so it lives here, outside the core."""
 import os
 import sys
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.vehicle import vehicle_from_file
+from auv_ident.core.model.vehicle import vehicle_from_file
 
 
 def config_dir():

@@ -6,9 +6,8 @@ import signal
 import subprocess
 import sys
 
-import numpy as np
-
 from conftest import require_loopback_dds
+import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -9,10 +9,10 @@ that a test (or a person, with the command line) can measure what each one costs
 
 What is the package's and what is not
 -------------------------------------
-From ``auv_ident`` only :class:`auv_ident.core.model.Model` (its ``f(x, u)`` for nu_dot; the
-kinematics returned with it are ignored), the vehicle loaders and ``trim_speed`` are used.
-The manoeuvre, the servo rate limiter, the integrator (scipy DOP853 between command changes, or
-fixed-step RK4), the kinematics, the current, the sampling and stamping, the noise, the ROS
+From ``auv_ident`` only :class:`auv_ident.core.model.hydrodynamics.Model` (its ``f(x, u)`` for
+nu_dot; the kinematics returned with it are ignored), the vehicle loaders and ``trim_speed`` are
+used. The manoeuvre, the servo rate limiter, the integrator (scipy DOP853 between command changes,
+or fixed-step RK4), the kinematics, the current, the sampling and stamping, the noise, the ROS
 messages (rosbags' typestore, Jazzy) and the bag writer (rosbags) are all here.
 
 Conventions (the package's documented message contract)
@@ -70,9 +70,9 @@ import yaml
 if __package__ in (None, ''):  # run as a script: the package is the repository root's
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from auv_ident.core.model import Model  # noqa: E402
-from auv_ident.core.trim import trim_speed  # noqa: E402
-from auv_ident.core.vehicle import vehicle_from_file  # noqa: E402
+from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
+from auv_ident.core.model.trim import trim_speed  # noqa: E402
+from auv_ident.core.model.vehicle import vehicle_from_file  # noqa: E402
 from auv_ident.session.messages import JOINT_NAMES  # noqa: E402
 from auv_ident.vehicles import load_vehicle, resolve_vehicle_path  # noqa: E402
 
@@ -528,8 +528,14 @@ def _epoch_ns(text):
 
 
 def _qos():
-    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
-                                    QosReliability, QosTime)
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
     inf = QosTime(9223372036, 854775807)
     return Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE, inf,
                inf, QosLiveliness.AUTOMATIC, inf, False)
@@ -657,7 +663,7 @@ def generate(cfg, out_dir, overwrite=False):
         vehicle = vehicle_from_file(vpath)
     else:
         vpath, vehicle = file_vehicle.path, file_vehicle
-        factors = {n: 1.0 for n in vehicle.names}
+        factors = dict.fromkeys(vehicle.names, 1.0)
     model = Model(vehicle)
     fin_limit = float(vehicle.raw['limits']['fin_rad'])
 
@@ -782,7 +788,7 @@ def _parse_gaps(text):
 
 def config_parser():
     p = argparse.ArgumentParser(
-        description='Make a rosbag2 MCAP bag of an AUV run independently of auv_ident\'s own '
+        description="Make a rosbag2 MCAP bag of an AUV run independently of auv_ident's own "
                     'simulator (truth.json next to it). Tuples: comma-separated; gaps: '
                     'start:length,start:length; names: comma-separated. A value that starts '
                     'with "-" needs "=": --current-ned=-0.07,-0.07,0.')

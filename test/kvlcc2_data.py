@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from auv_ident.core.state import Input, N_INPUT, N_STATE, State
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
 
 REALDATA = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'realdata' / 'kvlcc2_hsva'
 RUNS = ('Z_10_10_S', 'Z_10_10_P', 'Z_20_10_S', 'Z_20_10_P')

@@ -1,13 +1,13 @@
 """Short simulated runs shared by the tests of the identification methods (UKF, output error,
 equation error): NPS AUV II, the paper's `ident` manoeuvre at 500 rpm, the paper's five
-coefficients; "noise-light" = a fifth of the documented sensor noise (core/sensors.py)."""
+coefficients; "noise-light" = a fifth of the documented sensor noise (core/model/sensors.py)."""
 from functools import lru_cache
 
 import numpy as np
 
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 PAPER_FIVE = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']

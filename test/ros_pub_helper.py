@@ -23,11 +23,11 @@ SAMPLE_TIME = 0.05
 
 def build_samples(count, seed=SEED):
     """Return [[(topic, rclpy msg) in TOPICS order] per sample] of a simulated run."""
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
     from auv_ident.ros.conversions import clock_msg
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
-    from auv_ident.vehicles import load_vehicle
     from auv_ident.ros.sim_messages import sample_messages
+    from auv_ident.vehicles import load_vehicle
     run = simulate(Model(load_vehicle('nps_auv2'), ()), 'zigzag',
                    duration=(count - 1) * SAMPLE_TIME, T=SAMPLE_TIME, seed=seed)
     assert len(run.t) == count

@@ -1,13 +1,18 @@
 """The package's layers, checked on the source (every import, also inside functions).
 
-    core  <-  session  <-  ros, bags  <-  analysis  <-  cli
+    core  <-  session  <-  offline  <-  ros  <-  cli
+    bags (rosbag2 I/O)   <-  offline  <-  analysis  <-  cli
 
 - core/: numpy, scipy, numba, yaml and the standard library only; imports nothing else of the
-  package (the library one could publish alone);
+  package (the library one could publish alone); inside it, sub-packages that import one way:
+  model <- filter <- identification, model <- simulation (errors, angles and compiled_cache at
+  core/ serve them all);
 - vehicles.py (vehicle files by name): core only;
 - session/: core, vehicles, session; no ROS, no bag library;
-- bags/: core, vehicles, session, bags; the bag libraries, never rclpy or *_msgs;
-- ros/: the only place rclpy and ROS message packages appear; may use bags/ (record, play);
+- bags/: the rosbag2 MCAP reader, writer, scan and repair: core errors and the bag libraries
+  only, never the session, rclpy or *_msgs;
+- offline/: the application on bags (replay through the session, imports, simulated runs);
+- ros/: the only place rclpy and ROS message packages appear; may use bags/ and offline/;
 - analysis/: everything below but ros/, no rclpy;
 - no import cycles between modules.
 """
@@ -25,10 +30,19 @@ ALLOWED_INTERNAL = {
     'core': {'core'},
     'vehicles': {'core', 'vehicles'},
     'session': {'core', 'vehicles', 'session'},
-    'bags': {'core', 'vehicles', 'session', 'bags'},
-    'ros': {'core', 'vehicles', 'session', 'bags', 'ros'},
-    'analysis': {'core', 'vehicles', 'session', 'bags', 'analysis'},
-    'top': {'core', 'vehicles', 'session', 'bags', 'ros', 'analysis', 'top'},
+    'bags': {'core', 'bags'},
+    'offline': {'core', 'vehicles', 'session', 'bags', 'offline'},
+    'ros': {'core', 'vehicles', 'session', 'bags', 'offline', 'ros'},
+    'analysis': {'core', 'vehicles', 'session', 'bags', 'offline', 'analysis'},
+    'top': {'core', 'vehicles', 'session', 'bags', 'offline', 'ros', 'analysis', 'top'},
+}
+# inside core/: sub-package -> the core parts it may import ('' = core/'s own modules)
+CORE_PARTS = {
+    '': {''},
+    'model': {'', 'model'},
+    'filter': {'', 'model', 'filter'},
+    'identification': {'', 'model', 'filter', 'identification'},
+    'simulation': {'', 'model', 'simulation'},
 }
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosgraph_msgs',
                 'std_srvs', 'rosidl_runtime_py', 'rpyutils'}
@@ -37,7 +51,8 @@ ALLOWED_EXTERNAL = {
     'core': {'numpy', 'scipy', 'numba', 'llvmlite', 'yaml'},
     'vehicles': {'numpy', 'yaml', 'ament_index_python'},
     'session': {'numpy', 'scipy', 'yaml'},
-    'bags': {'numpy', 'scipy', 'yaml', 'mcap', 'mcap_ros2', 'rosbags', 'zstandard', 'lz4'},
+    'bags': {'numpy', 'yaml', 'mcap', 'mcap_ros2', 'rosbags', 'zstandard', 'lz4'},
+    'offline': {'numpy', 'scipy', 'yaml', 'mcap', 'mcap_ros2', 'rosbags'},
     'analysis': {'numpy', 'scipy', 'numba', 'yaml', 'matplotlib', 'filterpy', 'distributed',
                  'dask', 'mcap', 'rosbags'},
     'ros': None,    # anything
@@ -60,6 +75,14 @@ def _layer(module):
     if parts[1] in ALLOWED_INTERNAL:
         return parts[1]
     return 'top'    # cli, __main__
+
+
+def _core_part(module):
+    """'model', 'filter', ... for a module inside core/; '' for core/'s own modules."""
+    parts = module.split('.')
+    if len(parts) > 3 and parts[2] in CORE_PARTS:
+        return parts[2]
+    return ''
 
 
 def _sources():
@@ -112,6 +135,10 @@ def _violations(path, pkg=PKG):
                 continue    # the package itself (__version__)
             if _layer(target) not in ALLOWED_INTERNAL[layer]:
                 bad.append(f'line {line}: {target} ({_layer(target)} layer)')
+            elif layer == 'core' and _layer(target) == 'core':
+                part, other = _core_part(module), _core_part(target)
+                if other not in CORE_PARTS[part]:
+                    bad.append(f'line {line}: {target} (core/{other}, from core/{part})')
             continue
         if root in STDLIB:
             continue
@@ -177,10 +204,15 @@ def test_the_checks_see_a_violation(tmp_path):
     assert 'line 2: auv_ident.ros.conversions (ros layer)' in bad and 'line 3: rclpy' in bad
 
 
-def test_no_module_is_a_god_module():
-    long = {str(p.relative_to(PKG.parent)): n for p in _sources()
-            if (n := len(p.read_text(encoding='utf-8').splitlines())) > 700}
-    assert not long, f'modules over 700 lines: {long}'
+def test_the_checks_see_a_core_part_importing_against_the_order(tmp_path):
+    pkg = tmp_path / 'auv_ident'
+    for part in ('model', 'filter'):
+        (pkg / 'core' / part).mkdir(parents=True)
+    (pkg / 'core' / 'filter' / 'ekf.py').write_text('')
+    fake = pkg / 'core' / 'model' / 'probe.py'
+    fake.write_text('from auv_ident.core.filter import ekf\n')
+    module, layer, bad = _violations(fake, pkg)
+    assert bad == ['line 1: auv_ident.core.filter.ekf (core/filter, from core/model)']
 
 
 def test_python_lines_fit_in_99_columns():

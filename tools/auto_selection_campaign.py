@@ -39,6 +39,7 @@ sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
 from independent_data import DataConfig, generate  # noqa: E402
+
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 # NPS AUV II's hand-picked set: the paper's five and fifteen more

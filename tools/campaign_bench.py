@@ -40,11 +40,15 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 from distributed import Client  # noqa: E402
 
 from auv_ident.analysis import engine  # noqa: E402
-from auv_ident.analysis.campaign import (find_bags, identify_bag_row, run_campaign,  # noqa: E402
-                                         warm_up_plugin)
-from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag  # noqa: E402
-from auv_ident.core.model import Model  # noqa: E402
-from auv_ident.core.simulate import simulate  # noqa: E402
+from auv_ident.analysis.campaign import (  # noqa: E402
+    find_bags,
+    identify_bag_row,
+    run_campaign,
+    warm_up_plugin,
+)
+from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
+from auv_ident.core.simulation.simulate import simulate  # noqa: E402
+from auv_ident.offline.sim_bag import SIM_EPOCH_NS, write_run_bag  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 VEHICLE = 'nps_auv2'
@@ -72,7 +76,7 @@ def task_walls(out):
 
 
 def _process_cpu_s():
-    import psutil     # a dependency of distributed: on every worker
+    import psutil  # a dependency of distributed: on every worker
     t = psutil.Process().cpu_times()
     return t.user + t.system
 
@@ -177,7 +181,7 @@ def main(argv=None):
         print(f'{w} worker(s): cluster start {m["start"]:.1f} s, of which warm-up per worker '
               + ', '.join(f'{v:.1f}' for v in m['warm'].values()) + ' s; an idle worker uses '
               f'{100 * m["idle"]:.1f} % of a core; engine time per task (client round trip '
-              f'minus the task\'s own wall time, {ROUND_TRIPS} tasks one at a time): median '
+              f"minus the task's own wall time, {ROUND_TRIPS} tasks one at a time): median "
               f'{1000 * m["round_trip"][ROUND_TRIPS // 2]:.0f} ms, max '
               f'{1000 * m["round_trip"][-1]:.0f} ms')
         for p in pairs:
@@ -190,7 +194,7 @@ def main(argv=None):
               f'(wall {100 * (tasks / serial - 1):+.1f} % against the serial loop, speed-up '
               f'{serial / tasks:.2f}x); with the cluster start '
               f'{60 * n / (m["start"] + wall):.1f} bags/min; worker CPU against the serial '
-              f'loop\'s, median of the pairs: {100 * cpu:+.1f} %')
+              f"loop's, median of the pairs: {100 * cpu:+.1f} %")
 
     s = campaign(bag_glob, os.path.join(tmp.name, 'out_nowarm'), 1, warm_up=False)
     walls = task_walls(os.path.join(tmp.name, 'out_nowarm'))

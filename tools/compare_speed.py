@@ -23,8 +23,8 @@ import sys
 import tempfile
 import time
 
-import numpy as np
 from numba import njit
+import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
@@ -131,8 +131,8 @@ def main(argv=None):
         extract_core(a.new, pkgs, 'core_new')
         new_pkg = 'core_new'
     sys.path.insert(0, pkgs)
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
     from auv_ident.vehicles import load_vehicle
     run = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=a.steps / 20.0 + 1.0,
                    seed=1)

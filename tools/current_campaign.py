@@ -32,9 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-import numpy as np  # noqa: E402
-
 from independent_data import DataConfig, generate  # noqa: E402
+import numpy as np  # noqa: E402
 
 GOAL_MEDIAN_PCT = 2.0
 GOAL_COVERAGE = 0.90

@@ -4,12 +4,12 @@
 
 Reads the HSVA free-running runs from ../shared/realdata/kvlcc2_hsva (not in the repository;
 test/kvlcc2_data.py reads them), identifies config/kvlcc2_hsva.yaml's identify_default (or the
-given coefficients) from Z_10_10_S and Z_20_10_S at once (core.batch.identify_runs: one
-coefficient set, each run from its own initial state), started from the file's prior (captive
+given coefficients) from Z_10_10_S and Z_20_10_S at once (core.identification.batch.identify_runs:
+one coefficient set, each run from its own initial state), started from the file's prior (captive
 tests and Clarke 1983), then free-runs the identified model on all four runs with their
-measured rudder and thrust from their measured initial state (core/prediction.py) and prints
-the fit (%) of the yaw rate and of the speed U = sqrt(u^2 + v^2), against the goals of issue #20
-(port runs: Z_20_10_P r >= 90 %, U >= 90 %; Z_10_10_P r >= 75 %, U >= 70 %), and the prior's
+measured rudder and thrust from their measured initial state (core/simulation/prediction.py) and
+prints the fit (%) of the yaw rate and of the speed U = sqrt(u^2 + v^2), against the goals of issue
+#20 (port runs: Z_20_10_P r >= 90 %, U >= 90 %; Z_10_10_P r >= 75 %, U >= 70 %), and the prior's
 fit for comparison.
 """
 import argparse
@@ -22,13 +22,14 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'test'))
 
-from auv_ident.core.batch import identify_runs  # noqa: E402
-from auv_ident.core.filter import FilterConfig  # noqa: E402
-from auv_ident.core.model import Model  # noqa: E402
-from auv_ident.core.prediction import fit_percent, free_run  # noqa: E402
-from auv_ident.core.state import N_STATE, State  # noqa: E402
-from auv_ident.vehicles import load_vehicle  # noqa: E402
 from kvlcc2_data import available, load_run, REALDATA  # noqa: E402
+
+from auv_ident.core.filter.augmented import FilterConfig  # noqa: E402
+from auv_ident.core.identification.batch import identify_runs  # noqa: E402
+from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
+from auv_ident.core.model.state import N_STATE, State  # noqa: E402
+from auv_ident.core.simulation.prediction import fit_percent, free_run  # noqa: E402
+from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 VEHICLE = 'kvlcc2_hsva'
 TRAIN = ('Z_10_10_S', 'Z_20_10_S')

@@ -22,8 +22,8 @@ The offsets (Y_0, N_0: the propeller's asymmetry) are fitted so they do not bend
 are not part of the model. Prints each coefficient with its 1-sigma from the fit.
 """
 import csv
-import sys
 from pathlib import Path
+import sys
 
 import numpy as np
 

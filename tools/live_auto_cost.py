@@ -8,7 +8,8 @@ periodic at 20 Hz, white noise at the documented level, every coefficient 0.8-1.
 file's), 30 s longer than the longest window, fed in log-time order through an IdentSession
 with coefficients [auto, NAMED...]:
 
-1. per window (--windows, and --window): the choice alone (core.selection.choose_coefficients,
+1. per window (--windows, and --window): the choice alone
+(core.identification.selection.choose_coefficients,
    wall and CPU s of the job's thread), the job with the feeding of the kept record (wall s),
    and the chosen set. The choice runs inline here, so these are its own costs;
 2. with --paced, the node's situation: the window fed at once, then the rest at the bag's pace
@@ -31,8 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import (ACTUATOR_TOPIC, DataConfig, generate,  # noqa: E402
-                              ODOM_TOPIC)
+from independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC  # noqa: E402
+
 from auv_ident.bags.reader import read_bag  # noqa: E402
 from auv_ident.session.auto_choice import run_in_thread, run_inline  # noqa: E402
 from auv_ident.session.session import IdentSession  # noqa: E402

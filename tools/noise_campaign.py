@@ -65,7 +65,7 @@ def _summary(cases, key_z):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--vehicle', default='nps_auv2')
-    ap.add_argument('--coefficients', default='', help='default: the vehicle\'s default set')
+    ap.add_argument('--coefficients', default='', help="default: the vehicle's default set")
     ap.add_argument('--seeds', type=int, default=2)
     ap.add_argument('--levels', default='0.5,1,2,3')
     ap.add_argument('--taus', default='0.1,1,3')

@@ -9,7 +9,7 @@ before it:
 
 1. filter step: ``AugmentedEKF.predict`` + ``update`` (the compiled kernels and their thin
    Python wrappers), the filter work one odometry message costs;
-2. ``StreamIdentifier.add_measurement`` (core/stream.py: pairing with the command, time
+2. ``StreamIdentifier.add_measurement`` (core/filter/stream.py: pairing with the command, time
    rules, covariance check after the update);
 3. ``IdentSession.add_odometry`` (arrays: screening, coefficient checks, divergence guard,
    health windows, last good estimate);
@@ -41,12 +41,15 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
 from auv_ident.analysis.bench import best_interleaved  # noqa: E402
+from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
+from auv_ident.core.model.state import Input  # noqa: E402
+from auv_ident.core.simulation.simulate import simulate  # noqa: E402
 from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, sample_messages  # noqa: E402
-from auv_ident.core.model import Model  # noqa: E402
-from auv_ident.core.simulate import simulate  # noqa: E402
-from auv_ident.core.state import Input  # noqa: E402
-from auv_ident.session.messages import (joint_state_to_actuators,  # noqa: E402
-                                        odometry_to_state, stamp_to_ns)
+from auv_ident.session.messages import (  # noqa: E402
+    joint_state_to_actuators,
+    odometry_to_state,
+    stamp_to_ns,
+)
 from auv_ident.session.session import IdentSession  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 

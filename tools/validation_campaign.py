@@ -27,9 +27,10 @@ same truth vehicle). Then
 
 identifies SET on A (prior and initial guesses from the vehicle file) and validates on B's
 measurements (SET ``auto``: ``auto,Z_ds,Z_q,Z_w,M_ds,K_v``, the set chosen from A's data,
-core/selection.py). Printed per (set, seed): mean fit % over u v w p q r of the identified, the
-prior and, as the ceiling the sensor noise leaves, the true model; the gain (identified -
-prior); the yaw-rate (r) fit of the three; the mean fit over x y z phi theta psi; the largest
+core/identification/selection.py). Printed per (set, seed): mean fit % over u v w p q r of the
+identified, the prior and, as the ceiling the sensor noise leaves, the true model; the gain
+(identified - prior); the yaw-rate (r) fit of the three; the mean fit over x y z phi theta psi; the
+largest
 |error| % over the identified coefficients of the identified and of the file's values against
 the truth; the number identified; the wall time of the report command. The true model flies
 like the others (analysis.validation.validate_on_run, B's initial state and commands, still
@@ -71,10 +72,11 @@ sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
 from independent_data import DataConfig, generate  # noqa: E402
+
 from auv_ident.analysis.bag_identify import bag_source  # noqa: E402
 from auv_ident.analysis.validation import validate_on_run  # noqa: E402
-from auv_ident.core.prediction import fit_percent  # noqa: E402
-from auv_ident.core.state import NU_NAMES, STATE_NAMES  # noqa: E402
+from auv_ident.core.model.state import NU_NAMES, STATE_NAMES  # noqa: E402
+from auv_ident.core.simulation.prediction import fit_percent  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 PAPER = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
@@ -290,7 +292,7 @@ def main(argv=None):
              'every coefficient x U(0.8, 1.2) (added mass too, exact M^-1)')
     print(f'NPS AUV II truth vehicles: {which}; case {args.case} {CASES[args.case]}; A '
           f'{args.duration:.0f} s (identified), B {args.validation_duration:.0f} s (validated; '
-          f'seed + 100, same truth vehicle); models\' M^-1: {args.mass_inverse}')
+          f"seed + 100, same truth vehicle); models' M^-1: {args.mass_inverse}")
     print(f'{"set":<11}{"seed":>5}{"n":>4}  {"mean fit u..r ident/prior/true":>31}  {"gain":>5}'
           f'  {"r fit ident/prior/true":>23}  {"x..psi ident/prior/true":>23}  '
           f'{"max|err| % ident/file":>21}  {"wall s":>6}')

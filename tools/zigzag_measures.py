@@ -15,15 +15,21 @@ import sys
 
 import numpy as np
 
-from auv_ident.analysis.zigzag import (closed_loop, closed_loop_table, gear_table,
-                                       load_hsva_runs, measured_measures, measures_table,
-                                       thrust_table)
+from auv_ident.analysis.zigzag import (
+    closed_loop,
+    closed_loop_table,
+    gear_table,
+    load_hsva_runs,
+    measured_measures,
+    measures_table,
+    thrust_table,
+)
 from auv_ident.core.errors import AuvIdentError
-from auv_ident.core.nomoto import fit_nomoto
-from auv_ident.core.prediction import fit_percent
-from auv_ident.core.state import State
-from auv_ident.core.steering import identify_steering_gear, SteeringGear
-from auv_ident.core.thrust_fit import DEFAULT_TERMS, fit_thrust_model, SPEED_TERMS
+from auv_ident.core.identification.thrust_fit import DEFAULT_TERMS, fit_thrust_model, SPEED_TERMS
+from auv_ident.core.model.state import State
+from auv_ident.core.simulation.nomoto import fit_nomoto
+from auv_ident.core.simulation.prediction import fit_percent
+from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -34,7 +40,7 @@ def main(argv=None):
                     help='directory of the HSVA files (default: ../shared/realdata/kvlcc2_hsva '
                     'relative to the repository root)')
     ap.add_argument('--ideal-rate', type=float, default=15.8,
-                    help='deg/s, the ideal helm\'s rate (default 15.8, the nominal model-scale '
+                    help="deg/s, the ideal helm's rate (default 15.8, the nominal model-scale "
                     'rate quoted in issue #20; SOLAS 2.32 deg/s Froude-scaled to 1:45.714 is '
                     '15.7)')
     args = ap.parse_args(argv)
@@ -53,7 +59,7 @@ def main(argv=None):
     models = {'T(u)': fit_thrust_model(runs.values(), SPEED_TERMS),
               'T(u, v, r)': fit_thrust_model(runs.values(), DEFAULT_TERMS)}
     print(thrust_table(models, names))
-    print('\n## Closed loop with a first-order Nomoto model per test (fitted to the pair\'s '
+    print("\n## Closed loop with a first-order Nomoto model per test (fitted to the pair's "
           'yaw rate)\n')
     ideal = SteeringGear.ideal(args.ideal_rate)
     rows, fits = {}, []

@@ -7,16 +7,17 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.identification import diagnosed, identify_records
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
-from auv_ident.bags.replay import bag_custom_data, replay_bag
-from auv_ident.core.batch import Result
-from auv_ident.core.current import DEFAULT_CURRENT, parse_current
-from auv_ident.core.model import Model
-from auv_ident.core.noise_fit import fit_noise_runs
-from auv_ident.core.selection import identify_auto, parse_request
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import N_CURRENT, N_STATE
+from auv_ident.core.identification.batch import Result
+from auv_ident.core.identification.noise_fit import fit_noise_runs
+from auv_ident.core.identification.selection import identify_auto, parse_request
+from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import N_CURRENT, N_STATE
+from auv_ident.offline.replay import bag_custom_data, replay_bag
 from auv_ident.session.record import exact_hold
 from auv_ident.vehicles import load_vehicle
+
 
 def _meta_noise(meta):
     """(12,) the sensor noise 1-sigma a bag's custom data (bag_custom_data) stores (bags our
@@ -61,7 +62,7 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
     model, the batch refinement on the paired arrays at their stamps, identifiability and the
     diagnosis; with coefficients 'auto[,NAME,...]' the set is chosen from the data
-    (core/selection.py). Returns (JSON document, printable table).
+    (core/identification/selection.py). Returns (JSON document, printable table).
 
     noise_source, max_command_age : as IdentSession (the message covariances are the noise
     where they are usable; a held command stays in force however old)
@@ -69,7 +70,8 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     'estimate' by default, 'none', or a known 'N,E[,D]' in m/s)
     velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
     'ground')
-    mass_inverse : 'default' (the vehicle file's), 'exact' or 'mss_literal' (core.model.Model;
+    mass_inverse : 'default' (the vehicle file's), 'exact' or 'mss_literal'
+    (core.model.hydrodynamics.Model;
     with 'exact' the added-mass coefficients can be identified, and `auto` may choose them)"""
     t0 = time.perf_counter()
     meta = bag_custom_data(path)
@@ -102,7 +104,8 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     mean_nis = rr.mean_nis_per_dof
     if auto:
         # the replay only paired the samples (its EKF pass identified the named or default
-        # set); the coefficients come from the data (core/selection.py), started at the file
+        # set); the coefficients come from the data (core/identification/selection.py), started at
+        # the file
         def make_model(coefs):
             return Model(v, list(coefs) + list(rr.model.current_names),
                          mass_inverse=rr.model.mass_inverse, current=rr.model.current,
@@ -118,8 +121,9 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
         est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis = diagnosed(
             model, [rec], rr.T, fit, ekf_est, ekf_cov, est, cov, mean_nis, refine_pass)
     else:
-        # the noise model from the data (core/noise_fit.py): with the configured noise right,
-        # the EKF pass is the replay's (the live node's) and the refinement starts from it
+        # the noise model from the data (core/identification/noise_fit.py): with the configured
+        # noise right, the EKF pass is the replay's (the live node's) and the refinement starts
+        # from it
         est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit = identify_records(
             model, cfg_of(model, noise), [rec], rr.T, refine_pass, progress,
             ekf_pass=None if again else (rr.estimate, rr.cov))
@@ -174,7 +178,8 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
     measurement and per-step state process noise 1-sigma the replay's gate judges samples with
     (None: the messages' and the default; a real run needs the noise its identification used,
     docs/kvlcc2.md, or the gate rejects its samples). mass_inverse : the replay model's M^-1
-    ('default': the vehicle file's; core.model.Model), which the Source's vehicle then says
+    ('default': the vehicle file's; core.model.hydrodynamics.Model), which the Source's vehicle
+    then says
     (Vehicle.with_mass_inverse), so that every Model made of it forms M^-1 so."""
     names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
     meta = bag_custom_data(path)
@@ -207,8 +212,8 @@ def _replays(paths, replay, cfg_of):
     """Replay every bag (replay(path, noise_std, q_state, noise_source) -> ReplayResult); if
     they reject more than REPLAY_REJECT_LIMIT of their odometry (a first pass whose configured
     noise is far too small for the data throws away good samples as outliers), replay them
-    again with the noise model read off the accepted samples (core/noise_fit.py: the effective
-    measurement noise and, for model error, the matched process noise).
+    again with the noise model read off the accepted samples (core/identification/noise_fit.py: the
+    effective measurement noise and, for model error, the matched process noise).
 
     cfg_of(model, noise) -> FilterConfig of the configured noise. Returns (replays, the
     configured noise (12,) (the first replays' median), note: None or {'first_rejected',
@@ -219,7 +224,7 @@ def _replays(paths, replay, cfg_of):
             raise BagError(f'{p}: only {rr.accepted} odometry samples could be used '
                            f'(rejected: {dict(rr.reasons)})')
         if rr.vehicle != rrs[0].vehicle:
-            raise BagError(f'{p}: vehicle {rr.vehicle!r}, the other bags\' is '
+            raise BagError(f"{p}: vehicle {rr.vehicle!r}, the other bags' is "
                            f'{rrs[0].vehicle!r}: one model needs one vehicle')
     rejected = sum(rr.rejected for rr in rrs)
     total = rejected + sum(rr.accepted for rr in rrs)
@@ -245,7 +250,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     read it (its accepted measurements, its commands held, the noise of its messages; made
     again with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT, see
     _replays), then the noise model from all runs' innovations, the EKF pass over the runs in
-    turn and the refinement on all of them with it (core.noise_fit.
+    turn and the refinement on all of them with it (core.identification.noise_fit.
     identify_runs_with_noise_model), the sandwich covariance within each run,
     identifiability and the diagnosis (printed first, and in the JSON as identify_bag's).
 
@@ -319,7 +324,7 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
             f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
-            'configured noise ' + ('the messages\' (median over the bags)' if noise_std is None
+            'configured noise ' + ("the messages' (median over the bags)" if noise_std is None
                                    else 'as given')
             + ('' if q_state is None else ', state process noise as given')
             + ', then the noise model from the data; '

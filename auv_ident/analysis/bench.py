@@ -2,7 +2,7 @@
 
 Same run for all (NPS AUV II, 5 coefficients, 'ident' manoeuvre, 20 Hz). Figures:
 
-- steps_per_s: our EKF's compiled offline loop (core.ekf.run_filter), predict + update;
+- steps_per_s: our EKF's compiled offline loop (core.filter.ekf.run_filter), predict + update;
 - streaming_steps_per_s: our per-message API (AugmentedEKF.step), what the node calls;
 - filterpy_steps_per_s: filterpy 2.0 ExtendedKalmanFilter (Joseph form) driven by the same
   compiled model functions (our RK4 step and its Jacobian as F; H a selection matrix);
@@ -15,16 +15,16 @@ Same run for all (NPS AUV II, 5 coefficients, 'ident' manoeuvre, 20 Hz). Figures
 import resource
 import time
 
-import numpy as np
 from numba import njit
+import numpy as np
 
-from auv_ident.core import ekf as K
-from auv_ident.core.ekf import new_workspace, rk4_step_into
-from auv_ident.core.batch import identify, run_ekf
-from auv_ident.core.filter import AugmentedEKF, FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import COEFFICIENTS, EULER, Input, N_STATE, VEHICLE
+from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.filter.ekf import new_workspace, rk4_step_into
+from auv_ident.core.identification.batch import identify, run_ekf
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import COEFFICIENTS, EULER, Input, N_STATE, VEHICLE
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 

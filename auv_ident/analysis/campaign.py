@@ -21,10 +21,10 @@ from auv_ident.analysis import engine
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.analysis.campaign_plot import plot_trends
 from auv_ident.bags.info import bag_info
-from auv_ident.bags.sim_bag import write_run_bag
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
 
 CSV_NAME = 'campaign.csv'

@@ -2,13 +2,16 @@
 
 Methods (docs/methods.md says what each assumes and when to use it):
 
-- ``ekf``: the augmented EKF pass (core/ekf.py), with the noise model from the data
-  (core/noise_fit.py), as ``identify --no-refine``;
-- ``ukf``: the augmented unscented Kalman filter (core/ukf.py), same prior, Q, R and time line;
-- ``filter_error``: the filter-error maximum likelihood refinement (core/batch.py refine, via
+- ``ekf``: the augmented EKF pass (core/filter/ekf.py), with the noise model from the data
+  (core/identification/noise_fit.py), as ``identify --no-refine``;
+- ``ukf``: the augmented unscented Kalman filter (core/identification/ukf.py), same prior, Q, R and
+time line;
+- ``filter_error``: the filter-error maximum likelihood refinement (core/identification/batch.py
+refine, via
   noise_fit.identify_with_noise_model), as ``identify``;
-- ``output_error``: output-error maximum likelihood, multiple shooting (core/output_error.py);
-- ``equation_error``: equation-error least squares (core/equation_error.py).
+- ``output_error``: output-error maximum likelihood, multiple shooting
+(core/identification/output_error.py);
+- ``equation_error``: equation-error least squares (core/identification/equation_error.py).
 
 Every method starts from the same initial guesses (the vehicle file's values times
 1 + initial_offset, as ``identify``) and the recursive and likelihood methods use the same
@@ -32,16 +35,16 @@ import time
 import numpy as np
 
 from auv_ident.analysis.experiments import load_source
-from auv_ident.core.equation_error import equation_error
-from auv_ident.core.errors import AuvIdentError, ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.noise_fit import identify_with_noise_model
-from auv_ident.core.output_error import DEFAULT_SEGMENT_S, output_error
-from auv_ident.core.prediction import angle_channels, fit_percent, free_run
-from auv_ident.core.state import State, STATE_NAMES
-from auv_ident.core.ukf import run_ukf
 from auv_ident.analysis.report_format import finite_cell
 from auv_ident.analysis.results import make_config
+from auv_ident.core.errors import AuvIdentError, ConfigError
+from auv_ident.core.identification.equation_error import equation_error
+from auv_ident.core.identification.noise_fit import identify_with_noise_model
+from auv_ident.core.identification.output_error import DEFAULT_SEGMENT_S, output_error
+from auv_ident.core.identification.ukf import run_ukf
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import State, STATE_NAMES
+from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
 
 METHODS = ('ekf', 'ukf', 'filter_error', 'output_error', 'equation_error')
 HOLDOUT_FRACTION = 0.2      # final part of the record kept for validation without --validate
@@ -139,7 +142,8 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
     validation : a Source to validate on (None: the final `holdout` fraction of `source`, left
         out of the identification)
     progress : callable(method name), called before each method
-    mass_inverse : the identified model's M^-1 (core.model.Model; 'exact' to identify added
+    mass_inverse : the identified model's M^-1 (core.model.hydrodynamics.Model; 'exact' to identify
+    added
         mass with the methods that can)
 
     Returns the result dict (JSON-ready): 'source', 'vehicle', 'coefficients' (names),

@@ -19,7 +19,7 @@ What a worker needs travels with the task or with the cluster registration:
   identification creates no ROS node, but nothing spawned here may leave loopback if it did);
 - AUV_IDENT_THREADS in the same environment: the usable CPUs shared out among the local
   workers (:func:`difference_threads_env`), as each identification runs its finite
-  differences on that many threads (core/batch.py).
+  differences on that many threads (core/identification/batch.py).
 """
 import asyncio
 import contextlib
@@ -33,8 +33,8 @@ import time
 from distributed import as_completed, Client, get_worker, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from auv_ident.core.batch import difference_threads
 from auv_ident.core.errors import AuvIdentError, ConfigError
+from auv_ident.core.identification.batch import difference_threads
 from auv_ident.vehicles import resolve_vehicle_path
 
 WORKER_ENV = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -128,7 +128,8 @@ def worker_address():
 
 def difference_threads_env(workers):
     """AUV_IDENT_THREADS for each of `workers` local workers: the usable CPUs shared out
-    (at least 1), so that the threaded finite differences of core/batch.py do not put more
+    (at least 1), so that the threaded finite differences of core/identification/batch.py do not
+    put more
     threads on the machine than it has cores; {} when the user set AUV_IDENT_THREADS."""
     if os.environ.get('AUV_IDENT_THREADS', '').strip():
         return {}

@@ -8,16 +8,16 @@ import time
 
 import numpy as np
 
-from auv_ident.core.errors import ConfigError
-from auv_ident.core.current import parse_current
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import ar1_noise, DEFAULT_NOISE_STD, perturbed_values
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import Input
-from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.bag_identify import bag_source
 from auv_ident.analysis.identification import identify_with_diagnosis
-from auv_ident.analysis.results import (coefficient_list, DEFAULT_NOISE_MODE, make_config, Source)
+from auv_ident.analysis.results import coefficient_list, DEFAULT_NOISE_MODE, make_config, Source
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.model.current import parse_current
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD, perturbed_values
+from auv_ident.core.model.state import Input
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.vehicles import load_vehicle
 
 DEFAULT_DURATION = 600.0     # s of the identification run
 DEFAULT_MANEUVER = 'ident'
@@ -30,16 +30,16 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
                        noise_tau=0.0, perturb=0.0):
     """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
     if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
-    core/current.py) and the velocity reference of the simulated sensor, with the noise model
+    core/model/current.py) and the velocity reference of the simulated sensor, with the noise model
     from the data and a diagnosis (analysis/identification.py). Returns (Result, Run, Model).
 
     Data the identifier's assumptions do not hold for (issue #14), neither told to it:
     noise_level, noise_tau : the measurement noise is noise_level x cfg.noise_std, first-order
-        correlated with time constant noise_tau (s; core.sensors.ar1_noise), drawn from
+        correlated with time constant noise_tau (s; core.model.sensors.ar1_noise), drawn from
         default_rng([seed, 1]); 1.0 and 0 are the white noise the filter assumes
     perturb : every coefficient but the identified ones (and added mass) is scaled by
         U(1 - perturb, 1 + perturb) in the truth (default_rng([seed, 2]),
-        core.sensors.perturbed_values), the identifier keeps the file's values: a wrong
+        core.model.sensors.perturbed_values), the identifier keeps the file's values: a wrong
         prior"""
     v = load_vehicle(vehicle_name)
     values = (perturbed_values(v, perturb, np.random.default_rng([seed, 2]), keep=names)
@@ -69,7 +69,8 @@ def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
     NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
     or what a bag of our simulator says). mass_inverse: M^-1 of the model that simulates or
-    pairs the run ('default': the vehicle file's; core.model.Model); the Source's vehicle
+    pairs the run ('default': the vehicle file's; core.model.hydrodynamics.Model); the Source's
+    vehicle
     then says it (its `mass_inverse`), so that every Model made of it uses it."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
@@ -144,7 +145,7 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     `scheduler` if given, else on a local cluster of `jobs` worker processes, or one after the
     other in this process for jobs <= 1. Each case is a function of its seed and offset only,
     and the statistics are taken in case order, so every way gives the same numbers."""
-    from auv_ident.analysis import engine      # distributed is imported only when used
+    from auv_ident.analysis import engine  # distributed is imported only when used
     vehicle = engine.VehicleText.read(vehicle_name)
     cases = [(vehicle, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
               tau, noise_level, noise_tau, perturb) for s in range(seeds) for off in offsets]

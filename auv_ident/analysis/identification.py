@@ -13,20 +13,21 @@ import time
 
 import numpy as np
 
-from auv_ident.core.batch import Result
-from auv_ident.core.current import split_current
-from auv_ident.core.diagnosis import assess
-from auv_ident.core.noise_fit import identify_runs_with_noise_model
-from auv_ident.core.selection import identify_auto
-from auv_ident.core.state import State
-from auv_ident.core.timing import nominal_sample_time
+from auv_ident.core.filter.timing import nominal_sample_time
+from auv_ident.core.identification.batch import Result
+from auv_ident.core.identification.diagnosis import assess
+from auv_ident.core.identification.noise_fit import identify_runs_with_noise_model
+from auv_ident.core.identification.selection import identify_auto
+from auv_ident.core.model.current import split_current
+from auv_ident.core.model.state import State
 
 
 def diagnosed(model, records, T, fit, ekf_est, ekf_cov, est, cov, mean_nis_per_dof,
               refine_pass):
-    """Identifiability and diagnosis (core.diagnosis.assess) of an identification of the
+    """Identifiability and diagnosis (core.identification.diagnosis.assess) of an identification of
+    the
     paired records [(t, Y, U), ...] made with the noise model (its NoiseFit `fit`), and the
-    water current split off the estimates (core.current.split_current). Returns (estimate,
+    water current split off the estimates (core.model.current.split_current). Returns (estimate,
     cov, ekf estimate, ekf cov, current, verdicts, diagnosis) of the coefficients."""
     U = np.concatenate([np.asarray(r[2]) for r in records])
     verdicts, diagnosis = assess(model.vehicle, model.theta_names, est, cov, fit, U, T,
@@ -38,7 +39,8 @@ def diagnosed(model, records, T, fit, ekf_est, ekf_cov, est, cov, mean_nis_per_d
 
 def identify_records(model, cfg, records, T, refine_pass=True, progress=None, ekf_pass=None,
                      hist_every=0, configured_nis=False):
-    """The noise model, EKF pass, refinement (core.noise_fit.identify_runs_with_noise_model),
+    """The noise model, EKF pass, refinement
+    (core.identification.noise_fit.identify_runs_with_noise_model),
     identifiability and diagnosis (:func:`diagnosed`) of one or several paired records.
 
     ekf_pass : (estimate, covariance) of an EKF pass already made with the configured noise
@@ -56,10 +58,10 @@ def identify_records(model, cfg, records, T, refine_pass=True, progress=None, ek
 
 def identify_with_diagnosis(model, cfg, t, Y, U, T=None, refine_pass=True, hist_every=0,
                             truth=None, progress=None):
-    """core.batch.identify's Result, identified with the noise model from the data
-    (core/noise_fit.py), with its ``noise_model`` (NoiseFit.document()), ``identifiability``
-    (per coefficient verdicts, None without a refinement) and ``diagnosis`` ({'consistent',
-    'messages', 'checks'}, core/diagnosis.py) filled in.
+    """core.identification.batch.identify's Result, identified with the noise model from the data
+    (core/identification/noise_fit.py), with its ``noise_model`` (NoiseFit.document()),
+    ``identifiability`` (per coefficient verdicts, None without a refinement) and ``diagnosis``
+    ({'consistent', 'messages', 'checks'}, core/identification/diagnosis.py) filled in.
 
     The histories (hist_every), R_final and Q_final are those of the EKF pass whose estimate
     is reported; mean_nis_per_dof is that of the pass with the configured noise (what the live
@@ -74,14 +76,14 @@ def identify_with_diagnosis(model, cfg, t, Y, U, T=None, refine_pass=True, hist_
 def identify_auto_with_diagnosis(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
                                  hist_every=0, truth_of=None, progress=None):
     """:func:`identify_with_diagnosis` with the coefficients chosen from the data
-    (`--coefficients auto[,NAME,...]`, core.selection.identify_auto): the same Result, of the
-    chosen set, judged the same way (its mean_nis_per_dof that of the chosen set's pass with
-    the configured noise).
+    (`--coefficients auto[,NAME,...]`, core.identification.selection.identify_auto): the same
+    Result, of the chosen set, judged the same way (its mean_nis_per_dof that of the chosen set's
+    pass with the configured noise).
 
     make_model : names -> Model identifying them (and the water current as wanted)
     named : coefficients always identified
     truth_of : names -> their true values (None: truth unknown)
-    Returns (Result, Model of the chosen set, core.selection.Selection)."""
+    Returns (Result, Model of the chosen set, core.identification.selection.Selection)."""
     t0 = time.perf_counter()
     T = nominal_sample_time(t) if T is None else T
     model, ekf_est, ekf_cov, est, cov, fit, selection = identify_auto(

@@ -6,13 +6,14 @@ The way a naval architect validates a manoeuvring model (issue #20, item 5):
   with its measured inputs (rudder, thrust, shaft speed held between their stamps), the saved
   model and the prior model (the vehicle file's values) fly freely; per channel the fit %
   (MATLAB ``compare``) and, for a ship, the total speed U = sqrt(u^2 + v^2);
-- **closed-loop zig-zag**, when the run is one (core/zigzag.py detects the test on its measured
+- **closed-loop zig-zag**, when the run is one (core/simulation/zigzag.py detects the test on its
+measured
   heading and rudder): the run's ordered rudder and switch angles and first side executed by a
   helm through the steering gear identified from the IDENTIFICATION runs' measured rudder
-  (core/steering.py), with the thrust from a thrust model fitted on the same runs
-  (core/thrust_fit.py, for a vehicle whose thrust is an input); the IMO overshoot angles of the
-  measured run, of the saved model, of the prior model, and of the saved model with an ideal
-  helm (no dead time; the difference is the helm's effect);
+  (core/simulation/steering.py), with the thrust from a thrust model fitted on the same runs
+  (core/identification/thrust_fit.py, for a vehicle whose thrust is an input); the IMO overshoot
+  angles of the measured run, of the saved model, of the prior model, and of the saved model with
+  an ideal helm (no dead time; the difference is the helm's effect);
 - a **rudder-neutral diagnosis** AFTER scoring: the constant rudder bias (deg) that makes the
   saved model's free run fit the yaw rate best. A basin's rudder zero is set by hand; a bias
   of a degree turns a 10/10 zig-zag visibly. It never enters the scores above.
@@ -22,8 +23,8 @@ to the output folder. Units: SI in files (m/s, rad/s, rad), degrees in tables an
 
 ROS-free above bags; matplotlib only in the figure functions (report_format.pyplot).
 """
-from dataclasses import dataclass
 import csv
+from dataclasses import dataclass
 import json
 import os
 from types import SimpleNamespace
@@ -32,17 +33,22 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from auv_ident.analysis import validation as mv
-from auv_ident.analysis.report_format import (finite_cell, markdown_table,
-                                              package_versions, pyplot, save_figure)
+from auv_ident.analysis.report_format import (
+    finite_cell,
+    markdown_table,
+    package_versions,
+    pyplot,
+    save_figure,
+)
 from auv_ident.analysis.report_html import write_html
 from auv_ident.analysis.results import write_json
 from auv_ident.analysis.zigzag import closed_loop
 from auv_ident.core.errors import ConfigError, DataError
-from auv_ident.core.model import Model
-from auv_ident.core.prediction import angle_channels, fit_percent, free_run
-from auv_ident.core.state import Input, N_STATE, State
-from auv_ident.core.steering import identify_steering_gear, SteeringGear
-from auv_ident.core.thrust_fit import fit_thrust_model
+from auv_ident.core.identification.thrust_fit import fit_thrust_model
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import Input, N_STATE, State
+from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
+from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
 from auv_ident.vehicles import load_vehicle
 
 DEG = 180.0 / np.pi
@@ -58,7 +64,7 @@ SWITCH_TOL_DEG = 1.0        # deg: a zig-zag's rudder reversals lie this close t
 class SavedModel:
     """A model written by `identify --json` (docs/report.md), as the report uses it.
 
-    vehicle : core.vehicle.Vehicle; names, estimate, std : the coefficients (vehicle-file
+    vehicle : core.model.vehicle.Vehicle; names, estimate, std : the coefficients (vehicle-file
     units); current : (3,) m/s NED or None; bags : the identification bags (paths as written);
     noise_std, q_state : (12,) the noise the identification judged the data with, or None
     """
@@ -109,7 +115,7 @@ def load_model(path, vehicle=None):
         if not isinstance(c, dict) or 'estimate' not in c:
             raise ConfigError(f'--model {path}: coefficient {n!r} has no "estimate"')
         if n not in v.names:
-            raise ConfigError(f'--model {path}: coefficient {n!r} is not one of {v.name}\'s')
+            raise ConfigError(f"--model {path}: coefficient {n!r} is not one of {v.name}'s")
         names.append(n)
         est.append(float(c['estimate']))
         std.append(float(c['std']) if c.get('std') is not None else float('nan'))
@@ -133,14 +139,15 @@ def refuse_identification_bag(bags, validate_bag):
         try:
             mv.refuse_same_bag(b, validate_bag)
         except ConfigError:
-            raise ConfigError(f'--validate {validate_bag} is one of the model\'s identification '
+            raise ConfigError(f"--validate {validate_bag} is one of the model's identification "
                               f'bags ({b}): validation needs a run the model never saw') from None
 
 
 # ----------------------------------------------------------------------------- measured runs
 
 def measured_run(src, t0=None):
-    """A Source's measured rows from t0 on (default: the first) as a run for core.zigzag /
+    """A Source's measured rows from t0 on (default: the first) as a run for core.simulation.zigzag
+    /
     steering / thrust_fit: ``t`` (s, from t0), ``x`` (N, 12; unmeasured channels 0),
     ``inputs`` rudder (rad, the command in force: what the bag logs as the rudder) and thrust
     (N), ``base`` the inputs (7,) of the first row."""
@@ -179,7 +186,8 @@ def helm_and_thrust(vehicle, runs, bags):
 
 
 def detect_zigzag(run):
-    """(ZigzagMeasures, None) if the run is a zig-zag (core.zigzag finds a held rudder angle,
+    """(ZigzagMeasures, None) if the run is a zig-zag (core.simulation.zigzag finds a held rudder
+    angle,
     reversals and at least one completed overshoot), else (None, why)."""
     from auv_ident.analysis.zigzag import measured_measures
     try:
@@ -245,7 +253,7 @@ def zigzag_validation(saved, run, x0, ident_runs, ident_bag_names):
            'gear': dict(ident.gear.as_dict(), rms_deg=ident.rms_deg,
                         reversals=len(ident.reversals), identified_from=list(ident_bag_names),
                         how='dead time + rate-limited first-order servo fitted to every rudder '
-                            'reversal of the identification runs (core/steering.py)'),
+                            'reversal of the identification runs (core/simulation/steering.py)'),
            'ideal_helm': ideal.as_dict(),
            'thrust_model': None if thrust is None else dict(
                thrust.as_dict(), fitted_on=list(ident_bag_names))}
@@ -394,7 +402,7 @@ def zigzag_lines(zz):
         return L + [f'Not a zig-zag run ({zz["reason"]}): no closed-loop comparison.']
     g = zz['gear']
     L += [f'The run is a {zz["test"]} zig-zag, first to {zz["first"]} (detected on the measured '
-          'heading and rudder, core/zigzag.py). The helm orders the rudder '
+          'heading and rudder, core/simulation/zigzag.py). The helm orders the rudder '
           f'{zz["rudder_deg"]:g} deg at the estimated order time {zz["execute_time_s"]:.2f} s '
           f'and reverses it each time the heading deviation passes {zz["switch_deg"]:g} deg; '
           'the order goes through a **steering gear identified from the measured rudder of '
@@ -403,7 +411,7 @@ def zigzag_lines(zz):
           f'servo time constant {g["time_constant_s"]:.3f} s, rms {g["rms_deg"]:.3f} deg. '
           'The ideal helm has no dead time and no servo lag, the same rate.']
     th = zz['thrust_model']
-    L += ['', 'Thrust: ' + ('not an input of this vehicle (the shaft speed of the run\'s first '
+    L += ['', 'Thrust: ' + ("not an input of this vehicle (the shaft speed of the run's first "
                             'sample is held).' if th is None else
                             f'{th["formula"]}, fitted on the identification runs '
                             f'({", ".join(th["fitted_on"])}; rms {th["rms_N"]:.2f} N).'), '']
@@ -447,11 +455,11 @@ def markdown(doc, figures):
     if b:
         L += ['', '## Diagnosis: rudder neutral', '',
               'After the scores above (which it does not change): the constant bias added to '
-              'the measured rudder that makes the identified model\'s free run fit the yaw rate '
+              "the measured rudder that makes the identified model's free run fit the yaw rate "
               f'best is {b["bias_deg"]:+.2f} deg (searched within +-{BIAS_BOUND_DEG:g} deg; yaw-'
               f'rate fit {b["r_fit_percent_with_bias"]:.1f} %, speed U fit '
               f'{b["U_fit_percent_with_bias"]:.1f} % with it). A value of a few tenths of a '
-              'degree or more says the run\'s rudder zero differs from that of the '
+              "degree or more says the run's rudder zero differs from that of the "
               'identification runs (or the model has an asymmetry it does not know).'
               + (' The bias is at the edge of the search: the yaw rate is not explained by a '
                  'rudder offset.' if b['at_bound'] else '')]

@@ -11,26 +11,31 @@ import os
 
 import numpy as np
 
-from auv_ident.analysis import experiments as ex
-from auv_ident.analysis import results
-from auv_ident.analysis.identification import (identify_auto_with_diagnosis,
-                                               identify_with_diagnosis)
-from auv_ident.analysis.report_format import (cell as _num, markdown_table as _table,
-                                              package_versions, pyplot as _plt,
-                                              save_figure as _save)
-from auv_ident.analysis.report_noise import (diagnosis_lines, fig_innovation_autocorrelation,
-                                             identifiability_markdown, noise_model_markdown)
-from auv_ident.analysis import validation as mv
+from auv_ident.analysis import experiments as ex, results, validation as mv
+from auv_ident.analysis.identification import identify_auto_with_diagnosis, identify_with_diagnosis
+from auv_ident.analysis.report_format import (
+    cell as _num,
+    markdown_table as _table,
+    package_versions,
+    pyplot as _plt,
+    save_figure as _save,
+)
 from auv_ident.analysis.report_html import write_html
-from auv_ident.core.errors import ConfigError
-from auv_ident.core.current import DEFAULT_CURRENT, parse_current
-from auv_ident.core.model import Model
-from auv_ident.core.selection import AUTO, parse_request
-from auv_ident.core.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
-from auv_ident.core.trim import initial_state
+from auv_ident.analysis.report_noise import (
+    diagnosis_lines,
+    fig_innovation_autocorrelation,
+    identifiability_markdown,
+    noise_model_markdown,
+)
 from auv_ident.core.angles import wrap_angle
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import EULER, Input, N_STATE, State, STATE_NAMES
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.identification.selection import AUTO, parse_request
+from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
+from auv_ident.core.model.state import EULER, Input, N_STATE, State, STATE_NAMES
+from auv_ident.core.model.trim import initial_state
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)
@@ -375,7 +380,8 @@ def _true_model_markdown(doc, src, val_error):
 
 def _selection_markdown(doc):
     """The report's section on the automatic choice of coefficients (lines), empty when the
-    coefficients were named (`--coefficients auto[,NAME,...]`, core/selection.py)."""
+    coefficients were named (`--coefficients auto[,NAME,...]`,
+    core/identification/selection.py)."""
     sel = doc.get('selection')
     if not sel:
         return []
@@ -384,7 +390,7 @@ def _selection_markdown(doc):
          'identification data (' + sel['criteria']['method'] + '): '
          + ', '.join(sel['chosen'])
          + (f'; always included (named): {", ".join(sel["named"])}' if sel['named'] else '')
-         + '. The others keep the vehicle file\'s values; the error bars include their '
+         + ". The others keep the vehicle file's values; the error bars include their "
          f'errors ({100 * sel["criteria"]["prior_rel_std"]:g} % 1-sigma each, consider '
          'analysis).', '']
     groups = {}     # by the reason's kind, as Selection.summary (figures in result.json)
@@ -442,7 +448,8 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
     out_dir : str, created if missing
     vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source;
         with a bag, coefficients may also be 'auto[,NAME,...]': the set is chosen from the
-        identification data (core/selection.py) and validated, result.json gets `selection`
+        identification data (core/identification/selection.py) and validated, result.json gets
+        `selection`
     noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
     command : the command line that produced the report (quoted in report.md)
     validation_maneuver, validation_duration : held-out manoeuvre and its length (s) of the
@@ -450,7 +457,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         seed + 1000 when it has one) and its process noise is DEFAULT_PROCESS_STD
     progress : show progress bars (only when stderr is a terminal)
     current, current_down : the water current ('estimate', 'none' or 'N,E[,D]' m/s NED; and
-        whether its down component is estimated), core/current.py
+        whether its down component is estimated), core/model/current.py
     sim_current : (3,) m/s NED, the current a simulated run flies in (None: still water)
     velocity_reference : 'ground' or 'water', what the velocities are (None: 'ground', or what
         a bag of our simulator says)
@@ -464,15 +471,15 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
         `methods` and report.md a section "Methods side by side" (None: not run)
     mass_inverse : M^-1 of every model of the report, identified, prior and true ('default':
         the vehicle file's; 'exact' lets the added-mass coefficients be identified and chosen
-        by auto; core.vehicle.Vehicle.with_mass_inverse)
+        by auto; core.model.vehicle.Vehicle.with_mass_inverse)
 
     Returns
     -------
     dict with 'report', 'html', 'json' and 'figures' (name -> path) paths and 'result' (the JSON
     doc)
     """
-    from auv_ident.analysis.progress import Progress
     from auv_ident.analysis.bag_identify import bag_source
+    from auv_ident.analysis.progress import Progress
     mv.refuse_same_bag(bag, validate_bag)        # before anything is loaded or written
     opt = parse_current(current, current_down)
     # 'auto[,NAME,...]' (a bag): the source is paired for the named (or the default) set, the

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from auv_ident.analysis.report_format import cell, markdown_table, pyplot, save_figure
-from auv_ident.core.state import STATE_NAMES, STATE_UNITS
+from auv_ident.core.model.state import STATE_NAMES, STATE_UNITS
 
 # A white sequence's sample autocorrelation at a lag > 0 lies within +-1.96 / sqrt(n) with
 # probability 95 % (Bartlett), the band drawn in the figure
@@ -33,7 +33,8 @@ def noise_model_markdown(doc):
         return []
     L = ['', '## Noise model from the data', '',
          'Per measured channel, from the innovations of the EKF pass with the configured noise '
-         '(core/noise_fit.py): level = RMS of the whitened innovations (1: the configured '
+         '(core/identification/noise_fit.py): level = RMS of the whitened innovations (1: the '
+         'configured '
          'noise holds), lag-1 autocorrelation (AR(1)) and its time constant, the Ljung-Box '
          f'whiteness test over {len(next(iter(nm["channels"].values()), {}).get("acf", [0])) - 1}'
          ' lags, and the 1-sigma the identification used (the configured one, or the effective '

@@ -1,13 +1,13 @@
 """Identification results as users see them: the coefficient table, the JSON document, and the
 data a batch method takes (:class:`Source`)."""
-import json
 from dataclasses import dataclass
+import json
 
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.filter import FilterConfig
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 
 DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R wins on accuracy
 
@@ -15,9 +15,9 @@ def coefficient_list(vehicle, text):
     """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
     names = [n.strip() for n in (text or '').split(',') if n.strip()]
     if names and names[0].lower() == 'auto':
-        raise ConfigError("--coefficients auto chooses from a recorded run: use it with "
-                          "identify --bag or report --bag (a simulated run: simulate --out "
-                          "BAGDIR first)")
+        raise ConfigError('--coefficients auto chooses from a recorded run: use it with '
+                          'identify --bag or report --bag (a simulated run: simulate --out '
+                          'BAGDIR first)')
     names = names or list(vehicle.identify_default)
     if not names:
         raise ConfigError(f'no coefficients chosen and {vehicle.name} has no identify_default')
@@ -33,7 +33,7 @@ def make_config(names, noise_mode=DEFAULT_NOISE_MODE, initial_offset=0.5, initia
 class Source:
     """Data to identify from: a simulated run or a bag, as arrays on the sample grid.
 
-    U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/stream.py);
+    U[k] is the command in force over [t_k, t_k+1) (the pairing rule of core/filter/stream.py);
     X_true, truth and current_truth are known only for simulated data."""
 
     vehicle: object
@@ -62,7 +62,7 @@ def paper_values(vehicle, name):
 def current_dict(cur, truth=None):
     """The JSON `current` of a result (schema in docs/report.md): the estimate in m/s NED and
     its 1-sigma, the EKF pass's, what was estimated, and whether the run separates it from the
-    coefficients. cur: core.current.CurrentEstimate; truth: (3,) if known."""
+    coefficients. cur: core.model.current.CurrentEstimate; truth: (3,) if known."""
     if cur is None:
         return None
     d = {'north': float(cur.estimate[0]), 'east': float(cur.estimate[1]),

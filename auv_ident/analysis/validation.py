@@ -5,8 +5,8 @@ final part of the identification bag held out from identification): from the run
 initial state and with its measured commands (zero-order hold on the run's own stamps), the
 identified model and the prior model (the vehicle file's values) fly freely; their channels are
 compared with the measured ones by fit % (MATLAB ``compare``), RMSE and Theil's inequality
-coefficient (core/prediction.py). Positions and heading drift in any free run (an error in
-speed integrates), so they are also scored by K-step-ahead prediction: the model restarts from
+coefficient (core/simulation/prediction.py). Positions and heading drift in any free run (an error
+in speed integrates), so they are also scored by K-step-ahead prediction: the model restarts from
 the measured state every K measurements and predicts the next K.
 
 The identified water current (if any) flies with the identified model; the prior model flies
@@ -28,16 +28,28 @@ import os
 
 import numpy as np
 
-from auv_ident.analysis.report_format import (finite_cell, markdown_table, pyplot,
-                                              save_figure)
-from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.prediction import (angle_channels, DEFAULT_MAX_STEP, fit_percent, free_run,
-                                       rmse, theil)
+from auv_ident.analysis.report_format import finite_cell, markdown_table, pyplot, save_figure
 from auv_ident.core.angles import wrap_angle
-from auv_ident.core.state import (EULER, Input, N_STATE, NU_NAMES, State, STATE_NAMES,
-                                  STATE_UNITS)
-from auv_ident.core.trim import initial_state
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import (
+    EULER,
+    Input,
+    N_STATE,
+    NU_NAMES,
+    State,
+    STATE_NAMES,
+    STATE_UNITS,
+)
+from auv_ident.core.model.trim import initial_state
+from auv_ident.core.simulation.prediction import (
+    angle_channels,
+    DEFAULT_MAX_STEP,
+    fit_percent,
+    free_run,
+    rmse,
+    theil,
+)
 
 DEFAULT_HOLDOUT = 0.25          # fraction of the identification run held out (its final part)
 HORIZONS = (1, 10, 100)         # K of the K-step-ahead prediction (measurement samples)
@@ -159,9 +171,9 @@ def k_step_on_measurements(f, t, U, Y, K, x0, max_step=DEFAULT_MAX_STEP):
     """K-step-ahead prediction counted in measurements: restart at the measured state every K
     measured samples and predict up to the K-th next one.
 
-    Unlike core.prediction.k_step_prediction (K rows), rows without a measurement (the command
-    changes between samples, which carry the exact zero-order hold) are not restart points and
-    do not count toward K. A restart takes the measured channels and, for channels missing
+    Unlike core.simulation.prediction.k_step_prediction (K rows), rows without a measurement (the
+    command changes between samples, which carry the exact zero-order hold) are not restart points
+    and do not count toward K. A restart takes the measured channels and, for channels missing
     there, the prediction that arrives at that row. Row 0 holds x0; a restart row holds the
     prediction that arrives at it (not the measurement). (N, 12), NaN where a segment failed.
     """
@@ -296,7 +308,7 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
 
     Parameters
     ----------
-    vehicle : core.vehicle.Vehicle; its file's values are the prior model (and the truth of a
+    vehicle : core.model.vehicle.Vehicle; its file's values are the prior model (and the truth of a
         simulated run)
     names, estimate : the identified coefficients and their values (vehicle-file units)
     current : (3,) m/s NED, the identified (or given) water current the identified model flies
@@ -420,14 +432,14 @@ def markdown_lines(vd, held_out_fraction=None):
     win = vd['initial_state']['fit_window_s']
     start = (f'the straight-line fit of each channel over the first {win:g} s of measurements'
              if win else 'the first complete measured sample')
-    L += ['', f'From the initial state at the first complete sample ({start}), with the run\'s '
+    L += ['', f"From the initial state at the first complete sample ({start}), with the run's "
               'measured commands held between their stamps, the identified model'
           + (' (in the identified current ' + ', '.join(f'{c:.3g}' for c in cur)
              + ' m/s N, E, D)' if cur else '')
-          + ' and the prior model (the vehicle file\'s values, still water)'
+          + " and the prior model (the vehicle file's values, still water)"
           + (' and the true model' if 'truth' in models else '')
           + ' fly freely; per channel: fit % = 100 (1 - ||y - y_hat|| / ||y - mean y||) '
-            '(100 perfect, 0 no better than the mean), RMSE, and Theil\'s inequality '
+            "(100 perfect, 0 no better than the mean), RMSE, and Theil's inequality "
             'coefficient (0 perfect, below ~0.3 adequate).']
     if vd['initial_state']['filled']:
         L += ['', 'Initial state channels not measured: '

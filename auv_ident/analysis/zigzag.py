@@ -1,8 +1,9 @@
 """Zig-zag measures, steering gear and thrust model of measured runs, as tables.
 
-Glue over :mod:`auv_ident.core.zigzag`, :mod:`~auv_ident.core.steering`,
-:mod:`~auv_ident.core.thrust_fit` for files read with :mod:`auv_ident.bags.importers`
-(tools/zigzag_measures.py prints these tables; docs/zigzag.md shows them):
+Glue over :mod:`auv_ident.core.simulation.zigzag`, :mod:`~auv_ident.core.simulation.steering`,
+:mod:`~auv_ident.core.identification.thrust_fit` for files read with
+:mod:`auv_ident.offline.importers` (tools/zigzag_measures.py prints these tables; docs/zigzag.md
+shows them):
 
 - :func:`load_hsva_runs` reads the four HSVA KVLCC2 zig-zags (SIMMAN 2008) from a directory;
 - :func:`measured_measures` gives the measures of a run with its first execute at the order
@@ -16,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from auv_ident.bags.importers import read_hsva
 from auv_ident.core.errors import DataError
-from auv_ident.core.state import State
-from auv_ident.core.zigzag import zigzag_measures
-from auv_ident.core.zigzag_sim import simulate_zigzag
+from auv_ident.core.model.state import State
+from auv_ident.core.simulation.zigzag import zigzag_measures
+from auv_ident.core.simulation.zigzag_sim import simulate_zigzag
+from auv_ident.offline.importers import read_hsva
 
 HSVA_RUNS = ('Z_10_10_S', 'Z_10_10_P', 'Z_20_10_S', 'Z_20_10_P')
 HSVA_PATTERN = 'HSVA_CPMC_KVLCC2_{}.dat'

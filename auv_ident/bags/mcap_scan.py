@@ -16,8 +16,18 @@ import struct
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Header, Message,
-                          MessageIndex, Metadata, Schema)
+from mcap.records import (
+    Attachment,
+    Channel,
+    Chunk,
+    DataEnd,
+    Footer,
+    Header,
+    Message,
+    MessageIndex,
+    Metadata,
+    Schema,
+)
 from mcap.stream_reader import breakup_chunk
 
 from auv_ident.bags.schema import MCAP_MAGIC

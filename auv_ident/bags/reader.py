@@ -494,7 +494,7 @@ def _select_topics(topics, present, path):
     if isinstance(topics, Mapping):
         expected = dict(topics)
     else:
-        expected = {t: None for t in topics}
+        expected = dict.fromkeys(topics)
     absent = [t for t in expected if t not in present]
     if absent:
         listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'

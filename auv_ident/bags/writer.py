@@ -12,18 +12,25 @@ from pathlib import Path
 import threading
 import weakref
 
-from mcap.writer import CompressionType
 # Why mcap.writer.Writer and not rosbags.rosbag2.Writer: rosbags writes its own comment-less
 # message definitions, no 'topic_type_hash' channel metadata and a fixed 1 MiB chunk held in
 # memory; mcap's Writer takes our rosbag2-exact schema text and channel metadata verbatim, a
 # chunk size of our choosing, and has a public flush() that closes the chunk in progress.
-from mcap.writer import Writer as McapWriter
+from mcap.writer import CompressionType, Writer as McapWriter
 import yaml
 
 from auv_ident import __version__
-from auv_ident.bags.schema import (BagError, DEFAULT_CHUNK_SIZE, message_definition,
-                                   METADATA_VERSION, normalize_msgtype, _qos_list, qos_yaml,
-                                   ROS_DISTRO, type_hash)
+from auv_ident.bags.schema import (
+    _qos_list,
+    BagError,
+    DEFAULT_CHUNK_SIZE,
+    message_definition,
+    METADATA_VERSION,
+    normalize_msgtype,
+    qos_yaml,
+    ROS_DISTRO,
+    type_hash,
+)
 
 _dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
 
@@ -128,7 +135,7 @@ class BagWriter:
     def __init__(self, path, compression=None, chunk_size=DEFAULT_CHUNK_SIZE):
         self.path = Path(path)
         if compression not in (None, 'zstd'):
-            raise BagError(f'{self.path}: compression must be None or \'zstd\', '
+            raise BagError(f"{self.path}: compression must be None or 'zstd', "
                            f'got {compression!r}')
         if self.path.exists():
             raise BagError(f'{self.path}: bag path exists already, not overwriting')

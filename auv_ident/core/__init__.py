@@ -1,13 +1,21 @@
-"""The ROS-free core: vehicle data, model, integrators, EKF, noise adaptation, identification."""
+"""The ROS-free core, in four parts that import one way:
+
+    model  <-  filter  <-  identification
+    model  <-  simulation
+
+model/ (state layout, vehicle files, the hydrodynamic model, the current), filter/ (the
+augmented EKF), identification/ (batch methods, noise model, choice of coefficients,
+uncertainty, diagnosis), simulation/ (manoeuvres, simulator, prediction, zig-zags); errors.py,
+angles.py and compiled_cache.py serve them all."""
 import os
 
-from .compiled_cache import register
+from auv_ident.core.compiled_cache import register
 
 # The files holding the numba code compiled with cache=True and every core module that code
 # reads (it freezes their constants and inlines their functions): numba's cache of each is
 # keyed on all of them together (compiled_cache.py). test_ekf checks the list is complete.
-COMPILED_SOURCES = ('errors.py', 'state.py', 'vehicle.py', 'monomials.py', 'current_terms.py',
-                    'planar.py',
-                    'model.py', 'ekf.py', 'timing.py', 'propagation.py')
+COMPILED_SOURCES = ('errors.py', 'model/state.py', 'model/vehicle.py', 'model/monomials.py',
+                    'model/current_terms.py', 'model/planar.py', 'model/hydrodynamics.py',
+                    'filter/ekf.py', 'filter/timing.py', 'filter/propagation.py')
 
 register(os.path.dirname(os.path.abspath(__file__)), COMPILED_SOURCES)

@@ -17,19 +17,20 @@ import os
 
 from numba.core import caching
 
-_GROUPS = {}        # absolute folder -> file names of the group in it
+_GROUPS = {}        # absolute root folder -> paths of the group's files, relative to it
 
 
 def register(folder, sources):
-    """Key numba's cache of every function in `sources` (file names in `folder`) on the digest
-    of all of them (module docstring)."""
+    """Key numba's cache of every function in `sources` (paths relative to `folder`, '/'
+    separated) on the digest of all of them (module docstring)."""
     _GROUPS[os.path.abspath(folder)] = tuple(sources)
     if GroupStampLocator not in caching.CacheImpl._locator_classes:
         caching.CacheImpl._locator_classes.insert(0, GroupStampLocator)
 
 
 def group_digest(folder, sources):
-    """sha256 (hex) of the files `sources` in `folder`, each with its name and length."""
+    """sha256 (hex) of the files `sources` (paths relative to `folder`), each with its path and
+    length."""
     h = hashlib.sha256()
     for name in sources:
         with open(os.path.join(folder, name), 'rb') as f:
@@ -64,9 +65,12 @@ class GroupStampLocator(caching._CacheLocator):
 
     @classmethod
     def from_function(cls, py_func, py_file):
-        folder, name = os.path.split(os.path.abspath(py_file))
-        sources = _GROUPS.get(folder, ())
-        if name not in sources:
+        path = os.path.abspath(py_file)
+        for folder, sources in _GROUPS.items():
+            name = os.path.relpath(path, folder).replace(os.sep, '/')
+            if name in sources:
+                break
+        else:
             return None           # not ours: numba's next locator takes it
         try:
             stamp = group_digest(folder, sources)

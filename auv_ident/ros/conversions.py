@@ -8,9 +8,14 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from auv_ident.session.messages import (actuator_joint_fields, ConversionError,
-                                        JOINT_NAMES, NS_PER_S,
-                                        odometry_fields, sec_to_ns)
+from auv_ident.session.messages import (
+    actuator_joint_fields,
+    ConversionError,
+    JOINT_NAMES,
+    NS_PER_S,
+    odometry_fields,
+    sec_to_ns,
+)
 
 
 def ns_to_stamp(t_ns):

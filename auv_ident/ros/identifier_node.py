@@ -1,9 +1,9 @@
 """Online identification of hydrodynamic coefficients: ``ros2 run auv_ident identifier``.
 
 Thin layer over :class:`auv_ident.session.session.IdentSession` (message conversion, rejection
-policy, the augmented EKF through core.stream.StreamIdentifier, recovery, health rule). Offline,
-:func:`auv_ident.bags.replay.replay_bag` drives the same class with a bag's messages in log-time
-order, so a recorded run replays to the same estimates.
+policy, the augmented EKF through core.filter.stream.StreamIdentifier, recovery, health rule).
+Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's messages in
+log-time order, so a recorded run replays to the same estimates.
 
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these)
@@ -113,13 +113,13 @@ start-up, declared read-only)
 Coefficients chosen from the data (``coefficients`` [auto] or [auto, NAME, ...], as offline
 ``identify --bag --coefficients auto[,NAME,...]``; auv_ident/session/auto_choice.py): the node
 identifies and publishes the named coefficients (none named: identify_default) while it keeps
-the accepted odometry and commands of the first ``auto_window`` s; then core/selection.py's
-stepwise pass chooses the set from them in a worker thread (the callbacks go on identifying
-and keeping messages), a filter of the chosen set is fed the kept record, and the node switches
-to it at the next message or 1 Hz tick: logged (the set, every left-out coefficient by reason),
-then published at once. A choice that fails is logged once as an error and the running set
-stays. 'auto' with ``warm_start`` is a parameter error (the file fixes the set). Cost and
-figures: docs/ros.md.
+the accepted odometry and commands of the first ``auto_window`` s; then
+core/identification/selection.py's stepwise pass chooses the set from them in a worker thread (the
+callbacks go on identifying and keeping messages), a filter of the chosen set is fed the kept
+record, and the node switches to it at the next message or 1 Hz tick: logged (the set, every
+left-out coefficient by reason), then published at once. A choice that fails is logged once as an
+error and the running set stays. 'auto' with ``warm_start`` is a parameter error (the file fixes
+the set). Cost and figures: docs/ros.md.
 
 Executor and latency: rclpy's EventsExecutor (ros/toolkit.py spin); the estimate and
 covariance messages are built once and refilled per update. docs/latency.md has the measured
@@ -141,13 +141,21 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.core.ekf import MODES
-from auv_ident.core.filter import DEFAULT_Q_STATE
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import CURRENT_NAMES, STATE_NAMES
+from auv_ident.core.filter.augmented import DEFAULT_Q_STATE
+from auv_ident.core.filter.ekf import MODES
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
-from auv_ident.ros.toolkit import (declare_parameters, DIAGNOSTICS_QOS, LATCHED_QOS,
-                                   optional_list, Param, run_node, spin, STREAM_QOS)
+from auv_ident.ros.toolkit import (
+    declare_parameters,
+    DIAGNOSTICS_QOS,
+    LATCHED_QOS,
+    optional_list,
+    Param,
+    run_node,
+    spin,
+    STREAM_QOS,
+)
 from auv_ident.session.auto_choice import AUTO_WINDOW_S, run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S

@@ -111,8 +111,8 @@ def _percentiles(values_ms):
 
 def compute_latency(run, n_samples):
     """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
-    from auv_ident.session.session import IdentSession
     from auv_ident.ros.sim_messages import sample_messages
+    from auv_ident.session.session import IdentSession
     s = IdentSession(sample_time=float(run.T))
     s.warm_up()
     out = []
@@ -136,19 +136,19 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     ``split``: receive the estimates with their MessageInfo, to split the latency at the DDS
     timestamps (module docstring). ``samples_path``: write the per-message times there (.npz).
     Raises RuntimeError if the identifier does not start or dies."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.experimental import EventsExecutor
     from rclpy.serialization import serialize_message
-    from diagnostic_msgs.msg import DiagnosticArray
-    from nav_msgs.msg import Odometry
     from sensor_msgs.msg import JointState
 
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
-    from auv_ident.vehicles import load_vehicle
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
     from auv_ident.ros.sim_messages import sample_messages
     from auv_ident.ros.toolkit import STREAM_QOS, SubscriberWait
+    from auv_ident.vehicles import load_vehicle
 
     if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
         raise ValueError('rate_hz and sim_seconds must be > 0, real_time_factor >= 0')

@@ -63,9 +63,19 @@ import yaml
 
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.ros.conversions import ns_to_stamp
-from auv_ident.ros.toolkit import (CLOCK_QOS, declare_parameters, message_class, number, Param,
-                                   required_string, resolve_topics, run_node, stream_qos,
-                                   strings, SubscriberWait)
+from auv_ident.ros.toolkit import (
+    CLOCK_QOS,
+    declare_parameters,
+    message_class,
+    number,
+    Param,
+    required_string,
+    resolve_topics,
+    run_node,
+    stream_qos,
+    strings,
+    SubscriberWait,
+)
 from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'player'

@@ -63,9 +63,20 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from auv_ident.bags.schema import BagError, normalize_msgtype
 from auv_ident.bags.writer import BagWriter
 from auv_ident.core.errors import ConfigError
-from auv_ident.ros.toolkit import (choice, declare_parameters, message_class, number, Param,
-                                   POLL_S, required_string, resolve_topics, run_node, spin,
-                                   stream_qos, strings)
+from auv_ident.ros.toolkit import (
+    choice,
+    declare_parameters,
+    message_class,
+    number,
+    Param,
+    POLL_S,
+    required_string,
+    resolve_topics,
+    run_node,
+    spin,
+    stream_qos,
+    strings,
+)
 from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'recorder'

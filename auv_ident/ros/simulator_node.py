@@ -1,6 +1,6 @@
 """Simulated AUV: ``ros2 run auv_ident simulator`` (or ``python -m auv_ident run simulator``).
 
-The whole run is computed at start-up with :func:`auv_ident.core.simulate.simulate`
+The whole run is computed at start-up with :func:`auv_ident.core.simulation.simulate.simulate`
 (deterministic: same parameters, same messages), then a timer publishes sample k's messages,
 built by :func:`auv_ident.ros.sim_messages.sample_messages` (the messages a simulated bag holds).
 When the run is over the node logs a summary and exits with status 0.
@@ -37,9 +37,10 @@ Parameters (``config/simulator.yaml``; read once at start-up, declared read-only
     ``rpm`` (float, 0.0 rpm)  shaft speed; 0 = the vehicle's cruise rpm.
     ``frame`` ('ned' | 'enu', 'ned')  convention of the published Odometry.
     ``noise_std`` (12 floats)  measurement 1-sigma of u v w (m/s), p q r (rad/s), x y z (m),
-        phi theta psi (rad); default core.simulate.DEFAULT_NOISE_STD.
-    ``process_noise`` (bool, false)  add white accelerations (core.simulate.DEFAULT_PROCESS_STD).
-    ``current`` (2 or 3 floats, [0, 0, 0] m/s)  a constant water current, NED (north, east[,
+        phi theta psi (rad); default core.simulation.simulate.DEFAULT_NOISE_STD.
+    ``process_noise`` (bool, false)  add white accelerations
+    (core.simulation.simulate.DEFAULT_PROCESS_STD). ``current`` (2 or 3 floats, [0, 0, 0] m/s)  a
+    constant water current, NED (north, east[,
         down]; where the water goes); zeros = still water (docs/current.md).
     ``velocity_reference`` ('ground' | 'water', 'ground')  what the published twist.linear is:
         over ground (DVL in bottom lock) or through the water (water-track DVL).
@@ -71,15 +72,25 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
-from auv_ident.core.maneuvers import MANEUVERS
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
-from auv_ident.core.simulate import simulate
-from auv_ident.bags.sim_bag import SIM_EPOCH_NS
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
+from auv_ident.core.simulation.maneuvers import MANEUVERS
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import SIM_EPOCH_NS
 from auv_ident.ros.conversions import ns_to_stamp
 from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
-from auv_ident.ros.toolkit import (choice, CLOCK_QOS, declare_parameters, number, Param,
-                                   run_node, spin, STREAM_QOS, strings, SubscriberWait)
+from auv_ident.ros.toolkit import (
+    choice,
+    CLOCK_QOS,
+    declare_parameters,
+    number,
+    Param,
+    run_node,
+    spin,
+    STREAM_QOS,
+    strings,
+    SubscriberWait,
+)
 from auv_ident.session.messages import FRAMES, sec_to_ns
 from auv_ident.session.settings import ParameterError
 from auv_ident.vehicles import load_vehicle
@@ -224,7 +235,7 @@ class SimulatorNode(Node):
         if not self.context.ok():   # shutting down (SIGINT during the timer callback)
             return
         if self.pub_clock is not None:
-            # simulated time is a date, as in a simulated bag (bags/sim_bag.py SIM_EPOCH)
+            # simulated time is a date, as in a simulated bag (offline/sim_bag.py SIM_EPOCH)
             self.pub_clock.publish(ClockMsg(clock=ns_to_stamp(
                 SIM_EPOCH_NS + sec_to_ns(float(self.run.t[k])))))
         msgs = sample_messages(self.run, k, self.frame, epoch_ns=SIM_EPOCH_NS)

@@ -2,8 +2,8 @@
 live from the first ``auto_window`` seconds of data.
 
 Offline, ``identify --bag BAG --coefficients auto[,NAME,...]`` chooses the coefficients from a
-recorded run (core/selection.py). Live, the session does the same from the run under way, in
-these steps (:attr:`AutoChoice.state` in brackets):
+recorded run (core/identification/selection.py). Live, the session does the same from the run under
+way, in these steps (:attr:`AutoChoice.state` in brackets):
 
 1. (``choosing``) The session identifies the named coefficients (none named: the vehicle's
    identify_default) exactly as it would without 'auto', so the node publishes from the first
@@ -12,9 +12,9 @@ these steps (:attr:`AutoChoice.state` in brackets):
    spans ``auto_window`` s.
 2. (``choosing``) The choice, :func:`choose_and_feed`, runs in the caller's runner: a worker
    thread in the node (:func:`run_in_thread`), inline by default (:func:`run_inline`, so that
-   a bag replay is deterministic). It runs core.selection.choose_coefficients on that record:
-   pass 1 of the offline selection (stepwise regression on the filter-error residuals at the
-   vehicle file's values), with the running filter's measurement noise (the median of the
+   a bag replay is deterministic). It runs core.identification.selection.choose_coefficients on
+   that record: pass 1 of the offline selection (stepwise regression on the filter-error residuals
+   at the vehicle file's values), with the running filter's measurement noise (the median of the
    accepted updates' R), q_state and channels. Then it builds a filter of the chosen set and
    feeds it the record. The coefficients the running filter identified start at its last good
    estimate, the others at the vehicle file's values, each with the prior 1-sigma p0_rel of
@@ -46,10 +46,17 @@ import time
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError, DivergenceError, DomainError
-from auv_ident.core.selection import choose_coefficients
-from auv_ident.core.stream import StreamIdentifier
-from auv_ident.session.guard import (checked_coefficients, COV_BLOWUP_FACTOR, FUSED_CODES,
-                                     GUARD_WINDOW, GuardWindow, LastGood, NisWindow)
+from auv_ident.core.filter.stream import StreamIdentifier
+from auv_ident.core.identification.selection import choose_coefficients
+from auv_ident.session.guard import (
+    checked_coefficients,
+    COV_BLOWUP_FACTOR,
+    FUSED_CODES,
+    GUARD_WINDOW,
+    GuardWindow,
+    LastGood,
+    NisWindow,
+)
 from auv_ident.session.record import exact_hold, median_noise_std, paired
 
 AUTO_WINDOW_S = 120.0   # s of accepted odometry the choice is made from (docs/ros.md: why)
@@ -136,7 +143,7 @@ class ChoiceResult:
 
 class ChosenFilter:
     """The chosen set's streaming filter, fed the kept record with the session's rules: the
-    same pairing, gate and covariance repair (core.stream), the same estimate check
+    same pairing, gate and covariance repair (core.filter.stream), the same estimate check
     (guard.checked_coefficients), health and guard windows, and last good estimate. Where the
     session would reset the filter (a core error, a sustained guard), this raises
     ChoiceFailed instead: a set whose filter fails on the data it was chosen from is not
@@ -255,8 +262,8 @@ class AutoChoice:
     runner : work -> Future (:func:`run_inline`, :func:`run_in_thread`)
 
     Attributes the caller reads: state (CHOOSING, CHOSEN, FAILED), selection (the
-    core.selection.Selection once chosen), reason (why it failed), news ([(level, text)]
-    lines to log, 'info' or 'error', then clear), data_s (s of odometry kept).
+    core.identification.selection.Selection once chosen), reason (why it failed), news ([(level,
+    text)] lines to log, 'info' or 'error', then clear), data_s (s of odometry kept).
     """
 
     def __init__(self, named, window_s, runner=None):
@@ -383,7 +390,7 @@ class AutoChoice:
             sel = self.selection
             return (f'coefficients chosen from {self.window_data_s:.1f} s of data: '
                     f'{len(sel.chosen)} of {sel.candidates} candidates ({", ".join(sel.chosen)})'
-                    f'; {len(sel.left_out)} left out at the vehicle file\'s values, each with '
+                    f"; {len(sel.left_out)} left out at the vehicle file's values, each with "
                     'its reason (auto_left_out_<name>)')
         return (f'automatic choice of coefficients failed: {self.reason}; identifying {coefs} '
                 '(the running set) instead')

@@ -26,6 +26,7 @@ import numpy as np
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
+
 def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps):
     """The JSON-ready dict of an estimate (schema in the module docstring)."""
     est = [float(v) for v in estimate]

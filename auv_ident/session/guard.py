@@ -8,8 +8,8 @@ Divergence guard (not in noise mode 'paper', whose adapted R makes the NIS meani
   NIS/dof <= 4 on simulated runs, <= 56 with unmodelled process noise and the default (small)
   q_state, where a tighter gate was measured to reject good data and wreck the estimate;
 - covariance: an update that finds or leaves the covariance non-positive-definite is repaired
-  by symmetrising and flooring the eigenvalues (core.filter.repair_covariance) and counted
-  in ``repairs``; the update stands;
+  by symmetrising and flooring the eigenvalues (core.filter.augmented.repair_covariance) and
+  counted in ``repairs``; the update stands;
 - reset rule: a core error that the repair cannot fix (DomainError; DivergenceError:
   non-finite state or covariance, a second failure after the repair, a coefficient 1-sigma
   above COV_BLOWUP_FACTOR (100) x its prior p0_rel |initial guess|), or innovations
@@ -46,8 +46,8 @@ import operator
 import numpy as np
 
 from auv_ident.core.errors import DivergenceError
-from auv_ident.core.filter import is_positive_definite
-from auv_ident.core.state import N_STATE
+from auv_ident.core.filter.augmented import is_positive_definite
+from auv_ident.core.model.state import N_STATE
 
 # Divergence guard
 OUTLIER_P = 1e-9            # chi-square tail of the innovation gate ...
@@ -324,7 +324,7 @@ def checked_coefficients(f, t, names, std_limits):
     scale), naming the parameters (names).
 
     Per message, so on lists where numpy's per-call overhead would dominate; the decisions
-    are those of the numpy forms (core.filter.is_positive_definite and so on)."""
+    are those of the numpy forms (core.filter.augmented.is_positive_definite and so on)."""
     est, cov = f.theta, f.theta_cov
     var = cov.diagonal()
     isfinite = math.isfinite
@@ -345,7 +345,7 @@ def checked_coefficients(f, t, names, std_limits):
 
 def _has_cholesky(P):
     """True if the finite matrix P has a Cholesky factor (numpy's, as
-    core.filter.is_positive_definite, whose finiteness check the caller did)."""
+    core.filter.augmented.is_positive_definite, whose finiteness check the caller did)."""
     try:
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError:

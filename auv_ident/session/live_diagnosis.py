@@ -1,8 +1,8 @@
 """The live identifier's diagnosis: what the running filter can say about its own error bars.
 
-Offline, ``identify`` judges a result by its refined residuals (core/diagnosis.py: residual-
-input cross-correlation, whiteness per channel, the refinement's convergence, a noise model).
-Live there is only the EKF: its innovations and its covariance. So the live diagnosis says
+Offline, ``identify`` judges a result by its refined residuals (core/identification/diagnosis.py:
+residual- input cross-correlation, whiteness per channel, the refinement's convergence, a noise
+model). Live there is only the EKF: its innovations and its covariance. So the live diagnosis says
 
 - whether the innovations agree with the filter's noise model: the mean NIS per degree of
   freedom over the health window (session/guard.py) against its chi-square band. Above the
@@ -10,10 +10,11 @@ Live there is only the EKF: its innovations and its covariance. So the live diag
   1-sigma do NOT hold: ``consistent`` false, said on the first line. Below the band it is
   conservative (a note). While the window fills, nothing is judged yet.
 - per parameter, how well the data so far determine it, from the EKF covariance
-  (core/uncertainty.py :func:`verdicts_from_covariance`): 'identifiable', 'weak' (with the
-  correlated partner) or 'not excited' (its 1-sigma still above NOT_INFORMED_RATIO of the
-  prior's), with the excitation that would help (core/diagnosis.py). A water-current
-  component is judged on its 1-sigma in m/s (core.diagnosis.current_std_limits), as offline.
+  (core/identification/uncertainty.py :func:`verdicts_from_covariance`): 'identifiable', 'weak'
+  (with the correlated partner) or 'not excited' (its 1-sigma still above NOT_INFORMED_RATIO of the
+  prior's), with the excitation that would help (core/identification/diagnosis.py). A water-current
+  component is judged on its 1-sigma in m/s (core.identification.diagnosis.current_std_limits), as
+  offline.
 
 The live verdict cannot see coloured noise that keeps the NIS in its band, nor a bias from
 wrong fixed coefficients: `identify --bag` on the recorded run can (docs/method.md).
@@ -22,15 +23,16 @@ import math
 
 import numpy as np
 
-from auv_ident.core.diagnosis import current_std_limits, weak_notes, with_advice
-from auv_ident.core.uncertainty import verdicts_from_covariance
+from auv_ident.core.identification.diagnosis import current_std_limits, weak_notes, with_advice
+from auv_ident.core.identification.uncertainty import verdicts_from_covariance
 from auv_ident.session.guard import NIS_WINDOW
 
 NOT_INFORMED_RATIO = 0.9    # 1-sigma above this fraction of the prior's: the data told nothing
 
 
 def live_verdicts(vehicle, names, estimate, cov, prior_std):
-    """Per identified parameter its verdict (core.uncertainty.verdicts_from_covariance) from the
+    """Per identified parameter its verdict
+    (core.identification.uncertainty.verdicts_from_covariance) from the
     filter covariance cov (p, p) and the prior 1-sigma prior_std (p,), with advice for the
     ones that are not identifiable."""
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))

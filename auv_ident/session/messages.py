@@ -16,7 +16,7 @@ State vector ``x12 = [u v w p q r x y z phi theta psi]``:
   ``phi, psi`` in (-pi, pi], ``theta`` in [-pi/2, pi/2].
 
 Actuator vector ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]``
-(core.state.Input; the name predates the thrust): rudder, stern planes, bow planes, port bow
+(core.model.state.Input; the name predates the thrust): rudder, stern planes, bow planes, port bow
 plane, starboard bow plane (rad), propeller speed (rpm) and measured propeller thrust (N).
 
 nav_msgs/Odometry (REP-105 semantics):
@@ -50,7 +50,7 @@ propeller entry 0.0 (meaningless); ``velocity = [0, 0, 0, 0, 0, shaft speed (rad
 makes rclpy's padding unreadable for rosbags' strict reader; an AUV's commands carry thrust 0).
 Readers match joints by name, in any order; a message without effort values reads as thrust 0
 (bags recorded before the thrust existed). :func:`actuator_joint_fields` is the one place
-both writers (ros/conversions.py, bags/sim_bag.py) take the layout from.
+both writers (ros/conversions.py, offline/sim_bag.py) take the layout from.
 
 Non-finite values pass through unchanged: the caller decides (see :func:`is_finite_state`).
 Bad input raises :class:`ConversionError` naming the field.
@@ -62,7 +62,7 @@ import numpy as np
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import AuvIdentError
-from auv_ident.core.state import FINS, Input, N_INPUT
+from auv_ident.core.model.state import FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
 
@@ -72,7 +72,7 @@ DEFAULT_FRAME_IDS = {
     'enu': ('odom', 'base_link'),
 }
 
-# the joint of each core.state.Input channel, in that order
+# the joint of each core.model.state.Input channel, in that order
 JOINT_NAMES = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                'bow_plane_starboard', 'propeller')
 PROPELLER_JOINT = 'propeller'
@@ -310,7 +310,7 @@ def odometry_fields(x12, frame='ned', pose_cov=None, twist_cov=None, frame_id=No
                     child_frame_id=None):
     """What a nav_msgs/Odometry of a NED/FRD state holds in convention ``frame``: the one
     computation behind both message builders (rclpy: ros/conversions.py, rosbags:
-    bags/sim_bag.py).
+    offline/sim_bag.py).
 
     Returns ``(pos (3,), quat (x, y, z, w), lin (3,), ang (3,), pose_cov (6, 6),
     twist_cov (6, 6), frame_id, child_frame_id)``; covariances are zeros if omitted, the frame
@@ -392,7 +392,7 @@ def _state(pos, quat, lin, ang):
             raise ConversionError('pose.pose.orientation is a zero quaternion') from None
     else:
         eul = (math.nan, math.nan, math.nan)
-    return np.array([*lin, *ang, *pos, *eul])     # core.state.State order
+    return np.array([*lin, *ang, *pos, *eul])     # core.model.state.State order
 
 
 def odometry_to_state(msg, frame='ned'):

@@ -2,18 +2,18 @@
 
 The identifier keeps the commands and the measurements it accepted in arrival order (replay_bag
 with keep_arrays, the live automatic choice's window: session/auto_choice.py). The batch methods
-(core/batch.py, core/selection.py) want one record on the sample grid instead: :func:`paired`
-pairs every measurement with the command in force at its stamp (the streaming identifier's
-rule, core/stream.py), and :func:`exact_hold` inserts the command changes between samples as
-rows without a measurement, so that a batch filter follows the same zero-order hold as the
-streaming one (core.timing.with_command_changes).
+(core/identification/batch.py, core/identification/selection.py) want one record on the sample grid
+instead: :func:`paired` pairs every measurement with the command in force at its stamp (the
+streaming identifier's rule, core/filter/stream.py), and :func:`exact_hold` inserts the command
+changes between samples as rows without a measurement, so that a batch filter follows the same
+zero-order hold as the streaming one (core.filter.timing.with_command_changes).
 """
 import bisect
 
 import numpy as np
 
-from auv_ident.core.state import N_INPUT, N_STATE
-from auv_ident.core.timing import with_command_changes
+from auv_ident.core.filter.timing import with_command_changes
+from auv_ident.core.model.state import N_INPUT, N_STATE
 
 
 def paired(commands, measurements):

@@ -16,7 +16,7 @@ naming the problem; the filter is untouched). Codes, in the order they are check
   channels are set to NaN and ignored; the message covariances are not used);
 - ``implausible``: a value no vehicle produces, i.e. wrong units or a wrong frame (the
   plausibility rule below);
-- from StreamIdentifier (core/stream.py, its docstring has the time rules): ``no command``,
+- from StreamIdentifier (core/filter/stream.py, its docstring has the time rules): ``no command``,
   ``stale command`` (the command in force is older than 1 s), ``command unknown`` (a
   newer command in the interval was rejected: the input is unknown), ``zero stamp``,
   ``duplicate stamp``, ``out of order``, ``time jump backwards`` (until five consistent
@@ -53,7 +53,7 @@ from functools import lru_cache
 import math
 import re
 
-from auv_ident.core.state import Input, N_FINS, State, STATE_NAMES, STATE_UNITS
+from auv_ident.core.model.state import Input, N_FINS, State, STATE_NAMES, STATE_UNITS
 from auv_ident.session.messages import JOINT_NAMES
 
 MAX_BODY_SPEED = 10.0       # m/s, |u| |v| |w|

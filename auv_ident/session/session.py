@@ -4,7 +4,7 @@
 array API takes what a message says as plain arrays and stamps:
 
 - :meth:`IdentSession.add_command` ``(stamp_ns, u6)``: an actuator command, fins (rad) and
-  shaft speed (rpm) in the layout of core/state.py's ``Input``;
+  shaft speed (rpm) in the layout of core/model/state.py's ``Input``;
 - :meth:`IdentSession.add_odometry` ``(stamp_ns, x12, frame_id, child_frame_id)``: a
   measured state ``[u v w p q r x y z phi theta psi]`` in NED/FRD (as
   :func:`auv_ident.session.messages.odometry_to_state` returns it) with the message's frame
@@ -16,10 +16,10 @@ read sensor_msgs/JointState and nav_msgs/Odometry objects (rclpy or rosbags, duc
 rejected as ``conversion``. Each call returns an :class:`~auv_ident.session.guard.Event`.
 
 Per message the session screens (rejection policy, frame-id and plausibility rules:
-session/screening.py), feeds :class:`auv_ident.core.stream.StreamIdentifier` (pairing with
+session/screening.py), feeds :class:`auv_ident.core.filter.stream.StreamIdentifier` (pairing with
 commands, time rules), checks the estimate, runs the divergence guard and reset rule, keeps
 the last good estimate and the health windows (session/guard.py). The identifier node
-(``ros/identifier_node.py``) and :func:`auv_ident.bags.replay.replay_bag` both drive one
+(``ros/identifier_node.py``) and :func:`auv_ident.offline.replay.replay_bag` both drive one
 IdentSession with the messages in arrival (log-time) order, so the same message sequence
 gives identical events and estimates online and offline. The estimate file (``~/save``,
 ``warm_start``) is session/estimate_file.py. With ``coefficients`` ['auto', ...] the session
@@ -31,32 +31,68 @@ import math
 
 import numpy as np
 
-from auv_ident.core.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE, FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
-from auv_ident.core.stream import StreamIdentifier
-from auv_ident.core.vehicle import P_FIN, P_NMAX
+from auv_ident.core.filter.augmented import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE, FilterConfig
+from auv_ident.core.filter.stream import StreamIdentifier
+from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
+from auv_ident.core.model.vehicle import P_FIN, P_NMAX
 from auv_ident.session.auto_choice import AUTO_WINDOW_S, AutoChoice, ChoiceJob
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
-from auv_ident.session.guard import (checked_coefficients, COV_BLOWUP_FACTOR, Event,
-                                     FUSED_CODES, GUARD_FACTOR, GUARD_PROBATION, GUARD_SECONDS,
-                                     GUARD_WINDOW, GuardWindow,
-                                     GROSS_NIS_FACTOR, Health, innovation_gate, judge_health,
-                                     LastGood, NisWindow, RESET_COV_INFLATION, reset_start)
+from auv_ident.session.guard import (
+    checked_coefficients,
+    COV_BLOWUP_FACTOR,
+    Event,
+    FUSED_CODES,
+    GROSS_NIS_FACTOR,
+    GUARD_FACTOR,
+    GUARD_PROBATION,
+    GUARD_SECONDS,
+    GUARD_WINDOW,
+    GuardWindow,
+    Health,
+    innovation_gate,
+    judge_health,
+    LastGood,
+    NisWindow,
+    RESET_COV_INFLATION,
+    reset_start,
+)
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
-from auv_ident.session.messages import (_as_vector, ConversionError, header_stamp_ns,
-                                        integer_stamp, joint_state_to_actuators, NS_PER_S,
-                                        odometry_state, odometry_variances)
-from auv_ident.session.screening import (command_problem, frame_problem,
-                                         implausible_states, nonfinite_states)
-from auv_ident.session.settings import (choice, coefficient_list, coefficient_request,
-                                        FRAMES, MASS_INVERSES,
-                                        max_command_age as command_age_limit, noise_model,
-                                        NOISE_MODES, NOISE_SOURCES, ParameterError, positive,
-                                        relative_offset, timing, vehicle_named)
+from auv_ident.session.messages import (
+    _as_vector,
+    ConversionError,
+    header_stamp_ns,
+    integer_stamp,
+    joint_state_to_actuators,
+    NS_PER_S,
+    odometry_state,
+    odometry_variances,
+)
+from auv_ident.session.screening import (
+    command_problem,
+    frame_problem,
+    implausible_states,
+    nonfinite_states,
+)
+from auv_ident.session.settings import (
+    choice,
+    coefficient_list,
+    coefficient_request,
+    FRAMES,
+    MASS_INVERSES,
+    max_command_age as command_age_limit,
+    noise_model,
+    NOISE_MODES,
+    NOISE_SOURCES,
+    ParameterError,
+    positive,
+    relative_offset,
+    timing,
+    vehicle_named,
+)
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -92,10 +128,10 @@ class IdentSession:
     frame : one of settings.FRAMES ('ned', 'enu'), convention of the incoming Odometry
     sample_time : s, nominal sample time and longest single prediction step
     max_gap : s, a longer gap restarts the vehicle states (coefficients kept); also the
-        horizon of backward time jumps and stale commands (core/stream.py)
+        horizon of backward time jumps and stale commands (core/filter/stream.py)
     max_bridge : s, longest gap between odometry stamps bridged by time updates; a longer one
         restarts the vehicle states too (0 or None: settings.MAX_BRIDGE_S = 0.25 s, at least
-        one sample time, at most max_gap; see core/stream.py for why)
+        one sample time, at most max_gap; see core/filter/stream.py for why)
     mass_inverse : one of settings.MASS_INVERSES ('default', 'exact', 'mss_literal')
     warm_start : '' or an estimate JSON path (start from its estimate and covariance; the
         coefficients only: a previous run's current is not this run's)
@@ -107,7 +143,7 @@ class IdentSession:
         variances of each message where they are finite and positive, noise_std for the other
         channels (one notice names them); 'parameter': noise_std always
     current : 'estimate' (default), 'none', or 'N,E[,D]' (m/s NED, a known current): the water
-        current (core/current.py). Estimated by default because every AUV runs in one and 0.1
+        current (core/model/current.py). Estimated by default because every AUV runs in one and 0.1
         m/s left out biases the coefficients beyond their error bars, while estimating a zero
         current costs nothing measurable;
         'none' is still water, the filter of before (bit for bit)
@@ -148,7 +184,7 @@ class IdentSession:
         initial_offset = relative_offset('initial_offset', initial_offset)
         noise, qs, mask = noise_model(noise_std, q_state, measured, DEFAULT_NOISE_STD,
                                       DEFAULT_Q_STATE)
-        # a planar vehicle's held states are not measurements (core/planar.py): their fields
+        # a planar vehicle's held states are not measurements (core/model/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
         auto, coefficients = coefficient_request(self.vehicle, coefficients)
@@ -287,7 +323,7 @@ class IdentSession:
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
         loads (or, with a stale cache, compiles: ~15 s) the EKF before real data arrive."""
-        from auv_ident.core.trim import initial_state
+        from auv_ident.core.model.trim import initial_state
         try:
             s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap)
             rpm = float(self.vehicle.cruise_rpm)
@@ -383,7 +419,7 @@ class IdentSession:
         """Buffer an actuator command. Returns an Event.
 
         stamp_ns : int, header stamp (ns)
-        u6 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/state.py ``Input``
+        u6 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/model/state.py ``Input``
             order; copied
         """
         try:

@@ -4,18 +4,18 @@ naming the setting (= the identifier node's parameter and the keyword of IdentSe
 The choice lists are defined once and imported from here by whoever needs them (IdentSession,
 the identifier node's parameter descriptions, the command line):
 
-- :data:`NOISE_MODES`: the filter's noise adaptation modes (core.ekf.MODES);
-- :data:`MASS_INVERSES`: how M^-1 is formed (core.model.Model's ``mass_inverse``);
+- :data:`NOISE_MODES`: the filter's noise adaptation modes (core.filter.ekf.MODES);
+- :data:`MASS_INVERSES`: how M^-1 is formed (core.model.hydrodynamics.Model's ``mass_inverse``);
 - :data:`FRAMES`: conventions of the incoming Odometry (session.messages, the frame algebra).
 """
 import math
 
 import numpy as np
 
-from auv_ident.core.ekf import MODES
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.selection import AUTO, parse_request
-from auv_ident.core.state import CURRENT_NAMES, N_STATE, STATE_NAMES
+from auv_ident.core.filter.ekf import MODES
+from auv_ident.core.identification.selection import AUTO, parse_request
+from auv_ident.core.model.state import CURRENT_NAMES, N_STATE, STATE_NAMES
 from auv_ident.session.messages import FRAMES
 from auv_ident.vehicles import load_vehicle
 
@@ -177,8 +177,9 @@ def vehicle_named(name):
 def coefficient_request(vehicle, coefficients):
     """(auto, names) of the `coefficients` setting: ['auto'] or ['auto', NAME, ...] asks for
     the set to be chosen from the data, NAME always included (session/auto_choice.py), with
-    the offline `--coefficients auto[,NAME,...]` semantics (core.selection.parse_request:
-    'auto' first, names as the vehicle file spells them, none twice, no current component);
+    the offline `--coefficients auto[,NAME,...]` semantics
+    (core.identification.selection.parse_request: 'auto' first, names as the vehicle file spells
+    them, none twice, no current component);
     any other list is returned as given (auto False) for :func:`coefficient_list`."""
     names = [str(n) for n in (coefficients or ())]
     if not any(n.strip().lower() == AUTO for n in names):
@@ -192,7 +193,7 @@ def coefficient_request(vehicle, coefficients):
 def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
     """Return (names, initial guesses or None, warm-start covariance or None).
 
-    vehicle : core.vehicle.Vehicle
+    vehicle : core.model.vehicle.Vehicle
     coefficients : names to identify (empty: the warm-start file's, else the vehicle's
         identify_default); returned in the vehicle's spelling
     initial : guesses in the same order (empty: none)

@@ -1,6 +1,7 @@
 """Rate limit for the warnings of rejected messages (the live identifier node's log)."""
 from collections import Counter
 
+
 class WarningLimiter:
     """Rate limit for the warnings of rejected messages: at most one line per key (topic and
     rejection code) per `period` of `clock` (seconds), and that line says how many like it

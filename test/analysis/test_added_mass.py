@@ -9,13 +9,13 @@ import json
 import subprocess
 import sys
 
+from helpers import REPO
 import numpy as np
 
 from auv_ident.analysis.experiments import identify_simulated
 from auv_ident.analysis.results import make_config
-from auv_ident.core.model import Model
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.vehicles import load_vehicle
-from helpers import REPO
 
 ADDED_MASS = ['Z_wdot', 'M_qdot']
 MAX_ERROR_PCT = 3.0

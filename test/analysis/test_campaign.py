@@ -12,20 +12,19 @@ import sys
 import threading
 import time
 
+from distributed import Client
 import numpy as np
 import pytest
-
-from distributed import Client
 
 from auv_ident.analysis import engine
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.analysis.campaign import find_bags, run_campaign
 from auv_ident.analysis.experiments import identify_simulated, montecarlo
 from auv_ident.analysis.results import make_config
-from auv_ident.bags.sim_bag import SIM_EPOCH_NS, write_run_bag
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import SIM_EPOCH_NS, write_run_bag
 from auv_ident.vehicles import load_vehicle
 
 DAY_NS = 86_400 * 1_000_000_000
@@ -279,7 +278,8 @@ def test_campaign_on_a_real_dask_scheduler_and_worker(archive, tmp_path):
 
 def test_local_workers_share_the_cores_for_the_finite_differences(cluster, monkeypatch):
     """Each of the 2 local workers gets AUV_IDENT_THREADS = usable CPUs // 2 (at least 1): the
-    threaded Jacobians of core/batch.py then do not oversubscribe the machine; a value the
+    threaded Jacobians of core/identification/batch.py then do not oversubscribe the machine; a
+    value the
     user set is left alone."""
     from distributed import Client
     with Client(cluster) as client:

@@ -5,11 +5,10 @@ import os
 
 import pytest
 
-from auv_ident.analysis.compare_methods import (METHODS, methods_markdown, parse_methods,
-                                                read_truth)
+from auv_ident.analysis.compare_methods import METHODS, methods_markdown, parse_methods, read_truth
 from auv_ident.cli import main
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.state import STATE_NAMES
+from auv_ident.core.model.state import STATE_NAMES
 
 
 @pytest.fixture(scope='module')
@@ -102,9 +101,9 @@ def test_bad_method_names_one_line_and_exit_2(capsys):
 def test_bag_with_a_validation_bag(tmp_path):
     """--bag A --validate B: identification on all of A (a simulated bag: its truth is known),
     the fit % on B, whose description is the bag's."""
-    from auv_ident.bags.sim_bag import write_run_bag
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
+    from auv_ident.offline.sim_bag import write_run_bag
     from auv_ident.vehicles import load_vehicle
     truth = Model(load_vehicle('nps_auv2'))
     a = write_run_bag(simulate(truth, 'ident', duration=60.0, seed=4), str(tmp_path / 'a'))
@@ -132,6 +131,7 @@ SHIPPED_BAG_DEFAULT = {'ekf': 0.5, 'ukf': 0.5, 'filter_error': 0.5, 'output_erro
 @pytest.mark.slow
 def test_shipped_bag_meets_the_documented_accuracy():
     from helpers import REPO
+
     from auv_ident.analysis.compare_methods import compare_methods
     from auv_ident.analysis.experiments import load_source
     doc = compare_methods(load_source(bag=os.path.join(REPO, 'bags', 'nps_auv2_ident')))

@@ -7,10 +7,10 @@ import yaml
 
 from auv_ident.analysis.bag_identify import identify_bags
 from auv_ident.bags.reader import BagError
-from auv_ident.bags.sim_bag import write_run_bag
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import N_STATE, State
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import N_STATE, State
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
 
 NAMES = 'Y_v,N_r,Y_dr,N_dr'

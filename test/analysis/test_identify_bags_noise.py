@@ -10,10 +10,10 @@ import pytest
 
 from auv_ident.analysis.bag_identify import identify_bags, REPLAY_REJECT_LIMIT
 from auv_ident.bags.reader import BagError
-from auv_ident.bags.sim_bag import write_run_bag
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.uncertainty import sandwich_covariance
+from auv_ident.core.identification.uncertainty import sandwich_covariance
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
 
 PAPER_SET = 'Z_ds,Z_q,Z_w,M_ds,K_v'
@@ -125,10 +125,11 @@ def test_the_imported_hsva_runs_need_no_hand_given_noise(tmp_path):
     every coefficient lands within 3 sigma of the hand-tuned identification
     (tools/kvlcc2_identify.py's noise and process noise, docs/kvlcc2.md)."""
     import importlib.util
+
     from kvlcc2_data import load_run, require_runs, run_path
     require_runs(('Z_10_10_S', 'Z_20_10_S'))
     from auv_ident.cli import main
-    from auv_ident.core.batch import identify_runs
+    from auv_ident.core.identification.batch import identify_runs
     spec = importlib.util.spec_from_file_location(
         'kvlcc2_identify', Path(__file__).resolve().parents[2] / 'tools' / 'kvlcc2_identify.py')
     tool = importlib.util.module_from_spec(spec)

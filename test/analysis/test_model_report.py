@@ -10,16 +10,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from auv_ident.bags.sim_bag import write_run_bag
 from auv_ident.cli import main
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
-from auv_ident.core.model import Model
-from auv_ident.core.prediction import fit_percent
-from auv_ident.core.state import Input, State
-from auv_ident.core.steering import SteeringGear
-from auv_ident.core.trim import initial_state
-from auv_ident.core.zigzag_sim import simulate_zigzag
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import Input, State
+from auv_ident.core.model.trim import initial_state
+from auv_ident.core.simulation.prediction import fit_percent
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.core.simulation.steering import SteeringGear
+from auv_ident.core.simulation.zigzag_sim import simulate_zigzag
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
 
 VEHICLE = 'kvlcc2_hsva'

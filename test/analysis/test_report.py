@@ -2,21 +2,21 @@
 import json
 import os
 
+from independent_data import DataConfig, generate
 import matplotlib.image
 import numpy as np
 import pytest
 import yaml
 
-from auv_ident.core import maneuvers
-from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.state import STATE_NAMES
-from auv_ident.vehicles import load_vehicle
 from auv_ident.analysis.experiments import load_source
-from auv_ident.analysis.results import coefficient_list
 from auv_ident.analysis.report import make_report, validate
+from auv_ident.analysis.results import coefficient_list
 from auv_ident.cli import main
-from independent_data import DataConfig, generate
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import STATE_NAMES
+from auv_ident.core.simulation import maneuvers
+from auv_ident.vehicles import load_vehicle
 
 FIGURES = ('convergence', 'measured_speeds', 'measured_pose', 'validation_positions',
            'validation_attitudes', 'validation_speeds', 'nis', 'adapted_noise',
@@ -143,7 +143,7 @@ def test_true_coefficients_reproduce_the_truth_exactly(nps):
     t, X_true, X_ident, rms = val
     assert val.maneuver == 'steps' and val.seed == 1001 and len(t) == len(X_true) == 801
     assert np.array_equal(X_true, X_ident)
-    assert rms == {n: 0.0 for n in STATE_NAMES}
+    assert rms == dict.fromkeys(STATE_NAMES, 0.0)
     # the manoeuvre moves the vehicle: a zero RMS is not from a vehicle at rest
     assert np.ptp(X_true[:, 11]) > 0.1 and np.ptp(X_true[:, 8]) > 0.1
 
@@ -221,7 +221,8 @@ def test_report_with_methods_side_by_side(tmp_path):
 
 def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set(tmp_path):
     """`report --bag A --coefficients auto,NAME --validate B`: the set is chosen from A
-    (core/selection.py), identified, and the chosen set (not only NAME) flies in the validation
+    (core/identification/selection.py), identified, and the chosen set (not only NAME) flies in the
+    validation
     on B; result.json has `selection`, report.md its section."""
     truth = generate(DataConfig(seed=7, duration=60.0, odom_rate=20.0, commands='periodic',
                                 perturb=0.2), tmp_path / 'A')

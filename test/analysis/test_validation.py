@@ -5,6 +5,7 @@ from html.parser import HTMLParser
 import json
 import os
 
+from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
@@ -14,15 +15,19 @@ from auv_ident.analysis.experiments import load_source
 from auv_ident.analysis.report import make_report
 from auv_ident.analysis.report_html import markdown_to_html
 from auv_ident.analysis.results import coefficient_list
-from auv_ident.analysis.validation import (refuse_identification_run, refuse_same_bag,
-                                           split_held_out, validate_on_bag, validate_on_run)
-from auv_ident.bags.sim_bag import write_run_bag
+from auv_ident.analysis.validation import (
+    refuse_identification_run,
+    refuse_same_bag,
+    split_held_out,
+    validate_on_bag,
+    validate_on_run,
+)
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import N_STATE, NU_NAMES, STATE_NAMES
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import N_STATE, NU_NAMES, STATE_NAMES
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
-from independent_data import DataConfig, generate
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 

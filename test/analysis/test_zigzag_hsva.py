@@ -9,12 +9,19 @@ from pathlib import Path
 
 import pytest
 
-from auv_ident.analysis.zigzag import (closed_loop, closed_loop_table, gear_table, HSVA_RUNS,
-                                       load_hsva_runs, measured_measures, measures_table)
+from auv_ident.analysis.zigzag import (
+    closed_loop,
+    closed_loop_table,
+    gear_table,
+    HSVA_RUNS,
+    load_hsva_runs,
+    measured_measures,
+    measures_table,
+)
 from auv_ident.core.errors import DataError
-from auv_ident.core.nomoto import fit_nomoto
-from auv_ident.core.steering import identify_steering_gear, SteeringGear
-from auv_ident.core.thrust_fit import DEFAULT_TERMS, fit_thrust_model, SPEED_TERMS
+from auv_ident.core.identification.thrust_fit import DEFAULT_TERMS, fit_thrust_model, SPEED_TERMS
+from auv_ident.core.simulation.nomoto import fit_nomoto
+from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / 'shared' / 'realdata' / 'kvlcc2_hsva'

@@ -11,6 +11,7 @@ import sys
 import textwrap
 import time
 
+from helpers import assert_msg_equal, write_rclpy
 from mcap.reader import make_reader, SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
@@ -25,13 +26,12 @@ from sensor_msgs.msg import JointState
 import yaml
 
 from auv_ident.bags import reader as bag_reader, schema
-from auv_ident.ros import conversions as rc
-from auv_ident.session import messages as sm
-from auv_ident.bags.schema import BagError
-from auv_ident.bags.writer import BagWriter
 from auv_ident.bags.reader import read_bag
 from auv_ident.bags.repair import repair_bag
-from helpers import assert_msg_equal, write_rclpy
+from auv_ident.bags.schema import BagError
+from auv_ident.bags.writer import BagWriter
+from auv_ident.ros import conversions as rc
+from auv_ident.session import messages as sm
 
 N = 120  # samples per topic
 DT_NS = 5_000_000  # 200 Hz
@@ -209,7 +209,7 @@ def test_bare_mcap_file_and_info(bag):
     assert topics == {'/odom': 'nav_msgs/msg/Odometry',
                       '/actuators': 'sensor_msgs/msg/JointState',
                       '/clock': 'rosgraph_msgs/msg/Clock'}
-    assert bag_reader.message_counts(_mcap_file(bag)) == {t: N for t in topics}
+    assert bag_reader.message_counts(_mcap_file(bag)) == dict.fromkeys(topics, N)
 
 
 def test_zstd_bag(tmp_path):
@@ -391,7 +391,7 @@ def test_exception_in_with_block_still_finalises(tmp_path):
     assert [ns for _, ns, _ in read_bag(tmp_path / 'x')] == [5]
 
 
-_CHILD = textwrap.dedent('''
+_CHILD = textwrap.dedent("""
     import signal, sys, time
     # a process started in the background of a non-interactive shell inherits SIGINT ignored
     # (POSIX), and Python then leaves it ignored: this test is about the writer, so the child
@@ -412,7 +412,7 @@ _CHILD = textwrap.dedent('''
             w.write('/clock', i, payload)
             i += 1
             time.sleep(0.0005)
-''')
+""")
 
 
 @pytest.fixture

@@ -2,11 +2,11 @@
 import json
 import os
 
+from helpers import REPO
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
-from helpers import REPO
 
 pytestmark = pytest.mark.slow     # a 600 s identification (EKF pass + refinement)
 

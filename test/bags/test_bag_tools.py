@@ -15,6 +15,8 @@ import shutil
 import subprocess
 import sys
 
+import helpers
+from helpers import assert_msg_equal
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
@@ -28,16 +30,19 @@ from auv_ident.bags.info import bag_info, format_bag_info
 from auv_ident.bags.reader import bag_topics, message_counts, read_bag
 from auv_ident.bags.repair import repair_bag
 from auv_ident.bags.schema import BagError, normalize_msgtype
-from auv_ident.bags.sim_bag import (bag_sample_messages, SIM_EPOCH, SIM_EPOCH_NS, TOPIC_TYPES,
-                                    write_run_bag)
 from auv_ident.bags.writer import BagWriter
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.sim_bag import (
+    bag_sample_messages,
+    SIM_EPOCH,
+    SIM_EPOCH_NS,
+    TOPIC_TYPES,
+    write_run_bag,
+)
 from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.session.messages import sec_to_ns
 from auv_ident.vehicles import load_vehicle
-import helpers
-from helpers import assert_msg_equal
 
 REPO = Path(helpers.REPO)
 FOREIGN = Path(os.environ.get('AUV_IDENT_FOREIGN_BAGS', '/work/shared/foreign_bags'))
@@ -225,7 +230,7 @@ def test_simulated_bag_decodes_strictly_on_every_topic(sim_bag, run):
 def test_rclpy_sample_messages_serialize_strictly_decodable(run):
     """The live simulator's JointState (effort zeros) is strictly decodable once serialized
     by rclpy, unlike one with an empty effort (the Fast-CDR padding)."""
-    msgs = dict((t, m) for t, _, m in sample_messages(run, 3))
+    msgs = {t: m for t, _, m in sample_messages(run, 3)}
     joints = msgs['/actuators']
     assert list(joints.effort) == [0.0] * 6
     JAZZY.deserialize_cdr(serialize_message(joints), 'sensor_msgs/msg/JointState')
@@ -282,7 +287,7 @@ def test_replay_does_not_depend_on_the_epoch(run, tmp_path):
     """The same run stamped from 0 and from 2024 identifies bit for bit: the replay's time line
     starts at a time origin (0 for stamps near 0, the first stamp's whole second for wall-clock
     stamps), so its float seconds are the same small numbers for both."""
-    from auv_ident.bags.replay import replay_bag
+    from auv_ident.offline.replay import replay_bag
     at_zero = replay_bag(write_run_bag(run, tmp_path / 'zero', epoch_ns=0), warn=False)
     at_epoch = replay_bag(write_run_bag(run, tmp_path / 'epoch'), warn=False)
     assert at_zero.accepted == at_epoch.accepted == len(run.t) and at_epoch.rejected == 0
@@ -396,7 +401,7 @@ def test_repair_in_place_keeps_custom_data_and_the_original(sim_bag, tmp_path):
     assert message_counts(bag) == {t['topic_metadata']['name']: t['message_count']
                                    for t in info['topics_with_message_count']}
     # the repaired bag replays like any bag
-    from auv_ident.bags.replay import replay_bag
+    from auv_ident.offline.replay import replay_bag
     assert replay_bag(bag, warn=False).accepted == message_counts(bag)['/odom']
 
 
@@ -449,8 +454,8 @@ def test_info_flags_an_unfinished_file(sim_bag, tmp_path):
 
 def test_bags_layer_imports_no_ros():
     code = ('import sys\n'
-            'import auv_ident.bags.reader, auv_ident.bags.writer, auv_ident.bags.sim_bag\n'
-            'import auv_ident.bags.repair, auv_ident.bags.info, auv_ident.bags.replay\n'
+            'import auv_ident.bags.reader, auv_ident.bags.writer, auv_ident.offline.sim_bag\n'
+            'import auv_ident.bags.repair, auv_ident.bags.info, auv_ident.offline.replay\n'
             'bad = sorted(m for m in sys.modules if m.split(".")[0] == "rclpy"\n'
             '             or m.split(".")[0].endswith("_msgs") or m.startswith("auv_ident.ros"))\n'
             'print(bad)\n')

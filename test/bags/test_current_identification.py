@@ -12,11 +12,11 @@ import math
 import subprocess
 import sys
 
+from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
-from independent_data import DataConfig, generate
 
 GOAL_PCT = 2.0          # every coefficient within this of the truth (%)
 GOAL_CURRENT = 0.01     # m/s

@@ -1,4 +1,4 @@
-"""Importing measured runs (bags/importers.py, column_map.py, import_bag.py, `import`): the HSVA
+"""Importing measured runs (offline/importers.py, column_map.py, import_bag.py, `import`): the HSVA
 KVLCC2 files checked against the data themselves (independent parse with numpy), the bag they
 become (strictly decodable, read by today's readers, replayed without a rejection), a CSV
 round trip through column maps in other units, signs and frames, and every bad-input error.
@@ -12,26 +12,35 @@ import json
 import math
 from pathlib import Path
 
+import helpers
 from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
-import helpers
-
-from auv_ident.bags.column_map import ColumnMap, ColumnMapError
-from auv_ident.bags.import_bag import (HSVA_EPOCH, parse_epoch, TOPIC_TYPES,
-                                       UNMEASURED_VARIANCE, write_imported_bag)
-from auv_ident.bags.importers import (read_csv_run, read_hsva, RunFileError,
-                                      white_noise_std)
 from auv_ident.bags.info import bag_info
 from auv_ident.bags.reader import read_bag
-from auv_ident.bags.replay import bag_custom_data, replay_bag
 from auv_ident.cli import main as cli_main
-from auv_ident.core.state import Input, State
-from auv_ident.session.messages import (joint_state_to_actuators, JOINT_NAMES, NS_PER_S,
-                                        odometry_to_state, odometry_variances, RPM_TO_RAD_S)
+from auv_ident.core.model.state import Input, State
+from auv_ident.offline.column_map import ColumnMap, ColumnMapError
+from auv_ident.offline.import_bag import (
+    HSVA_EPOCH,
+    parse_epoch,
+    TOPIC_TYPES,
+    UNMEASURED_VARIANCE,
+    write_imported_bag,
+)
+from auv_ident.offline.importers import read_csv_run, read_hsva, RunFileError, white_noise_std
+from auv_ident.offline.replay import bag_custom_data, replay_bag
+from auv_ident.session.messages import (
+    JOINT_NAMES,
+    joint_state_to_actuators,
+    NS_PER_S,
+    odometry_to_state,
+    odometry_variances,
+    RPM_TO_RAD_S,
+)
 
 REPO = Path(helpers.REPO)
 DATA = REPO.parent / 'shared' / 'realdata' / 'kvlcc2_hsva'
@@ -430,7 +439,7 @@ BAD_MAPS = [
                                                  r'heading psi'),
     (_with(u=None, psi=None), r'map.yaml: no state quantity mapped'),
     (dict(GOOD_MAP, world='nwu'), r"map.yaml: world must be ned or enu, got 'nwu'"),
-    (['time'], r"map.yaml: must be a mapping"),
+    (['time'], r'map.yaml: must be a mapping'),
 ]
 
 

@@ -3,6 +3,8 @@ commands, bag layout, noise, current, truth vehicle and integrator. Short runs o
 import json
 import math
 
+import independent_data as gen
+from independent_data import DataConfig, generate
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -11,13 +13,11 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from auv_ident.bags.reader import read_bag
-from auv_ident.core.model import Model
-from auv_ident.core.trim import trim_speed
-from auv_ident.core.vehicle import vehicle_from_file
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.trim import trim_speed
+from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.session.messages import joint_state_to_actuators, odometry_to_state
 from auv_ident.vehicles import load_vehicle
-import independent_data as gen
-from independent_data import DataConfig, generate
 
 PAPER_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
 EPOCH_2025_06_03_09 = 1748941200 * gen.NS
@@ -202,7 +202,7 @@ def test_true_covariance_fields(tmp_path):
 
 
 def test_documented_sigmas_match_the_package():
-    from auv_ident.core.sensors import DEFAULT_NOISE_STD
+    from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
     np.testing.assert_array_equal(np.array(gen.DOCUMENTED_SIGMA), DEFAULT_NOISE_STD)
 
 

@@ -3,12 +3,12 @@ tell the truth. Bags made by test/independent_data.py (its own integrator, noise
 import json
 from pathlib import Path
 
+from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
-from auv_ident.core.diagnosis import diagnose, XCORR_Z
-from independent_data import DataConfig, generate
+from auv_ident.core.identification.diagnosis import diagnose, XCORR_Z
 
 PAPER_SET = 'Z_ds,Z_q,Z_w,M_ds,K_v'
 

@@ -4,16 +4,16 @@ writer), identified as a user would (`identify --bag`, analysis.bag_identify.ide
 import json
 from pathlib import Path
 
+from independent_data import CHANNELS, DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
-from auv_ident.bags.replay import replay_bag
-from auv_ident.bags.sim_bag import write_run_bag
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.replay import replay_bag
+from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
-from independent_data import CHANNELS, DataConfig, generate
 
 PAPER_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
 

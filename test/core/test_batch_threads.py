@@ -1,14 +1,15 @@
-"""The finite differences of the batch methods run on threads (core/batch.py): the numbers
+"""The finite differences of the batch methods run on threads (core/identification/batch.py): the
+numbers
 must be those of one thread, bit for bit, and a bad thread count must be one clear error."""
 import numpy as np
 import pytest
 
-from auv_ident.core import batch
-from auv_ident.core.batch import difference_threads, FilterErrorResiduals, refine
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.filter import FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
+from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification import batch
+from auv_ident.core.identification.batch import difference_threads, FilterErrorResiduals, refine
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']

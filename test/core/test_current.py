@@ -4,18 +4,23 @@ against the independent generator's (test/independent_data.py). Identification o
 independent bags with a current: test_current_identification.py."""
 import math
 
+import independent_data as gen
+from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
-from auv_ident.core.current import (ADVICE, body_current, current_identifiability,
-                                    heading_span_deg, parse_current)
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model import CURRENT_GROUND, CURRENT_NONE, CURRENT_WATER, Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import CURRENT_NAMES, LINEAR, State
+from auv_ident.core.model.current import (
+    ADVICE,
+    body_current,
+    current_identifiability,
+    heading_span_deg,
+    parse_current,
+)
+from auv_ident.core.model.hydrodynamics import CURRENT_GROUND, CURRENT_NONE, CURRENT_WATER, Model
+from auv_ident.core.model.state import CURRENT_NAMES, LINEAR, State
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
-import independent_data as gen
-from independent_data import DataConfig, generate
 
 VEHICLES = ('nps_auv2', 'remus100')
 
@@ -63,7 +68,7 @@ def test_jacobians_with_a_current_match_finite_differences(name, ref):
 def test_model_in_a_current_is_the_still_water_model_in_nu_r(name):
     """Ground reference: nu_dot = f_still(nu_r, eta)[nu] + v_cb x omega, eta_dot = J nu; water
     reference: nu_r_dot = f_still(nu_r, eta)[nu], position rate = R nu_r + v_c. R from the
-    generator's own rotation (independent of core/model.py)."""
+    generator's own rotation (independent of core/model/hydrodynamics.py)."""
     v = load_vehicle(name)
     still = Model(v)
     rng = np.random.default_rng(5)

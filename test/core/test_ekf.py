@@ -12,14 +12,14 @@ import pytest
 import auv_ident.core as core
 from auv_ident.core import compiled_cache
 from auv_ident.core.angles import wrap_angle
-from auv_ident.core import ekf as K
 from auv_ident.core.errors import ConfigError, DimensionError
-from auv_ident.core.batch import identify, run_ekf
-from auv_ident.core.filter import AugmentedEKF, FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
-from auv_ident.core.stream import StreamIdentifier
+from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.filter.stream import StreamIdentifier
+from auv_ident.core.identification.batch import identify, run_ekf
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 NPS = load_vehicle('nps_auv2')
@@ -328,20 +328,27 @@ def test_zero_sample_time_and_unknown_coefficient_are_clear_errors():
 def _compiled_core_closure(core):
     """Core modules with numba code, and every core module they import (transitively)."""
     compiled, imports = set(), {}
-    for path in core.glob('*.py'):
+    for path in core.rglob('*.py'):
+        if '__pycache__' in path.parts:
+            continue        # generated kernels (model/monomials.py), not sources
+        name = path.relative_to(core).as_posix()
         tree = ast.parse(path.read_text())
         names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
         names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
         if names & {'njit', 'jit', 'cfunc', 'intrinsic', 'kernel'}:
-            compiled.add(path.name)
-        imports[path.name] = {f'{n.module}.py' for n in ast.walk(tree)
-                              if isinstance(n, ast.ImportFrom) and n.level == 1 and n.module}
-    todo, seen = list(compiled - {'__init__.py', 'compiled_cache.py'}), set()
+            compiled.add(name)
+        imports[name] = set()
+        for n in ast.walk(tree):
+            if isinstance(n, ast.ImportFrom) and (n.module or '').startswith('auv_ident.core.'):
+                mod = n.module[len('auv_ident.core.'):].replace('.', '/')
+                imports[name] |= {f'{mod}.py'} | {f'{mod}/{a.name}.py' for a in n.names}
+    todo = list(compiled - {'__init__.py', 'compiled_cache.py'})
+    seen = set()
     while todo:
         name = todo.pop()
         if name not in seen:
             seen.add(name)
-            todo.extend(imports.get(name, ()))
+            todo.extend(i for i in imports.get(name, ()) if (core / i).is_file())
     return seen
 
 
@@ -367,13 +374,13 @@ def test_editing_model_py_makes_the_cached_ekf_loop_stale(tmp_path):
 
     def stamp():
         loc = compiled_cache.GroupStampLocator.from_function(K.run_filter.py_func,
-                                                             str(folder / 'ekf.py'))
+                                                             str(folder / 'filter/ekf.py'))
         return loc.get_source_stamp()
     before = stamp()
-    with open(folder / 'stream.py', 'a') as fh:
+    with open(folder / 'filter/stream.py', 'a') as fh:
         fh.write('# an edit outside the compiled sources\n')
     assert stamp() == before
-    with open(folder / 'model.py', 'a') as fh:
+    with open(folder / 'model/hydrodynamics.py', 'a') as fh:
         fh.write('# an edit of the model\n')
     assert stamp() != before
 

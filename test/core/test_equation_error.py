@@ -1,12 +1,12 @@
-"""core.equation_error: the force-equation regression recovers the coefficients of a short
+"""core.identification.equation_error: the force-equation regression recovers the coefficients of a
+short
 noise-light run within its stated accuracy, and refuses what it cannot estimate by name."""
+from method_runs import light_run, relative_error
 import numpy as np
 
-from auv_ident.core.equation_error import equation_error, refusals
-from auv_ident.core.model import Model
-from auv_ident.core.state import State
-
-from method_runs import light_run, relative_error
+from auv_ident.core.identification.equation_error import equation_error, refusals
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import State
 
 
 def test_equation_error_on_a_noise_light_run():

@@ -6,14 +6,14 @@ import importlib.util
 from pathlib import Path
 import time
 
+from kvlcc2_data import load_run, require_runs, RUNS
 import numpy as np
 import pytest
 
-from auv_ident.core.batch import identify_runs
-from auv_ident.core.model import Model
-from auv_ident.core.state import Input
+from auv_ident.core.identification.batch import identify_runs
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import Input
 from auv_ident.vehicles import load_vehicle
-from kvlcc2_data import load_run, require_runs, RUNS
 
 TOOL = Path(__file__).resolve().parents[2] / 'tools' / 'kvlcc2_identify.py'
 
@@ -63,12 +63,14 @@ def test_identified_from_both_starboard_runs_predicts_the_port_runs():
 def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     """`import --format hsva` then `identify --bag A --bag B` with the real-data noise gives
     the coefficients of the same steps on the arrays of test/kvlcc2_data.py (the noise model
-    from the data, core.noise_fit.identify_runs_with_noise_model; same samples, same filter
+    from the data, core.identification.noise_fit.identify_runs_with_noise_model; same samples, same
+    filter
     settings: the bags keep every value in float64)."""
     require_runs(('Z_10_10_S', 'Z_20_10_S'))
+    from kvlcc2_data import run_path
+
     from auv_ident.analysis.bag_identify import identify_bags
     from auv_ident.cli import main
-    from kvlcc2_data import run_path
     tool = _tool()
     bags = []
     for run in tool.TRAIN:
@@ -79,7 +81,7 @@ def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     runs = [load_run(r) for r in tool.TRAIN]
     cfg = tool.config(v, v.identify_default, tool.measurement_noise(runs[0][1], runs[0][0]))
     from auv_ident.analysis.results import make_config
-    from auv_ident.core.noise_fit import identify_runs_with_noise_model
+    from auv_ident.core.identification.noise_fit import identify_runs_with_noise_model
     # the filter settings of the bag path (its prior: the vehicle file's values, p0_rel 1;
     # every channel fused, the unmeasured ones as the zeros the bags hold at 1-sigma 1): the
     # noise model is read off the EKF pass, so that pass must be the same

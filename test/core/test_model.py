@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from auv_ident.core.errors import ConfigError, DomainError
-from auv_ident.core.model import Model
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 # shared/reference/vehicles.md section 1.7: classic MSS npsauv.m run in GNU Octave
@@ -129,7 +129,7 @@ def test_inputs_are_saturated():
 
 def _strip_sum(par, v, w, q, r):
     """MSS classic cross-flow (Y, Z, M, N), station by station in numpy, skipping U = 0."""
-    from auv_ident.core.vehicle import P_CF_CY, P_CF_CZ, P_CF_N, P_L, P_RHO
+    from auv_ident.core.model.vehicle import P_CF_CY, P_CF_CZ, P_CF_N, P_L, P_RHO
     L, ns = par[P_L], int(par[P_CF_N])
     out = np.zeros(4)
     for xl in np.linspace(-L / 2, L / 2, ns):
@@ -146,8 +146,8 @@ def test_crossflow_station_at_rest_adds_nothing():
     """A station with zero cross-flow speed (here the seventh: v = r = 0, w = x_7 q, with
     q = 1 so that x_7 q is exact and U is exactly 0 there) is a 0/0 in the strip formula; it
     must add nothing rather than a NaN."""
-    from auv_ident.core.model import _crossflow
-    from auv_ident.core.vehicle import P_CF_N, P_L
+    from auv_ident.core.model.hydrodynamics import _crossflow
+    from auv_ident.core.model.vehicle import P_CF_N, P_L
     v = load_vehicle('nps_auv2')
     L, ns = v.par[P_L], int(v.par[P_CF_N])
     q = 1.0

@@ -3,9 +3,9 @@ and its file cache."""
 import numpy as np
 import pytest
 
-from auv_ident.core import monomials
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.monomials import NZ, kernel_source, monomial_kernel
+from auv_ident.core.model import monomials
+from auv_ident.core.model.monomials import kernel_source, monomial_kernel, NZ
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 

@@ -1,13 +1,13 @@
-"""core.output_error: multiple-shooting output error recovers the coefficients of a short
+"""core.identification.output_error: multiple-shooting output error recovers the coefficients of a
+short
 noise-light run, estimates the output noise, and cuts segments where the stamps say."""
+from method_runs import LIGHT_NOISE_STD, light_run, relative_error
 import numpy as np
 import pytest
 
-from auv_ident.core.output_error import output_error, segment_index, segment_starts
 from auv_ident.core.errors import DataError
-from auv_ident.core.state import State
-
-from method_runs import LIGHT_NOISE_STD, light_run, relative_error
+from auv_ident.core.identification.output_error import output_error, segment_index, segment_starts
+from auv_ident.core.model.state import State
 
 
 def test_output_error_recovers_the_truth_on_a_noise_light_run():

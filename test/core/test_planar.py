@@ -3,13 +3,13 @@ the simulator and the EKF; the measured thrust input; one model from several run
 import numpy as np
 import pytest
 
-from auv_ident.core.batch import identify, identify_runs
 from auv_ident.core.errors import ConfigError, DimensionError
-from auv_ident.core.filter import AugmentedEKF, FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import Input, N_INPUT, N_STATE, State
-from auv_ident.core.vehicle import _build
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.identification.batch import identify, identify_runs
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
+from auv_ident.core.model.vehicle import _build
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.session.messages import actuator_joint_fields, joint_state_to_actuators
 from auv_ident.vehicles import load_vehicle
 

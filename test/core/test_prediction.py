@@ -1,12 +1,19 @@
-"""core.prediction: the fit measures against hand computations, and the free run / K-step
+"""core.simulation.prediction: the fit measures against hand computations, and the free run /
+K-step
 prediction of a model against a closed-form solution."""
 import numpy as np
 import pytest
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.prediction import (angle_channels, fit_percent, free_run, k_step_prediction,
-                                       rmse, theil)
-from auv_ident.core.state import State
+from auv_ident.core.model.state import State
+from auv_ident.core.simulation.prediction import (
+    angle_channels,
+    fit_percent,
+    free_run,
+    k_step_prediction,
+    rmse,
+    theil,
+)
 
 
 def test_fit_rmse_theil_by_hand():

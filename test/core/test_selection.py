@@ -1,14 +1,15 @@
-"""The automatic choice of coefficients (core/selection.py): the request's syntax, the
+"""The automatic choice of coefficients (core/identification/selection.py): the request's syntax,
+the
 stepwise pass on a linear problem whose answer is known, and a short simulated run whose truth
 differs from the vehicle file in a few coefficients."""
 import numpy as np
 import pytest
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.filter import FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.selection import forward_stepwise, identify_auto, parse_request
-from auv_ident.core.simulate import simulate
+from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.selection import forward_stepwise, identify_auto, parse_request
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 

@@ -1,7 +1,7 @@
-"""core.sensors: the coloured-noise generator and the perturbed truth vehicle."""
+"""core.model.sensors: the coloured-noise generator and the perturbed truth vehicle."""
 import numpy as np
 
-from auv_ident.core.sensors import ar1_noise, perturbed_values
+from auv_ident.core.model.sensors import ar1_noise, perturbed_values
 from auv_ident.vehicles import load_vehicle
 
 

@@ -6,13 +6,13 @@ import sys
 import numpy as np
 import pytest
 
-from auv_ident.core import maneuvers
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.integrators import rk4_step
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
-from auv_ident.core.trim import trim_speed
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.integrators import rk4_step
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.trim import trim_speed
+from auv_ident.core.simulation import maneuvers
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 

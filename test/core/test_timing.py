@@ -1,4 +1,5 @@
-"""Tier 1: time is what the stamps say (core/timing.py), in the batch methods and the stream.
+"""Tier 1: time is what the stamps say (core/filter/timing.py), in the batch methods and the
+stream.
 
 The records here are simulated NPS AUV II runs integrated at a fine step (5 ms) and sampled at
 stamps of our own: jitter of +-10 % of the 50 ms sample time, 5 % of the samples dropped and a
@@ -8,18 +9,23 @@ what is tested is the time handling, not the loss of a command change between tw
 import numpy as np
 import pytest
 
-from auv_ident.core import maneuvers
 from auv_ident.core.angles import wrap_angle
-from auv_ident.core.batch import identify, refine, run_ekf
 from auv_ident.core.errors import ConfigError, DataError
-from auv_ident.core.filter import AugmentedEKF, FilterConfig
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import EULER, Input
-from auv_ident.core.stream import StreamIdentifier
-from auv_ident.core.timing import (check_times, commands_at, DEFAULT_MAX_BRIDGE,
-                                   nominal_sample_time, time_steps)
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.filter.stream import StreamIdentifier
+from auv_ident.core.filter.timing import (
+    check_times,
+    commands_at,
+    DEFAULT_MAX_BRIDGE,
+    nominal_sample_time,
+    time_steps,
+)
+from auv_ident.core.identification.batch import identify, refine, run_ekf
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import EULER, Input
+from auv_ident.core.simulation import maneuvers
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
 NPS = load_vehicle('nps_auv2')

@@ -1,15 +1,15 @@
-"""core.ukf: the augmented UKF recovers the coefficients of a short noise-light run, agrees with
+"""core.identification.ukf: the augmented UKF recovers the coefficients of a short noise-light run,
+agrees with
 the augmented EKF on it, and its unscented mean handles angles across +-pi."""
+from method_runs import LIGHT_NOISE_STD, light_run, relative_error
 import numpy as np
 import pytest
 
 from auv_ident.analysis.results import make_config
-from auv_ident.core.batch import identify
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.state import N_STATE, State
-from auv_ident.core.ukf import run_ukf, unscented_mean_cov, UnscentedSettings
-
-from method_runs import LIGHT_NOISE_STD, light_run, relative_error
+from auv_ident.core.identification.batch import identify
+from auv_ident.core.identification.ukf import run_ukf, unscented_mean_cov, UnscentedSettings
+from auv_ident.core.model.state import N_STATE, State
 
 
 @pytest.fixture(scope='module')

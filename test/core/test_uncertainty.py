@@ -1,9 +1,15 @@
-"""Tests of core/uncertainty.py on problems with a known answer (linear least squares)."""
+"""Tests of core/identification/uncertainty.py on problems with a known answer (linear least
+squares)."""
 import numpy as np
 import pytest
 
-from auv_ident.core.uncertainty import (autocorrelation, bandwidth, identifiability,
-                                        noise_model, sandwich_covariance)
+from auv_ident.core.identification.uncertainty import (
+    autocorrelation,
+    bandwidth,
+    identifiability,
+    noise_model,
+    sandwich_covariance,
+)
 
 
 def _ar1(rng, n, m, rho, sigma=1.0):

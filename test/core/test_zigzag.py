@@ -1,4 +1,5 @@
-"""core.zigzag, core.steering, core.thrust_fit, core.zigzag_sim, core.nomoto against hand
+"""core.simulation.zigzag, core.simulation.steering, core.identification.thrust_fit,
+core.simulation.zigzag_sim, core.simulation.nomoto against hand
 computations and independent integrations: IMO overshoots of a heading with known extremes, a
 steering gear recovered from a rudder made by a fine Euler integration of the servo, a thrust
 model recovered from exact data, the closed-loop zig-zag of a first-order Nomoto model against
@@ -10,12 +11,12 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from auv_ident.core.errors import ConfigError, DataError, DomainError
-from auv_ident.core.nomoto import fit_nomoto, NomotoModel
-from auv_ident.core.state import Input, State
-from auv_ident.core.steering import identify_steering_gear, SteeringGear
-from auv_ident.core.thrust_fit import fit_thrust_model, SPEED_TERMS
-from auv_ident.core.zigzag import zigzag_measures
-from auv_ident.core.zigzag_sim import simulate_zigzag
+from auv_ident.core.identification.thrust_fit import fit_thrust_model, SPEED_TERMS
+from auv_ident.core.model.state import Input, State
+from auv_ident.core.simulation.nomoto import fit_nomoto, NomotoModel
+from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
+from auv_ident.core.simulation.zigzag import zigzag_measures
+from auv_ident.core.simulation.zigzag_sim import simulate_zigzag
 
 DEG = np.pi / 180.0
 DT = 0.05                   # s, the 20 Hz of the basin's files
@@ -347,7 +348,7 @@ def test_nomoto_fit_recovers_the_model_of_a_simulated_zigzag():
 def test_a_model_leaving_its_domain_ends_the_run_early():
     def fragile(x, u):
         if x[State.PSI] < -12.0 * DEG:
-            raise DomainError('heading beyond the model\'s data')
+            raise DomainError("heading beyond the model's data")
         return nomoto(x, u)
 
     x0 = np.zeros(12)

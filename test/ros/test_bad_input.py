@@ -31,6 +31,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from helpers import REPO, spawn_node, stop_process, write_rclpy
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -41,19 +42,18 @@ from sensor_msgs.msg import JointState
 
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.writer import BagWriter
-from auv_ident.session.messages import euler_to_quat, RPM_TO_RAD_S
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.replay import replay_bag, ReplayWarnings
+from auv_ident.offline.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, TOPIC_TYPES, write_run_bag
 from auv_ident.ros.conversions import sec_to_stamp
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.vehicles import load_vehicle
 from auv_ident.ros.identifier_node import IdentifierNode
+from auv_ident.ros.sim_messages import sample_messages
+from auv_ident.session.estimate_file import write_estimate_json
+from auv_ident.session.messages import euler_to_quat, RPM_TO_RAD_S
 from auv_ident.session.session import GUARD_SECONDS, IdentSession
 from auv_ident.session.settings import ParameterError
-from auv_ident.bags.replay import replay_bag, ReplayWarnings
-from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.bags.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, TOPIC_TYPES, write_run_bag
-from auv_ident.ros.sim_messages import sample_messages
-from helpers import REPO, spawn_node, stop_process, write_rclpy
+from auv_ident.vehicles import load_vehicle
 
 DURATION = 30.0
 T = 0.05
@@ -315,8 +315,8 @@ def _state_modified(run, fn, seg=SEG):
     def bad(k):
         y = run.y[k].copy()
         fn(y)
+        from auv_ident.offline.sim_bag import noise_covariances
         from auv_ident.ros.conversions import state_to_odometry
-        from auv_ident.bags.sim_bag import noise_covariances
         pc, tc = noise_covariances(run.noise_std)
         msgs = _sample(run, k)
         return [msgs[0], (ODOM_TOPIC, state_to_odometry(float(run.t[k]), y, 'ned', pc, tc))]
@@ -828,10 +828,10 @@ BAD_PARAMETERS = [
 def test_absurd_parameter_is_one_clear_error(name, value, good_bag):
     with pytest.raises(ParameterError) as info:
         IdentSession(**{name: value})
-    assert f"parameter {name!r}" in str(info.value)
+    assert f'parameter {name!r}' in str(info.value)
     with pytest.raises(ParameterError) as info:      # the offline replay: same check
         replay_bag(good_bag, warn=False, **{name: value})
-    assert f"parameter {name!r}" in str(info.value)
+    assert f'parameter {name!r}' in str(info.value)
 
 
 def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
@@ -877,8 +877,8 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
     duplicate stamps, an absurd burst, then good data; SIGTERM. Each problem is one named
     warning line, nothing non-finite is published, no traceback, the estimate file is written
     on SIGTERM and a later run starts from it."""
-    from rclpy.executors import SingleThreadedExecutor
     from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
     save = tmp_path / 'estimate.json'
     proc = spawn_node('identifier', ['-p', f'save_path:={save}'], ros_env,
                       str(tmp_path))
@@ -969,7 +969,7 @@ def test_legitimate_data_pass_untouched():
     bag = os.path.join(REPO, 'bags', 'nps_auv2_ident')
     res = replay_bag(bag)
     assert res.accepted == 12001 and res.rejected == 0 and res.errors == 0, res.reasons
-    from auv_ident.core.sensors import DEFAULT_PROCESS_STD
+    from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD
     for vehicle, T, frame, pn, mode in [('remus100', 0.005, 'enu', True, 'matching'),
                                         ('isimi', 0.05, 'ned', True, 'fixed'),
                                         ('nps_auv2', 0.005, 'ned', False, 'paper_q')]:

@@ -10,10 +10,9 @@ import shutil
 import subprocess
 import sys
 
-import pytest
-
 from conftest import require_loopback_dds
 import helpers
+import pytest
 
 pytestmark = pytest.mark.slow     # a colcon build and the installed executables
 

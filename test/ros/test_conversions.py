@@ -423,8 +423,9 @@ def _assert_view_equals(view, msg):
 
 
 def test_raw_odometry_view_reads_what_rclpy_reads():
-    from rclpy.serialization import deserialize_message, serialize_message
     from nav_msgs.msg import Odometry
+    from rclpy.serialization import deserialize_message, serialize_message
+
     from auv_ident.ros.cdr import OdometryView
     rng = np.random.default_rng(5)
     view = OdometryView()
@@ -464,6 +465,7 @@ def _big_endian(payload):
 
 def test_raw_odometry_view_reads_big_endian_and_refuses_what_it_cannot_read():
     from rclpy.serialization import serialize_message
+
     from auv_ident.ros.cdr import OdometryView
     rng = np.random.default_rng(6)
     msg = _random_odometry(rng, 1)

@@ -13,10 +13,9 @@ import subprocess
 import sys
 import time
 
+from conftest import require_loopback_dds
 import numpy as np
 import pytest
-
-from conftest import require_loopback_dds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from kvlcc2_data import require_runs, run_path  # noqa: E402
@@ -91,8 +90,8 @@ def test_live_identifier_on_the_hsva_run_ends_near_the_offline_model(tmp_path, r
     assert live['steps'] >= 3801 - 5, (live['steps'], ierr[-2000:])
     # the node runs the replay's EKF pass live (the replay is its session); the offline EKF
     # pass is that same pass only when the configured noise held: offline, the noise model
-    # from the data (core/noise_fit.py) replaces it when the data contradict it, as these
-    # filtered real data do, so then the offline pass differs from the live one
+    # from the data (core/identification/noise_fit.py) replaces it when the data contradict it, as
+    # these filtered real data do, so then the offline pass differs from the live one
     if not doc['noise_model']['used']:
         ekf_std = np.array([c['ekf_std'] for c in names.values()])
         assert np.all(np.abs(est - ekf) <= 0.01 * ekf_std), report

@@ -12,6 +12,7 @@ import os
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from helpers import REPO, write_rclpy
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
@@ -26,21 +27,26 @@ from std_srvs.srv import Trigger
 
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.writer import BagWriter
-from auv_ident.ros.conversions import actuators_to_joint_state, state_to_odometry
-from auv_ident.session.messages import stamp_to_ns
 from auv_ident.core.errors import ConfigError, DivergenceError
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
-from auv_ident.vehicles import load_vehicle
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.replay import replay_bag, replay_messages
+from auv_ident.offline.sim_bag import (
+    ACTUATOR_TOPIC,
+    bag_sample_messages,
+    ODOM_TOPIC,
+    SIM_EPOCH_NS,
+    TOPIC_TYPES,
+    write_run_bag,
+)
+from auv_ident.ros.conversions import actuators_to_joint_state, state_to_odometry
 from auv_ident.ros.identifier_node import IdentifierNode
-from auv_ident.ros.simulator_node import SimulatorNode
-from auv_ident.session.session import IdentSession
-from auv_ident.bags.replay import replay_bag, replay_messages
-from auv_ident.bags.sim_bag import (ACTUATOR_TOPIC, bag_sample_messages, ODOM_TOPIC, TOPIC_TYPES,
-                                    SIM_EPOCH_NS, write_run_bag)
 from auv_ident.ros.sim_messages import sample_messages
-from helpers import REPO, write_rclpy
+from auv_ident.ros.simulator_node import SimulatorNode
+from auv_ident.session.messages import stamp_to_ns
+from auv_ident.session.session import IdentSession
+from auv_ident.vehicles import load_vehicle
 
 CONFIG = os.path.join(REPO, 'config')
 LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,

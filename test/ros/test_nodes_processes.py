@@ -13,6 +13,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from helpers import spawn_node, stop_process
 import numpy as np
 import pytest
 import rclpy
@@ -21,10 +22,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from auv_ident.bags.sim_bag import SIM_EPOCH_NS
-from auv_ident.core.model import Model
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.offline.sim_bag import SIM_EPOCH_NS
 from auv_ident.vehicles import load_vehicle
-from helpers import spawn_node, stop_process
 
 pytestmark = pytest.mark.slow     # node processes over DDS
 

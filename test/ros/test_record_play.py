@@ -13,6 +13,8 @@ import sys
 import time
 import warnings
 
+from conftest import require_loopback_dds
+from helpers import assert_msg_equal
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
@@ -21,21 +23,18 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
+import ros_pub_helper
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
-from auv_ident.bags.schema import BagError
 from auv_ident.bags.reader import message_counts, read_bag
 from auv_ident.bags.repair import repair_bag
+from auv_ident.bags.schema import BagError
+from auv_ident.offline.sim_bag import bag_sample_messages, SIM_EPOCH_NS, TOPIC_TYPES, write_run_bag
 from auv_ident.session.messages import sec_to_ns, stamp_to_ns
-from auv_ident.bags.sim_bag import (bag_sample_messages, SIM_EPOCH_NS, TOPIC_TYPES,
-                                    write_run_bag)
-import ros_pub_helper
-from conftest import require_loopback_dds
-from helpers import assert_msg_equal
 
 pytestmark = pytest.mark.slow     # record, play and publisher processes over DDS
 
@@ -54,8 +53,8 @@ def samples():
 
 @pytest.fixture(scope='module')
 def sim_run():
-    from auv_ident.core.model import Model
-    from auv_ident.core.simulate import simulate
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
     from auv_ident.vehicles import load_vehicle
     return simulate(Model(load_vehicle('nps_auv2'), ()), 'zigzag', duration=2.0, T=0.05,
                     seed=3)
@@ -130,7 +129,7 @@ def _check_recorded(bag, samples, window, allow_truncated=False):
     per_topic = {t: [] for t in TOPICS}
     for topic, t_ns, msg in read_bag(bag, allow_truncated=allow_truncated):
         per_topic[topic].append((t_ns, msg))
-    assert {t: len(v) for t, v in per_topic.items()} == {t: N for t in TOPICS}
+    assert {t: len(v) for t, v in per_topic.items()} == dict.fromkeys(TOPICS, N)
     for j, topic in enumerate(TOPICS):
         times = [t for t, _ in per_topic[topic]]
         # log time = receive time (system clock), not the header stamp (sim time from 0 s)
@@ -146,7 +145,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
     assert rc == 0, err
     assert 'Traceback' not in err
     assert (bag / 'metadata.yaml').is_file()
-    assert message_counts(bag) == {t: N for t in TOPICS}
+    assert message_counts(bag) == dict.fromkeys(TOPICS, N)
     _check_recorded(bag, samples, window)
 
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
@@ -162,7 +161,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
     # rosbags AnyReader (JointState with empty effort needs rclpy: the padding pitfall)
     got = {t: [] for t in TOPICS}
     with AnyReader([bag]) as reader:
-        assert {c.topic: c.msgcount for c in reader.connections} == {t: N for t in TOPICS}
+        assert {c.topic: c.msgcount for c in reader.connections} == dict.fromkeys(TOPICS, N)
         for conn, _, raw in reader.messages():
             try:
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -170,7 +169,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
                 assert conn.msgtype == 'sensor_msgs/msg/JointState'
                 msg = deserialize_message(bytes(raw), JointState)
             got[conn.topic].append(msg)
-    assert {t: len(v) for t, v in got.items()} == {t: N for t in TOPICS}
+    assert {t: len(v) for t, v in got.items()} == dict.fromkeys(TOPICS, N)
     for j, topic in enumerate(TOPICS):
         for k, msg in enumerate(got[topic]):
             assert_msg_equal(samples[k][j][1], msg, f'AnyReader {topic}[{k}]')
@@ -180,7 +179,7 @@ def test_record_until_signal(tmp_path, ros_env, samples, sig):
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
             got[channel.topic].append(msg)
-    assert {t: len(v) for t, v in got.items()} == {t: N for t in TOPICS}
+    assert {t: len(v) for t, v in got.items()} == dict.fromkeys(TOPICS, N)
     for j, topic in enumerate(TOPICS):
         for k, msg in enumerate(got[topic]):
             assert_msg_equal(samples[k][j][1], msg, f'mcap_ros2 {topic}[{k}]')
@@ -201,7 +200,7 @@ def test_record_sigkill_keeps_flushed_chunks(tmp_path, ros_env, samples):
     assert [f.rewritten for f in report.files] == [True]
     _check_recorded(tmp_path / 'repaired', samples, window)
     with RosbagsReader(tmp_path / 'repaired') as reader:
-        assert {c.topic: c.msgcount for c in reader.connections} == {t: N for t in TOPICS}
+        assert {c.topic: c.msgcount for c in reader.connections} == dict.fromkeys(TOPICS, N)
 
 
 def _probe(ctx, topics):
@@ -243,7 +242,7 @@ def test_play_publishes_every_message_in_order(tmp_path, ros_env, ctx, sim_run):
         node.destroy_node()
     assert rc == 0, err
     assert 'Traceback' not in err
-    assert {t: len(v) for t, v in got.items()} == {t: n for t in topics}, (
+    assert {t: len(v) for t, v in got.items()} == dict.fromkeys(topics, n), (
         err, [stamp_to_ns(m.clock) for _, m in got['/clock']])
     for k in range(n):
         for topic, _, expected in bag_sample_messages(sim_run, k):
@@ -284,7 +283,7 @@ def test_record_play_round_trip(tmp_path, ros_env, sim_run):
         assert len(a) == len(b) == len(sim_run.t)
         for k in range(len(a)):
             # rebuild the bag's messages: the reference for field-by-field comparison
-            expected = dict((t, m) for t, _, m in bag_sample_messages(sim_run, k))[topic]
+            expected = {t: m for t, _, m in bag_sample_messages(sim_run, k)}[topic]
             assert_msg_equal(expected, a[k], f'source {topic}[{k}]')
             assert_msg_equal(expected, b[k], f'copy {topic}[{k}]')
     times = [t_ns for t, t_ns, _ in recorded if t == '/odom']

@@ -8,20 +8,27 @@ import subprocess
 import sys
 import time
 
+from conftest import require_loopback_dds
+from helpers import REPO  # noqa: E402 - the repository root (conftest puts test/ on the path)
 import pytest
-import rclpy
 from rcl_interfaces.msg import ParameterType
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from auv_ident.ros import toolkit
-from auv_ident.ros.toolkit import (choice, declare_parameters, number, Param, required_string,
-                                   StopFlag, strings, SubscriberWait)
+from auv_ident.ros.toolkit import (
+    choice,
+    declare_parameters,
+    number,
+    Param,
+    required_string,
+    StopFlag,
+    strings,
+    SubscriberWait,
+)
 from auv_ident.session.settings import ParameterError
-from conftest import require_loopback_dds
-
-from helpers import REPO  # noqa: E402 - the repository root (conftest puts test/ on the path)
 
 TABLE = (
     Param('rate', 1.0, 'a rate [Hz]', number(above=0.0)),

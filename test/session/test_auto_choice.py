@@ -4,8 +4,8 @@ without losing a sample, and ends where an offline identify of the chosen set en
 that arrive while a worker chooses are kept and fed; a failed choice keeps the running set and
 says why; bad settings are one-line errors."""
 import math
-import re
 from pathlib import Path
+import re
 import sys
 import threading
 
@@ -14,8 +14,8 @@ import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.bags.reader import read_bag
-from auv_ident.bags.replay import replay_bag
 from auv_ident.core.errors import DomainError
+from auv_ident.offline.replay import replay_bag
 from auv_ident.session import auto_choice
 from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.session import IdentSession
@@ -223,8 +223,8 @@ def test_a_choice_of_no_coefficient_keeps_the_default_set_with_the_reasons(recor
 
 BAD = [
     ('auto_window', 0.0, "parameter 'auto_window': 0.0 must be a positive finite number"),
-    ('auto_window', -5.0, "must be a positive finite number"),
-    ('auto_window', math.nan, "must be a positive finite number"),
+    ('auto_window', -5.0, 'must be a positive finite number'),
+    ('auto_window', math.nan, 'must be a positive finite number'),
     ('auto_window', 'long', "'long' is not a number"),
     ('coefficients', ['Z_ds', 'auto'], "'auto' must come first"),
     ('coefficients', ['auto', 'Z_ds', 'Q_xyz'], "unknown coefficient 'Q_xyz'"),

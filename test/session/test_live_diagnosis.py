@@ -4,9 +4,9 @@ judged while the window fills; per-parameter verdicts from the filter covariance
 import numpy as np
 import pytest
 
-from auv_ident.core.model import Model
-from auv_ident.core.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.simulate import simulate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.session.guard import Health, NIS_WINDOW
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.session import IdentSession

@@ -8,19 +8,31 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from auv_ident.core.filter.ekf import MODES
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import Input, State, STATE_NAMES
+from auv_ident.core.model.vehicle import P_FIN, P_NMAX
+from auv_ident.core.simulation.simulate import simulate
 from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, sample_messages
-from auv_ident.core.ekf import MODES
-from auv_ident.core.model import Model
-from auv_ident.core.simulate import simulate
-from auv_ident.core.state import Input, State, STATE_NAMES
-from auv_ident.core.vehicle import P_FIN, P_NMAX
 from auv_ident.session import screening
-from auv_ident.session.guard import (GUARD_FACTOR, GUARD_SECONDS, GUARD_WINDOW, GuardWindow,
-                                     NIS_WINDOW, nis_band, NisWindow)
-from auv_ident.session.messages import (ConversionError, joint_state_to_actuators,
-                                        odometry_state, odometry_to_state, stamp_to_ns)
+from auv_ident.session.guard import (
+    GUARD_FACTOR,
+    GUARD_SECONDS,
+    GUARD_WINDOW,
+    GuardWindow,
+    nis_band,
+    NIS_WINDOW,
+    NisWindow,
+)
+from auv_ident.session.messages import (
+    ConversionError,
+    joint_state_to_actuators,
+    odometry_state,
+    odometry_to_state,
+    stamp_to_ns,
+)
 from auv_ident.session.session import IdentSession
-from auv_ident.session.settings import (FRAMES, MASS_INVERSES, NOISE_MODES, ParameterError)
+from auv_ident.session.settings import FRAMES, MASS_INVERSES, NOISE_MODES, ParameterError
 from auv_ident.vehicles import load_vehicle
 
 T = 0.05
@@ -336,9 +348,9 @@ BAD_SETTINGS = [
     ('initial', ['a'] * 5, 'expected 5 numbers'),
     ('coefficients', ['Z_w', 'nope'], 'nope'),
     ('coefficients', ['Z_w', 'current_n'], 'is the water current'),
-    ('current', 'fast', "use estimate, none, or N,E[,D]"),
-    ('current', '0.1', "use estimate, none, or N,E[,D]"),
-    ('current', 3, "use estimate, none, or N,E[,D]"),
+    ('current', 'fast', 'use estimate, none, or N,E[,D]'),
+    ('current', '0.1', 'use estimate, none, or N,E[,D]'),
+    ('current', 3, 'use estimate, none, or N,E[,D]'),
     ('velocity_reference', 'bottom', 'use one of ground, water'),
     ('current_sd0', 0.0, 'positive'),
     ('current_walk', -1e-3, 'non-negative'),

@@ -1,0 +1,419 @@
+"""Identification over a whole record: the augmented EKF's pass (compiled loop), then an
+optional batch refinement by the filter-error method.
+
+Pass 1, the paper's method: the augmented EKF (ekf.py) runs once over the data, as it would
+online; its final estimate and covariance are the online answer.
+
+Pass 2 (offline, on by default): maximum likelihood over the whole record by the filter-error
+method (Maine & Iliff 1981; Jategaonkar 2015, ch. 5): for a candidate theta, a 12-state EKF with
+theta FIXED produces innovations nu_k and their covariances S_k; theta minimises
+sum_k nu_k^T S_k^-1 nu_k (Gauss-Newton/Levenberg-Marquardt, scipy least_squares, started from
+pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that exceeds 1. Why:
+an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
+shared/method_notes.md); the batch pass uses every sample against one consistent theta.
+
+The water current's identified components (core/model/current.py) are parameters of both passes
+like the coefficients: random-walk states of the augmented EKF, and constants of the
+maximum-likelihood fit (scaled in m/s, where the coefficients are scaled by their size).
+
+Finite differences run on threads (:func:`difference_threads`): the compiled filter releases
+the GIL, so the columns of a Jacobian (one filter run each) share the machine's cores; the
+numbers are the same as one thread gives.
+
+Time is what the stamps say: both passes take the sample times t and cross each interval by
+the rules of timing.py (RK4 steps of at most max_step with the command held, a restart of the
+vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
+"""
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+import inspect
+import os
+import threading
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from auv_ident.core.errors import ConfigError, DimensionError, DivergenceError, DomainError
+from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.filter.timing import (
+    check_times,
+    DEFAULT_MAX_BRIDGE,
+    nominal_sample_time,
+    time_steps,
+)
+from auv_ident.core.model.current import split_current
+from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
+
+
+@dataclass
+class Result:
+    """Outcome of identify(): final estimates with 1-sigma and covariance."""
+
+    names: list
+    estimate: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+    ekf_estimate: np.ndarray
+    ekf_std: np.ndarray
+    initial: np.ndarray
+    truth: object          # array or None
+    steps: int
+    wall_s: float
+    mean_nis_per_dof: float
+    refined: bool
+    history: dict = field(default_factory=dict)
+    R_final: object = None
+    Q_final: object = None
+    current: object = None   # core.model.current.CurrentEstimate, or None (still water, not asked)
+    # set by analysis.identification.identify_with_diagnosis (None from identify() alone):
+    noise_model: dict = None      # core.identification.noise_fit.NoiseFit.document()
+    identifiability: dict = None  # per coefficient verdicts (core/identification/diagnosis.py)
+    diagnosis: dict = None        # {'consistent', 'messages', 'checks'}
+
+    def error_pct(self, which='estimate'):
+        if self.truth is None:
+            return None
+        est = getattr(self, which)
+        return 100.0 * (est - self.truth) / np.abs(self.truth)
+
+
+def _record(t, Y, U):
+    """(t, Y, U) as contiguous float arrays, checked: t (N,) strictly increasing finite times
+    (s), Y (N, 12), U (N, 7)."""
+    Y = np.ascontiguousarray(Y, dtype=float)
+    U = np.ascontiguousarray(U, dtype=float)
+    if (Y.ndim != 2 or Y.shape[1] != N_STATE or U.shape != (Y.shape[0], N_INPUT)
+            or Y.shape[0] == 0):
+        raise DimensionError(f'Y must be (N, 12) and U (N, {N_INPUT}) with N >= 1; got '
+                             f'{Y.shape} and {U.shape}')
+    return check_times(t, Y.shape[0]), Y, U
+
+
+def _timeline(f, t, Y, U, max_step, max_bridge):
+    """The Timeline of the record for the filter f (the rules of timing.py): time steps of at
+    most max_step (s; None: f.T), and the start states of the restarts after the gaps longer
+    than max_bridge (s), each from its measurement and shaft speed as at the start."""
+    max_step = f.T if max_step is None else float(max_step)
+    if not max_step > 0.0 or not np.isfinite(max_step):
+        raise ConfigError(f'max_step = {max_step!r} s must be a positive number')
+    if not float(max_bridge) > 0.0:
+        raise ConfigError(f'max_bridge = {max_bridge!r} s must be positive')
+    n_sub, h = time_steps(t, max_step, float(max_bridge))
+    starts = np.flatnonzero(n_sub[1:] == 0) + 1
+    x0 = np.empty((starts.size, N_STATE))
+    sd0 = np.empty((starts.size, N_STATE))
+    for r, k in enumerate(starts):
+        x0[r], sd0[r] = f.initial_state(Y[k], U[k, Input.N_RPM])
+    return K.Timeline(n_sub, h, x0, sd0)
+
+
+def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
+            max_bridge=DEFAULT_MAX_BRIDGE):
+    """Run the AugmentedEKF `f` over a record with the compiled loop, started from Y[0].
+
+    Parameters
+    ----------
+    f : AugmentedEKF (its state is replaced by the result)
+    t : (N,) sample times (s), strictly increasing; jitter, dropouts and gaps allowed
+    Y : (N, 12) measurements (NaN: missing)
+    U : (N, 7) inputs, U[k] the command in force over [t_k, t_k+1) (zero-order hold)
+    hist_every : record histories every this many samples (0: none)
+    want_white : return the whitened innovations (N, 12)
+    max_step : s, longest RK4 step of a time update (None: the filter's sample time f.T)
+    max_bridge : s, a longer interval restarts the vehicle states (timing.py)
+
+    Returns (stats, histories, whitened innovations); the histories' 't' is the time of each
+    recorded sample since the first (s). Raises DomainError/DivergenceError naming the
+    sample.
+    """
+    t, Y, U = _record(t, Y, U)
+    N = Y.shape[0]
+    m = f.model
+    timeline = _timeline(f, t, Y, U, max_step, max_bridge)
+    xa0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
+    out = K.new_outputs(f.n, N, hist_every, want_white)
+    K.run_filter(xa0, P0, Y, U, m.compiled, f.settings(), timeline, out)
+    stats = out.stats
+    nh = out.theta.shape[0]
+    st = int(stats[0])
+    f.xa, f.P, f.Q, f.R, f.steps = out.xa, out.P, out.Q, out.R, int(stats[1])
+    if st != K.OK:
+        k = int(stats[1])
+        if st in STATUS_TEXT:
+            raise DomainError(f'EKF stopped at sample {k} (t = {t[k]:.2f} s): '
+                              f'{STATUS_TEXT[st]}')
+        raise DivergenceError(f'EKF diverged at sample {k} (t = {t[k]:.2f} s): the '
+                              'covariance lost positive definiteness (try --noise-mode fixed)')
+    hist = {'t': t[::hist_every][:nh] - t[0], 'theta': out.theta, 'std': out.std,
+            'nis': out.nis[:, 0], 'dof': out.nis[:, 1], 'R_diag': out.rq[:, :N_STATE],
+            'Q_theta_diag': out.rq[:, N_STATE:]} if nh else {}
+    return stats, hist, out.white
+
+
+def run_ekf_runs(f, runs, hist_every=0, want_white=False, max_step=None,
+                 max_bridge=DEFAULT_MAX_BRIDGE):
+    """run_ekf over several runs in turn: each run starts its vehicle states from its own first
+    measurement, the coefficients (and any identified current) from where the previous run
+    left them, with their covariance (AugmentedEKF.set_prior). runs: list of (t, Y, U).
+
+    Returns (stats (5,) summed over the runs (stats[0] the last status), the last run's
+    histories, the list of each run's whitened innovations (N_i, 12) (None each without
+    want_white))."""
+    total = np.zeros(5)
+    whites = []
+    for i, (t, Y, U) in enumerate(runs):
+        if i > 0:       # carry the coefficients' estimate and covariance into the next run
+            f.set_prior(f.theta, f.theta_cov)
+        stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=want_white,
+                                     max_step=max_step, max_bridge=max_bridge)
+        total[1:] += stats[1:]
+        total[0] = stats[0]
+        whites.append(white.copy() if want_white else None)
+    return total, hist, whites
+
+
+class FilterErrorResiduals:
+    """The filter-error method's residuals as a function of theta: for candidate values of the
+    model's parameters, the whitened innovations ``r_k = S_k^{-1/2} nu_k`` of a 12-state EKF
+    with those values fixed (NaN where a channel has no measurement), over one run or several
+    runs of the vehicle (each filtered from its own first measurement; their innovations
+    stacked in order, run i in rows bounds[i]:bounds[i + 1] of ``white``). The refinement
+    minimises their sum of squares; the automatic selection (selection.py) differentiates them
+    with respect to every candidate coefficient.
+
+    model : Model whose theta are the parameters; cfg : FilterConfig (its noise, q_state and
+    measured channels are used); runs : a list of (t, Y, U) records (as for run_ekf); T (s) the
+    nominal sample time (None: the first run's median interval); max_step, max_bridge as for
+    run_ekf.
+    """
+
+    def __init__(self, model, cfg, runs, T=None, max_step=None,
+                 max_bridge=DEFAULT_MAX_BRIDGE):
+        runs = [_record(*r) for r in runs]
+        if not runs:
+            raise DimensionError('the filter-error residuals need at least one run')
+        T = nominal_sample_time(runs[0][0]) if T is None else T
+        self.model = model
+        fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
+                                 noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
+        state_model = Model(model.vehicle, (), mass_inverse=model.mass_inverse,
+                            coefficient_values=model.c, current=model.current,
+                            velocity_reference=model.velocity_reference)
+        f = AugmentedEKF(state_model, fixed_cfg, T)
+        self.settings = f.settings()
+        # per run: (Y, U, timeline, x0, P0)
+        self.legs = []
+        for t, Y, U in runs:
+            timeline = _timeline(f, t, Y, U, max_step, max_bridge)
+            x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
+            self.legs.append((Y, U, timeline, x0, P0))
+        self.bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
+        self._local = threading.local()     # each thread fills its own output buffers
+        self.white = self._buffers()[1]
+
+    def _buffers(self):
+        """This thread's (filter outputs per run, stacked whitened innovations (sum N, 12))."""
+        buffers = getattr(self._local, 'buffers', None)
+        if buffers is None:
+            outs = [K.new_outputs(N_STATE, leg[0].shape[0], want_white=True)
+                    for leg in self.legs]
+            white = (outs[0].white if len(outs) == 1
+                     else np.full((int(self.bounds[-1]), N_STATE), np.nan))
+            buffers = self._local.buffers = (outs, white)
+        return buffers
+
+    def __call__(self, theta):
+        """(ok, white): ok False when a filter stopped (the model left its domain or the
+        covariance failed); white (sum N, 12) is the calling thread's buffer (``self.white``
+        for the thread that built this object), overwritten by its next call."""
+        cm = self.model.compiled_fixed(theta)
+        outs, white = self._buffers()
+        for i, ((Y, U, timeline, x0, P0), out) in enumerate(zip(self.legs, outs)):
+            out.white[:] = np.nan
+            K.run_filter(x0, P0, Y, U, cm, self.settings, timeline, out)
+            if out.stats[0] != K.OK:
+                return False, white
+            if len(outs) > 1:
+                white[self.bounds[i]:self.bounds[i + 1]] = out.white
+        return True, white
+
+    def vector(self, theta):
+        """The residual vector at theta (sum N * 12,), a new array: 0 where no measurement,
+        None when a filter stopped. Safe to call from several threads at once."""
+        ok, white = self(theta)
+        return np.nan_to_num(white.ravel()) if ok else None
+
+    def forward_differences(self, theta, steps, threads=None):
+        """Forward-difference derivatives of the residual vector with respect to each
+        parameter: column i = (r(theta + steps[i] e_i) - r(theta)) / steps[i], the columns
+        computed on `threads` threads (None: :func:`difference_threads`).
+
+        Returns (r (sum N * 12,) at theta, J (sum N * 12, p), failed: indices whose step took
+        the model out of its domain, their columns zero). Raises DomainError if the filter
+        fails at theta itself."""
+        theta = np.asarray(theta, dtype=float)
+        r0 = self.vector(theta)
+        if r0 is None:
+            raise DomainError('the filter-error residuals cannot be computed at the given '
+                              'parameters (the model leaves its domain on this record)')
+
+        def column(i):
+            th = theta.copy()
+            th[i] += steps[i]
+            return self.vector(th)
+
+        J = np.zeros((r0.size, theta.size))
+        failed = []
+        with ThreadPoolExecutor(threads or difference_threads()) as pool:
+            for i, r in enumerate(pool.map(column, range(theta.size))):
+                if r is None:
+                    failed.append(i)
+                else:
+                    J[:, i] = (r - r0) / steps[i]
+        return r0, J, failed
+
+
+LEAST_SQUARES_WORKERS = 'workers' in inspect.signature(least_squares).parameters
+
+
+def difference_threads():
+    """Threads for finite differences: the CPUs this process may run on, or the
+    AUV_IDENT_THREADS environment variable (a positive integer) when set."""
+    text = os.environ.get('AUV_IDENT_THREADS', '').strip()
+    if text:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ConfigError(f'AUV_IDENT_THREADS={text!r}: expected a positive integer')
+        return n
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:          # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
+           max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
+    """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p,).
+
+    t, Y, U, max_step, max_bridge as for run_ekf; T (s) the nominal sample time (None: the
+    median interval of t). Returns (theta, cov, cost per residual), and with details=True a
+    fourth item, a dict: 'J' (N * 12, p) the Jacobian of the whitened innovations with respect
+    to theta, 'white' (N, 12) those innovations at the solution (NaN: no measurement),
+    'converged' (bool), 'message' (the optimiser's), 'nfev'. cov is (J^T J)^-1 times the cost
+    per residual when that exceeds 1 (the white-noise covariance;
+    core/identification/uncertainty.py has the
+    one for coloured residuals)."""
+    return refine_runs(model, cfg, [(t, Y, U)], theta_start, T=T, max_step=max_step,
+                       max_bridge=max_bridge, max_nfev=max_nfev, progress=progress,
+                       details=details)
+
+
+def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
+                max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
+    """Pass 2 over several runs of one vehicle: one theta for all of them. runs: a list of
+    (t, Y, U) records (as for run_ekf), each filtered from its own first measurement; the
+    residual vector is the runs' whitened innovations stacked in order (so 'white' of details
+    is (sum N, 12) and 'J' (sum N * 12, p)), and the covariance uses all of them. T (s): the
+    nominal sample time (None: the first run's median interval). Otherwise as refine()."""
+    p = model.p
+    fer = FilterErrorResiduals(model, cfg, runs, T=T, max_step=max_step,
+                               max_bridge=max_bridge)
+    white = fer.white
+    scale = parameter_scale(model, theta_start)
+    lock = threading.Lock()
+
+    def residuals(z):
+        if progress is not None:
+            with lock:          # the Jacobian's columns are evaluated on several threads
+                progress()
+        # theta enters through the coefficients of a 12-state filter
+        r = fer.vector(z * scale)
+        return np.full(white.size, 1e3) if r is None else r
+
+    z0 = theta_start / scale
+    with ThreadPoolExecutor(difference_threads()) as pool:
+        # scipy >= 1.16 evaluates the Jacobian's columns with `workers`; an older scipy (e.g.
+        # Ubuntu 24.04's python3-scipy under `ros2 run`) does them one after the other
+        threads = {'workers': pool.map} if LEAST_SQUARES_WORKERS else {}
+        sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p),
+                            max_nfev=max_nfev * p, diff_step=1e-5, **threads)
+    J = sol.jac / scale[None, :]
+    n_res = np.count_nonzero(sol.fun)
+    s2 = 2.0 * sol.cost / max(1, n_res - p)
+    try:
+        cov = np.linalg.inv(J.T @ J) * max(1.0, s2)
+    except np.linalg.LinAlgError:
+        raise DivergenceError('batch refinement: the coefficients are not identifiable from '
+                              'this run (singular information matrix)') from None
+    if not details:
+        return sol.x * scale, cov, s2
+    residuals(sol.x)            # the innovations at the solution (the last call may differ)
+    return sol.x * scale, cov, s2, {'J': J, 'white': white.copy(), 'converged': sol.status > 0,
+                                    'message': sol.message, 'nfev': sol.nfev}
+
+
+def parameter_scale(model, theta):
+    """Scale of each parameter in the fit (p,): |theta| for a coefficient (a relative step),
+    1 m/s for a current component (which may well be 0)."""
+    scale = np.abs(np.asarray(theta, dtype=float)).copy()
+    scale[model.p_coef:] = 1.0
+    return scale
+
+
+def identify(model, t, Y, U, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
+             progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
+    """Identify model.theta_names from measurements Y (N, 12) stamped t (N,) (s) and inputs
+    U (N, 7), U[k] the command held over [t_k, t_k+1).
+
+    T (s): the nominal sample time (None: the median interval of t); max_step, max_bridge: as
+    for run_ekf; truth: the true coefficients (p_coef,), if known. Returns a Result: the
+    coefficients in names/estimate/std/cov, the water current (if the model identifies or
+    is given one) in Result.current."""
+    return identify_runs(model, [(t, Y, U)], cfg, T=T, refine_pass=refine_pass,
+                         hist_every=hist_every, truth=truth, progress=progress,
+                         max_step=max_step, max_bridge=max_bridge)
+
+
+def identify_runs(model, runs, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
+                  progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
+    """One set of model.theta_names from several runs of the vehicle: runs is a list of
+    (t (N,), Y (N, 12), U (N, 7)) records, each as identify() takes one.
+
+    The EKF pass runs the runs one after the other: each starts its vehicle states from its
+    own first measurement, the coefficients (and any identified current) from where the
+    previous run left them, with their covariance (AugmentedEKF.set_prior). The refinement fits
+    one theta to all runs' innovations stacked (refine_runs), so the 1-sigma uses all the data.
+    T (s): the nominal sample time (None: the first run's median interval). Result.steps and
+    mean_nis_per_dof are over all runs, Result.history that of the last run."""
+    t0 = time.perf_counter()
+    runs = [_record(*r) for r in runs]
+    if not runs:
+        raise DimensionError('identification needs at least one run')
+    T = nominal_sample_time(runs[0][0]) if T is None else T
+    f = AugmentedEKF(model, cfg, T)
+    initial = f.theta0[:model.p_coef].copy()     # the first run's start (set_prior moves it)
+    stats, hist, _ = run_ekf_runs(f, runs, hist_every=hist_every, max_step=max_step,
+                                  max_bridge=max_bridge)
+    steps, nis, dof = int(stats[1]), stats[2], stats[3]
+    ekf_est, ekf_cov = f.theta, f.theta_cov
+    est, cov = ekf_est, ekf_cov
+    if refine_pass and model.p > 0:
+        est, cov, _ = refine_runs(model, cfg, runs, ekf_est, T=T, max_step=max_step,
+                                  max_bridge=max_bridge, progress=progress)
+    psi = np.concatenate([Y[:, State.PSI] for _, Y, _ in runs])
+    est_c, cov_c, ekf_c, ekf_cov_c, current = split_current(model, est, cov, ekf_est, ekf_cov,
+                                                            psi)
+    wall = time.perf_counter() - t0
+    return Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
+                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
+                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
+                  truth=None if truth is None else np.asarray(truth, float),
+                  steps=steps, wall_s=wall, mean_nis_per_dof=float(nis / max(1.0, dof)),
+                  refined=refine_pass, history=hist, R_final=f.R.copy(), Q_final=f.Q.copy(),
+                  current=current)

@@ -1,0 +1,191 @@
+"""A diagnosis that speaks: do the data contradict the identification's assumptions?
+
+Checks, in the order a user needs them:
+
+1. Model adequacy: the residuals of a model that holds do not follow the inputs. The
+   cross-correlation of each measured channel's residuals with each varying input over lags
+   of 0-2 s (core/identification/uncertainty.py :func:`input_correlation`, standardised by
+   Bartlett's variance, which accounts for coloured sensor noise) beyond XCORR_Z standard
+   deviations means the model leaves out or gets wrong something the inputs drive: coefficients
+   that are not identified are off (a prior from empirical formulas is 10-50 % off), or the
+   structure lacks a term. Then the estimates absorb the error (bias), and no error bar covers a
+   bias: the result is NOT consistent. Remedy: identify more coefficients (--coefficients auto).
+   Measured on independent NPS AUV II bags (600 s, 20 Hz): white noise 2.3, coloured noise
+   (AR(1), tau 1 s, 2x) 1.6, every other coefficient 0.8-1.2x the file's 5.5.
+2. The batch refinement converged.
+3. The noise model: the configured measurement noise against the innovations (level, AR(1)
+   correlation, whiteness per channel), and what was done about it
+   (core/identification/noise_fit.py).
+4. Identifiability: per coefficient the relative 1-sigma the run supports, correlations, and a
+   verdict with the excitation that would help.
+"""
+import math
+
+import numpy as np
+
+from auv_ident.core.identification.uncertainty import (
+    identifiability,
+    input_correlation,
+    LJUNG_BOX_LAGS,
+    split_rows,
+    with_gaps,
+)
+from auv_ident.core.model.current import MAX_CURRENT_STD
+from auv_ident.core.model.state import INPUT_NAMES, STATE_NAMES
+from auv_ident.core.model.vehicle import EQUATIONS
+
+XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
+XCORR_SECONDS = 2.0     # lags of the cross-correlation (s)
+
+# What excites the terms of each equation (the manoeuvre a weak coefficient needs), by the
+# equation the coefficient belongs to; added-mass terms need accelerations.
+EXCITATION = {
+    'X': 'speed changes: steps of the shaft speed, or long turns (surge drag terms)',
+    'Y': 'rudder zig-zags with legs held 20-40 s (sway velocity and yaw rate build up)',
+    'Z': 'stern-plane steps every 5-6 s between +-10 and +-20 deg (heave and pitch)',
+    'K': 'rudder held 20-40 s per leg at the highest speed that is safe (roll follows the '
+         'sway speed: K ~ u v)',
+    'M': 'stern-plane steps every 5-6 s (pitch rate and angle of attack)',
+    'N': 'rudder zig-zags with legs held 20-40 s (yaw rate and sway)',
+}
+ADDED_MASS_EXCITATION = 'quick fin reversals at the rate limit (accelerations)'
+
+
+CURRENT_EXCITATION = ('turns: the current is separable from the coefficients only through '
+                      'heading changes')
+
+
+def excitation_advice(vehicle, name):
+    """The manoeuvre that would excite coefficient `name` of `vehicle` (or a water-current
+    component, 'current_*'), in words."""
+    if name.startswith('current_'):
+        return CURRENT_EXCITATION
+    c = vehicle.coefficients[vehicle.index(name)]
+    if c.is_added_mass:
+        return ADDED_MASS_EXCITATION
+    return EXCITATION.get(EQUATIONS[c.equation], 'a manoeuvre that moves the terms it '
+                                                  'multiplies')
+
+
+def current_std_limits(names):
+    """(p,) per parameter the 1-sigma (m/s) to judge it by instead of the relative one: a
+    water-current component may be ~0, so it is judged in m/s (MAX_CURRENT_STD); NaN for a
+    coefficient (judged relative to its value)."""
+    return np.array([MAX_CURRENT_STD if n.startswith('current_') else math.nan
+                     for n in names])
+
+
+def with_advice(vehicle, verdicts):
+    """The verdicts (core/identification/uncertainty.py) with the excitation advice for the weak
+    ones."""
+    for name, d in verdicts.items():
+        if d['verdict'] != 'identifiable':
+            d['advice'] = excitation_advice(vehicle, name)
+    return verdicts
+
+
+def weak_notes(verdicts):
+    """One line per parameter that is not identifiable: its verdict, its 1-sigma (m/s for a
+    current component, else % of its value), a correlation above 0.9, and the advice."""
+    notes = []
+    for n, d in verdicts.items():
+        if d['verdict'] == 'identifiable':
+            continue
+        partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
+                   if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
+        size = (f'1-sigma {d["crb_std"]:.2g} m/s' if n.startswith('current_')
+                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
+        notes.append(f'{n} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
+    return notes
+
+
+def coefficient_verdicts(vehicle, names, estimate, J, cov):
+    """identifiability() of the run with the excitation advice for the weak ones."""
+    return with_advice(vehicle, identifiability(J, estimate, names, cov=cov,
+                                                absolute_std=current_std_limits(names)))
+
+
+def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=None,
+             refined=True):
+    """The diagnosis of one identification.
+
+    Parameters
+    ----------
+    fit : core.identification.noise_fit.NoiseFit (or None)
+    xcorr : input_correlation() output on the refined residuals (or None: not checked)
+    dt : s, the sample time the cross-correlation lags are in
+    mean_nis_per_dof : of the EKF pass with the configured noise
+    verdicts : coefficient_verdicts() output (or None)
+    refined : whether a refinement ran (its convergence is then checked)
+
+    Returns
+    -------
+    dict {'consistent': bool, 'messages': [str, ...] (the first says whether the result can be
+    trusted and why), 'checks': {...} (the figures behind them)}
+    """
+    problems, notes, checks = [], [], {}
+    if xcorr:
+        z, channel, inp, lag = xcorr[0]
+        checks['residual_input_correlation'] = {'z': float(z), 'channel': channel,
+                                                'input': inp,
+                                                'lag_s': None if dt is None else lag * dt,
+                                                'limit': XCORR_Z}
+        if abs(z) > XCORR_Z:
+            problems.append(
+                f'the model is inadequate: the {channel} residuals follow {inp} (cross-'
+                f'correlation {abs(z):.1f} sd, limit {XCORR_Z:g}'
+                + (f', at a lag of {lag * dt:.2g} s' if dt is not None else '')
+                + '); coefficients that are not identified are wrong or missing, and the '
+                'estimates absorb that error (bias no error bar covers): identify more '
+                'coefficients (--coefficients auto)')
+    if refined and fit is not None:
+        checks['refinement_converged'] = bool(fit.refine_converged)
+        if not fit.refine_converged:
+            problems.append(f'the batch refinement did not converge ({fit.refine_message})')
+    if fit is not None:
+        checks['noise_model_used'] = bool(fit.used)
+        checks['covariance'] = fit.covariance
+        coloured = [n for n, d in fit.model.items() if not d['white']]
+        checks['coloured_channels'] = coloured
+        notes.extend(fit.notes)
+        if fit.covariance == 'sandwich':
+            notes.append('error bars from the sandwich covariance (residuals correlated in '
+                         'time; up to {:.2g}x the white-noise ones)'.format(
+                             float(max(fit.inflation))))
+    if math.isfinite(mean_nis_per_dof):
+        checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
+    if verdicts:
+        notes.extend(weak_notes(verdicts))
+    consistent = not problems
+    head = ('consistent: the data agree with the assumptions of the identification; the '
+            'error bars hold' if consistent else
+            'NOT consistent: ' + problems[0])
+    return {'consistent': consistent, 'messages': [head] + problems[1:] + notes,
+            'checks': checks}
+
+
+def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
+           refined=True):
+    """Identifiability and diagnosis of an identification made with
+    core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
+    residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
+    (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
+    the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
+    lag pairs a residual of one run with an input of another. Returns (verdicts or None,
+    diagnosis dict)."""
+    verdicts = xcorr = None
+    if fit is not None and fit.white is not None:
+        lags = max(1, int(round(XCORR_SECONDS / dt)))
+        white, U = fit.white, np.asarray(U, dtype=float)
+        if fit.bounds is not None and len(fit.bounds) > 2:
+            if U.shape[0] != white.shape[0]:
+                raise ValueError(f'U has {U.shape[0]} rows, the stacked residuals '
+                                 f'{white.shape[0]}')
+            # input_correlation's autocorrelations reach 4 max(lags, LJUNG_BOX_LAGS) lags
+            gap = 4 * max(lags, LJUNG_BOX_LAGS) + 1
+            white = with_gaps(split_rows(white, fit.bounds), gap)
+            U = with_gaps(split_rows(U, fit.bounds), gap)
+        xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
+        verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
+                                        cov)
+    return verdicts, diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined)

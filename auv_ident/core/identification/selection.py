@@ -1,0 +1,544 @@
+"""Which coefficients to identify, chosen from the data (`--coefficients auto[,NAME,...]`).
+
+A vehicle file holds ~100 coefficients from empirical formulas, each 10-50 % off. Identifying
+a hand-picked few leaves the others at their prior values, and their errors bias the few (no
+error bar covers that bias; core/identification/diagnosis.py says so). Identifying all of them
+fails the other way: most are not excited by a given run, and confounded sets give large,
+correlated errors. This module picks the largest set the run determines, in two passes:
+
+1. **Stepwise regression on the filter-error residuals** (Klein & Morelli 2006, "Aircraft
+   System Identification", ch. 5, written for the filter-error method of
+   core/identification/batch.py): at the prior (the vehicle file's values), the whitened
+   innovations r of a 12-state EKF over the record and their sensitivities J to every candidate
+   (finite differences: one filter run per candidate, on the data's own trajectory, since the
+   filter follows the measurements). Then, starting from the coefficients the user named (always
+   included) and the water current, try the candidates in order of their residual reduction (the
+   partial F of the linearised fit, white) and add the first that
+     - reduces the residual significantly: partial F >= F_TO_ENTER, the variance of its
+       estimate from the Newey-West long-run variance of its scores (the residuals of a
+       wrong prior are strongly correlated in time; a white-noise F would count every sample
+       as new information);
+     - is identifiable in the enlarged set: relative Cramer-Rao 1-sigma (linearised, white)
+       below REL_STD_MAX and largest |correlation| with a member at most CORRELATION_MAX;
+     - lowers the expected error (:func:`expected_error`): of the named coefficients, or of
+       the whole model when none is named, counting for each coefficient its Cramer-Rao
+       variance plus the bias the coefficients left at their prior (PRIOR_REL_STD 1-sigma)
+       cause, by Schmidt's consider analysis. This keeps out a candidate that would mostly
+       absorb the errors of others.
+   Stop when none qualifies. A candidate that fails the identifiability test is left out for
+   good (more members only widen the bounds); the others may still enter after others have.
+2. **Identify, re-assess, identify again**: the chosen set is identified (EKF pass and
+   filter-error refinement with the noise model from the data, core/identification/noise_fit.py,
+   started at the prior), its covariance (sandwich when the residuals are coloured) re-checked with
+   the identified values, and the members that turned weak (relative 1-sigma >= REL_STD_MAX) or
+   strongly correlated (|rho| > CORRELATION_MAX) dropped one at a time, the worst first
+   (fixing a parameter is conditioning: the covariance of the rest is the inverse of their
+   block of the information matrix). If any was dropped, the rest are identified again,
+   started at the first identification's values.
+
+Pass 1 alone is :func:`choose_coefficients`: the live identifier (session/auto_choice.py) runs
+only it, on its first `auto_window` seconds, and lets its filter identify the chosen set;
+:func:`identify_auto` runs both passes.
+
+Error bars: the final covariance adds the consider covariance of the coefficients left at the
+file's values (PRIOR_REL_STD 1-sigma each; added-mass terms a literal M^-1 cannot change
+included, their sensitivities from a model with the exact inverse), so that it covers the bias
+a wrong prior causes. Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
+
+Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
+out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
+Coefficients the user named are always identified, whatever their figures (the diagnosis then
+calls them weak if they are).
+"""
+from dataclasses import dataclass, field, replace
+import math
+
+import numpy as np
+
+from auv_ident.core.errors import ConfigError, DomainError
+from auv_ident.core.identification.batch import FilterErrorResiduals, parameter_scale
+from auv_ident.core.identification.noise_fit import identify_with_noise_model
+from auv_ident.core.identification.uncertainty import (
+    bandwidth,
+    CORRELATION_WEAK,
+    long_run_variance,
+    REL_STD_IDENTIFIABLE,
+    REL_STD_WEAK,
+)
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import CURRENT_NAMES, N_STATE
+
+AUTO = 'auto'
+F_TO_ENTER = 9.0            # partial F (long-run variance) a candidate needs: 3 sigma
+REL_STD_MAX = REL_STD_IDENTIFIABLE   # relative CRB 1-sigma of a member: below 5 %
+CORRELATION_MAX = CORRELATION_WEAK   # |correlation| between members: at most 0.95
+SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitivities
+PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
+
+
+def parse_request(vehicle, text):
+    """`--coefficients` text -> (auto, names).
+
+    'auto' alone: choose from the data; 'auto,A,B': choose, always including A and B; 'A,B':
+    exactly these; '': the vehicle's default set (names empty). Names are matched as
+    Vehicle.index matches them and returned as the file spells them. Raises ConfigError naming
+    an unknown coefficient, a name given twice, or 'auto' anywhere but first."""
+    tokens = [n.strip() for n in (text or '').split(',') if n.strip()]
+    auto = bool(tokens) and tokens[0].lower() == AUTO
+    rest = tokens[1:] if auto else tokens
+    if any(tok.lower() == AUTO for tok in rest):
+        raise ConfigError(f"coefficients {text!r}: 'auto' must come first (auto,NAME,...)")
+    names = []
+    for tok in rest:
+        if tok in CURRENT_NAMES:
+            raise ConfigError(f'coefficients: {tok!r} is the water current; choose it with '
+                              'the current setting (--current)')
+        name = vehicle.names[vehicle.index(tok)]
+        if name in names:
+            raise ConfigError(f'coefficients {text!r}: {name} is listed twice')
+        names.append(name)
+    return auto, names
+
+
+def candidate_coefficients(vehicle, mass_inverse):
+    """The coefficients the selection may choose, and the reasons of the others.
+
+    mass_inverse : the model's resolved choice ('exact' or 'mss_literal'); with the vehicle's
+    fixed literal M^-1 the added-mass coefficients cannot change the model.
+    Returns (candidates [names in file order], {name: reason})."""
+    cands, left = [], {}
+    for c, value in zip(vehicle.coefficients, vehicle.values):
+        if c.is_added_mass and mass_inverse == 'mss_literal':
+            left[c.name] = ("added mass: the vehicle's fixed (literal) mass inverse does not "
+                            'change with it')
+        elif value == 0.0:
+            left[c.name] = ('zero in the vehicle file: no prior to scale the search by (name '
+                            'it to identify it)')
+        else:
+            cands.append(c.name)
+    return cands, left
+
+
+def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=0.25,
+                  threads=None):
+    """Filter-error residuals at theta and their sensitivities to every parameter (one filter
+    run per parameter, on `threads` threads: None =
+    core.identification.batch.difference_threads()).
+
+    model : Model whose theta are the parameters; cfg : FilterConfig (noise, channels)
+    theta : (p,) the values to linearise at (file units; current in m/s)
+    Returns (white (N, 12) whitened innovations, NaN = no measurement; J (N * 12, p) their
+    derivatives, zero rows where no measurement; failed: indices of parameters whose step took
+    the model out of its domain (their columns are zero)). Raises DomainError if the filter
+    fails at theta itself."""
+    fer = FilterErrorResiduals(model, cfg, [(t, Y, U)], T=T, max_step=max_step,
+                               max_bridge=max_bridge)
+    theta = np.asarray(theta, dtype=float)
+    steps = SENSITIVITY_STEP * parameter_scale(model, theta)
+    try:
+        r0, J, failed = fer.forward_differences(theta, steps, threads=threads)
+    except DomainError:
+        raise DomainError('the filter-error residuals cannot be computed at the vehicle '
+                          "file's values (the model leaves its domain on this record)") from None
+    white = fer.white.copy()
+    return white, J, failed
+
+
+def _set_figures(G, members, s2, prior):
+    """Linearised white-noise CRB of a set: (relative 1-sigma, largest |correlation|, index of
+    that partner) per member, from the information G[members, members] / s2. A member whose
+    prior is 0 (a current component) has relative 1-sigma 0 (judged by others only)."""
+    idx = np.asarray(members, dtype=int)
+    try:
+        cov = np.linalg.inv(G[np.ix_(idx, idx)]) * s2
+    except np.linalg.LinAlgError:
+        k = len(idx)
+        return np.full(k, math.inf), np.ones(k), np.zeros(k, dtype=int)
+    return _figures_of_cov(cov, prior[idx])
+
+
+def _figures_of_cov(cov, values):
+    """(relative 1-sigma, largest |correlation|, index of that partner) per parameter."""
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        rel = np.where(values != 0.0, sd / np.abs(values), 0.0)
+        corr = np.nan_to_num(cov / np.outer(sd, sd))
+    np.fill_diagonal(corr, 0.0)
+    corr = np.abs(corr)
+    n = len(sd)
+    if n < 2:
+        return rel, np.zeros(n), np.zeros(n, dtype=int)
+    partner = np.argmax(corr, axis=1)
+    return rel, corr[np.arange(n), partner], partner
+
+
+def _hac_partial_f(J, r_set, J_set, proj, c, n_samples):
+    """Partial F (Wald) of candidate c with the Newey-West variance of its estimate: with
+    j_perp c's sensitivity with the members' part projected out, delta = j_perp^T r /
+    j_perp^T j_perp fitted, the scores g_k = sum over the channels of sample k of
+    j_perp * (r - delta j_perp) and F = delta^2 (j_perp^T j_perp)^2 / LRV(g). The scores are
+    taken after the fit (under the alternative): before it, a candidate's own effect in the
+    residuals would count as correlated noise and hide it."""
+    j_perp = J[:, c] - (J_set @ proj if J_set.shape[1] else 0.0)
+    jj = float(j_perp @ j_perp)
+    if jj <= 0.0:
+        return 0.0
+    delta = float(j_perp @ r_set) / jj
+    resid = (r_set - delta * j_perp).reshape(n_samples, N_STATE)
+    g = (j_perp.reshape(n_samples, N_STATE) * resid).sum(axis=1)
+    lrv = long_run_variance(g, bandwidth(resid))
+    return float(delta ** 2 * jj ** 2 / lrv) if lrv > 0 else 0.0
+
+
+def consider_bias(G, members, left, sigma):
+    """Bias covariance of the members' estimates from the errors of the coefficients left at
+    their prior (Schmidt's consider analysis, linearised): with d_L ~ (0, diag(sigma_L^2)),
+    the least-squares estimate of the members moves by -G_SS^-1 G_SL d_L, whose covariance is
+    B B^T with B = G_SS^-1 G_SL diag(sigma_L). Returns B B^T (|members|, |members|)."""
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
+    if L.size == 0:
+        return np.zeros((S.size, S.size))
+    B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
+    return B @ B.T
+
+
+def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
+    """The selection's objective, from the expected squared relative error of a coefficient:
+    PRIOR_REL_STD^2 for one left at its prior, and for a member its white-noise CRB variance
+    plus the bias the left-out ones cause (:func:`consider_bias`), over its value squared.
+
+    of_interest : indices (members) whose errors are the objective, the coefficients the user
+        named; empty: the sum over every coefficient with a prior (pool_all: the candidates,
+        the named ones and those only considered), where named coefficients the run does not
+        determine (CRB 1-sigma >= REL_STD_WEAK of the value: no choice helps them) and the
+        current components count nothing.
+    """
+    left = [c for c in pool_all if c not in set(members)]
+    S = np.asarray(members, dtype=int)
+    var = np.diag(np.linalg.pinv(G[np.ix_(S, S)])) * s2
+    mse = var + np.diag(consider_bias(G, members, left, sigma))
+    if len(of_interest):
+        pos = [members.index(i) for i in of_interest]
+        return float(np.sum(mse[pos] / prior[S[pos]] ** 2))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        determined = var < (REL_STD_WEAK * prior[S]) ** 2
+    coef = (prior[S] != 0.0) & determined
+    return float(np.sum(mse[coef] / prior[S][coef] ** 2) + len(left) * PRIOR_REL_STD ** 2)
+
+
+def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(),
+                     named=()):
+    """Pass 1 of the module docstring on one linearisation.
+
+    J (N * 12, p), white (N, 12): sensitivities and residuals (sensitivities()); prior (p,)
+    the values they were taken at; names (p,); forced: indices always in the set (named
+    coefficients, current components); candidates: indices it may add; consider_only:
+    indices never added whose prior errors count (added mass the model cannot change); named:
+    the forced coefficients the user named, whose expected error is the objective if the run
+    determines any of them (expected_error), else that of the whole model.
+    Returns (chosen indices in order of entry, forced first; steps [{name, partial_f,
+    rel_std, max_correlation, expected_error}]; {name: reason} for the candidates left
+    out)."""
+    n_samples = white.shape[0]
+    r = np.nan_to_num(white.ravel())
+    n_res = int(np.count_nonzero(r))
+    G = J.T @ J
+    b = J.T @ r
+    rr = float(r @ r)
+    sigma = PRIOR_REL_STD * np.abs(prior)
+    members = list(forced)
+    pool_all = (list(candidates) + list(consider_only)
+                + [c for c in forced if prior[c] != 0.0])
+    pool = [c for c in candidates if G[c, c] > 0.0]
+    reasons = {names[c]: 'no sensitivity: this run does not excite it'
+               for c in candidates if G[c, c] <= 0.0}
+    last = {}
+    steps = []
+    if len(members):
+        var0 = np.diag(np.linalg.pinv(G[np.ix_(members, members)]))
+        s2_0 = max(1.0, (rr - float(b[members] @ np.linalg.pinv(
+            G[np.ix_(members, members)]) @ b[members])) / max(1, n_res - len(members)))
+        of_interest = [i for i in named if prior[i] != 0.0 and var0[members.index(i)] * s2_0
+                       < (REL_STD_WEAK * prior[i]) ** 2]
+    else:
+        of_interest = []
+    while pool:
+        if members:
+            G_inv = np.linalg.pinv(G[np.ix_(members, members)])
+            delta = G_inv @ b[members]
+            rss = rr - float(b[members] @ delta)
+            J_set = J[:, members]
+            r_set = r - J_set @ delta
+        else:
+            G_inv = np.zeros((0, 0))
+            rss, J_set, r_set = rr, np.zeros((r.size, 0)), r
+        s2 = max(1.0, max(rss, 1e-300) / max(1, n_res - len(members) - 1))
+        current = expected_error(G, members, pool_all, s2, prior, sigma, of_interest)
+        cand = np.array(pool)
+        proj = G_inv @ G[np.ix_(members, cand)] if members else np.zeros((0, len(cand)))
+        norm = G[cand, cand] - np.einsum('ij,ij->j', G[np.ix_(members, cand)], proj)
+        cross = b[cand] - proj.T @ b[members] if members else b[cand]
+        with np.errstate(invalid='ignore', divide='ignore'):
+            f_white = np.where(norm > 0.0, cross ** 2 / norm / s2, 0.0)
+        added = False
+        for k in np.argsort(-f_white):
+            c = int(cand[k])
+            if f_white[k] < F_TO_ENTER:
+                last[c] = ('residual reduction too small: partial F (white) '
+                           f'{f_white[k]:.3g} < {F_TO_ENTER:g}')
+                continue
+            trial = members + [c]
+            rel, cmax, partner = _set_figures(G, trial, s2, prior)
+            if rel[-1] >= REL_STD_MAX:
+                reasons[names[c]] = (f'not identifiable: relative 1-sigma {100 * rel[-1]:.3g} % '
+                                     f'>= {100 * REL_STD_MAX:g} %')
+                pool.remove(c)
+                continue
+            if cmax[-1] > CORRELATION_MAX:
+                reasons[names[c]] = (f'correlated {cmax[-1]:.3f} with {names[trial[partner[-1]]]}'
+                                     f' (limit {CORRELATION_MAX:g})')
+                pool.remove(c)
+                continue
+            after = expected_error(G, trial, pool_all, s2, prior, sigma, of_interest)
+            if after >= current:
+                last[c] = ('would not lower the expected error: it absorbs the errors of '
+                           'coefficients left at their prior (consider analysis, '
+                           f'{after:.3g} >= {current:.3g})')
+                continue
+            f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, n_samples)
+            if f_hac < F_TO_ENTER:
+                last[c] = (f'residual reduction too small: partial F {f_hac:.3g} < '
+                           f'{F_TO_ENTER:g} (long-run variance)')
+                continue
+            members.append(c)
+            steps.append({'name': names[c], 'partial_f': f_hac, 'rel_std': float(rel[-1]),
+                          'max_correlation': float(cmax[-1]), 'expected_error': after})
+            pool.remove(c)
+            added = True
+            break
+        if not added:
+            break
+    for c in pool:
+        reasons[names[c]] = last.get(c, 'not reached')
+    return members, steps, reasons
+
+
+def prune(names, estimate, cov, keep_always):
+    """Pass 2: drop, one at a time and the worst first, the members that are weak (relative
+    1-sigma >= REL_STD_MAX) or strongly correlated (> CORRELATION_MAX) with the identified
+    values; the covariance of the rest is the inverse of their block of the information.
+    keep_always: names never dropped (named by the user, current components).
+    Returns (kept names, {dropped name: reason})."""
+    names = list(names)
+    est = np.asarray(estimate, dtype=float)
+    info = np.linalg.pinv(np.asarray(cov, dtype=float))
+    keep = list(range(len(names)))
+    dropped = {}
+    while True:
+        sub = np.linalg.pinv(info[np.ix_(keep, keep)])
+        values = np.array([0.0 if names[i] in CURRENT_NAMES else est[i] for i in keep])
+        rel, cmax, partner = _figures_of_cov(sub, values)
+        bad = [j for j, i in enumerate(keep) if names[i] not in keep_always
+               and (rel[j] >= REL_STD_MAX or cmax[j] > CORRELATION_MAX)]
+        if not bad:
+            return [names[i] for i in keep], dropped
+        j = max(bad, key=lambda j: rel[j])
+        i = keep[j]
+        if rel[j] >= REL_STD_MAX:
+            why = f'relative 1-sigma {100 * rel[j]:.3g} % >= {100 * REL_STD_MAX:g} %'
+        else:
+            why = (f'correlated {cmax[j]:.3f} with {names[keep[partner[j]]]} (limit '
+                   f'{CORRELATION_MAX:g})')
+        dropped[names[i]] = 'dropped after the first identification: ' + why
+        keep.pop(j)
+
+
+@dataclass
+class Selection:
+    """The outcome of the automatic choice.
+
+    chosen : the coefficients identified (named ones first, then in order of entry)
+    named : those the user named (always chosen)
+    left_out : {name: reason} for every other coefficient of the vehicle (file values kept)
+    steps : per coefficient added by the stepwise pass: partial F, relative CRB 1-sigma and
+        largest correlation when it entered
+    candidates : how many coefficients the selection could choose from
+    consider_inflation : per identified parameter, its final 1-sigma over the statistical one
+        (identify_auto; empty when the set was only chosen)
+    reassessed : True when pass 2 ran (identify_auto); False for pass 1 alone
+        (:func:`choose_coefficients`, the live identifier's choice)
+    """
+
+    chosen: list
+    named: list
+    left_out: dict
+    steps: list = field(default_factory=list)
+    candidates: int = 0
+    consider_inflation: dict = field(default_factory=dict)
+    reassessed: bool = True
+
+    def document(self):
+        """JSON-ready dict (the result's `selection`)."""
+        return {'chosen': list(self.chosen), 'named': list(self.named),
+                'left_out': dict(self.left_out), 'steps': list(self.steps),
+                'candidates': int(self.candidates),
+                'consider_inflation': dict(self.consider_inflation),
+                'criteria': {'f_to_enter': F_TO_ENTER, 'rel_std_max': REL_STD_MAX,
+                             'correlation_max': CORRELATION_MAX,
+                             'prior_rel_std': PRIOR_REL_STD,
+                             'method': 'stepwise regression on the filter-error residuals '
+                                       '(partial F with the long-run variance)'
+                                       + (', then identify, re-assess and identify again'
+                                          if self.reassessed else ' (no re-assessment)')}}
+
+    def summary(self):
+        """Lines for the command line: the chosen set, then the left-out ones by reason."""
+        lines = [f'automatic selection: {len(self.chosen)} of {self.candidates} candidate '
+                 'coefficients chosen (' + ', '.join(self.chosen) + ')'
+                 + (f'; named: {", ".join(self.named)}' if self.named else '')]
+        groups = {}
+        for name, why in self.left_out.items():
+            key = why.split(':')[0].split(' (')[0]
+            groups.setdefault(key, []).append(name)
+        if self.consider_inflation:
+            worst = max(self.consider_inflation, key=self.consider_inflation.get)
+            ratio = self.consider_inflation[worst]
+            lines.append("error bars include the errors of the coefficients left at the file's "
+                         f'values ({100 * PRIOR_REL_STD:g} % 1-sigma each, consider analysis): up '
+                         f'to {ratio:.3g}x the statistical ones ({worst})')
+        lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
+                     '`selection`):')
+        for key, members in groups.items():
+            lines.append(f'  {key}: {", ".join(members)}')
+        return lines
+
+
+@dataclass
+class Linearisation:
+    """What pass 1 linearised, for the consider analysis of the final error bars.
+
+    G : (q, q) information J^T J of the whitened residuals at the prior, over every parameter
+        the pass saw (the named and candidate coefficients, the current components, then the
+        added mass only considered)
+    names : (q,) their names; prior : (q,) the values the sensitivities were taken at
+    left_candidates : indices of the coefficients whose errors bias the set when they are left
+        at their prior (the candidates and the considered added mass)
+    """
+
+    G: np.ndarray
+    names: list
+    prior: np.ndarray
+    left_candidates: list
+
+
+def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=None,
+                        max_bridge=0.25, threads=None):
+    """Pass 1 of the module docstring alone: which coefficients the record asks for.
+
+    The part of :func:`identify_auto` that chooses; the live identifier (session/auto_choice.py)
+    runs only this and lets its filter identify the set. Costs one filter run over the record
+    per candidate (and per added-mass term the model cannot change), then the stepwise pass.
+
+    make_model, cfg, named, t, Y, U, T, max_step, max_bridge : as identify_auto
+    threads : threads for the sensitivities (None: every usable CPU; the live node asks for 1)
+    Returns (Selection of the chosen set, every other coefficient left out with its reason,
+    Linearisation). Raises DomainError if the filter leaves the model's domain at the prior."""
+    named = list(named)
+    base = make_model([])
+    vehicle = base.vehicle
+    cands, left_out = candidate_coefficients(vehicle, base.mass_inverse)
+    for n in named:
+        left_out.pop(n, None)
+    pool = [n for n in cands if n not in named]
+    all_model = make_model(named + pool)
+    prior = all_model.theta_true
+    white, J, failed = sensitivities(all_model, cfg, t, Y, U, prior, T=T, max_step=max_step,
+                                     max_bridge=max_bridge, threads=threads)
+    names = list(all_model.theta_names)
+    forced = list(range(len(named))) + list(range(all_model.p_coef, all_model.p))
+    for i in failed:
+        if i >= len(named) and i < all_model.p_coef:
+            left_out[names[i]] = 'a small change takes the model out of its domain'
+    cand_idx = [i for i in range(len(named), all_model.p_coef) if i not in failed]
+    # added mass the model cannot change (fixed literal M^-1) still has errors that bias the
+    # rest: its sensitivities from a model with the exact inverse, for the consider analysis
+    am = [c.name for c in vehicle.coefficients if c.is_added_mass and c.name in left_out
+          and c.name not in named]
+    consider_idx = []
+    if am:
+        am_model = Model(vehicle, am + list(base.current_names), mass_inverse='exact',
+                         current=base.current, velocity_reference=base.velocity_reference)
+        _, J_am, am_failed = sensitivities(am_model, cfg, t, Y, U, am_model.theta_true, T=T,
+                                           max_step=max_step, max_bridge=max_bridge,
+                                           threads=threads)
+        keep_am = [i for i in range(len(am)) if i not in am_failed]
+        consider_idx = list(range(all_model.p, all_model.p + len(keep_am)))
+        J = np.hstack([J, J_am[:, keep_am]])
+        names += [am[i] for i in keep_am]
+        prior = np.concatenate([prior, am_model.theta_true[keep_am]])
+        del J_am
+    members, steps, reasons = forward_stepwise(J, white, prior, names, forced, cand_idx,
+                                               consider_only=consider_idx,
+                                               named=list(range(len(named))))
+    left_out.update(reasons)
+    chosen = [names[i] for i in members if i < all_model.p_coef]
+    lin = Linearisation(G=J.T @ J, names=names, prior=prior,
+                        left_candidates=list(range(len(named), all_model.p_coef))
+                        + consider_idx)
+    sel = Selection(chosen=chosen, named=named, left_out=_in_file_order(vehicle, left_out),
+                    steps=steps, candidates=len(cands), reassessed=False)
+    return sel, lin
+
+
+def _in_file_order(vehicle, reasons):
+    order = {n: i for i, n in enumerate(vehicle.names)}
+    return dict(sorted(reasons.items(), key=lambda kv: order[kv[0]]))
+
+
+def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
+                  max_step=None, max_bridge=0.25, progress=None, hist_every=0):
+    """Choose the coefficients from the data and identify them (module docstring).
+
+    make_model : names -> Model identifying those coefficients (and the water current as the
+        caller wants it; the current components are always in the set)
+    cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
+    named : coefficients always identified (file spelling)
+    t, Y, U, T, max_step, max_bridge, refine_pass, progress, hist_every : as
+        identify_with_noise_model (the histories are those of the final identification)
+    Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
+    identification (estimate: the model's theta, coefficients then current)."""
+    named = list(named)
+    sel, lin = choose_coefficients(make_model, cfg, t, Y, U, named=named, T=T,
+                                   max_step=max_step, max_bridge=max_bridge)
+    vehicle = make_model([]).vehicle
+    chosen, left_out = sel.chosen, dict(sel.left_out)
+
+    def run(coefs, initial):
+        m = make_model(coefs)
+        c = replace(cfg, coefficients=list(coefs), initial=np.asarray(initial, dtype=float))
+        return (m,) + identify_with_noise_model(m, c, t, Y, U, T=T, refine_pass=refine_pass,
+                                                max_step=max_step, max_bridge=max_bridge,
+                                                progress=progress, hist_every=hist_every)
+
+    start = [vehicle.values[vehicle.index(n)] for n in chosen]
+    model, ekf_est, ekf_cov, est, cov, fit = run(chosen, start)
+    kept, dropped = prune(model.theta_names, est, cov, set(named) | set(CURRENT_NAMES))
+    if dropped:
+        left_out.update(dropped)
+        kept_coefs = [n for n in kept if n not in CURRENT_NAMES]
+        start = [est[model.theta_names.index(n)] for n in kept_coefs]
+        model, ekf_est, ekf_cov, est, cov, fit = run(kept_coefs, start)
+        chosen = kept_coefs
+    # error bars that cover the coefficients left at the file's values (consider analysis)
+    names = lin.names
+    idx = [names.index(n) for n in model.theta_names]
+    left = [i for i in lin.left_candidates if names[i] not in chosen]
+    bias = consider_bias(lin.G, idx, left, PRIOR_REL_STD * np.abs(lin.prior))
+    stat_sd = np.sqrt(np.diag(cov))
+    cov = cov + bias
+    inflation = np.sqrt(np.diag(cov)) / stat_sd
+    sel = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
+                  steps=[s for s in sel.steps if s['name'] in chosen], reassessed=True,
+                  consider_inflation={n: float(inflation[i])
+                                      for i, n in enumerate(model.theta_names)})
+    return model, ekf_est, ekf_cov, est, cov, fit, sel

@@ -1,0 +1,434 @@
+"""Vehicle data: read a `config/<vehicle>.yaml` once and turn it into flat arrays for the model.
+
+A vehicle is data (coefficients with their equation, length exponent and multiplier) plus a
+model structure chosen by keys (`scaling`, `propulsion.model`, `crossflow.model`,
+`mass_inverse`, `dofs`). The rigid-body mass matrix and Coriolis terms, restoring forces and
+kinematics are built here generically from mass, r_G, inertia, W, B and r_B (Fossen 2021,
+ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients.
+
+Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
+"""
+from dataclasses import dataclass, field, replace
+import os
+
+import numpy as np
+import yaml
+
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
+
+EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
+
+# Factor vector z (see model.py): index of each multiplier factor. 'U' is the speed in the
+# horizontal plane sqrt(u^2 + v^2) (m/s; the total speed of a ship, whose prime system scales
+# by it), 'thrust' the measured propeller thrust input (N; see _term_scale for its scaling).
+FACTORS = ('u', 'v', 'w', 'p', 'q', 'r', '|u|', '|v|', '|w|', '|p|', '|q|', '|r|',
+           'dr', 'ds', 'db', 'dbp', 'dbs', 'db2', 'eps', 'U', 'thrust')
+FACTOR_INDEX = {name: i for i, name in enumerate(FACTORS)}
+MAX_FACTORS = 5
+
+PROPULSION_MODELS = {'none': 0, 'healey_lienard': 1, 'quadratic_thrust': 2,
+                     'measured_thrust': 3}
+CROSSFLOW_MODELS = {'none': 0, 'mss_classic_strip': 1}
+
+# Layout of the float parameter vector `par` handed to the compiled model.
+P_RHO, P_L, P_W, P_B, P_XG, P_YG, P_ZG, P_XB, P_YB, P_ZB = range(10)
+P_FIN, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_PROP_D = range(10, 17)
+P_CF, P_CF_N, P_CF_CY, P_CF_CZ, P_RECOMPUTE_MINV, P_U_MIN, P_SPEED_FACTOR = range(17, 24)
+N_PAR = 24
+
+U_MIN = 1e-6          # m/s: |u| below this is outside the Healey-Lienard propeller's domain
+COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular (theta ~ +-90 deg)
+
+
+
+
+@dataclass
+class Coefficient:
+    """One hydrodynamic/control coefficient of the vehicle file."""
+
+    name: str
+    value: float        # in the file's scaling (prime value if nondimensional)
+    equation: int       # 0..5 = X Y Z K M N
+    k: int              # length exponent of (rho/2) L^k
+    factors: tuple      # factor indices into FACTORS, or ('dot', column) for added mass
+    scale: float        # (rho/2) L^k, or 1 for dimensional files
+    added_mass_col: int = -1   # 0..5 when this is an added-mass coefficient
+
+    @property
+    def is_added_mass(self):
+        return self.added_mass_col >= 0
+
+
+@dataclass
+class Vehicle:
+    """A vehicle file, validated, with the flat arrays the compiled model uses."""
+
+    name: str
+    title: str
+    path: str
+    raw: dict
+    coefficients: list
+    par: np.ndarray              # float parameters, layout P_*
+    terms_i: np.ndarray          # int (nt, 2 + MAX_FACTORS): equation, coef (-1 fixed), factors
+    terms_s: np.ndarray          # float (nt,): scale (times the value for fixed terms)
+    am_i: np.ndarray             # int (na, 3): equation, column, coef index
+    am_s: np.ndarray             # float (na,): scale of each added-mass coefficient
+    M_RB: np.ndarray             # (6, 6) rigid-body mass matrix
+    Minv_literal: np.ndarray     # (6, 6) or None: MSS hard-coded inverse
+    mass_inverse: str
+    identify_default: list
+    paper: dict = field(default_factory=dict)
+    cruise_rpm: float = 500.0
+    cruise_thrust: float = 0.0   # N, the thrust input of a straight run (measured_thrust)
+    # (12,) bool, the states the vehicle's degrees of freedom move (`dofs:`); the others are
+    # held (core/model/planar.py). All True for a 6-DOF vehicle.
+    free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
+
+    @property
+    def held(self):
+        """Indices (int64) of the held states (empty for a 6-DOF vehicle)."""
+        return np.flatnonzero(~self.free_states).astype(np.int64)
+
+    @property
+    def names(self):
+        return [c.name for c in self.coefficients]
+
+    @property
+    def values(self):
+        return np.array([c.value for c in self.coefficients], dtype=float)
+
+    def index(self, name):
+        """Index of a coefficient by name (exact, or ignoring '_' and case as a fallback)."""
+        for i, c in enumerate(self.coefficients):
+            if c.name == name:
+                return i
+        key = name.replace('_', '').lower()
+        hits = [i for i, c in enumerate(self.coefficients)
+                if c.name.replace('_', '').lower() == key]
+        if len(hits) == 1:
+            return hits[0]
+        raise ConfigError(f'unknown coefficient {name!r} for vehicle {self.name!r}; '
+                          f'known: {", ".join(self.names)}')
+
+    def with_mass_inverse(self, mass_inverse):
+        """This vehicle with M^-1 formed as `mass_inverse`: 'default' (as its file says: this
+        vehicle), 'exact' (inv(M_RB + M_A), which the added-mass coefficients change) or
+        'mss_literal' (MSS's hard-coded inverse); a copy, so that every Model made of it (one
+        not given its own mass_inverse) uses that M^-1."""
+        if mass_inverse in ('default', self.mass_inverse):
+            return self
+        if mass_inverse not in ('exact', 'mss_literal'):
+            raise ConfigError(f'mass_inverse = {mass_inverse!r}; use default, exact or '
+                              'mss_literal')
+        if mass_inverse == 'mss_literal' and self.Minv_literal is None:
+            raise ConfigError(f'vehicle {self.name!r} has no MSS literal inverse')
+        return replace(self, mass_inverse=mass_inverse)
+
+    def mass_matrix(self, c=None):
+        """M = M_RB + M_A for coefficient values c (file values by default), (6, 6)."""
+        c = self.values if c is None else c
+        M = self.M_RB.copy()
+        for (eq, col, ci), s in zip(self.am_i, self.am_s):
+            M[eq, col] -= s * c[ci]
+        return M
+
+    def nondimensional_scale(self, name):
+        """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
+        value is scale * prime value."""
+        c = self.coefficients[self.index(name)]
+        return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
+
+
+def _term_scale(rho, L, k, factors, scaling):
+    """Scale of a coefficient's term: (rho/2) L^k in the prime system (SNAME 1950), 1 for a
+    dimensional file. The thrust factor is a measured force; a force is (rho/2) times lengths
+    and speeds in the prime system, so the thrust counts as T / (rho/2) there and its term's
+    scale is L^k: `X_T: [1 - t_P, X, 0, thrust]` adds (1 - t_P) T to X (t_P the thrust
+    deduction), in either scaling."""
+    if scaling != 'nondimensional':
+        return 1.0
+    scale = 0.5 * rho * L ** k
+    if FACTOR_INDEX['thrust'] in factors:
+        scale /= 0.5 * rho
+    return scale
+
+
+def _dofs(raw, where):
+    """(12,) bool of the states a vehicle's `dofs:` list moves (all six when absent)."""
+    dofs = raw.get('dofs', list(DOF_STATES))
+    if (not isinstance(dofs, list) or not dofs
+            or any(not isinstance(d, str) or d not in DOF_STATES for d in dofs)
+            or len(set(dofs)) != len(dofs)):
+        raise ConfigError(f'{where}: dofs = {dofs!r}; use a list of distinct names from '
+                          + ', '.join(DOF_STATES))
+    free = np.zeros(N_STATE, dtype=bool)
+    for d in dofs:
+        free[list(DOF_STATES[d])] = True
+    return free
+
+
+def _num(d, key, where, positive=False):
+    if key not in d:
+        raise ConfigError(f'{where}: missing key {key!r}')
+    try:
+        v = float(d[key])
+    except (TypeError, ValueError):
+        raise ConfigError(f'{where}: {key} = {d[key]!r} is not a number') from None
+    if not np.isfinite(v) or (positive and v <= 0):
+        raise ConfigError(f'{where}: {key} = {v!r} must be a finite'
+                          + (' positive' if positive else '') + ' number')
+    return v
+
+
+def _vec3(d, key, where):
+    v = d.get(key, [0.0, 0.0, 0.0])
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f'{where}: {key} = {v!r} is not a list of 3 numbers') from None
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ConfigError(f'{where}: {key} = {v!r} must be a list of 3 finite numbers')
+    return a
+
+
+def _parse_multiplier(text, where):
+    text = str(text).strip()
+    if text.endswith('dot') and text[:-3] in NU_NAMES:
+        return ('dot', NU_NAMES.index(text[:-3]))
+    facs = []
+    for f in text.split('*'):
+        f = f.strip()
+        if f not in FACTOR_INDEX:
+            raise ConfigError(f'{where}: unknown factor {f!r} in multiplier {text!r} '
+                              f'(allowed: {" ".join(FACTORS)}, or udot..rdot)')
+        facs.append(FACTOR_INDEX[f])
+    if len(facs) > MAX_FACTORS:
+        raise ConfigError(f'{where}: multiplier {text!r} has more than {MAX_FACTORS} factors')
+    return tuple(facs)
+
+
+def rigid_body_terms(mass, r_G, I):
+    """Rigid-body Coriolis/centripetal forces as monomials in nu (Fossen; vehicles.md 1.4).
+
+    Returns a list of (equation, constant, factor tuple); every entry contributes
+    constant * product(nu factors) to that equation. I = (Ix, Iy, Iz, Ixy, Iyz, Ixz).
+    """
+    xg, yg, zg = r_G
+    Ix, Iy, Iz, Ixy, Iyz, Ixz = I
+    u, v, w, p, q, r = (int(s) for s in (State.U, State.V, State.W, State.P, State.Q, State.R))
+    m = mass
+    t = [
+        # X: m (v r - w q) + m (xG (q^2 + r^2) - yG p q - zG p r)
+        (0, m, (v, r)), (0, -m, (w, q)), (0, m * xg, (q, q)), (0, m * xg, (r, r)),
+        (0, -m * yg, (p, q)), (0, -m * zg, (p, r)),
+        # Y: -m (u r - w p + xG p q - yG (p^2 + r^2) + zG q r)
+        (1, -m, (u, r)), (1, m, (w, p)), (1, -m * xg, (p, q)), (1, m * yg, (p, p)),
+        (1, m * yg, (r, r)), (1, -m * zg, (q, r)),
+        # Z: -m (v p - u q + xG p r + yG q r - zG (p^2 + q^2))
+        (2, -m, (v, p)), (2, m, (u, q)), (2, -m * xg, (p, r)), (2, -m * yg, (q, r)),
+        (2, m * zg, (p, p)), (2, m * zg, (q, q)),
+        # K: (Iy - Iz) q r - Ixy p r - Iyz (r^2 - q^2) + Ixz p q
+        #    - m (yG (v p - u q) - zG (u r - w p))
+        (3, Iy - Iz, (q, r)), (3, -Ixy, (p, r)), (3, -Iyz, (r, r)), (3, Iyz, (q, q)),
+        (3, Ixz, (p, q)), (3, -m * yg, (v, p)), (3, m * yg, (u, q)), (3, m * zg, (u, r)),
+        (3, -m * zg, (w, p)),
+        # M: (Iz - Ix) p r + Ixy q r - Iyz p q - Ixz (p^2 - r^2)
+        #    + m (xG (v p - u q) - zG (w q - v r))
+        (4, Iz - Ix, (p, r)), (4, Ixy, (q, r)), (4, -Iyz, (p, q)), (4, -Ixz, (p, p)),
+        (4, Ixz, (r, r)), (4, m * xg, (v, p)), (4, -m * xg, (u, q)), (4, -m * zg, (w, q)),
+        (4, m * zg, (v, r)),
+        # N: (Ix - Iy) p q + Ixy (p^2 - q^2) + Iyz p r - Ixz q r
+        #    - m (xG (u r - w p) - yG (w q - v r))
+        (5, Ix - Iy, (p, q)), (5, Ixy, (p, p)), (5, -Ixy, (q, q)), (5, Iyz, (p, r)),
+        (5, -Ixz, (q, r)), (5, -m * xg, (u, r)), (5, m * xg, (w, p)), (5, m * yg, (w, q)),
+        (5, -m * yg, (v, r)),
+    ]
+    return [e for e in t if e[1] != 0.0]
+
+
+def rigid_body_mass_matrix(mass, r_G, I):
+    """M_RB = [[m I3, -m S(r_G)], [m S(r_G), I_g]] (Fossen 2021, eq. 3.44), (6, 6)."""
+    Ix, Iy, Iz, Ixy, Iyz, Ixz = I
+    xg, yg, zg = r_G
+    S = np.array([[0.0, -zg, yg], [zg, 0.0, -xg], [-yg, xg, 0.0]])
+    I_g = np.array([[Ix, -Ixy, -Ixz], [-Ixy, Iy, -Iyz], [-Ixz, -Iyz, Iz]])
+    M = np.zeros((N_NU, N_NU))
+    M[LINEAR, LINEAR] = mass * np.eye(3)
+    M[LINEAR, ANGULAR] = -mass * S
+    M[ANGULAR, LINEAR] = mass * S
+    M[ANGULAR, ANGULAR] = I_g
+    return M
+
+
+def vehicle_from_file(path):
+    """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
+    parsed once, never in a hot path). Looking a vehicle up by name is
+    :func:`auv_ident.vehicles.load_vehicle`."""
+    path = os.path.abspath(path)
+    try:
+        key = (path, os.path.getmtime(path))
+    except OSError:
+        raise ConfigError(f'no vehicle file {path}') from None
+    if key not in _CACHE:
+        with open(path, encoding='utf-8') as fh:
+            try:
+                raw = yaml.safe_load(fh)
+            except yaml.YAMLError as err:
+                raise ConfigError(f'{path}: not valid YAML: {err}') from None
+        _CACHE[key] = _build(raw, path)
+    return _CACHE[key]
+
+
+_CACHE = {}
+
+
+def _build(raw, path):
+    where = os.path.basename(path)
+    if not isinstance(raw, dict) or 'coefficients' not in raw:
+        raise ConfigError(f'{where}: not a vehicle file (no `coefficients:` mapping)')
+    scaling = raw.get('scaling', 'nondimensional')
+    if scaling not in ('nondimensional', 'dimensional'):
+        raise ConfigError(f'{where}: scaling = {scaling!r}; use nondimensional or dimensional')
+    rho = _num(raw, 'rho', where, positive=True)
+    L = _num(raw, 'L', where, positive=True)
+    mass = _num(raw, 'mass', where, positive=True)
+    W = _num(raw, 'W', where, positive=True)
+    B = _num(raw, 'B', where, positive=True)
+    r_G = _vec3(raw, 'r_G', where)
+    r_B = _vec3(raw, 'r_B', where)
+    inertia = raw.get('inertia') or {}
+    I = tuple(_num(inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'))
+              if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
+              for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
+    limits = raw.get('limits') or {}
+    fin = _num(limits, 'fin_rad', where + ' limits', positive=True)
+    nmax = _num(limits, 'n_rpm', where + ' limits', positive=True)
+
+    par = np.zeros(N_PAR)
+    par[P_RHO], par[P_L], par[P_W], par[P_B] = rho, L, W, B
+    par[P_XG:P_ZG + 1] = r_G
+    par[P_XB:P_ZB + 1] = r_B
+    par[P_FIN], par[P_NMAX], par[P_U_MIN] = fin, nmax, U_MIN
+    free = _dofs(raw, where)
+
+    prop = raw.get('propulsion') or {'model': 'none'}
+    pm = prop.get('model', 'none')
+    if pm not in PROPULSION_MODELS:
+        raise ConfigError(f'{where}: propulsion.model = {pm!r}; known: '
+                          + ', '.join(PROPULSION_MODELS))
+    par[P_PROP] = PROPULSION_MODELS[pm]
+    if pm == 'healey_lienard':
+        par[P_PROP_A] = _num(prop, 'Cd0', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'eta_gain', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'Ct_gain', where + ' propulsion')
+    elif pm == 'quadratic_thrust':
+        par[P_PROP_A] = _num(prop, 'X_prop', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'K_prop', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
+
+    cf = raw.get('crossflow') or {'model': 'none'}
+    cm = cf.get('model', 'none')
+    if cm not in CROSSFLOW_MODELS:
+        raise ConfigError(f'{where}: crossflow.model = {cm!r}; known: '
+                          + ', '.join(CROSSFLOW_MODELS))
+    par[P_CF] = CROSSFLOW_MODELS[cm]
+    if cm == 'mss_classic_strip':
+        par[P_CF_N] = int(_num(cf, 'stations', where + ' crossflow', positive=True))
+        par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
+        par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
+
+    coefs = []
+    seen = set()
+    craw = raw['coefficients']
+    if not isinstance(craw, dict) or not craw:
+        raise ConfigError(f'{where}: `coefficients:` must be a non-empty mapping')
+    for name, entry in craw.items():
+        cw = f'{where} coefficient {name}'
+        if name in seen:
+            raise ConfigError(f'{cw}: defined twice')
+        seen.add(name)
+        if not isinstance(entry, list) or len(entry) != 4:
+            raise ConfigError(f'{cw}: expected [value, equation, k, multiplier], got {entry!r}')
+        value, eq, k, mult = entry
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f'{cw}: value {value!r} is not a number') from None
+        if not np.isfinite(value):
+            raise ConfigError(f'{cw}: value {value!r} is not finite')
+        if eq not in EQUATIONS:
+            raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
+        if not isinstance(k, int) or not 0 <= k <= 6:
+            raise ConfigError(f'{cw}: k = {k!r} must be an integer 0..6')
+        facs = _parse_multiplier(mult, cw)
+        am_col = facs[1] if facs[0] == 'dot' else -1
+        scale = _term_scale(rho, L, k, facs if am_col < 0 else (), scaling)
+        if am_col >= 0 and not (free[EQUATIONS.index(eq)] and free[am_col]):
+            raise ConfigError(f'{cw}: added mass of a held degree of freedom (dofs: '
+                              f'{raw.get("dofs")}); leave it out')
+        if am_col < 0 and FACTOR_INDEX['U'] in facs:
+            par[P_SPEED_FACTOR] = 1.0
+        coefs.append(Coefficient(str(name), value, EQUATIONS.index(eq), k,
+                                 facs if am_col < 0 else (), scale, am_col))
+
+    terms_i, terms_s, am_i, am_s = [], [], [], []
+    for ci, c in enumerate(coefs):
+        if c.is_added_mass:
+            am_i.append((c.equation, c.added_mass_col, ci))
+            am_s.append(c.scale)
+        else:
+            f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))
+            terms_i.append([c.equation, ci] + f)
+            terms_s.append(c.scale)
+    for eq, const, facs in rigid_body_terms(mass, r_G, I):
+        f = list(facs) + [-1] * (MAX_FACTORS - len(facs))
+        terms_i.append([eq, -1] + f)
+        terms_s.append(const)
+
+    M_RB = rigid_body_mass_matrix(mass, r_G, I)
+    # A held degree of freedom: its acceleration is zero and the constraint takes whatever
+    # force its equation needs, so the free accelerations solve M_ff nu_f_dot = F_f alone.
+    # Identity rows and columns for the held ones make M^-1 = blockdiag(M_ff^-1, I) in every
+    # code path that inverts M (the held rows of f are zeroed afterwards, core/model/planar.py).
+    held_nu = ~free[:N_NU]
+    M_RB[held_nu, :] = 0.0
+    M_RB[:, held_nu] = 0.0
+    M_RB[held_nu, held_nu] = 1.0
+    mass_inverse = raw.get('mass_inverse', 'exact')
+    Minv_literal = None
+    if mass_inverse == 'mss_literal' and not free.all():
+        raise ConfigError(f'{where}: mass_inverse: mss_literal is a 6-DOF inverse; a vehicle '
+                          'with dofs needs exact')
+    if mass_inverse == 'mss_literal':
+        try:
+            Minv_literal = np.array(raw['mss_inverse'], dtype=float)
+        except (KeyError, TypeError, ValueError):
+            raise ConfigError(f'{where}: mass_inverse: mss_literal needs a 6x6 `mss_inverse`') \
+                from None
+        if Minv_literal.shape != (6, 6) or not np.all(np.isfinite(Minv_literal)):
+            raise ConfigError(f'{where}: mss_inverse must be a finite 6x6 matrix')
+    elif mass_inverse != 'exact':
+        raise ConfigError(f'{where}: mass_inverse = {mass_inverse!r}; use exact or mss_literal')
+
+    v = Vehicle(
+        name=str(raw.get('name', os.path.splitext(where)[0])), title=str(raw.get('title', '')),
+        path=path, raw=raw, coefficients=coefs, par=par,
+        terms_i=np.array(terms_i, dtype=np.int64).reshape(-1, 2 + MAX_FACTORS),
+        terms_s=np.array(terms_s, dtype=float),
+        am_i=np.array(am_i, dtype=np.int64).reshape(-1, 3), am_s=np.array(am_s, dtype=float),
+        M_RB=M_RB, Minv_literal=Minv_literal, mass_inverse=mass_inverse,
+        identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
+        cruise_rpm=float(raw.get('cruise_rpm', 500.0)),
+        cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
+        free_states=free)
+    M = v.mass_matrix()
+    if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):
+        raise ConfigError(f'{where}: M_RB + M_A is not symmetric (check added-mass pairs)')
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise ConfigError(f'{where}: M_RB + M_A is not positive definite') from None
+    for n in v.identify_default:
+        v.index(n)
+    return v

@@ -1,0 +1,160 @@
+"""A measured run (:mod:`auv_ident.offline.importers`) written as a bag in our topics and frames:
+``python -m auv_ident import``.
+
+Topics, as a simulated bag's (:mod:`auv_ident.offline.sim_bag`, whose message builders and
+writing path this uses), one message of each per sample, the actuators first:
+
+- ``/odom`` nav_msgs/Odometry, NED/FRD (frame ids ``odom_ned`` / ``base_link_frd``): position,
+  orientation ``q(phi, theta, psi)``, body velocities. Channels the file does not measure are
+  written as 0 with the variance :data:`UNMEASURED_VARIANCE` (1e6 in the state's units squared:
+  a 1-sigma of 1000 m, m/s, rad or rad/s). Our readers take finite positive message variances
+  as the measurement noise (``noise_source message``), so an EKF fusing such a channel gives
+  it a gain of ~1e-6 of a measured one's: the channel is in effect not used, while every
+  message stays readable (NaN fields are rejected as non-finite unless the identifier's
+  ``measured`` list excludes them, and 0 or -1 would mean "not stated": the reader would then
+  fuse the 0 at its default noise as if it were measured). The planar vehicles hold those
+  states anyway. Measured channels carry the variance of :func:`white_noise_std`'s estimate,
+  or 0 (not stated: the reader falls back to its noise parameter) where there is none.
+  Roll rate p is not derived from phi: a differentiated angle is not a measurement, and its
+  error would be correlated with phi's.
+- ``/actuators`` sensor_msgs/JointState, the six joints of JOINT_NAMES: 'rudder' position =
+  delta_r (rad, our sign), other fins 0; 'propeller' velocity = shaft speed (rad/s) and
+  effort = the measured thrust (N); all other entries 0. Inputs the file lacks are 0
+  (``auv_ident.measured_inputs`` lists the present ones).
+
+Stamps (header and log time alike): for files with run-relative time (HSVA, CSV ``base:
+run``), ``start + t`` with ``start`` given (``--start``, ISO 8601 with a UTC offset) or
+nominal: HSVA files carry no date, so they are stamped from :data:`HSVA_EPOCH`
+2006-01-01T00:00:00Z (the tests were run at HSVA in 2006; the day is not known), other CSV logs
+from our simulated-bag epoch 2024-01-01T00:00:00Z; ``auv_ident.stamp_epoch_nominal`` says
+which. Files with ``base: unix`` times are stamped with them.
+
+metadata.yaml custom_data: ``auv_ident.vehicle``, ``frame`` (ned), ``simulated`` (false),
+``format``, ``source`` (file name), ``source_sha256``, ``column_map`` (the map used, as one
+line of JSON), ``measured`` and ``measured_inputs`` (names), ``noise_std_estimate`` (12
+1-sigmas, NaN unmeasured), ``sample_time``, ``samples``, ``stamp_epoch_ns``, ``stamp_epoch``,
+``stamp_epoch_nominal``, ``command``.
+"""
+from datetime import datetime, timezone
+import json
+
+import numpy as np
+
+from auv_ident.core.model.state import Input, N_INPUT
+from auv_ident.offline.column_map import ColumnMapError
+from auv_ident.offline.sim_bag import (
+    ACTUATOR_TOPIC,
+    joint_state_msg,
+    ODOM_TOPIC,
+    odometry_msg,
+    SIM_EPOCH,
+    write_message_bag,
+)
+from auv_ident.session.messages import NS_PER_S
+
+HSVA_EPOCH = '2006-01-01T00:00:00Z'
+UNMEASURED_VARIANCE = 1e6
+TOPIC_TYPES = {ODOM_TOPIC: 'nav_msgs/msg/Odometry',
+               ACTUATOR_TOPIC: 'sensor_msgs/msg/JointState'}
+DEFAULT_VEHICLE = {'hsva': 'kvlcc2_hsva'}
+
+
+def parse_epoch(text):
+    """Integer ns since 1970-01-01T00:00:00Z of an ISO 8601 time with a UTC offset
+    (``2006-01-01T00:00:00Z``, ``2025-06-03T14:05:00.25+02:00``)."""
+    try:
+        when = datetime.fromisoformat(str(text).strip())
+    except ValueError:
+        raise ColumnMapError(f'--start {text!r}: not an ISO 8601 time, e.g. '
+                             f'{HSVA_EPOCH}') from None
+    if when.tzinfo is None:
+        raise ColumnMapError(f'--start {text!r}: give the UTC offset (Z or +hh:mm): a time '
+                             'without one is ambiguous')
+    delta = when - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    ns = (delta.days * 86_400 + delta.seconds) * NS_PER_S + delta.microseconds * 1_000
+    if ns < 0:
+        raise ColumnMapError(f'--start {text!r}: before 1970-01-01, not a ROS time')
+    return ns
+
+
+def _epoch(run, start):
+    """(epoch_ns, text, nominal) of a run's stamps."""
+    if run.absolute:
+        if start is not None:
+            raise ColumnMapError(f'--start {start!r}: {run.source} has absolute (base: unix) '
+                                 'times, which are its stamps')
+        return 0, '1970-01-01T00:00:00Z', False
+    if start is None:
+        text = HSVA_EPOCH if run.fmt == 'hsva' else SIM_EPOCH
+        return parse_epoch(text), text, True
+    return parse_epoch(start), str(start), False
+
+
+def covariances(run):
+    """(pose_cov, twist_cov) 6x6 of the run's odometry: variance of the noise estimate where
+    measured (0: no estimate), :data:`UNMEASURED_VARIANCE` elsewhere."""
+    var = np.where(run.measured, np.nan_to_num(run.noise_std) ** 2, UNMEASURED_VARIANCE)
+    return np.diag(var[6:12]), np.diag(var[0:6])
+
+
+def input_arrays(run):
+    """u (N, 7) [delta_r .. n_rpm thrust] (rad, rpm, N), core.model.state.Input order: the thrust
+    is
+    an input, written to the propeller joint's effort by joint_state_msg."""
+    n = len(run.t_ns)
+    u = np.zeros((n, N_INPUT))
+    if 'rudder' in run.inputs:
+        u[:, Input.DELTA_R] = run.inputs['rudder']
+    if 'shaft' in run.inputs:
+        u[:, Input.N_RPM] = run.inputs['shaft']
+    if 'thrust' in run.inputs:
+        u[:, Input.THRUST] = run.inputs['thrust']
+    return u
+
+
+def imported_messages(run, epoch_ns):
+    """(topic, t_ns, rosbags message) of every sample, the actuators first at each stamp."""
+    pose_cov, twist_cov = covariances(run)
+    u = input_arrays(run)
+    for k, tk in enumerate(run.t_ns):
+        t_ns = int(epoch_ns) + int(tk)
+        yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u[k])
+        yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], 'ned', pose_cov, twist_cov)
+
+
+def import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command=''):
+    """metadata.yaml custom_data of an imported run (module docstring)."""
+    return {
+        'auv_ident.vehicle': str(vehicle), 'auv_ident.frame': 'ned',
+        'auv_ident.simulated': 'false', 'auv_ident.format': run.fmt,
+        'auv_ident.source': run.source.name, 'auv_ident.source_sha256': run.sha256,
+        'auv_ident.column_map': json.dumps(run.column_map, separators=(',', ':')),
+        'auv_ident.measured': ' '.join(run.measured_names),
+        'auv_ident.measured_inputs': ' '.join(sorted(run.inputs)),
+        'auv_ident.noise_std_estimate': ' '.join(repr(float(v)) for v in run.noise_std),
+        'auv_ident.sample_time': repr(run.sample_time),
+        'auv_ident.samples': str(len(run.t_ns)),
+        'auv_ident.stamp_epoch_ns': str(int(epoch_ns)), 'auv_ident.stamp_epoch': epoch_text,
+        'auv_ident.stamp_epoch_nominal': 'true' if nominal else 'false',
+        'auv_ident.command': command,
+    }
+
+
+def write_imported_bag(run, path, vehicle=None, start=None, command='', compression='zstd'):
+    """Write a MeasuredRun as a rosbag2 MCAP bag directory at path (must not exist).
+
+    vehicle : stored as auv_ident.vehicle (default for HSVA files: kvlcc2_hsva; required for
+        CSV logs); start : ISO 8601 time of t = 0 (default: the nominal epoch, module
+        docstring). Returns path.
+    """
+    vehicle = vehicle or DEFAULT_VEHICLE.get(run.fmt)
+    if not vehicle:
+        raise ColumnMapError(f'{run.source}: give the vehicle (--vehicle NAME): it is stored '
+                             'in the bag for identify --bag')
+    epoch_ns, epoch_text, nominal = _epoch(run, start)
+    if epoch_ns + int(run.t_ns[0]) < 0:
+        raise ColumnMapError(f'{run.source}: the first stamp would be before 1970-01-01 '
+                             f'({run.t_ns[0] / NS_PER_S:g} s from {epoch_text})')
+    meta = import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command)
+    return write_message_bag(path, TOPIC_TYPES, meta, imported_messages(run, epoch_ns),
+                             compression)

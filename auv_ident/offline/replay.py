@@ -1,0 +1,224 @@
+"""Bag replay: a recorded bag through the identifier's per-message logic, offline.
+
+The identifier node and :func:`replay_bag` both drive one
+:class:`auv_ident.session.session.IdentSession` with the messages in arrival (log-time) order,
+so the same message sequence gives identical estimates online and offline.
+"""
+from collections import Counter
+from dataclasses import dataclass, field
+import logging
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from auv_ident.bags.reader import bag_topics, BagError, read_bag
+from auv_ident.session.estimate_file import estimate_document
+from auv_ident.session.record import median_noise_std, paired
+from auv_ident.session.session import Health, IdentSession
+
+log = logging.getLogger('auv_ident.replay')
+
+@dataclass
+class ReplayResult:
+    """Identification over a bag.
+
+    names : parameter names (coefficients, then any estimated current components);
+        vehicle, frame : what was used
+    updates : list of (stamp_ns, estimate (p,), std (p,)), one per accepted odometry update
+    estimate, std, cov : final (last good) estimate, 1-sigma, covariance (p,), (p,), (p, p)
+    initial : the initial guesses; truth : the vehicle file's values (the truth of a simulated
+        bag)
+    accepted, rejected : odometry messages fused / dropped; commands : actuator messages
+        buffered; errors : core errors (each restarted the filter); reasons : Counter of
+        rejection reasons
+    t, Y, U : (N,), (N, 12), (N, 7) of the accepted measurements (NaN: unmeasured channel) and
+        U[k] = the command in force at t[k] (latest stamp <= t[k]), for identify.refine
+    mean_nis_per_dof : over the last NIS window; health : the node's health verdict at the end
+    noise_std : (12,) the measurement 1-sigma the EKF pass used, per channel (the median over
+        the accepted updates: the message covariances with noise_source 'message')
+    time_origin_ns : t = 0 of t and of the session's time line (int ns; 0 for stamps that
+        start near 0)
+    t_cmd, U_cmd : (M,), (M, 7) the accepted commands by stamp (a later message with the same
+        stamp wins), on the same time line
+    """
+
+    names: list
+    vehicle: str
+    frame: str
+    updates: list
+    estimate: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+    initial: np.ndarray
+    truth: np.ndarray
+    accepted: int
+    rejected: int
+    commands: int
+    errors: int
+    reasons: Counter
+    t: np.ndarray
+    Y: np.ndarray
+    U: np.ndarray
+    mean_nis_per_dof: float
+    health: Health
+    T: float = 0.05
+    settings: dict = field(default_factory=dict)
+    noise_std: np.ndarray = None
+    time_origin_ns: int = 0
+    t_cmd: np.ndarray = None
+    U_cmd: np.ndarray = None
+    # the session's core.model.hydrodynamics.Model (coefficients, then current)
+    model: object = None
+
+    def document(self, stamp_ns=None):
+        """The estimate file's dict of the final estimate."""
+        if stamp_ns is None and self.updates:
+            stamp_ns = self.updates[-1][0]
+        return estimate_document(self.vehicle, self.names, self.estimate, self.cov, stamp_ns,
+                                 self.accepted)
+
+def bag_custom_data(path):
+    """metadata.yaml's custom_data of a bag directory ({} if absent or unreadable)."""
+    meta = Path(path) / 'metadata.yaml'
+    if not meta.is_file():
+        return {}
+    try:
+        doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
+        data = doc['rosbag2_bagfile_information'].get('custom_data') or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return {}
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+class ReplayWarnings:
+    """Offline counterpart of WarningLimiter: logs (logger 'auv_ident.replay', WARNING) the
+    first `first` rejections/errors of each key (topic, code), then only counts them;
+    :meth:`summary` logs one line per key with more."""
+
+    def __init__(self, first=3, logger=None):
+        self.first = first
+        self.log = logger or log
+        self.counts = Counter()
+
+    def __call__(self, ev):
+        key = (ev.reason.split(':', 1)[0], ev.code)
+        self.counts[key] += 1
+        n = self.counts[key]
+        if n <= self.first:
+            self.log.warning('%s %s' % ('rejected' if ev.kind == 'rejected' else 'filter reset:',
+                                        ev.reason)
+                             + (f' [first {self.first} of this kind logged]'
+                                if n == self.first else ''))
+
+    def summary(self):
+        for (topic, code), n in sorted(self.counts.items()):
+            if n > self.first:
+                self.log.warning(f'{topic}: {n} messages in all with problem {code!r} '
+                                 f'({n - self.first} not logged)')
+
+def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actuators',
+                    warn=None):
+    """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
+
+    warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
+    Returns the list of (stamp_ns, estimate, std) of the accepted updates (with coefficients
+    ['auto', ...] their length changes once, at the switch). The session's one-time notices
+    (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
+    as info (an error if it failed)."""
+    updates = []
+    for topic, _, msg in messages:
+        if topic == actuator_topic:
+            ev = session.on_actuators(msg)
+        elif topic == odom_topic:
+            ev = session.on_odom(msg)
+            if ev.kind == 'update':
+                updates.append((ev.stamp_ns, ev.estimate, ev.std))
+        else:
+            continue
+        if warn is not None and ev.kind in ('rejected', 'error'):
+            warn(ev)
+        if session.notices:
+            for text in session.notices:
+                log.warning(text)
+            session.notices.clear()
+        if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
+            _log_choice_news(session.auto)
+    return updates
+
+
+def _log_choice_news(auto):
+    for level, text in auto.news:
+        (log.error if level == 'error' else log.info)(text)
+    auto.news.clear()
+
+def session_result(session, updates, settings=None):
+    """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
+    t, Y, U, t_cmd, U_cmd = paired(session.commands, session.measurements)
+    est, cov = session.current()
+    if session.last_good is not None:
+        est, cov = session.last_good.estimate, session.last_good.cov
+    return ReplayResult(
+        names=list(session.names), vehicle=session.vehicle.name, frame=session.frame,
+        updates=updates, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
+        initial=session.theta0.copy(), truth=session.model.theta_true,
+        accepted=session.odom_accepted, rejected=session.odom_rejected,
+        commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
+        t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),
+        T=session.T, settings=dict(settings or {}),
+        noise_std=median_noise_std(session.variances, session.noise_default),
+        time_origin_ns=int(session.time_origin_ns or 0),
+        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model)
+
+def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
+               actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
+    """Identify from a bag exactly as the identifier node would have live.
+
+    Odometry and actuator messages are read in log-time order (as recorded) and fed to an
+    IdentSession in that order.
+
+    Parameters
+    ----------
+    path : bag directory or .mcap file
+    vehicle, frame : default from the bag's metadata custom_data ('auv_ident.vehicle',
+        'auv_ident.frame', written for simulated runs), else 'nps_auv2' and 'ned'
+    coefficients : names (empty: the vehicle's identify_default)
+    odom_topic, actuator_topic : topics to read
+    allow_truncated : read the complete chunks of a bag whose writer died (bags.reader.read_bag);
+        default: such a bag is a BagError naming the option
+    warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
+        then a count), or False
+    **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
+        noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
+        warm_start, max_command_age, noise_source, current, current_down, velocity_reference,
+        current_sd0, current_walk); defaults are the node's parameter defaults (max_command_age:
+        none, noise_source: 'message', current: 'estimate', velocity_reference: 'ground')
+
+    Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
+    not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad
+    setting; nothing else for bad input.
+    """
+    present = bag_topics(path, allow_truncated=allow_truncated)
+    for what, topic in (('odometry', odom_topic), ('actuator', actuator_topic)):
+        if topic not in present:
+            listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
+            raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
+                           f'{listing}')
+    meta = bag_custom_data(path)
+    vehicle = vehicle or meta.get('auv_ident.vehicle') or 'nps_auv2'
+    frame = frame or meta.get('auv_ident.frame') or 'ned'
+    settings.pop('keep_arrays', None)
+    session = IdentSession(vehicle=vehicle, coefficients=coefficients, frame=frame,
+                           keep_arrays=True, **settings)
+    msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
+                           actuator_topic: 'sensor_msgs/msg/JointState'},
+                    allow_truncated=allow_truncated)
+    warner = ReplayWarnings() if warn else None
+    try:
+        updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
+        if session.poll_choice():   # an 'auto' window that filled with the last message
+            _log_choice_news(session.auto)
+    finally:
+        if warner is not None:
+            warner.summary()
+    return session_result(session, updates, dict(settings, vehicle=vehicle, frame=frame,
+                                                 coefficients=list(coefficients)))
