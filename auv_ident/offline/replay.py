@@ -10,9 +10,9 @@ import logging
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from auv_ident.bags.reader import bag_topics, BagError, read_bag
+from auv_ident.bags.schema import custom_data_of, read_metadata
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
@@ -80,15 +80,13 @@ class ReplayResult:
 
 def bag_custom_data(path):
     """metadata.yaml's custom_data of a bag directory ({} if absent or unreadable)."""
-    meta = Path(path) / 'metadata.yaml'
-    if not meta.is_file():
+    if not Path(path).is_dir():
         return {}
     try:
-        doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
-        data = doc['rosbag2_bagfile_information'].get('custom_data') or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-        return {}
-    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+        info = read_metadata(path)
+        return {} if info is None else custom_data_of(info)
+    except BagError:
+        return {}   # reading the bag's messages says what is wrong with it
 
 class ReplayWarnings:
     """Offline counterpart of WarningLimiter: logs (logger 'auv_ident.replay', WARNING) the
