@@ -15,6 +15,9 @@ What a worker needs travels with the task or with the cluster registration:
   identification on every worker (those that join later, e.g. a restarted one, too) before
   its first task, so that a worker compiles (or loads from its own numba cache) once, and no
   task's wall time carries the compilation;
+- a local cluster speaks TLS with throw-away credentials (:func:`local_cluster`): its
+  scheduler listens on loopback, where any local user could otherwise connect and run code in
+  the workers;
 - ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST in the environment of the workers it starts (the
   identification creates no ROS node, but nothing spawned here may leave loopback if it did);
 - AUV_IDENT_THREADS in the same environment: the usable CPUs shared out among the local
@@ -136,13 +139,21 @@ def difference_threads_env(workers):
     return {'AUV_IDENT_THREADS': str(max(1, difference_threads() // max(1, workers)))}
 
 
-def local_cluster(workers, silence_logs=logging.ERROR, env=None):
+def local_cluster(workers, silence_logs=logging.ERROR, env=None, secure=True):
     """A distributed.LocalCluster of `workers` single-threaded worker processes, everything on
     127.0.0.1, no dashboard. The scheduler still serves its small HTTP API (health, metrics):
     on a free loopback port, not on 8787, which another cluster may hold. env : more
-    environment variables for the workers (tools/campaign_bench.py: empty compile caches)."""
+    environment variables for the workers (tools/campaign_bench.py: empty compile caches).
+
+    Security: every connection is TLS with a key and self-signed certificate made for this
+    cluster and held in memory only (distributed's Security.temporary; needs `cryptography`).
+    Loopback keeps the network out but not the machine's other users: without this, anyone on
+    the machine could connect to the scheduler's port and run code in the workers. A client
+    connects with the cluster object (``Client(cluster)``), which carries the credentials.
+    secure=False: plain TCP, as an existing cluster reached by its address (`--scheduler`) may
+    be; the tests use it to stand in for one."""
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        host=LOOPBACK, dashboard_address=None,
+                        host=LOOPBACK, dashboard_address=None, security=True if secure else None,
                         env=dict(WORKER_ENV, **difference_threads_env(workers), **(env or {})),
                         silence_logs=silence_logs,
                         scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})

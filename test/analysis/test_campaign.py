@@ -54,8 +54,27 @@ def archive(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def cluster():
-    with engine.local_cluster(2) as c:
+    # stands in for an existing cluster reached by its address (--scheduler): plain TCP, as a
+    # user's own cluster may be; the campaign's own local cluster is TLS (test below)
+    with engine.local_cluster(2, secure=False) as c:
         yield c
+
+
+def test_the_local_cluster_runs_no_code_for_another_local_process():
+    """A process on the machine that knows the scheduler's port cannot connect, with no
+    credentials or with self-made ones, so it cannot run code in the workers; the campaign's
+    client (the cluster object) can."""
+    from distributed.security import Security
+    with engine.local_cluster(1) as lc:
+        assert lc.scheduler_address.startswith('tls://127.0.0.1:')
+        with Client(lc) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
+        for address, security in ((lc.scheduler_address, None),
+                                  (lc.scheduler_address.replace('tls://', 'tcp://'), None),
+                                  (lc.scheduler_address, Security.temporary())):
+            with pytest.raises((OSError, TypeError, TimeoutError)):
+                outsider = Client(address, timeout=3, security=security)
+                outsider.run(lambda: 'ran')
 
 
 def _rows(out):
@@ -137,7 +156,7 @@ def test_a_worker_killed_mid_campaign_loses_no_bag(archive, tmp_path):
     worker still alive (or the one the nanny restarts); every bag gets its 'ok' row."""
     root, good, _ = archive
     out = tmp_path / 'out'
-    with engine.local_cluster(2) as lc, Client(lc.scheduler_address) as client:
+    with engine.local_cluster(2, secure=False) as lc, Client(lc) as client:
         pids = client.run(os.getpid)
         result = {}
         campaign = threading.Thread(target=lambda: result.update(run_campaign(
