@@ -13,6 +13,7 @@ install for nothing measurable at that size.
 import csv
 import datetime
 import glob
+import io
 import os
 import tempfile
 import time
@@ -23,6 +24,7 @@ from auv_ident.analysis.campaign_plot import plot_trends
 from auv_ident.bags.info import bag_info
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.safe_files import write_atomic
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
@@ -130,13 +132,12 @@ def write_table(path, rows):
                 coefs.append(k)
     columns = list(HEAD_COLUMNS) + [c for n in coefs for c in (n, n + '_std')] \
         + list(TAIL_COLUMNS)
-    tmp = path + '.tmp'
-    with open(tmp, 'w', newline='', encoding='utf-8') as fh:
-        w = csv.DictWriter(fh, columns, restval='')
-        w.writeheader()
-        for r in sorted(rows, key=lambda r: r['bag']):
-            w.writerow(r)
-    os.replace(tmp, path)
+    text = io.StringIO(newline='')
+    w = csv.DictWriter(text, columns, restval='')
+    w.writeheader()
+    for r in sorted(rows, key=lambda r: r['bag']):
+        w.writerow(r)
+    write_atomic(path, text.getvalue())
 
 
 def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, scheduler=None,

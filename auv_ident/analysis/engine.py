@@ -30,7 +30,6 @@ from dataclasses import dataclass
 import hashlib
 import logging
 import os
-import tempfile
 import time
 
 from distributed import as_completed, Client, get_worker, LocalCluster
@@ -38,6 +37,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.identification.batch import difference_threads
+from auv_ident.core.safe_files import private_dir, write_atomic
 from auv_ident.vehicles import resolve_vehicle_path
 
 WORKER_ENV = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -74,17 +74,18 @@ class VehicleText:
         return hashlib.sha256(self.text.encode()).hexdigest()[:16]
 
     def local_path(self):
-        """Path of this content on the machine that calls it (written once per content: the
-        folder is named after its digest, the file is renamed into place atomically)."""
-        folder = os.path.join(tempfile.gettempdir(), 'auv_ident_vehicles', self.digest)
-        path = os.path.join(folder, self.name + '.yaml')
-        if not os.path.isfile(path):
-            os.makedirs(folder, exist_ok=True)
-            tmp = f'{path}.{os.getpid()}.tmp'
-            with open(tmp, 'w', encoding='utf-8') as fh:
-                fh.write(self.text)
-            os.replace(tmp, path)
-        return path
+        """Path of this content on the machine that calls it: in the user's private cache
+        (core/safe_files.py: 0700, checked, never a guessable shared /tmp folder), in a folder
+        named after the digest; written atomically, and again whenever what is there is not
+        this content (a file changed behind our back is never used as is)."""
+        path = private_dir('vehicles', self.digest) / f'{self.name}.yaml'
+        try:
+            same = path.read_text(encoding='utf-8') == self.text
+        except (OSError, UnicodeDecodeError):
+            same = False
+        if not same:
+            write_atomic(path, self.text)
+        return str(path)
 
 
 class WarmUp(WorkerPlugin):

@@ -18,11 +18,11 @@ AutoChoice.document(): the state of the live choice and, once made, the offline 
 selection block); warm_start reads only the keys above.
 """
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from auv_ident.core.safe_files import write_atomic
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
@@ -39,22 +39,11 @@ def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps):
             'steps': int(steps)}
 
 def write_estimate_json(path, doc):
-    """Write an estimate document atomically (temp file + rename); NaN/Inf refused."""
-    path = Path(path)
+    """Write an estimate document atomically (a fresh temporary file, then one rename:
+    core/safe_files.py; a symlink planted beside the target redirects nothing); NaN/Inf
+    refused."""
     text = json.dumps(doc, indent=1, allow_nan=False) + '\n'
-    # a plain open() (not mkstemp, which makes the file 0600) keeps the umask's permissions
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
-    try:
-        with open(tmp, 'w', encoding='utf-8') as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_atomic(Path(path), text)
 
 def load_estimate_json(path):
     """Read an estimate file: (vehicle, names, estimate (p,), covariance (p, p)).

@@ -206,6 +206,20 @@ def test_vehicle_text_becomes_a_file_of_the_same_content():
     assert load_vehicle(path).name == 'nps_auv2'
 
 
+def test_a_vehicle_file_changed_behind_the_workers_back_is_not_used(tmp_path, monkeypatch):
+    """The worker's copy lives in the user's private cache, and a copy whose content is not the
+    task's is written again before use (a planted or edited file changed campaign results)."""
+    monkeypatch.setenv('AUV_IDENT_CACHE', str(tmp_path / 'cache'))
+    vt = engine.VehicleText.read('nps_auv2')
+    path = vt.local_path()
+    assert path.startswith(str(tmp_path / 'cache' / 'vehicles'))
+    with open(path, 'a', encoding='utf-8') as fh:
+        fh.write('# planted\n')
+    assert vt.local_path() == path
+    with open(path, encoding='utf-8') as fh:
+        assert fh.read() == vt.text
+
+
 def test_an_unreachable_scheduler_is_one_clear_error(archive, tmp_path):
     root, good, _ = archive
     proc = subprocess.run(
