@@ -463,8 +463,9 @@ class IdentSession:
 
     def on_actuators(self, msg):
         """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
-        stamp_ns = header_stamp_ns(msg)
+        stamp_ns = None
         try:
+            stamp_ns = header_stamp_ns(msg)
             _, u6 = joint_state_to_actuators(msg)
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
@@ -472,8 +473,9 @@ class IdentSession:
 
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement (in the `frame` convention). Returns an Event."""
-        stamp_ns = header_stamp_ns(msg)
+        stamp_ns = None
         try:
+            stamp_ns = header_stamp_ns(msg)
             _, x12 = odometry_state(msg, self.frame)
         except ConversionError as err:
             return self._reject('odom', 'conversion', str(err), stamp_ns)
