@@ -1,6 +1,7 @@
 """Tier 1: where the compiled code goes. numba's cache of the core and the generated model
 kernels live in private folders of the user's, keyed on what they were compiled from; no file of
 the package is written at run time. (The group key itself: test_ekf.py.)"""
+import importlib
 import os
 import pathlib
 import shutil
@@ -56,7 +57,7 @@ def test_without_a_usable_cache_folder_the_group_is_compiled_without_cache(tmp_p
     compiled_cache.register(str(pkg), ('tiny.py',))
     monkeypatch.syspath_prepend(str(tmp_path))
     with pytest.warns(RuntimeWarning, match='no usable folder for numba.s cache.*file/numba'):
-        from nocache_pkg.tiny import f
+        f = importlib.import_module('nocache_pkg.tiny').f
     assert f(1) == 2
     assert sorted(p.name for p in pkg.iterdir()) in (['tiny.py'], ['__pycache__', 'tiny.py'])
     assert not list(pkg.rglob('*.nb[ic]'))
