@@ -482,9 +482,9 @@ def repair_covariance(P, ref_std, floor=COV_REPAIR_FLOOR):
             raise DivergenceError('covariance overflows its reference scale: cannot be repaired')
         try:
             lam, V = np.linalg.eigh(C)
-        except np.linalg.LinAlgError:
+        except np.linalg.LinAlgError as err:
             raise DivergenceError('covariance eigen-decomposition failed: cannot be '
-                                  'repaired') from None
+                                  'repaired') from err
         fixed = (V * np.maximum(lam, floor)) @ V.T
         fixed = 0.5 * (fixed + fixed.T) * np.outer(d, d)
     if not np.all(np.isfinite(fixed)):

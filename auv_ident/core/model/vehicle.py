@@ -268,8 +268,8 @@ def vehicle_from_file(path):
     path = os.path.abspath(path)
     try:
         key = (path, os.path.getmtime(path))
-    except OSError:
-        raise ConfigError(f'no vehicle file {path}') from None
+    except OSError as err:
+        raise ConfigError(f'no vehicle file {path}') from err
     if key not in _CACHE:
         with open(path, encoding='utf-8') as fh:
             try:
@@ -456,9 +456,9 @@ def _mass_inverse(raw, where, free):
                           'with dofs needs exact')
     try:
         Minv_literal = np.array(raw['mss_inverse'], dtype=float)
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError) as err:
         raise ConfigError(f'{where}: mass_inverse: mss_literal needs a 6x6 `mss_inverse`') \
-            from None
+            from err
     if Minv_literal.shape != (6, 6) or not np.all(np.isfinite(Minv_literal)):
         raise ConfigError(f'{where}: mss_inverse must be a finite 6x6 matrix')
     return mass_inverse, Minv_literal
