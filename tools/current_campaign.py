@@ -1,6 +1,6 @@
 """Measure the identification in a water current on bags made independently of the identifier.
 
-Seeds x current directions x current speeds: each bag is made by test/independent_data.py (its
+Seeds x current directions x current speeds: each bag is made by offline/independent_data.py (its
 own integrator, kinematics, noise and rosbags writer; the vehicle flies in a constant NED
 current, the DVL measures over ground or through the water), then identified as
 ``python -m auv_ident identify --bag BAG --json OUT`` does (analysis.bag_identify.identify_bag,
@@ -29,11 +29,11 @@ import sys
 import time
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import DataConfig, generate  # noqa: E402
 import numpy as np  # noqa: E402
+
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 
 GOAL_MEDIAN_PCT = 2.0
 GOAL_COVERAGE = 0.90
@@ -213,7 +213,7 @@ def main(argv=None):
         rows = list(pool.map(run_case, jobs))
     from auv_ident.vehicles import load_vehicle
     names = list(load_vehicle(args.vehicle).identify_default)
-    print(f'{args.vehicle}, {args.duration:.0f} s bags from test/independent_data.py '
+    print(f'{args.vehicle}, {args.duration:.0f} s bags from offline/independent_data.py '
           f'({SAMPLING[args.sampling][0]}), seeds '
           f'{args.first_seed}..{args.first_seed + args.seeds - 1}, current speeds {speeds} m/s '
           f'towards {dirs} deg; identify --bag (current estimated); '

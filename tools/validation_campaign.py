@@ -2,7 +2,7 @@
 vehicle file's model?
 
 For each seed, a truth vehicle differs from the NPS AUV II file by factors U(0.8, 1.2)
-(test/independent_data.py, perturb 0.2), in one of two ways (--prior-error):
+(offline/independent_data.py, perturb 0.2), in one of two ways (--prior-error):
 
 - ``identified`` (default): only the identified coefficients differ (perturb_keep = every
   coefficient NOT identified, added mass included), so the file and the truth differ exactly
@@ -68,15 +68,13 @@ import time
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
-
-from independent_data import DataConfig, generate  # noqa: E402
 
 from auv_ident.analysis.bag_identify import bag_source  # noqa: E402
 from auv_ident.analysis.validation import validate_on_run  # noqa: E402
 from auv_ident.core.model.state import NU_NAMES, STATE_NAMES  # noqa: E402
 from auv_ident.core.simulation.prediction import fit_percent  # noqa: E402
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 PAPER = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')

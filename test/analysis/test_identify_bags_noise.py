@@ -95,11 +95,11 @@ def test_a_known_current_is_taken_for_all_bags(tmp_path):
 
 @pytest.mark.slow
 def test_two_bags_with_coloured_noise_give_honest_error_bars(tmp_path):
-    """Two independent bags (test/independent_data.py, its own integrator and writer), AR(1)
+    """Two independent bags (offline/independent_data.py, its own integrator and writer), AR(1)
     noise, 1 s, twice the documented level, not told: identified together, the truth is
     within 3 sigma of the refined and the EKF-pass estimates, and the result says the noise
     model from the data was used. (Measured: |error|/sigma 0.6-1.3 refined, 0.1-0.7 EKF.)"""
-    from independent_data import DataConfig, generate
+    from auv_ident.offline.independent_data import DataConfig, generate
     bags, truth = [], None
     for seed in (1, 2):
         data = generate(DataConfig(seed=seed, noise='ar1', noise_level=2.0, noise_tau=1.0,

@@ -2,7 +2,6 @@
 import json
 import os
 
-from independent_data import DataConfig, generate
 import matplotlib.image
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import STATE_NAMES
 from auv_ident.core.simulation import maneuvers
+from auv_ident.offline.independent_data import DataConfig, generate
 from auv_ident.vehicles import load_vehicle
 
 FIGURES = ('convergence', 'measured_speeds', 'measured_pose', 'validation_positions',

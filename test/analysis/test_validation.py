@@ -5,7 +5,6 @@ from html.parser import HTMLParser
 import json
 import os
 
-from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
@@ -26,6 +25,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_STATE, NU_NAMES, STATE_NAMES
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.independent_data import DataConfig, generate
 from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle
 

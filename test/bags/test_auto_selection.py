@@ -13,7 +13,7 @@ from auv_ident.session.session import IdentSession
 from auv_ident.vehicles import load_vehicle
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 
 
 @pytest.fixture(scope='module')

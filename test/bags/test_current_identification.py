@@ -1,5 +1,5 @@
 """Identification in a water current, on bags made independently of the identifier
-(test/independent_data.py: its own integrator, kinematics, noise and rosbags writer), through
+(offline/independent_data.py: its own integrator, kinematics, noise and rosbags writer), through
 ``identify --bag`` (analysis.bag_identify.identify_bag) and the command line.
 
 The slow tests fly 600 s bags in steady currents from several directions, DVL over ground and
@@ -12,11 +12,11 @@ import math
 import subprocess
 import sys
 
-from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
+from auv_ident.offline.independent_data import DataConfig, generate
 
 GOAL_PCT = 2.0          # every coefficient within this of the truth (%)
 GOAL_CURRENT = 0.01     # m/s

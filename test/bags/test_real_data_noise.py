@@ -1,14 +1,14 @@
 """Real data, part 2: coloured noise of an unknown level, a wrong prior, and error bars that
-tell the truth. Bags made by test/independent_data.py (its own integrator, noise and writer)."""
+tell the truth. Bags made by offline/independent_data.py (its own integrator, noise and writer)."""
 import json
 from pathlib import Path
 
-from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.core.identification.diagnosis import diagnose, XCORR_Z
+from auv_ident.offline.independent_data import DataConfig, generate
 
 PAPER_SET = 'Z_ds,Z_q,Z_w,M_ds,K_v'
 

@@ -1,16 +1,16 @@
 """Real data, part 1: time is what the stamps say, commands are held, the message covariances
-are the noise. Bags made by test/independent_data.py (its own integrator, stamping and
+are the noise. Bags made by offline/independent_data.py (its own integrator, stamping and
 writer), identified as a user would (`identify --bag`, analysis.bag_identify.identify_bag)."""
 import json
 from pathlib import Path
 
-from independent_data import CHANNELS, DataConfig, generate
 import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline.independent_data import CHANNELS, DataConfig, generate
 from auv_ident.offline.replay import replay_bag
 from auv_ident.offline.sim_bag import write_run_bag
 from auv_ident.vehicles import load_vehicle

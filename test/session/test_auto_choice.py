@@ -4,9 +4,7 @@ without losing a sample, and ends where an offline identify of the chosen set en
 that arrive while a worker chooses are kept and fed; a failed choice keeps the running set and
 says why; bad settings are one-line errors."""
 import math
-from pathlib import Path
 import re
-import sys
 import threading
 
 import numpy as np
@@ -15,15 +13,13 @@ import pytest
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.bags.reader import read_bag
 from auv_ident.core.errors import DomainError
+from auv_ident.offline.independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC
 from auv_ident.offline.replay import replay_bag
 from auv_ident.session import auto_choice
 from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.session import IdentSession
 from auv_ident.session.settings import ParameterError
 from auv_ident.vehicles import load_vehicle
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC  # noqa: E402
 
 WINDOW_S = 30.0
 CURRENT = ['current_n', 'current_e']
