@@ -4,6 +4,7 @@ import pytest
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.plausibility import (
+    depth_contradicts_down,
     implausible_coefficients,
     is_self_damping,
     prior_sd,
@@ -74,3 +75,23 @@ def test_the_prior_block_of_a_vehicle_file(tmp_path):
                                 'cruise_rpm: 500.0\nprior: {relative_sd: -1}'))
     with pytest.raises(ConfigError, match='prior of Z_q gives 1-sigma'):
         prior_sd(load_vehicle(str(bad)), 'Z_q')
+
+
+def test_control_derivatives_with_the_opposite_sign_are_named():
+    """An ENU run read as NED flips Z_ds, M_ds (and K_v, a cross term the prior judges): the
+    control derivatives are named whatever their size; within their error bar they are not."""
+    v = load_vehicle('nps_auv2')
+    names = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
+    flipped = np.array([0.073, -0.14, -0.3, 0.041, -0.0031])
+    found = implausible_coefficients(v, names, flipped, np.abs(flipped) * 0.01)
+    assert [f.name for f in found] == ['Z_ds', 'M_ds']
+    assert 'opposite sign' in found[0].reason
+    assert implausible_coefficients(v, ['Z_ds'], [0.001], [0.01]) == []
+
+
+def test_a_depth_above_the_surface_says_the_z_axis_points_up():
+    assert depth_contradicts_down(np.full(100, 10.0)) == ''
+    assert depth_contradicts_down(np.r_[np.full(50, -0.3), np.full(50, 0.4)]) == ''
+    why = depth_contradicts_down(np.r_[np.full(100, -10.0), np.nan])
+    assert 'above the water surface' in why and 'ENU/FLU' in why
+    assert depth_contradicts_down(np.full(100, -10.0), heave_free=False) == ''

@@ -12,6 +12,11 @@ against what the vehicle file says:
   damping of a vehicle moving forward), and the diagonal added mass (``X_udot`` ... ``N_rdot``,
   multiplier ``udot`` in X, ...). Such a coefficient identified positive by more than
   ``z`` of its 1-sigma is not plausible: dissipation does not feed the motion.
+- **Control derivatives keep the file's sign.** A term with a fin angle in its multiplier
+  (``dr ds db dbp dbs db2``) gets its sign from the fin's place and the file's sign convention
+  for the deflection, not from the data: identified with the opposite sign by more than ``z``
+  of its 1-sigma, it says the fins' sign convention or the frames (an ENU/FLU run read as
+  NED/FRD flips Z_ds, M_ds, Y_dr, N_dr) differ from the file's.
 - **The prior.** The vehicle file's value is a prior with a 1-sigma of ``relative_sd`` times
   its magnitude (default :data:`DEFAULT_RELATIVE_SD` = 1.0, i.e. the file may be off by its own
   size), or what the file's ``prior:`` block says per coefficient::
@@ -73,6 +78,15 @@ def is_self_damping(coefficient):
     return e == 0 and f == [own, own]          # X_uu u*u: drag of a vehicle moving forward
 
 
+FIN_FACTORS = frozenset(FACTOR_INDEX[f] for f in ('dr', 'ds', 'db', 'dbp', 'dbs', 'db2'))
+
+
+def is_control_derivative(coefficient):
+    """True for a term with a fin angle in its multiplier (its sign is the file's)."""
+    return (not coefficient.is_added_mass
+            and any(f in FIN_FACTORS for f in coefficient.factors))
+
+
 def prior_sd(vehicle, name):
     """1-sigma of the vehicle file's value of `name` as a prior, in the file's units (NaN when
     the file value is 0 and no absolute sd is given: no prior check)."""
@@ -109,6 +123,14 @@ def implausible_coefficients(vehicle, names, estimate, std, z=DEFAULT_Z):
                 f'{EQUATIONS[c.equation]} takes energy out of the motion, so it is negative '
                 f'(file value {c.value:.4g})'))
             continue
+        if (is_control_derivative(c) and c.value != 0.0 and est * c.value < 0.0
+                and abs(est) > z * sd):
+            out.append(Implausible(
+                name, float(est), sd, c.value,
+                f"{name} = {est:.4g} +- {sd:.2g} has the opposite sign of the vehicle file's "
+                f"{c.value:.4g}: a control derivative's sign is set by the fin and its sign "
+                "convention, so the fins' convention or the frames differ from the file's"))
+            continue
         prior = prior_sd(vehicle, name)
         if math.isnan(prior):
             continue
@@ -134,3 +156,22 @@ def what_to_check(findings, frame_hint=''):
             "vehicle's, that the data's frames are what the bag says (ENU/FLU vs NED/FRD)"
             + (f' ({frame_hint})' if frame_hint else '')
             + ' and the units of every channel')
+
+
+ABOVE_SURFACE_M = 1.0   # m: a submerged run's median depth this far above the surface is no depth
+
+
+def depth_contradicts_down(z, heave_free=True):
+    """A sentence when the run's NED depths z (m, down positive; NaN: not measured) put a
+    submerged vehicle above the water (median z < -ABOVE_SURFACE_M): the data's 'down' is up,
+    e.g. an ENU (REP-103) run read as NED; '' otherwise, or for a vehicle without heave."""
+    z = np.asarray(z, dtype=float)
+    z = z[np.isfinite(z)]
+    if not heave_free or z.size == 0:
+        return ''
+    median = float(np.median(z))
+    if median >= -ABOVE_SURFACE_M:
+        return ''
+    return (f'the depth z (NED, down positive) has a median of {median:.3g} m: the vehicle '
+            f"would run {-median:.3g} m above the water surface, so the data's z axis points "
+            'up (an ENU/FLU run, REP-103, read as NED/FRD?)')
