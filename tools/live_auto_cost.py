@@ -37,6 +37,7 @@ from independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC  #
 from auv_ident.bags.reader import read_bag  # noqa: E402
 from auv_ident.session.auto_choice import run_in_thread, run_inline  # noqa: E402
 from auv_ident.session.session import IdentSession  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 
 
 def messages_of(bag):
@@ -62,7 +63,8 @@ def timed_inline(cpu):
 
 def one_window(messages, named, window):
     cpu = []
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window),
                      auto_runner=timed_inline(cpu))
     feed(s, messages)
     a = s.auto
@@ -77,8 +79,8 @@ def one_window(messages, named, window):
 def paced(messages, named, window):
     """Feed the window at once, then the rest at the log times' pace, the choice in a worker
     thread; per-message call times (s) while it ran and after."""
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
-                     auto_runner=run_in_thread)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window), auto_runner=run_in_thread)
     t0_ns = messages[0][1]
     split = next(i for i, (_, t_ns, _) in enumerate(messages)
                  if (t_ns - t0_ns) * 1e-9 > window + 0.5)
