@@ -479,6 +479,8 @@ def build_parser():
                 kw['choices'] = f.metadata['choices']
             elif kind in ('strings', 'floats'):
                 kw['metavar'] = 'A,B,...'
+            elif kind == 'float':
+                kw['type'] = float
             sp.add_argument(_option(f.name), **kw)
 
     def ident_args(sp):

@@ -43,8 +43,8 @@ def _case(vehicle, level, tau, seed, out, reuse, coefficients):
                  bag_dir)
     truth = json.loads((bag_dir / 'truth.json').read_text())['coefficients']
     t0 = time.perf_counter()
-    doc, _ = identify_bag(str(bag_dir / 'bag'), IdentifierSettings.from_values(vehicle=vehicle,
-                                                                               coefficients=coefficients))
+    doc, _ = identify_bag(str(bag_dir / 'bag'), IdentifierSettings.from_values(
+        vehicle=vehicle, coefficients=coefficients))
     wall = time.perf_counter() - t0
     rows = {}
     for name, c in doc['coefficients'].items():

@@ -5,9 +5,14 @@ metadata, Python callers) and passed whole down the stack.
 Each setting is one dataclass field whose metadata holds its help text, unit, choices and
 kind (:func:`setting`); the node's parameter declarations, the command-line options,
 config/identifier.yaml and the docs/ros.md table are made from these fields
-(:func:`settings_fields`; ``python -m auv_ident settings`` writes the last two). A bad value
-raises :class:`ParameterError` naming the setting (= the node parameter, the keyword of
-:meth:`IdentifierSettings.from_values` and, with '-' for '_', the command-line option).
+(:func:`settings_fields`; tools/settings_docs.py writes the last two as
+session/settings_text.py says). A bad value raises :class:`ParameterError` naming the setting
+(= the node parameter, the keyword of :meth:`IdentifierSettings.from_values` and, with '-' for
+'_', the command-line option).
+
+Adding a setting: a field here, its use where it acts (IdentSession reads the value), then
+``python tools/settings_docs.py``; the node's parameter, the option of ``identify`` and the
+checks of test/ros/test_settings_agree.py follow from the field.
 
 The choice lists are defined once here:
 
@@ -199,7 +204,7 @@ def coefficient_request(vehicle, coefficients):
     if not any(n.strip().lower() == AUTO for n in names):
         return False, names
     try:
-        return parse_request(vehicle, ','.join(names))
+        return parse_request(vehicle, names)
     except ConfigError as err:
         raise ParameterError('coefficients', str(err)) from None
 

@@ -41,8 +41,8 @@ def test_irregular_stamps_dropouts_and_commands_on_change(tmp_path):
         cfg = DataConfig(seed=seed, odom_rate=rate, odom_jitter=0.1, dropout=0.05,
                          commands='on_change')
         data = generate(cfg, tmp_path / f'r{rate:g}_{seed}')
-        doc, _ = identify_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
-                                                                       coefficients=','.join(PAPER_SET)))
+        doc, _ = identify_bag(data.bag, IdentifierSettings.from_values(
+            vehicle='nps_auv2', coefficients=PAPER_SET))
         assert doc['rejected'] == 0, doc['rejection_reasons']
         assert doc['steps'] == len(data.odom_stamp_ns)
         e, z = _errors(doc, data.truth_json)

@@ -121,7 +121,7 @@ def test_the_chosen_set_ends_where_an_offline_identify_of_it_ends(record):
     _feed(s, messages)
     assert s.auto.state == 'chosen', s.auto.reason
     doc, _ = identify_bag(data.bag,
-                          IdentifierSettings.from_values(coefficients=','.join(s.coefficient_names)))
+                          IdentifierSettings.from_values(coefficients=s.coefficient_names))
     assert list(doc['coefficients']) == s.coefficient_names
     offline = np.array([doc['coefficients'][n]['estimate'] for n in s.coefficient_names])
     live, cov = s.best()
