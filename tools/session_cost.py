@@ -102,6 +102,12 @@ def new_session(cls):
     return cls(settings.from_values(sample_time=T)) if settings else cls(sample_time=T)
 
 
+def counters(session):
+    """The session's counters (session/status.py); a session of a revision before them kept
+    them on itself."""
+    return getattr(session, 'counters', session)
+
+
 class Pass:
     """One pass of a session over the data; `odom` and `cmd` are the mean call times (us)."""
 
@@ -112,7 +118,8 @@ class Pass:
             t0 = clock()
             call(*args)
             (odom if is_odom else cmd).append(clock() - t0)
-        assert session.odom_rejected == 0 and session.errors == 0, session.reasons
+        c = counters(session)
+        assert c.odom_rejected == 0 and c.errors == 0, c.reasons
         self.session = session
         self.odom = 1e6 * sum(odom) / len(odom)
         self.cmd = 1e6 * sum(cmd) / len(cmd)
@@ -219,7 +226,8 @@ def main(argv=None):
                  ('  on_odom minus the filter step', best[name] - best['filter'], ''),
                  (f'{args.against}: IdentSession.on_actuators', best[name + ' cmd'], '')]
         a, b = last['on_odom'].session, last[name].session
-        same = (a.reasons == b.reasons and a.odom_accepted == b.odom_accepted
+        ca, cb = counters(a), counters(b)
+        same = (ca.reasons == cb.reasons and ca.odom_accepted == cb.odom_accepted
                 and np.array_equal(a.last_good.estimate, b.last_good.estimate)
                 and np.array_equal(a.last_good.cov, b.last_good.cov))
         rows.append((f'same events and estimate as {args.against}', None, str(same)))

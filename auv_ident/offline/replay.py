@@ -154,16 +154,16 @@ def _log_choice_news(auto):
 def session_result(session, updates, settings=None):
     """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
     t, Y, U, t_cmd, U_cmd = paired(session.commands, session.measurements)
-    est, cov = session.current()
-    if session.last_good is not None:
-        est, cov = session.last_good.estimate, session.last_good.cov
+    est, cov = session.best()
+    counters = session.counters
     return ReplayResult(
         names=list(session.names), vehicle=session.vehicle.name, frame=session.frame,
         updates=updates, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
         initial=session.theta0.copy(), truth=session.model.theta_true,
-        accepted=session.odom_accepted, rejected=session.odom_rejected,
-        commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
-        t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),
+        accepted=counters.odom_accepted, rejected=counters.odom_rejected,
+        commands=counters.cmd_accepted, errors=counters.errors, reasons=counters.reasons,
+        t=t, Y=Y, U=U, mean_nis_per_dof=session.filter.mean_nis_per_dof(),
+        health=session.health(),
         T=session.T, settings=dict(settings or {}),
         noise_std=median_noise_std(session.variances, session.noise_default),
         time_origin_ns=int(session.time_origin_ns or 0),

@@ -1,9 +1,11 @@
 """Online identification of hydrodynamic coefficients: ``ros2 run auv_ident identifier``.
 
 Thin layer over :class:`auv_ident.session.session.IdentSession` (message conversion, rejection
-policy, the augmented EKF through core.filter.stream.StreamIdentifier, recovery, health rule).
-Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's messages in
-log-time order, so a recorded run replays to the same estimates.
+policy, the augmented EKF through core.filter.stream.StreamIdentifier, recovery, health rule):
+the node builds the messages and publishes them; what they hold comes from the session layer
+(the /diagnostics values: session/status.py; the frame algebra: session/messages.py).
+Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's
+messages in log-time order, so a recorded run replays to the same estimates.
 
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these)
@@ -14,10 +16,10 @@ is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed 
         ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
 
 Publications
-    ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good in
-        auv_ident/session/session.py: fused, finite, positive definite, innovations
-        consistent; during a divergence nothing is published, so the latched value stays the
-        last good estimate):
+    ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good, the
+        last good estimate rule of auv_ident/session/guard.py: fused, finite, positive
+        definite, innovations consistent; during a divergence nothing is published, so the
+        latched value stays the last good estimate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
         (vehicle file's units); velocity = 1-sigma; effort empty. The names and their number
         are fixed for the run, except once with ``coefficients`` [auto, ...] (below): at the
@@ -42,7 +44,7 @@ Publications
             or the divergence guard: innovations inconsistent for 1 s) within the last 200
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
             updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
-            (rules and reset in auv_ident/session/session.py);
+            (rules and reset in auv_ident/session/guard.py);
         WARN 'waiting for data': no update since start-up or the last restart;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
@@ -52,10 +54,12 @@ Publications
     values: accepted, rejected (odometry), commands, commands_rejected, errors (filter resets
     by the reset rule: core errors and divergence-guard resets), guard_resets, outliers
     (innovation gate), repairs (covariance repairs), time_jumps (confirmed backward jumps),
-    internal_errors (unexpected exceptions caught in a callback; 0 unless there is a bug),
-    last_error, mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis,
-    last_dof, last_stamp (of the last good estimate), then per coefficient <name> and
-    <name>_std of the last good estimate (repr floats), R_<channel> (adapted measurement
+    actuator_publishers (on the actuator topic, checked at 1 Hz), internal_errors (unexpected
+    exceptions caught in a callback; 0 unless there is a bug), last_error, mean_nis_per_dof,
+    nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
+    last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
+    session/live_diagnosis.py), then per coefficient <name>, <name>_std and <name>_verdict of
+    the last good estimate (repr floats), R_<channel> (adapted measurement
     variance of u ... psi) and Q_<name> (coefficient random-walk variance). With
     ``coefficients`` [auto, ...] also auto_state ('choosing', 'chosen' or 'failed'),
     auto_window_s, auto_data_s (s of odometry kept, or the choice was made from),
@@ -70,13 +74,13 @@ Services (std_srvs/srv/Trigger)
     ``~/save``: write the estimate file to ``save_path`` (fails if save_path is empty).
 
 Errors never stop the node: rejected messages (the rejection policy and plausibility rule of
-auv_ident/session/session.py: conversion errors, wrong frame, non-finite or implausible values,
+auv_ident/session/screening.py: conversion errors, wrong frame, non-finite or implausible values,
 zero, duplicate, out-of-order stamps, backward time jumps, no command yet, outliers) are warnings
 naming the problem, rate-limited per topic and problem (WarningLimiter: at most one line per
 kind every 5 s, with the count of those suppressed), so a flood of one problem never hides
 another. A filter fault (core error or divergence guard) is logged as an error (at most one
 per second), reported as ERROR on /diagnostics at once, and handled by the reset rule of
-auv_ident/session/session.py (vehicle states restart, coefficients from the last good estimate
+auv_ident/session/guard.py (vehicle states restart, coefficients from the last good estimate
 with inflated covariance); the last good estimate stays available (latched ~/estimate, ~/save).
 Nothing non-finite is published. An unexpected exception inside a callback (a bug) is caught,
 logged as one line, counted in internal_errors and handled by the same reset rule, so the
@@ -84,9 +88,9 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/session/session.py) of the last good estimate;
-with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
-JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
+null, "steps": accepted updates}`` (auv_ident/session/estimate_file.py) of the last good
+estimate; with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen
+the offline JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
 Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady
 clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
@@ -129,7 +133,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.core.model.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (
     declare_parameters,
@@ -143,10 +146,16 @@ from auv_ident.ros.toolkit import (
 )
 from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S
+from auv_ident.session.messages import (
+    current_indices,
+    current_twist_fields,
+    DEFAULT_FRAME_IDS,
+    NS_PER_S,
+)
 from auv_ident.session.session import Event, IdentSession
 from auv_ident.session.settings import help_text, IdentifierSettings, settings_fields
 from auv_ident.session.settings_text import SAVE_PATH
+from auv_ident.session.status import diagnostic_values
 from auv_ident.session.warning_limiter import WarningLimiter
 
 NODE_NAME = 'identifier'
@@ -242,8 +251,7 @@ class IdentifierNode(Node):
         self._covariance.layout.dim = [
             MultiArrayDimension(label='row:' + joined, size=p, stride=p * p),
             MultiArrayDimension(label='col:' + joined, size=p, stride=p)]
-        self._current_index = [self.names.index(n) if n in self.names else -1
-                               for n in CURRENT_NAMES]
+        self._current_index = current_indices(self.names)
 
     def _follow_choice(self, diagnostics=True):
         """After a session call: log what the 'auto' choice has to say (it started, switched
@@ -373,74 +381,26 @@ class IdentifierNode(Node):
             self.publish_current(est.header.stamp, estimate, cov)
 
     def publish_current(self, stamp, estimate, cov):
-        """~/current: the estimated water current in the world frame of ``frame`` (NED north,
-        east, down; ENU east, north, up), twist.linear, with its covariance in the linear block
-        (row-major 6x6; the angular part is 0 with covariance 0: the current model is
-        irrotational, Fossen 2021 sec. 10.3). A component that is not estimated (down, by
-        default) is 0 with variance 0: it is given, not measured."""
-        ned = np.zeros(3)
-        C = np.zeros((3, 3))
-        for a, i in enumerate(self._current_index):
-            if i < 0:
-                continue
-            ned[a] = estimate[i]
-            for b, j in enumerate(self._current_index):
-                if j >= 0:
-                    C[a, b] = cov[i, j]
-        if self.session.frame == 'enu':       # NED -> ENU: (E, N, -D), a signed permutation
-            perm, sign = [1, 0, 2], np.array([1.0, 1.0, -1.0])
-            ned = ned[perm] * sign
-            C = C[np.ix_(perm, perm)] * np.outer(sign, sign)
+        """~/current: the estimated water current in the world frame of ``frame``, with its
+        covariance (session/messages.py current_twist_fields: the frame algebra)."""
+        linear, covariance = current_twist_fields(estimate, cov, self._current_index,
+                                                  self.session.frame)
         msg = self._current
         msg.header.stamp = stamp
         lin = msg.twist.twist.linear
-        lin.x, lin.y, lin.z = (float(v) for v in ned)
-        full = np.zeros((6, 6))
-        full[:3, :3] = C
-        msg.twist.covariance = array('d', full.ravel().tobytes())
+        lin.x, lin.y, lin.z = (float(v) for v in linear)
+        msg.twist.covariance = array('d', covariance.tobytes())
         self.pub_current.publish(msg)
 
     # -- diagnostics --
 
     def diagnostic_status(self):
-        """The DiagnosticStatus of the rule in the module docstring."""
+        """The DiagnosticStatus of the rule in the module docstring: the session's health and
+        values (session/status.py), with the node's own counts."""
         s = self.session
         h = s.health()
-        f = s.stream.ekf
-        est, cov = s.best()
-        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-
-        def num(v):
-            v = float(v)
-            return repr(v) if np.isfinite(v) else 'n/a'
-
-        values = [('accepted', str(s.odom_accepted)), ('rejected', str(s.odom_rejected)),
-                  ('commands', str(s.cmd_accepted)),
-                  ('commands_rejected', str(s.cmd_rejected)),
-                  ('errors', str(s.errors)), ('guard_resets', str(s.guard_resets)),
-                  ('outliers', str(s.outliers)), ('repairs', str(s.repairs)),
-                  ('time_jumps', str(s.time_jumps)),
-                  ('actuator_publishers', str(self.actuator_publishers)),
-                  ('internal_errors', str(self.internal_errors)),
-                  ('last_error', s.last_error),
-                  ('mean_nis_per_dof', num(h.mean_nis_per_dof)),
-                  ('nis_band', f'{num(h.band[0])} {num(h.band[1])}'),
-                  ('nis_window', str(h.window)),
-                  ('guard_median_nis_per_dof', num(s.guard_median())),
-                  ('last_nis', num(s.last_nis)), ('last_dof', str(s.last_dof)),
-                  ('last_stamp', 'n/a' if s.last_good is None
-                   else num(s.last_good.stamp_ns * 1e-9))]
-        verdicts, diagnosis = s.diagnosis(h)
-        values += [('consistent', {True: 'true', False: 'false', None: 'not judged'}[
-            diagnosis['consistent']]), ('diagnosis', diagnosis['messages'][0])]
-        values += [(f'diagnosis_{i}', m) for i, m in enumerate(diagnosis['messages'][1:], 1)]
-        for name, v, sd in zip(self.names, est, std):
-            values += [(name, num(v)), (name + '_std', num(sd)),
-                       (name + '_verdict', verdicts[name]['verdict'])]
-        if s.auto is not None:
-            values += s.auto.diagnostic_values()
-        values += [('R_' + n, num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
-        values += [('Q_' + n, num(v)) for n, v in zip(self.names, np.diag(f.Q)[12:])]
+        values = diagnostic_values(s, h, [('actuator_publishers', str(self.actuator_publishers)),
+                                          ('internal_errors', str(self.internal_errors))])
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
                                 hardware_id=s.vehicle.name,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
@@ -451,7 +411,7 @@ class IdentifierNode(Node):
         that the actuator topic stopped is that no publisher is left. Then warn (rate-limited)
         while odometry still arrives. Returns the number of publishers."""
         count = self.sub_actuators.get_publisher_count()
-        accepted = self.session.odom_accepted
+        accepted = self.session.counters.odom_accepted
         if count == 0 and accepted > self._odom_at_last_check:
             line = self._warn_limit(('actuators', 'no publisher'),
                                     'actuators: no publisher left on the actuator topic while '
@@ -473,7 +433,7 @@ class IdentifierNode(Node):
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S
-                and self.session.odom_accepted != self._saved_steps):
+                and self.session.counters.odom_accepted != self._saved_steps):
             self._last_autosave = now
             ok, message = self.save()
             if not ok:
@@ -520,9 +480,10 @@ class IdentifierNode(Node):
         """On shutdown: write save_path if set, and log the final estimate."""
         est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        self._final_log('INFO', f'{self.session.odom_accepted} updates, '
-                                f'{self.session.odom_rejected} rejected, {self.session.errors} '
-                                'filter resets; last good estimate: ' + ', '.join(
+        counters = self.session.counters
+        self._final_log('INFO', f'{counters.odom_accepted} updates, {counters.odom_rejected} '
+                                f'rejected, {counters.errors} filter resets; last good '
+                                'estimate: ' + ', '.join(
                                     f'{n} = {v:.6g} +- {s:.2g}'
                                     for n, v, s in zip(self.names, est, std)))
         if self.save_path:

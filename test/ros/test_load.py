@@ -50,5 +50,5 @@ def test_identifier_keeps_up_with_200hz_and_memory_stays_flat(ros_env, tmp_path)
     # the estimate file written on shutdown starts a later run
     warm = IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'estimate.json'),
                                                        sample_time=1 / RATE_HZ))
-    est, cov = warm.current()
+    est, cov = warm.estimate_now()
     assert np.all(np.isfinite(est)) and np.all(np.linalg.eigvalsh(cov) > 0)

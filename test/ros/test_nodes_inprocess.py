@@ -345,10 +345,10 @@ def test_identifier_reads_odometry_bytes_as_the_messages(ctx, nodes, run):
             assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
                                                             expected.reason)
             assert np.array_equal(got.estimate, expected.estimate)
-    assert ident.session.odom_accepted == 60
+    assert ident.session.counters.odom_accepted == 60
     ev = ident.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
     assert ev.kind == 'rejected' and ev.code == 'conversion' and 'Undecodable' in ev.reason
-    assert ident.session.odom_rejected == 1 and ident.internal_errors == 0
+    assert ident.session.counters.odom_rejected == 1 and ident.internal_errors == 0
 
 
 def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypatch):
@@ -382,7 +382,7 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
     # a wrong message type on the odometry callback
     ev = ident.on_odom(JointState())
     assert ev.kind == 'rejected'
-    assert ident.session.odom_rejected == 4 and ident.session.cmd_rejected == 2
+    assert ident.session.counters.odom_rejected == 4 and ident.session.counters.cmd_rejected == 2
     assert ident.session.last_good is good
 
     # a core error: logged, ERROR on /diagnostics, filter restarted, last good kept
@@ -394,12 +394,12 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
     st = ident.diagnostic_status()
     assert st.level == DiagnosticStatus.ERROR and st.message == 'diverging'
     assert ident.session.last_good is good and not ident.session.started
-    est, _ = ident.session.current()
+    est, _ = ident.session.estimate_now()
     assert np.array_equal(est, good.estimate)
     # the restarted filter takes data again (buffered commands kept)
     events = _feed(ident, messages[3 * 41:3 * 60])
     assert events and all(e.kind == 'update' for e in events)
-    assert ident.session.errors == 1
+    assert ident.session.counters.errors == 1
     assert ident.diagnostic_status().level == DiagnosticStatus.ERROR   # until 200 updates
 
 
@@ -459,7 +459,7 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     nodes.append(warm)
     p = warm.session.model.p_coef    # the coefficients; the current starts afresh
     assert np.array_equal(warm.session.theta0[:p], doc['estimate'][:p])
-    est, cov = warm.session.current()
+    est, cov = warm.session.estimate_now()
     assert np.allclose(cov[:p, :p], np.asarray(doc['covariance'])[:p, :p])
     ev = _feed(warm, _ordered_messages(run)[:6])[-1]
     assert ev.kind == 'update'

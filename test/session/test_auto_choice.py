@@ -85,7 +85,7 @@ def test_publishes_while_choosing_then_switches_without_losing_a_sample(record):
     assert all(len(ev.estimate) == len(s.names) for ev in events[switch:])
     assert auto.window_data_s == pytest.approx(WINDOW_S, abs=0.05)
     # no sample lost: every odometry sample reached the chosen set's filter once and was taken
-    assert s.odom_accepted == n_odom and s.odom_rejected == 0
+    assert s.counters.odom_accepted == n_odom and s.counters.odom_rejected == 0
     assert s.stream.accepted == n_odom and s.stream.rejected == 0
     assert auto.samples == switch         # the ones kept up to the switch were fed to it
     assert s.last_good is not None and len(s.last_good.estimate) == len(s.names)
@@ -180,7 +180,7 @@ def test_messages_arriving_while_a_worker_chooses_are_kept_and_fed(record, monke
     events += _feed(s, messages[split:])
     assert s.auto.state == 'chosen', s.auto.reason
     assert s.auto.samples == 900    # the window's and the 15 s kept while it chose
-    assert s.stream.accepted == len(odom) == s.odom_accepted
+    assert s.stream.accepted == len(odom) == s.counters.odom_accepted
     assert len(events[-1].estimate) == len(s.names) > 3
 
 

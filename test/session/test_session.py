@@ -24,6 +24,7 @@ from auv_ident.session.guard import (
     NIS_WINDOW,
     NisWindow,
 )
+from auv_ident.session.guarded_filter import GuardedFilter
 from auv_ident.session.messages import (
     ConversionError,
     joint_state_to_actuators,
@@ -39,6 +40,7 @@ from auv_ident.session.settings import (
     NOISE_MODES,
     ParameterError,
 )
+from auv_ident.session.status import diagnostic_values
 from auv_ident.vehicles import load_vehicle
 
 T = 0.05
@@ -109,14 +111,14 @@ def test_array_api_gives_the_events_of_the_message_api(run, case):
     a = _feed_messages(by_message, messages)
     b = _feed_arrays(by_array, messages)
     _assert_same_events(a, b)
-    assert by_message.reasons == by_array.reasons
+    assert by_message.counters.reasons == by_array.counters.reasons
     if case == 'clean':
-        assert not by_message.reasons and all(e.accepted for e in a)
+        assert not by_message.counters.reasons and all(e.accepted for e in a)
     else:
         assert {'odom: non-finite', 'odom: implausible', 'odom: wrong frame',
                 'actuators: implausible', 'odom: duplicate stamp',
-                'odom: outlier'} <= set(by_message.reasons)
-        assert by_message.guard_resets >= 1
+                'odom: outlier'} <= set(by_message.counters.reasons)
+        assert by_message.counters.guard_resets >= 1
     assert by_message.document() == by_array.document()
     h1, h2 = by_message.health(), by_array.health()
     assert (h1.level, h1.message, h1.window) == (h2.level, h2.message, h2.window)
@@ -141,8 +143,8 @@ def test_array_api_rejects_unreadable_arrays_by_name(run):
     assert ev.code == 'conversion' and 'x12 must have shape (12,)' in ev.reason
     assert ev.stamp_ns == 10
     ev = s.add_command(np.int64(10), ['a'] * 6)
-    assert ev.code == 'conversion' and 'u6 is not numeric' in ev.reason
-    assert s.reasons == {'odom: conversion': 2, 'actuators: conversion': 1}
+    assert ev.code == 'conversion' and 'u7 is not numeric' in ev.reason
+    assert s.counters.reasons == {'odom: conversion': 2, 'actuators: conversion': 1}
     # numpy integer stamps and plain lists are taken
     assert s.add_command(np.int64(0), list(run.u[0])).kind == 'command'
     assert s.add_odometry(np.int64(0), list(run.y[0])).kind == 'update'
@@ -314,6 +316,47 @@ def test_nis_band_brackets_one_and_narrows_with_dof():
     assert lo1 < lo2 < 1.0 < hi2 < hi1
 
 
+# --- the parts: one filter's update rule, the status ---------------------------------------
+
+
+def test_the_session_updates_through_one_guarded_filter(run):
+    """The session's per-odometry update is GuardedFilter.update (the rule the 'auto'
+    choice's chosen filter follows too): a GuardedFilter of its own, fed the same samples
+    after the session's screening, gives the same updates, last good estimate and windows."""
+    s = IdentSession()
+    g = GuardedFilter(s._new_stream(), s.guard_on)
+    for k in range(120):
+        stamp_ns = round(run.t[k] * 1e9)
+        t = stamp_ns / 1e9                      # the session's time line: origin 0
+        s.add_command(stamp_ns, run.u[k])
+        g.stream.add_command(t, run.u[k].copy())
+        ev = s.add_odometry(stamp_ns, run.y[k])
+        step = g.update(t, stamp_ns, run.y[k].copy())
+        assert (ev.kind == 'update') == step.accepted and ev.good == step.good, k
+        assert np.array_equal(ev.estimate, step.estimate) and ev.nis == step.nis, k
+    assert s.filter is not g and np.array_equal(s.last_good.cov, g.last_good.cov)
+    assert s.filter.mean_nis_per_dof() == g.mean_nis_per_dof()
+    assert s.filter.guard_median() == g.guard_median()
+
+
+def test_status_values_are_the_diagnostics_without_ros(run):
+    s = IdentSession()
+    _feed_messages(s, _corrupted(run))
+    h = s.health()
+    values = diagnostic_values(s, h, [('internal_errors', '0')])
+    keys = [k for k, _ in values]
+    assert keys[:10] == ['accepted', 'rejected', 'commands', 'commands_rejected', 'errors',
+                         'guard_resets', 'outliers', 'repairs', 'time_jumps', 'internal_errors']
+    kv = dict(values)
+    c = s.counters
+    assert kv['accepted'] == str(c.odom_accepted) and kv['errors'] == str(c.errors) != '0'
+    assert kv['rejected'] == str(sum(n for key, n in c.reasons.items()
+                                     if key.startswith('odom: ')))
+    assert kv['last_error'] == c.last_error and kv['nis_window'] == str(h.window)
+    assert kv['Z_ds'] == repr(float(s.best()[0][s.names.index('Z_ds')]))
+    assert {'R_u', 'R_psi', 'Q_Z_ds', 'Z_ds_std', 'Z_ds_verdict', 'diagnosis'} <= set(kv)
+
+
 # --- parameters -------------------------------------------------------------------------------
 
 
@@ -400,7 +443,7 @@ def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
     assert warm.names == s.names
     assert np.array_equal(warm.theta0[:-2], doc['estimate'][:-2])
     assert list(warm.theta0[-2:]) == [0.0, 0.0]
-    assert np.allclose(warm.current()[1][-2:, -2:], np.eye(2) * 0.5 ** 2)
+    assert np.allclose(warm.estimate_now()[1][-2:, -2:], np.eye(2) * 0.5 ** 2)
 
 
 def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
