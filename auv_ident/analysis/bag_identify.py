@@ -347,7 +347,8 @@ def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noi
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
     pairs them estimates the current (so that its innovation gate judges samples with it); the
-    caller's model says what to do with the current. noise_std, q_state : (12,) the
+    caller's model says what to do with the current. vehicle : a Vehicle, a name or a YAML path
+    (None: what the bag's metadata say). noise_std, q_state : (12,) the
     measurement and per-step state process noise 1-sigma the replay's gate judges samples with
     (None: the messages' and the default; a real run needs the noise its identification used,
     docs/kvlcc2.md, or the gate rejects its samples). mass_inverse : the replay model's M^-1

@@ -268,7 +268,7 @@ def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, dura
         source = replace(source, truth=read_truth(truth, source.names))
     validation = None
     if validate:
-        validation = load_source(vehicle=source.vehicle.name, bag=validate,
+        validation = load_source(vehicle=source.vehicle, bag=validate,
                                  coefficients=','.join(source.names))
     return source, validation
 

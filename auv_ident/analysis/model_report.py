@@ -512,7 +512,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
         if not os.path.exists(b):
             raise ConfigError(f'identification bag {b} (from the model, or --ident-bags) does '
                               'not exist: give --ident-bags A,B')
-        s = bag_source(b, vehicle=v.path, coefficients=','.join(saved.names),
+        s = bag_source(b, vehicle=v, coefficients=','.join(saved.names),
                        noise_std=saved.noise_std, q_state=saved.q_state)
         mv.refuse_identification_run(s, src)
         ident_srcs.append(s)

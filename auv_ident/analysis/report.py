@@ -499,7 +499,7 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                           'manoeuvre: validation must use a held-out manoeuvre')
     v = full.vehicle
     if validate_bag:
-        run = bag_source(validate_bag, vehicle=v.path, coefficients=','.join(full.names),
+        run = bag_source(validate_bag, vehicle=v, coefficients=','.join(full.names),
                          velocity_reference=velocity_reference or full.velocity_reference,
                          mass_inverse=v.mass_inverse)
         mv.refuse_identification_run(full, run)
