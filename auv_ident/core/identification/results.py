@@ -149,7 +149,7 @@ class NoiseFit:
     refine_cost: float = math.nan
 
     @property
-    def reported_pass(self) -> FilterPass:
+    def reported_pass(self) -> Optional[FilterPass]:
         """The EKF pass whose estimate is reported: ekf_run, or the configured pass when a
         pass made elsewhere with the configured noise was kept."""
         return self.ekf_run if self.ekf_run is not None else self.configured_pass
@@ -227,12 +227,12 @@ class Selection:
         lines = [f'automatic selection: {len(self.chosen)} of {self.candidates} candidate '
                  'coefficients chosen (' + ', '.join(self.chosen) + ')'
                  + (f'; named: {", ".join(self.named)}' if self.named else '')]
-        groups = {}
+        groups: dict[str, list[str]] = {}
         for name, why in self.left_out.items():
             key = why.split(':')[0].split(' (')[0]
             groups.setdefault(key, []).append(name)
         if self.consider_inflation:
-            worst = max(self.consider_inflation, key=self.consider_inflation.get)
+            worst = max(self.consider_inflation, key=lambda n: self.consider_inflation[n])
             ratio = self.consider_inflation[worst]
             lines.append("error bars include the errors of the coefficients left at the file's "
                          f'values ({100 * self.criteria["prior_rel_std"]:g} % 1-sigma each, '
