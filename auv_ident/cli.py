@@ -133,14 +133,15 @@ def _identify_simulated(args, settings):
                               tau=settings.tau)
     pr = _progress('batch refinement', 40 * len(names))
     opt = settings.current_option
-    res, run, _ = ex.identify_simulated(
-        v.name, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
+    sim = ex.identify_simulated(
+        v, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
         duration=args.duration, rpm=args.rpm, refine_pass=not args.no_refine,
         mass_inverse=settings.mass_inverse, progress=pr.update, current=opt,
         sim_current=_sim_current(args.sim_current),
         velocity_reference=settings.velocity_reference)
     pr.close()
-    print(res.diagnosis['messages'][0])
+    res, run = sim.result, sim.run
+    print(res.diagnosis.messages[0])
     print(f'{v.title}: identified {", ".join(names)} from a simulated '
           f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
           f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
@@ -158,7 +159,7 @@ def _identify_simulated(args, settings):
     print(results.doc_table(doc))
     print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
           f'wall {res.wall_s:.2f} s'
-          + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
+          + ''.join('\n- ' + m for m in res.diagnosis.messages[1:]))
     return doc
 
 
@@ -170,7 +171,7 @@ def cmd_montecarlo(args):
     names = results.coefficient_list(v, settings.coefficients)
     offsets = [float(o) for o in args.offsets.split(',')]
     pr = _progress('monte carlo', args.seeds * len(offsets))
-    st = ex.montecarlo(v.name, names, seeds=args.seeds, offsets=offsets,
+    st = ex.montecarlo(v, names, seeds=args.seeds, offsets=offsets,
                        noise_mode=settings.noise_mode,
                        maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
                        refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update,

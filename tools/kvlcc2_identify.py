@@ -4,8 +4,8 @@
 
 Reads the HSVA free-running runs (not in the repository) from ../shared/realdata/kvlcc2_hsva or
 --data FOLDER with the package's HSVA importer, identifies config/kvlcc2_hsva.yaml's
-identify_default (or the
-given coefficients) from Z_10_10_S and Z_20_10_S at once (core.identification.batch.identify_runs:
+identify_default (or the given coefficients) from Z_10_10_S and Z_20_10_S at once
+(core.identification.batch.identify:
 one coefficient set, each run from its own initial state), started from the file's prior (captive
 tests and Clarke 1983), then free-runs the identified model on all four runs with their
 measured rudder and thrust from their measured initial state (core/simulation/prediction.py) and
@@ -24,7 +24,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from auv_ident.core.filter.augmented import FilterConfig  # noqa: E402
-from auv_ident.core.identification.batch import identify_runs  # noqa: E402
+from auv_ident.core.identification.batch import identify  # noqa: E402
+from auv_ident.core.identification.results import Record  # noqa: E402
 from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State  # noqa: E402
 from auv_ident.core.simulation.prediction import fit_percent, free_run  # noqa: E402
@@ -133,7 +134,7 @@ def main(argv=None):
     noise = measurement_noise(runs[TRAIN[0]][1], runs[TRAIN[0]][0])
     cfg = config(v, names, noise)
     t0 = time.perf_counter()
-    res = identify_runs(model, [runs[r] for r in TRAIN], cfg, refine_pass=not args.no_refine)
+    res = identify(model, [Record(*runs[r]) for r in TRAIN], cfg, refine_pass=not args.no_refine)
     wall = time.perf_counter() - t0
     print(f'identified {len(names)} coefficients of {v.name} from {" + ".join(TRAIN)} '
           f'({res.steps} samples) in {wall:.1f} s (' + ('EKF pass + refinement'

@@ -27,7 +27,7 @@ method refuses keeps its initial guess in that method's model.
 
 ROS-free; the sources come from analysis/experiments.load_source.
 """
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 import json
 import math
 import time
@@ -41,6 +41,7 @@ from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.identification.equation_error import equation_error
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
 from auv_ident.core.identification.output_error import DEFAULT_SEGMENT_S, output_error
+from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.ukf import run_ukf
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import State, STATE_NAMES
@@ -64,24 +65,37 @@ def parse_methods(text):
     return names
 
 
+@dataclass
+class MethodResult:
+    """One method's answer: estimate and 1-sigma (p,) (NaN: not given), {name: reason} of the
+    coefficients it refused, notes, and the noise model it read off the data (the EKF pass's,
+    which the other methods then use)."""
+
+    estimate: np.ndarray
+    std: np.ndarray
+    refused: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    noise: object = None
+
+
 def _ekf(model, cfg, t, Y, U, T):
-    ekf_est, ekf_cov, _, _, fit = identify_with_noise_model(model, cfg, t, Y, U, T=T,
-                                                            refine_pass=False)
-    notes = list(fit.notes)
-    return ekf_est, np.sqrt(np.diag(ekf_cov)), {}, notes, fit
+    est = identify_with_noise_model(model, cfg, [Record(t, Y, U)], T=T, refine_pass=False)
+    return MethodResult(est.ekf_estimate, np.sqrt(np.diag(est.ekf_cov)),
+                        notes=list(est.noise.notes), noise=est.noise)
 
 
 def _filter_error(model, cfg, t, Y, U, T):
-    _, _, est, cov, fit = identify_with_noise_model(model, cfg, t, Y, U, T=T, refine_pass=True)
+    est = identify_with_noise_model(model, cfg, [Record(t, Y, U)], T=T, refine_pass=True)
+    fit = est.noise
     notes = [f'{fit.covariance} covariance']
     if not fit.refine_converged:
         notes.append(f'refinement did not converge: {fit.refine_message}')
-    return est, np.sqrt(np.diag(cov)), {}, notes
+    return MethodResult(est.estimate, np.sqrt(np.diag(est.cov)), notes=notes)
 
 
 def _ukf(model, cfg, t, Y, U, T):
     r = run_ukf(model, cfg, t, Y, U, T=T)
-    return r.theta, r.theta_std, {}, [f'mean NIS/dof {r.mean_nis_per_dof:.3f}']
+    return MethodResult(r.theta, r.theta_std, notes=[f'mean NIS/dof {r.mean_nis_per_dof:.3f}'])
 
 
 def _output_error(model, cfg, t, Y, U, T):
@@ -91,13 +105,13 @@ def _output_error(model, cfg, t, Y, U, T):
              + ' '.join(r.channels)]
     if not r.converged:
         notes.append('the search stopped at its evaluation limit')
-    return r.theta, r.theta_std, {}, notes
+    return MethodResult(r.theta, r.theta_std, notes=notes)
 
 
 def _equation_error(model, cfg, t, Y, U, T):
     r = equation_error(model, t, Y, U, measured=cfg.measured, T=T)
     notes = [f'R^2 {eq} {v:.3f}' for eq, v in r.r_squared.items()]
-    return r.estimate, r.std, dict(r.refused), notes
+    return MethodResult(r.estimate, r.std, dict(r.refused), notes)
 
 
 RUNNERS = {'ekf': _ekf, 'ukf': _ukf, 'filter_error': _filter_error,
@@ -195,12 +209,11 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
             doc['methods'][name] = entry
             continue
         entry['wall_s'] = time.perf_counter() - t0
-        est, std, refused, notes = out[:4]
-        if name == 'ekf':
-            fit = out[4]
-            if fit.used:       # the other methods use the noise the data showed
-                cfg_run = replace(cfg, noise_std=fit.effective_std.copy())
-        entry['notes'] = notes
+        est, std, refused = out.estimate, out.std, out.refused
+        if out.noise is not None and out.noise.used:
+            # the other methods use the noise the data showed
+            cfg_run = replace(cfg, noise_std=out.noise.effective_std.copy())
+        entry['notes'] = out.notes
         for i, n in enumerate(names):
             c = {'estimate': _jsonable(est[i]), 'std': _jsonable(std[i]),
                  'error_pct': (None if truth is None or not np.isfinite(est[i])

@@ -12,7 +12,6 @@ import os
 import numpy as np
 
 from auv_ident.analysis import experiments as ex, results, validation as mv
-from auv_ident.analysis.identification import identify_auto_with_diagnosis, identify_with_diagnosis
 from auv_ident.analysis.report_format import (
     cell as _num,
     markdown_table as _table,
@@ -29,6 +28,8 @@ from auv_ident.analysis.report_noise import (
 )
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.identification.pipeline import identify_with_diagnosis
+from auv_ident.core.identification.results import Record, SelectionRequest
 from auv_ident.core.identification.selection import AUTO
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -467,8 +468,9 @@ def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, vali
 
 
 def _identify(src, cfg, opt, named, hist_every, progress):
-    """(Result, the Source of the identified set, selection or None) of make_report: the set
-    chosen from the data when `named` is a list (coefficients ['auto', ...]), else src's."""
+    """(Identification, the Source of the identified set) of make_report: the set chosen from
+    the data when `named` is a list (coefficients ['auto', ...]; res.selection says how), else
+    src's."""
     from auv_ident.analysis.progress import Progress
     v = src.vehicle
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
@@ -476,22 +478,23 @@ def _identify(src, cfg, opt, named, hist_every, progress):
     def make_model(names):
         return Model(v, list(names) + opt.names, current=opt.fixed,
                      velocity_reference=src.velocity_reference)
-    selection = None
-    if named is not None:
-        def truth_of(names):    # known for a simulated source (the vehicle file)
-            return None if src.truth is None else Model(v, list(names)).theta_true[:len(names)]
-        res, _, selection = identify_auto_with_diagnosis(
-            make_model, cfg, src.t, src.Y, src.U, named=named, T=src.T, refine_pass=True,
-            hist_every=hist_every, truth_of=truth_of, progress=bar.update if bar else None)
-        # from here on the source identifies the chosen set (validation, methods, report)
+    auto = named is not None
+    res = identify_with_diagnosis(None if auto else make_model(src.names), cfg,
+                                  [Record(src.t, src.Y, src.U)], T=src.T, refine_pass=True,
+                                  hist_every=hist_every, truth=None if auto else src.truth,
+                                  progress=bar.update if bar else None,
+                                  auto=SelectionRequest(make_model, tuple(named)) if auto
+                                  else None)
+    if auto:
+        # the truth of the chosen set (known for a simulated source: the vehicle file); from
+        # here on the source identifies the chosen set (validation, methods, report)
+        truth = (None if src.truth is None
+                 else Model(v, list(res.names)).theta_true[:len(res.names)])
+        res = replace(res, truth=truth)
         src = replace(src, names=list(res.names), truth=res.truth)
-    else:
-        res = identify_with_diagnosis(make_model(src.names), cfg, src.t, src.Y, src.U, T=src.T,
-                                      refine_pass=True, hist_every=hist_every, truth=src.truth,
-                                      progress=bar.update if bar else None)
     if bar:
         bar.close()
-    return res, src, selection
+    return res, src
 
 
 def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0,
@@ -548,7 +551,7 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
     # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
     cfg.measured = np.any(np.isfinite(src.Y), axis=0)
     hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
-    res, src, selection = _identify(src, cfg, opt, named, hist_every, progress)
+    res, src = _identify(src, cfg, opt, named, hist_every, progress)
 
     run_val = mv.validate_on_run(
         v, src.names, res.estimate, None if res.current is None else res.current.estimate,
@@ -588,7 +591,7 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
              'noise_std': np.asarray(src.noise_std, dtype=float).tolist(),
              'versions': package_versions(), 'command': command,
              'validation': val_doc, 'validation_true_model': true_doc,
-             'selection': None if selection is None else selection.document()}
+             'selection': None if res.selection is None else res.selection.document()}
     if methods_doc is not None:
         extra['methods'] = methods_doc['methods']
         extra['methods_reference_fit_percent'] = methods_doc.get('reference_fit_percent')

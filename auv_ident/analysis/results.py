@@ -93,7 +93,10 @@ def current_warnings(cur):
 
 
 def result_dict(vehicle, res, extra=None, current_truth=None):
-    """The JSON document of `identify --json` (schema in docs/report.md)."""
+    """The JSON document of `identify --json` (schema in docs/report.md) of an
+    Identification (core.identification.results); `extra`: more entries, after the
+    identification's (its noise_model, identifiability and diagnosis where extra places
+    them, if it does)."""
     err = res.error_pct()
     ekf_err = res.error_pct('ekf_estimate')
     coeffs = {}
@@ -114,11 +117,16 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
          'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
          + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
             else 'dimensional SI') + ')',
-         'current': current_dict(getattr(res, 'current', None), current_truth),
-         'warnings': current_warnings(getattr(res, 'current', None))}
-    for key in ('noise_model', 'identifiability', 'diagnosis'):
-        if getattr(res, key, None) is not None:
-            d[key] = getattr(res, key)
+         'current': current_dict(res.current, current_truth),
+         'warnings': current_warnings(res.current)}
+    extra = extra or {}
+    judged = {} if res.diagnosis is None else {
+        'noise_model': None if res.noise is None else res.noise.document(),
+        'identifiability': res.diagnosis.identifiability,
+        'diagnosis': res.diagnosis.document()}
+    for key, value in judged.items():
+        if value is not None and key not in extra:
+            d[key] = value
     if extra:
         d.update(extra)
     return d

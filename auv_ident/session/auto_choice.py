@@ -192,14 +192,14 @@ def choose_and_feed(job):
     if len(measurements) < 2:
         raise ChoiceFailed(f'{len(measurements)} odometry sample(s) kept: nothing to choose '
                            'from')
-    t, Y, U = exact_hold(*paired(commands, measurements))
+    record = exact_hold(*paired(commands, measurements))
     # the noise the running filter used; the selection's filter runs with it fixed
     cfg = replace(job.cfg, noise_std=median_noise_std(variances, job.noise_variances),
                   mode='fixed')
     # one thread: the choice runs beside the live identifier, which keeps the other core for
     # the messages (offline, the same sensitivities take every core)
-    selection, _ = choose_coefficients(job.make_model, cfg, t, Y, U, named=job.named, T=job.T,
-                                       max_bridge=job.max_bridge, threads=1)
+    selection = choose_coefficients(job.make_model, cfg, [record], named=job.named, T=job.T,
+                                    max_bridge=job.max_bridge, threads=1).selection
     choice_wall_s = time.perf_counter() - start
     if not selection.chosen:
         # 'auto' alone on data that determine no coefficient: a filter of the current alone

@@ -193,8 +193,8 @@ def test_montecarlo_on_dask_gives_the_numbers_of_the_serial_loop(cluster):
     assert serial['cases'] == 4 and serial['diverged'] == 0
     # and a case is what identify_simulated gives with the vehicle by name (no engine at all)
     cfg = make_config(['Z_w', 'M_ds'], initial_offset=-0.5)
-    res, _, _ = identify_simulated('nps_auv2', ['Z_w', 'M_ds'], cfg, seed=1, duration=BAG_S,
-                                   refine_pass=False)
+    res = identify_simulated('nps_auv2', ['Z_w', 'M_ds'], cfg, seed=1, duration=BAG_S,
+                             refine_pass=False).result
     run = next(r for r in serial['runs'] if (r['seed'], r['offset']) == (1, -0.5))
     assert run['error_pct'] == res.error_pct().tolist()
 

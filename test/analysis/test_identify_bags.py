@@ -108,3 +108,18 @@ def test_a_vehicle_given_as_a_yaml_path_is_that_file(bags, tmp_path):
     src = bag_source(bags[0], IdentifierSettings.from_values(vehicle=str(path),
                                                              coefficients='N_r'))
     assert src.vehicle.name == 'my_ship' and src.truth[0] == pytest.approx(2.0 * file_n_r)
+
+
+def test_several_bags_choose_the_coefficients_from_all_runs(bags):
+    """`--coefficients auto,NAME` with several bags: one selection over the runs together
+    (core.identification.selection on all their residuals), every coefficient chosen or left
+    out with its reason, in the JSON and the table as for one bag."""
+    doc, table = identify_bags(bags, coefficients='auto,N_r', initial_offset=0.2,
+                               refine_pass=False)
+    sel = doc['selection']
+    v = load_vehicle('kvlcc2_hsva')
+    assert sel['named'] == ['N_r'] and sel['chosen'][0] == 'N_r'
+    assert list(doc['coefficients']) == sel['chosen']
+    assert set(sel['chosen']).isdisjoint(sel['left_out'])
+    assert set(sel['chosen']) | set(sel['left_out']) == set(v.names)
+    assert 'from 2 bags together' in table and 'automatic selection:' in table

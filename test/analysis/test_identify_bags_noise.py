@@ -133,7 +133,8 @@ def test_the_imported_hsva_runs_need_no_hand_given_noise(tmp_path):
     from kvlcc2_data import load_run, require_runs, run_path
     require_runs(('Z_10_10_S', 'Z_20_10_S'))
     from auv_ident.cli import main
-    from auv_ident.core.identification.batch import identify_runs
+    from auv_ident.core.identification.batch import identify
+    from auv_ident.core.identification.results import Record
     spec = importlib.util.spec_from_file_location(
         'kvlcc2_identify', Path(__file__).resolve().parents[2] / 'tools' / 'kvlcc2_identify.py')
     tool = importlib.util.module_from_spec(spec)
@@ -156,7 +157,7 @@ def test_the_imported_hsva_runs_need_no_hand_given_noise(tmp_path):
     v = load_vehicle(tool.VEHICLE)
     runs = [load_run(r) for r in tool.TRAIN]
     cfg = tool.config(v, v.identify_default, tool.measurement_noise(runs[0][1], runs[0][0]))
-    hand = identify_runs(Model(v, v.identify_default), runs, cfg)
+    hand = identify(Model(v, v.identify_default), [Record(*r) for r in runs], cfg)
     for i, name in enumerate(hand.names):
         c = doc['coefficients'][name]
         sd = max(c['std'], hand.std[i])

@@ -18,6 +18,7 @@ from auv_ident.core.filter import ekf as K
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
 from auv_ident.core.identification.batch import identify, run_ekf
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
 from auv_ident.core.simulation.simulate import simulate
@@ -192,7 +193,7 @@ def test_covariance_stays_symmetric_positive_definite_over_a_long_run():
     m = Model(NPS, NAMES)
     run = simulate(Model(NPS), 'ident', duration=900.0, seed=2)
     f = AugmentedEKF(m, FilterConfig(coefficients=NAMES), run.T)
-    _, hist, _ = run_ekf(f, run.t, run.y, run.u, hist_every=100)
+    hist = run_ekf(f, [Record(run.t, run.y, run.u)], hist_every=100).history
     assert np.array_equal(f.P, f.P.T)
     assert np.linalg.eigvalsh(f.P).min() > 0
     assert np.all(np.isfinite(hist['std'])) and np.all(hist['std'] > 0)
@@ -202,8 +203,8 @@ def test_short_run_converges_within_a_few_percent(short_run):
     m = Model(NPS, NAMES)
     for offset in (0.5, -0.5):
         cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
-        res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False,
-                       truth=m.theta_true)
+        res = identify(m, [Record(short_run.t, short_run.y, short_run.u)], cfg,
+                       refine_pass=False, truth=m.theta_true)
         err = np.abs(res.error_pct())
         assert err.max() < 5.0, dict(zip(NAMES, err))
 
@@ -212,7 +213,7 @@ def test_refinement_is_consistent_and_independent_of_the_start(short_run):
     m = Model(NPS, NAMES)
     ests = []
     for offset in (0.5, -0.5):
-        res = identify(m, short_run.t, short_run.y, short_run.u,
+        res = identify(m, [Record(short_run.t, short_run.y, short_run.u)],
                        FilterConfig(coefficients=NAMES, initial_offset=offset),
                        truth=m.theta_true)
         assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
@@ -227,14 +228,15 @@ def test_subset_of_channels_and_missing_samples_still_identify(short_run):
     measured = np.ones(12, dtype=bool)
     measured[6:8] = False                      # no USBL x, y
     cfg = FilterConfig(coefficients=NAMES, measured=measured)
-    res = identify(m, short_run.t, y, short_run.u, cfg, refine_pass=False, truth=m.theta_true)
+    res = identify(m, [Record(short_run.t, y, short_run.u)], cfg, refine_pass=False,
+                   truth=m.theta_true)
     assert np.abs(res.error_pct()).max() < 5.0
 
 
 def test_stream_identifier_equals_the_compiled_loop(short_run):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
-    res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False)
+    res = identify(m, [Record(short_run.t, short_run.y, short_run.u)], cfg, refine_pass=False)
     s = StreamIdentifier(m, cfg, short_run.T)
     # actuator commands arrive with the odometry of the same stamp; order must not matter
     for k, t in enumerate(short_run.t):
@@ -303,11 +305,11 @@ def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compile
     g.start(short_run.y[0], short_run.u[0, 5])
     for k in range(1, 50):
         g.step(short_run.u[k - 1], short_run.y[k])
-    run_ekf(f, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    run_ekf(f, [Record(short_run.t[:50], short_run.y[:50], short_run.u[:50])])
     np.testing.assert_allclose(g.xa, f.xa, rtol=1e-12)
     # the default prior differs (diagonal), so the prior did matter
     d = AugmentedEKF(m, FilterConfig(coefficients=NAMES, initial=th0), short_run.T)
-    run_ekf(d, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    run_ekf(d, [Record(short_run.t[:50], short_run.y[:50], short_run.u[:50])])
     assert not np.allclose(d.xa[12:], f.xa[12:], rtol=1e-6)
     h = AugmentedEKF(m, FilterConfig(coefficients=NAMES), short_run.T)
     h.set_prior(th0, C)
@@ -460,7 +462,7 @@ def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     m = Model(v, names)
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, run.t, run.y, run.u)
+    run_ekf(f, [Record(run.t, run.y, run.u)])
     g = AugmentedEKF(m, cfg, run.T)
     g.start(run.y[0], run.u[0, 5])
     for k in range(1, len(run.t)):

@@ -7,6 +7,7 @@ import pytest
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.selection import forward_stepwise, identify_auto, parse_request
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
@@ -61,9 +62,9 @@ def test_auto_on_a_short_simulated_run_picks_the_wrong_excited_coefficients():
         c[v.index(name)] *= factor
     run = simulate(Model(v, coefficient_values=c), 'ident', duration=150.0, seed=2)
     cfg = FilterConfig(coefficients=[], noise_std=run.noise_std, mode='fixed')
-    model, _, _, est, cov, fit, sel = identify_auto(lambda names: Model(v, list(names)), cfg,
-                                                    run.t, run.y, run.u, named=['X_pp'],
-                                                    T=run.T)
+    out = identify_auto(lambda names: Model(v, list(names)), cfg,
+                        [Record(run.t, run.y, run.u)], named=['X_pp'], T=run.T)
+    model, est, cov, sel = out.model, out.estimate, out.cov, out.selection
     assert sel.chosen[0] == 'X_pp' and sel.named == ['X_pp']
     for name in ('Z_w', 'N_r', 'M_uq'):
         assert name in sel.chosen, (name, sel.left_out.get(name))
