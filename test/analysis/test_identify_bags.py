@@ -114,7 +114,8 @@ def test_several_bags_choose_the_coefficients_from_all_runs(bags):
     """`--coefficients auto,NAME` with several bags: one selection over the runs together
     (core.identification.selection on all their residuals), every coefficient chosen or left
     out with its reason, in the JSON and the table as for one bag."""
-    doc, table = identify_bags(bags, coefficients='auto,N_r', initial_offset=0.2,
+    doc, table = identify_bags(bags, IdentifierSettings.from_values(coefficients='auto,N_r',
+                                                                    initial_offset=0.2),
                                refine_pass=False)
     sel = doc['selection']
     v = load_vehicle('kvlcc2_hsva')

@@ -74,6 +74,7 @@ def test_the_cache_folders_are_outside_the_package():
 _RUN = """
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.identification.batch import run_ekf
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
@@ -81,7 +82,7 @@ v = load_vehicle('isimi')
 names = list(v.identify_default)
 run = simulate(Model(v), 'ident', duration=2.0, seed=1)
 run_ekf(AugmentedEKF(Model(v, names), FilterConfig(coefficients=names), run.T),
-        run.t, run.y, run.u)
+        [Record(run.t, run.y, run.u)])
 """
 
 

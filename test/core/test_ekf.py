@@ -376,7 +376,7 @@ def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source(short_run):
         assert compiled_cache.cache_folder_of(str(folder / name)) == group
     r = short_run
     run_ekf(AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), r.T),
-            r.t[:50], r.y[:50], r.u[:50])
+            [Record(r.t[:50], r.y[:50], r.u[:50])])
     assert list(pathlib.Path(group).rglob('ekf.run_filter-*.nbi'))
 
 
