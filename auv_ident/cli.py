@@ -361,6 +361,9 @@ def cmd_import(args):
     from auv_ident.offline.importers import read_csv_run, read_hsva
     if args.format in ('slocum', 'npy'):
         from auv_ident.offline.glider_import import import_glider_files
+        if args.columns or args.start or args.vehicle:
+            raise AuvIdentError(f'--columns, --start and --vehicle are not for --format '
+                                f'{args.format}: glider logs carry their own times and layout')
         print('\n'.join(import_glider_files(args.format, args.file, args.out,
                                              'python -m auv_ident ' + ' '.join(sys.argv[1:]))))
         return 0
