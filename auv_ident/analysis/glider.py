@@ -10,22 +10,38 @@ Models (:mod:`auv_ident.core.glider`):
 - ``steady (gliderflight style)``: the steady glide with C_D0, m and V_g fitted to the depth
   rate computed with one density (1004 kg/m^3), as gliderflight's example calibrates
   (``SteadyStateCalibrate(rho0=1004)``, a_h 3.8, C_D1 10.5, the 10-35 m window); written here
-  with our code, least squares in place of Nelder-Mead (the same minimum).
+  with our code, least squares in place of Nelder-Mead (the same minimum);
+- ``dynamic (gliderflight style)``: the same three parameters and density, the dynamic model;
+- with the water temperature in the record (``import --format npy`` given the raw logs too):
+  ours with the hull's thermal expansion at its prior, and with it fitted. Ours leaves it out
+  (docs/glider.md says why).
 
 Scores on the half not fitted: speed through water against the DVL (bias, RMS, fit %) over
 every DVL sample and over the dives where the DVL agrees with the pressure and pitch
 (:func:`auv_ident.core.glider.validation.consistent_dvl`), and the depth rate (RMS over the
 fit window). Agreement of the halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
 """
+from dataclasses import replace
+
 import numpy as np
 
 from auv_ident.core.glider.calibration import calibrate, DEPTH_WINDOW, identifiability
 from auv_ident.core.glider.flight import FLIGHT_MODELS
 from auv_ident.core.glider.validation import consistent_dvl, score
 
-OURS = ('dynamic', ('hull_volume', 'drag_zero_lift'), None)
-GLIDERFLIGHT_STEADY = ('steady', ('drag_zero_lift', 'mass', 'hull_volume'), 1004.0)
-MODELS = {'dynamic': OURS, 'steady (gliderflight style)': GLIDERFLIGHT_STEADY}
+# label: (model, free parameters, depth-rate density (None: local), water temperature used)
+OURS = ('dynamic', ('hull_volume', 'drag_zero_lift'), None, False)
+GLIDERFLIGHT_FREE = ('drag_zero_lift', 'mass', 'hull_volume')
+MODELS = {'dynamic': OURS,
+          'steady (gliderflight style)': ('steady', GLIDERFLIGHT_FREE, 1004.0, False),
+          'dynamic (gliderflight style)': ('dynamic', GLIDERFLIGHT_FREE, 1004.0, False)}
+# with the water temperature (the raw logs'): the hull's thermal expansion at the prior, and
+# freed
+THERMAL_MODELS = {
+    'dynamic + thermal expansion (prior)': ('dynamic', ('hull_volume', 'drag_zero_lift'),
+                                            None, True),
+    'dynamic + thermal expansion (fitted)': ('dynamic', ('hull_volume', 'drag_zero_lift',
+                                                         'thermal_expansion'), None, True)}
 # what the dives are asked about beyond what ours identifies
 EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
 
@@ -44,21 +60,25 @@ def run_campaign(record, split=None, window=DEPTH_WINDOW):
     1-sigma, fit seconds, scores on both halves; per model the halves' agreement; the
     identifiability of the extra parameters; the DVL dives judged."""
     t_split = 0.5 * (record.t[0] + record.t[-1]) if split is None else float(split)
-    first, second = record.split(t_split)
-    halves = {'first': first, 'second': second}
+    with_temperature = dict(zip(('first', 'second'), record.split(t_split)))
+    halves = {name: replace(h, temperature=None) for name, h in with_temperature.items()}
     out = {'split': t_split, 'window': list(window), 'models': {}}
-    for label, (model, free, density) in MODELS.items():
+    models = dict(MODELS)
+    if record.temperature is not None:
+        models.update(THERMAL_MODELS)
+    for label, (model, free, density, thermal) in models.items():
         runs = {}
+        data = with_temperature if thermal else halves
         for fit_name, val_name in (('first', 'second'), ('second', 'first')):
-            cal = calibrate(halves[fit_name], model, free, window=window,
+            cal = calibrate(data[fit_name], model, free, window=window,
                             depth_rate_density=density)
             runs[fit_name] = {
                 'fitted_on': fit_name, 'validated_on': val_name,
                 'estimates': {n: list(v) for n, v in cal.estimates().items()},
                 'verdicts': {n: v['verdict'] for n, v in cal.verdicts.items()},
                 'seconds': cal.seconds, 'lags': cal.lags, 'depth_rate_rms_fit': cal.rms,
-                'validation': _scores(cal, halves[val_name]),
-                'fit': _scores(cal, halves[fit_name]),
+                'validation': _scores(cal, data[val_name]),
+                'fit': _scores(cal, data[fit_name]),
                 'calibration': cal}
         a, b = runs['first']['estimates'], runs['second']['estimates']
         agreement = {n: abs(a[n][0] - b[n][0]) / np.hypot(a[n][1], b[n][1]) for n in free}

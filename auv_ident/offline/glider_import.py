@@ -1,7 +1,8 @@
 """A Slocum glider's dives into our bags and back: ``import --format slocum`` (the raw .dbd/.ebd
 logs, :mod:`auv_ident.offline.slocum`) and ``import --format npy`` (gliderflight's processed
-``gliderflight_data.npy``), and :func:`read_glider_bag`, which gives the flight model
-(:mod:`auv_ident.core.glider`) its :class:`~auv_ident.core.glider.record.GliderRecord`.
+``gliderflight_data.npy``, and the raw logs if given, for the water temperature it lacks),
+and :func:`read_glider_bag`, which gives the flight model (:mod:`auv_ident.core.glider`) its
+:class:`~auv_ident.core.glider.record.GliderRecord`.
 
 One sample per CTD time (the science computer's ``sci_ctd41cp_timestamp``, ~1 s), stamped with
 it (s since 1970 UTC: real stamps). Topics, at each stamp, the actuators first:
@@ -135,6 +136,16 @@ def read_gliderflight_npy(path):
                      pumped_volume=pumped_cc * CC, battery_position=_nan(n), fin=_nan(n),
                      speed_through_water=speed, fmt='npy', sources=[path],
                      sha256=[_digest(path)])
+
+
+def add_ctd_from_logs(log, raw):
+    """Give a processed log the water temperature and conductivity of the raw logs' CTD
+    (interpolated onto its times: the same CTD stamps where both hold them; held beyond the
+    raw logs' ends, seconds away), in place; their files join its sources."""
+    for name in ('temperature', 'conductivity'):
+        setattr(log, name, np.interp(log.t, raw.t, getattr(raw, name)))
+    log.sources = list(log.sources) + list(raw.sources)
+    log.sha256 = list(log.sha256) + list(raw.sha256)
 
 
 def _stacked(logs, name, time_name=None):
@@ -351,10 +362,14 @@ def read_glider_bag(path):
 def import_glider_files(fmt, files, out, command=''):
     """``import --format slocum|npy``: read, write the bag; returns the lines to print."""
     if fmt == 'npy':
-        if len(files) != 1:
-            raise RunFileError(f'--format npy reads one file (gliderflight_data.npy), not '
-                               f'{len(files)}')
-        log = read_gliderflight_npy(files[0])
+        npys = [f for f in files if str(f).endswith('.npy')]
+        if len(npys) != 1:
+            raise RunFileError(f'--format npy reads one .npy file (gliderflight_data.npy), '
+                               f'and Slocum logs for the temperature; given {len(npys)} .npy')
+        log = read_gliderflight_npy(npys[0])
+        logs = [f for f in files if f not in npys]
+        if logs:
+            add_ctd_from_logs(log, read_slocum_logs(logs))
     else:
         log = read_slocum_logs(files)
     write_glider_bag(log, out, command=command)

@@ -18,7 +18,8 @@ BASELINE_RMS = 0.037        # m/s: gliderflight's steady calibration on the seco
 def campaign(tmp_path_factory):
     data = slocum_data.require()
     bag = tmp_path_factory.mktemp('comet') / 'bag'
-    assert cli_main(['import', '--format', 'npy', str(data / slocum_data.NPY_NAME),
+    logs = [str(p) for p in sorted(data.glob('*.[de]bd'))]      # for the water temperature
+    assert cli_main(['import', '--format', 'npy', str(data / slocum_data.NPY_NAME), *logs,
                      '--out', str(bag)]) == 0
     return run_campaign(read_glider_bag(bag))
 
@@ -43,6 +44,20 @@ def test_the_dynamic_model_predicts_the_dvl_on_dives_it_never_saw(campaign):
     # where that dive lies, and only there
     assert ours['runs']['first']['validation']['all']['speed_bias'] > 0.005
     assert abs(ours['runs']['second']['validation']['all']['speed_bias']) < 0.005
+
+
+def test_the_hull_thermal_expansion_with_the_water_temperature_is_refuted(campaign):
+    """With the water's temperature as the hull's, the aluminium's alpha_T (6.9e-5 1/K)
+    makes the prediction worse, and freed it comes out far below it (the hull lags the
+    water through a 12 K thermocline in a 5 min dive): ours leaves it out."""
+    prior = campaign['models']['dynamic + thermal expansion (prior)']['runs']
+    fitted = campaign['models']['dynamic + thermal expansion (fitted)']['runs']
+    ours = campaign['models']['dynamic']['runs']
+    for half in ('first', 'second'):
+        assert (prior[half]['validation']['consistent']['speed_rms']
+                > ours[half]['validation']['consistent']['speed_rms'] + 0.003)
+        value, std = fitted[half]['estimates']['thermal_expansion']
+        assert value + 5.0 * std < 6.9e-5
 
 
 def test_what_the_dives_cannot_identify_and_the_dvl_dive_set_apart(campaign):

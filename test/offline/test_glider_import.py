@@ -103,7 +103,7 @@ def test_bad_glider_inputs_are_named(tmp_path, capsys):
         read_gliderflight_npy(text)
     assert cli_main(['import', '--format', 'npy', str(bad), str(bad),
                      '--out', str(tmp_path / 'x')]) != 0
-    assert 'reads one file' in capsys.readouterr().err
+    assert 'given 2 .npy' in capsys.readouterr().err
     assert cli_main(['import', '--format', 'hsva', str(bad), str(bad),
                      '--out', str(tmp_path / 'y')]) != 0
     assert 'reads one file, not 2' in capsys.readouterr().err

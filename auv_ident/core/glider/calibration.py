@@ -156,8 +156,12 @@ def calibrate(record, model='dynamic', free=IDENTIFIED, start=None, window=DEPTH
                         diff_step=DIFF_STEP, x_scale=1.0)
     x = sol.x
     r = f(x)
-    J = _jacobian(f, x)
-    cov_x, info = sandwich_covariance(np.nan_to_num(J), r[:, None])
+    J = np.nan_to_num(_jacobian(f, x))
+    blind = [n for n, col in zip(free, J.T) if not np.any(col)]
+    if blind:
+        raise DataError(f'glider calibration: the record says nothing on {", ".join(blind)} '
+                        '(thermal_expansion needs the temperature)')
+    cov_x, info = sandwich_covariance(J, r[:, None])
     values = x0 + x * scale
     cov = cov_x * np.outer(scale, scale)
     params = start.with_values(free, values)
@@ -173,12 +177,20 @@ def calibrate(record, model='dynamic', free=IDENTIFIED, start=None, window=DEPTH
 def identifiability(record, calibration, extra=('lift_slope', 'induced_drag')):
     """name -> verdict dict (uncertainty.verdicts_from_covariance) of the calibration's free
     parameters together with ``extra`` ones, from the sandwich at the solution: what the
-    dives could say about the extra parameters had they been freed (module docstring)."""
+    dives could say about the extra parameters had they been freed (module docstring). A
+    parameter the record holds no information on (thermal expansion without a temperature)
+    is 'not excited' with an infinite 1-sigma."""
     names = tuple(calibration.free) + tuple(n for n in extra if n not in calibration.free)
     _check_names(names)
     f, _, x0, scale = residual_function(record, calibration.params, names, calibration.model,
                                         calibration.window, calibration.depth_rate_density)
     x = np.zeros(len(names))
-    J = _jacobian(f, x)
-    cov_x, _ = sandwich_covariance(np.nan_to_num(J), f(x)[:, None])
-    return verdicts_from_covariance(cov_x * np.outer(scale, scale), x0, list(names))
+    J = np.nan_to_num(_jacobian(f, x))
+    informed = np.array([np.any(col) for col in J.T])
+    cov = np.full((len(names), len(names)), np.nan)
+    keep = np.flatnonzero(informed)
+    cov_x, _ = sandwich_covariance(J[:, keep], f(x)[:, None])
+    cov[np.ix_(keep, keep)] = cov_x * np.outer(scale[keep], scale[keep])
+    cov[~informed, ~informed] = np.inf      # no information: 'not excited'
+    return verdicts_from_covariance(np.nan_to_num(cov, nan=0.0, posinf=np.inf), x0,
+                                    list(names), informed=informed)
