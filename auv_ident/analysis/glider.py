@@ -21,13 +21,13 @@ every DVL sample and over the dives where the DVL agrees with the pressure and p
 (:func:`auv_ident.core.glider.validation.consistent_dvl`), and the depth rate (RMS over the
 fit window). Agreement of the halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
 """
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 
 from auv_ident.core.glider.calibration import calibrate, DEPTH_WINDOW, identifiability
-from auv_ident.core.glider.flight import FLIGHT_MODELS
-from auv_ident.core.glider.validation import consistent_dvl, score
+from auv_ident.core.glider.flight import FLIGHT_MODELS, GliderParameters
+from auv_ident.core.glider.validation import consistent_dvl, dvl_dives, score
 
 # label: (model, free parameters, depth-rate density (None: local), water temperature used)
 OURS = ('dynamic', ('hull_volume', 'drag_zero_lift'), None, False)
@@ -79,7 +79,7 @@ def run_campaign(record, split=None, window=DEPTH_WINDOW):
                 'seconds': cal.seconds, 'lags': cal.lags, 'depth_rate_rms_fit': cal.rms,
                 'validation': _scores(cal, data[val_name]),
                 'fit': _scores(cal, data[fit_name]),
-                'calibration': cal}
+                'params': asdict(cal.params), 'calibration': cal}
         a, b = runs['first']['estimates'], runs['second']['estimates']
         agreement = {n: abs(a[n][0] - b[n][0]) / np.hypot(a[n][1], b[n][1]) for n in free}
         out['models'][label] = {'runs': runs, 'agreement': agreement}
@@ -106,7 +106,7 @@ def format_campaign(result):
     """Markdown lines of the campaign's table (module docstring)."""
     L = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
          'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
-         'dz/dt RMS cm/s | fit s |',
+         'dz/dt RMS cm/s | fit s (wall) |',
          '|---|---|---|---|---|---|---|---|---|---|---|']
     for label, model in result['models'].items():
         for run in model['runs'].values():
@@ -118,7 +118,7 @@ def format_campaign(result):
                      f"{v['consistent']['speed_fit']:.1f} | "
                      f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
     L += ['', '| model | parameter | first half (1-sigma) | second half (1-sigma) | '
-          '|difference| / combined sigma |', '|---|---|---|---|---|']
+          'difference / combined sigma |', '|---|---|---|---|---|']
     for label, model in result['models'].items():
         a, b = model['runs']['first']['estimates'], model['runs']['second']['estimates']
         for name, z in model['agreement'].items():
@@ -139,3 +139,60 @@ def format_campaign(result):
           + (', '.join(f"{np.datetime64(int(d['start']), 's')} UTC ({d['samples']} samples, "
                        f"{d['implied_aoa_deg']:.1f} deg)" for d in dropped) or 'none')]
     return L
+
+
+def plot_campaign(record, result, path):
+    """A figure of the campaign (PNG at path): top, three dives of the second half, the DVL's
+    speed and the speeds the models fitted on the first half predict; bottom, per DVL dive of
+    the whole record, the mean speed error (model - DVL) of each model on the half it did not
+    see, the inconsistent dive marked."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    first, second = record.split(result['split'])
+    halves = {'first': replace(first, temperature=None),
+              'second': replace(second, temperature=None)}
+    labels = ('dynamic', 'steady (gliderflight style)')
+    colours = {'dynamic': 'C0', 'steady (gliderflight style)': 'C3'}
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6.5))
+    val = halves['second']
+    t0 = val.t[0]
+    window = (val.t - t0 > 1200) & (val.t - t0 < 3200)
+    top.plot((val.t[window] - t0) / 60, val.speed_through_water[window], 'k.', ms=2,
+             label='DVL')
+    for label in labels:
+        run = result['models'][label]['runs']['first']
+        model, *_ = MODELS[label]
+        flight = FLIGHT_MODELS[model](GliderParameters(**run['params']), val)
+        top.plot((val.t[window] - t0) / 60, flight.speed[window], color=colours[label],
+                 lw=1, label=f'{label}, fitted on the first half')
+    top.set_xlabel('minutes into the second half')
+    top.set_ylabel('speed through water (m/s)')
+    top.set_ylim(0.0, 0.5)
+    top.legend(fontsize=8, loc='upper right')
+    for label in labels:
+        xs, ys = [], []
+        for fit_name, val_name in (('first', 'second'), ('second', 'first')):
+            rec = halves[val_name]
+            model, *_ = MODELS[label]
+            params = GliderParameters(**result['models'][label]['runs'][fit_name]['params'])
+            flight = FLIGHT_MODELS[model](params, rec)
+            for idx in dvl_dives(rec):
+                xs.append((rec.t[idx[0]] - record.t[0]) / 3600)
+                ys.append(100 * np.mean(flight.speed[idx] - rec.speed_through_water[idx]))
+        bottom.plot(xs, ys, 'o', color=colours[label], ms=4, label=label)
+    for d in result['dvl_dives']:
+        if not d['kept']:
+            bottom.axvspan((d['start'] - record.t[0]) / 3600 - 0.03,
+                           (d['start'] - record.t[0]) / 3600 + 0.08, color='0.85',
+                           label='DVL inconsistent with pressure and pitch')
+    bottom.axhline(0.0, color='k', lw=0.5)
+    bottom.axvline((result['split'] - record.t[0]) / 3600, color='k', ls='--', lw=0.8)
+    bottom.set_xlabel('hours from the start (dashed: the split)')
+    bottom.set_ylabel('dive mean of model - DVL (cm/s)')
+    bottom.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
