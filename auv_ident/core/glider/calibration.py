@@ -22,7 +22,7 @@ only the angle of attack, which at the near-constant pitch of these dives is a c
 factor on the speed that C_D0 takes up as well: :func:`identifiability` reports their
 correlation with C_D0 from the same sandwich with them added, at the solution.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import time
 
 import numpy as np
@@ -54,7 +54,8 @@ class Calibration:
     verdicts : name -> identifiability verdict dict (uncertainty.verdicts_from_covariance)
     rms : m/s, depth-rate residual RMS over the fit window; samples : in the window
     lags : the sandwich's lag window (samples); inflation : (p,) its bars over the white-noise
-    ones; seconds : the fit's wall time; depth_rate_source : 'local' or the constant density
+    ones; seconds : the fit's wall time; window : the depth window (m);
+    depth_rate_density : None (the depth rate with the local density) or the constant one
     """
 
     model: str
@@ -70,7 +71,6 @@ class Calibration:
     seconds: float
     window: tuple = DEPTH_WINDOW
     depth_rate_density: float = None
-    extra: dict = field(default_factory=dict)
 
     def value(self, name):
         return getattr(self.params, name)
@@ -104,8 +104,9 @@ def _check_names(names):
 
 
 def residual_function(record, start, names, model, window, density=None):
-    """(f, mask): f(x) -> (N,) model minus measured depth rate (NaN outside the window) at
-    the parameters ``start`` with names[i] = start + x[i] * SCALES."""
+    """(f, mask, x0, scale): f(x) -> (N,) model minus measured depth rate (NaN outside the
+    window, mask) at the parameters ``start`` with names[i] = x0[i] + x[i] * scale[i] (x0 the
+    start's values, scale from SCALES)."""
     flight = FLIGHT_MODELS[model]
     mask = fit_window(record, window)
     measured = measured_depth_rate(record, density)
