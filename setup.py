@@ -18,7 +18,7 @@ setup(
          glob('bags/nps_auv2_ident/*')),
     ],
     install_requires=['setuptools'],
-    zip_safe=False,  # numba caches compiled code next to the sources
+    zip_safe=False,  # numba compiles from the source files (core/compiled_cache.py)
     maintainer='auv_ident developers',
     maintainer_email='auv_ident@example.com',
     description='Identification of AUV hydrodynamic coefficients with an augmented-state EKF '

@@ -7,7 +7,7 @@ import os
 import sys
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model.vehicle import vehicle_from_file
+from auv_ident.core.model.vehicle import Vehicle, vehicle_from_file
 
 
 def config_dir():
@@ -52,5 +52,8 @@ def resolve_vehicle_path(name_or_path):
 
 
 def load_vehicle(name_or_path):
-    """Load and validate a vehicle by name (a file in config/) or path (parsed once per file)."""
+    """Load and validate a vehicle by name (a file in config/) or path (parsed once per file).
+    A Vehicle is returned as it is: a command resolves its vehicle once and passes it whole."""
+    if isinstance(name_or_path, Vehicle):
+        return name_or_path
     return vehicle_from_file(resolve_vehicle_path(name_or_path))

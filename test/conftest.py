@@ -2,11 +2,11 @@
 
 The tests live in folders that mirror the package (core/, session/, ros/, bags/, analysis/;
 test_layering.py, which checks the whole package, at the top). The shared helpers stay here in
-test/ (conftest.py, helpers.py, ros_pub_helper.py, independent_data.py) and are imported by
-plain name (`from helpers import ...`): pytest's default prepend import mode puts each test
-file's own folder on sys.path, so this file puts test/ there too, for every folder. The folders
-have no __init__.py (test/ as a package would be named `test`, the standard library's test
-package), so every test file's basename must be unique across the folders.
+test/ (conftest.py, helpers.py, ros_pub_helper.py, kvlcc2_data.py, method_runs.py) and are
+imported by plain name (`from helpers import ...`): pytest's default prepend import mode puts
+each test file's own folder on sys.path, so this file puts test/ there too, for every folder. The
+folders have no __init__.py (test/ as a package would be named `test`, the standard library's
+test package), so every test file's basename must be unique across the folders.
 
 DDS stays on loopback: each pytest run gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own
 ROS_DOMAIN_ID (1-101) and its own ROS_LOG_DIR, set here before any test imports rclpy, and

@@ -227,3 +227,34 @@ def test_python_lines_fit_in_99_columns():
             for i, line in enumerate(p.read_text(encoding='utf-8').splitlines(), 1)
             if len(line) > 99]
     assert files and not long, f'lines over 99 columns: {long}'
+
+
+def _test_imports(tool, test_modules):
+    """'line N: name' of each import of a test module (or test/ put on sys.path) in `tool`."""
+    text = tool.read_text(encoding='utf-8')
+    bad = [f'line {n.lineno}: {name}' for n in ast.walk(ast.parse(text))
+           for name in ([a.name for a in n.names] if isinstance(n, ast.Import)
+                        else [n.module or ''] if isinstance(n, ast.ImportFrom) else [])
+           if name.split('.')[0] in test_modules | {'test'}]
+    bad += [f'line {i}: test/ on sys.path' for i, line in enumerate(text.splitlines(), 1)
+            if 'sys.path' in line and "'test'" in line]
+    return bad
+
+
+def test_tools_import_only_the_package_never_the_tests():
+    """A developer script in tools/ uses the package (and third-party libraries), never a test
+    helper: what a tool needs of it is either a product feature (in the package) or the tool's
+    own."""
+    root = PKG.parent
+    test_modules = {p.stem for p in (root / 'test').rglob('*.py')}
+    bad = {t.name: b for t in sorted((root / 'tools').glob('*.py'))
+           if (b := _test_imports(t, test_modules))}
+    assert bad == {}
+
+
+def test_the_tools_check_sees_a_test_import(tmp_path):
+    tool = tmp_path / 'tool.py'
+    tool.write_text("import sys\nsys.path.insert(0, str(REPO / 'test'))\n"
+                    'from helpers import REPO\nimport kvlcc2_data\n')
+    assert _test_imports(tool, {'helpers', 'kvlcc2_data'}) == [
+        'line 3: helpers', 'line 4: kvlcc2_data', 'line 2: test/ on sys.path']

@@ -1,5 +1,5 @@
 """Campaign: `--coefficients auto,<the vehicle's default set>` against a hand-picked
-20-coefficient set (NPS AUV II) on bags the identifier did not make (test/independent_data.py),
+20-coefficient set (NPS AUV II) on bags the identifier did not make (offline/independent_data.py),
 with a truth vehicle whose other coefficients are 0.8-1.2x the vehicle file's.
 
 Per seed: one 600 s bag of the vehicle (20 Hz odometry, white noise at the documented level,
@@ -35,11 +35,9 @@ import time
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import DataConfig, generate  # noqa: E402
-
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 # NPS AUV II's hand-picked set: the paper's five and fifteen more

@@ -1,6 +1,6 @@
 """Measure the identification in a water current on bags made independently of the identifier.
 
-Seeds x current directions x current speeds: each bag is made by test/independent_data.py (its
+Seeds x current directions x current speeds: each bag is made by offline/independent_data.py (its
 own integrator, kinematics, noise and rosbags writer; the vehicle flies in a constant NED
 current, the DVL measures over ground or through the water), then identified as
 ``python -m auv_ident identify --bag BAG --json OUT`` does (analysis.bag_identify.identify_bag,
@@ -29,11 +29,11 @@ import sys
 import time
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import DataConfig, generate  # noqa: E402
 import numpy as np  # noqa: E402
+
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 
 GOAL_MEDIAN_PCT = 2.0
 GOAL_COVERAGE = 0.90
@@ -69,6 +69,7 @@ def run_case(job):
     """Generate (or reuse) one bag, identify it with the current estimated (and with
     --current none if asked). Returns a row dict."""
     from auv_ident.analysis.bag_identify import identify_bag
+    from auv_ident.session.settings import IdentifierSettings
     vehicle, speed, direction, seed, dvl, duration, out, reuse, compare_none, sampling = job
     name = f'{vehicle}_{sampling}_{dvl}_s{speed:g}_d{direction:g}_seed{seed}'
     folder = Path(out) / name
@@ -83,8 +84,8 @@ def run_case(job):
             continue
         t0 = time.perf_counter()
         try:
-            doc, _ = identify_bag(folder / 'bag', vehicle=vehicle, current=cur,
-                                  velocity_reference=dvl)
+            doc, _ = identify_bag(folder / 'bag', IdentifierSettings.from_values(
+                vehicle=vehicle, current=cur, velocity_reference=dvl))
         except ArithmeticError as err:          # a diverged run counts as a failure
             row[label] = {'failed': str(err)}
             continue
@@ -213,7 +214,7 @@ def main(argv=None):
         rows = list(pool.map(run_case, jobs))
     from auv_ident.vehicles import load_vehicle
     names = list(load_vehicle(args.vehicle).identify_default)
-    print(f'{args.vehicle}, {args.duration:.0f} s bags from test/independent_data.py '
+    print(f'{args.vehicle}, {args.duration:.0f} s bags from offline/independent_data.py '
           f'({SAMPLING[args.sampling][0]}), seeds '
           f'{args.first_seed}..{args.first_seed + args.seeds - 1}, current speeds {speeds} m/s '
           f'towards {dirs} deg; identify --bag (current estimated); '

@@ -1,4 +1,4 @@
-"""Baseline: how the identifier does on bags it did not make (test/independent_data.py).
+"""Baseline: how the identifier does on bags it did not make (offline/independent_data.py).
 
 Five cases, NPS AUV II, the paper's five coefficients (Z_ds, Z_q, Z_w, M_ds, K_v), 600 s:
 
@@ -28,10 +28,9 @@ import sys
 import time
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
 
 PAPER_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
 NE = 0.1 / math.sqrt(2.0)

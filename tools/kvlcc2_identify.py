@@ -2,9 +2,10 @@
 
     PYTHONPATH=. .venv/bin/python tools/kvlcc2_identify.py [--no-refine] [--coefficients A,B]
 
-Reads the HSVA free-running runs from ../shared/realdata/kvlcc2_hsva (not in the repository;
-test/kvlcc2_data.py reads them), identifies config/kvlcc2_hsva.yaml's identify_default (or the
-given coefficients) from Z_10_10_S and Z_20_10_S at once (core.identification.batch.identify_runs:
+Reads the HSVA free-running runs (not in the repository) from ../shared/realdata/kvlcc2_hsva or
+--data FOLDER with the package's HSVA importer, identifies config/kvlcc2_hsva.yaml's
+identify_default (or the given coefficients) from Z_10_10_S and Z_20_10_S at once
+(core.identification.batch.identify:
 one coefficient set, each run from its own initial state), started from the file's prior (captive
 tests and Clarke 1983), then free-runs the identified model on all four runs with their
 measured rudder and thrust from their measured initial state (core/simulation/prediction.py) and
@@ -20,17 +21,18 @@ import time
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
-
-from kvlcc2_data import available, load_run, REALDATA  # noqa: E402
+sys.path.insert(0, str(REPO))
 
 from auv_ident.core.filter.augmented import FilterConfig  # noqa: E402
-from auv_ident.core.identification.batch import identify_runs  # noqa: E402
+from auv_ident.core.identification.batch import identify  # noqa: E402
+from auv_ident.core.identification.results import Record  # noqa: E402
 from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
-from auv_ident.core.model.state import N_STATE, State  # noqa: E402
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State  # noqa: E402
 from auv_ident.core.simulation.prediction import fit_percent, free_run  # noqa: E402
+from auv_ident.offline.importers import read_hsva  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
+REALDATA = REPO / '..' / 'shared' / 'realdata' / 'kvlcc2_hsva'   # not in the repository
 VEHICLE = 'kvlcc2_hsva'
 TRAIN = ('Z_10_10_S', 'Z_20_10_S')
 VALIDATE = ('Z_20_10_P', 'Z_10_10_P', 'Z_20_10_S', 'Z_10_10_S')
@@ -94,23 +96,45 @@ def validate(model, theta, runs):
     return out
 
 
+def run_path(run, folder):
+    return Path(folder) / f'HSVA_CPMC_KVLCC2_{run}.dat'
+
+
+def load_run(run, folder):
+    """(t (N,) s, Y (N, 12), U (N, 7)) of one run, read by the package's HSVA importer
+    (`auv_ident import --format hsva`): Y holds the MEASURED channels (the others NaN), U the
+    rudder (rad), the shaft speed (rpm) and the measured thrust (N)."""
+    m = read_hsva(run_path(run, folder))
+    Y = np.full((len(m.t), N_STATE), np.nan)
+    Y[:, list(MEASURED)] = m.x[:, list(MEASURED)]
+    U = np.zeros((len(m.t), N_INPUT))
+    U[:, Input.DELTA_R] = m.inputs['rudder']
+    U[:, Input.N_RPM] = m.inputs['shaft']
+    U[:, Input.THRUST] = m.inputs['thrust']
+    return m.t, Y, U
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--coefficients', default='')
     ap.add_argument('--no-refine', action='store_true')
+    ap.add_argument('--data', default=str(REALDATA),
+                    help='folder of the HSVA files (default: %(default)s)')
     args = ap.parse_args(argv)
-    if not available(TRAIN + VALIDATE):
-        print(f'KVLCC2 runs not found in {REALDATA} (not part of the repository)',
+    missing = [str(run_path(r, args.data)) for r in TRAIN + VALIDATE
+               if not run_path(r, args.data).is_file()]
+    if missing:
+        print('KVLCC2 runs not found (not part of the repository): ' + ', '.join(missing),
               file=sys.stderr)
         return 2
     v = load_vehicle(VEHICLE)
     names = [n for n in args.coefficients.split(',') if n] or v.identify_default
     model = Model(v, names)
-    runs = {r: load_run(r) for r in dict.fromkeys(TRAIN + VALIDATE)}
+    runs = {r: load_run(r, args.data) for r in dict.fromkeys(TRAIN + VALIDATE)}
     noise = measurement_noise(runs[TRAIN[0]][1], runs[TRAIN[0]][0])
     cfg = config(v, names, noise)
     t0 = time.perf_counter()
-    res = identify_runs(model, [runs[r] for r in TRAIN], cfg, refine_pass=not args.no_refine)
+    res = identify(model, [Record(*runs[r]) for r in TRAIN], cfg, refine_pass=not args.no_refine)
     wall = time.perf_counter() - t0
     print(f'identified {len(names)} coefficients of {v.name} from {" + ".join(TRAIN)} '
           f'({res.steps} samples) in {wall:.1f} s (' + ('EKF pass + refinement'

@@ -3,7 +3,7 @@
     PYTHONPATH=. .venv/bin/python tools/live_auto_cost.py [--window 120] [--rate 20]
         [--named Z_ds,Z_q,Z_w,M_ds,K_v] [--windows 30,60,120,240] [--seed 5] [--paced]
 
-One independent NPS AUV II bag (test/independent_data.py: odometry at --rate Hz, commands
+One independent NPS AUV II bag (offline/independent_data.py: odometry at --rate Hz, commands
 periodic at 20 Hz, white noise at the documented level, every coefficient 0.8-1.2x the vehicle
 file's), 30 s longer than the longest window, fed in log-time order through an IdentSession
 with coefficients [auto, NAMED...]:
@@ -28,15 +28,11 @@ import time
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
-sys.path.insert(0, str(REPO))
-
-from independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC  # noqa: E402
-
-from auv_ident.bags.reader import read_bag  # noqa: E402
-from auv_ident.session.auto_choice import run_in_thread, run_inline  # noqa: E402
-from auv_ident.session.session import IdentSession  # noqa: E402
+from auv_ident.bags.reader import read_bag
+from auv_ident.offline.independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC
+from auv_ident.session.auto_choice import run_in_thread, run_inline
+from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 
 
 def messages_of(bag):
@@ -62,7 +58,8 @@ def timed_inline(cpu):
 
 def one_window(messages, named, window):
     cpu = []
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window),
                      auto_runner=timed_inline(cpu))
     feed(s, messages)
     a = s.auto
@@ -77,8 +74,8 @@ def one_window(messages, named, window):
 def paced(messages, named, window):
     """Feed the window at once, then the rest at the log times' pace, the choice in a worker
     thread; per-message call times (s) while it ran and after."""
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
-                     auto_runner=run_in_thread)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window), auto_runner=run_in_thread)
     t0_ns = messages[0][1]
     split = next(i for i, (_, t_ns, _) in enumerate(messages)
                  if (t_ns - t0_ns) * 1e-9 > window + 0.5)

@@ -1,6 +1,6 @@
 """Campaign: are the error bars honest when the sensor noise is coloured and its level unknown?
 
-Bags made by test/independent_data.py (its own integrator, stamping, noise and writer; not the
+Bags made by offline/independent_data.py (its own integrator, stamping, noise and writer; not the
 identifier's simulator): AR(1) noise at LEVEL x the documented 1-sigma with correlation time TAU,
 neither told to the identifier, 20 Hz, 600 s, for each seed. Each bag goes through
 `identify --bag` (analysis.bag_identify.identify_bag: noise model from the data, EKF pass,
@@ -22,12 +22,11 @@ import time
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
 
-from independent_data import DataConfig, generate  # noqa: E402
-
 from auv_ident.analysis.bag_identify import identify_bag  # noqa: E402
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 
 
 def _floats(text):
@@ -42,7 +41,8 @@ def _case(vehicle, level, tau, seed, out, reuse, coefficients):
                  bag_dir)
     truth = json.loads((bag_dir / 'truth.json').read_text())['coefficients']
     t0 = time.perf_counter()
-    doc, _ = identify_bag(str(bag_dir / 'bag'), vehicle=vehicle, coefficients=coefficients)
+    doc, _ = identify_bag(str(bag_dir / 'bag'), IdentifierSettings.from_values(
+        vehicle=vehicle, coefficients=coefficients))
     wall = time.perf_counter() - t0
     rows = {}
     for name, c in doc['coefficients'].items():

@@ -2,7 +2,7 @@
 vehicle file's model?
 
 For each seed, a truth vehicle differs from the NPS AUV II file by factors U(0.8, 1.2)
-(test/independent_data.py, perturb 0.2), in one of two ways (--prior-error):
+(offline/independent_data.py, perturb 0.2), in one of two ways (--prior-error):
 
 - ``identified`` (default): only the identified coefficients differ (perturb_keep = every
   coefficient NOT identified, added mass included), so the file and the truth differ exactly
@@ -68,15 +68,14 @@ import time
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO))
-
-from independent_data import DataConfig, generate  # noqa: E402
 
 from auv_ident.analysis.bag_identify import bag_source  # noqa: E402
 from auv_ident.analysis.validation import validate_on_run  # noqa: E402
 from auv_ident.core.model.state import NU_NAMES, STATE_NAMES  # noqa: E402
 from auv_ident.core.simulation.prediction import fit_percent  # noqa: E402
+from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 PAPER = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
@@ -134,7 +133,8 @@ def true_model_validation(a_dir, b_dir, names, truth, prior_error, coefficients)
     """The true model flown through run B as validate_on_run flies the others (module
     docstring); returns B's run (bag_source) and the model's RunValidation (scores under
     'identified')."""
-    run = bag_source(str(b_dir / 'bag'), vehicle='nps_auv2', coefficients=coefficients)
+    run = bag_source(str(b_dir / 'bag'), IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                        coefficients=coefficients))
     if prior_error == 'all':        # the whole truth vehicle file, added mass and M^-1 too
         vehicle, names, values = load_vehicle(str(a_dir / 'truth_vehicle.yaml')), [], []
     else:                           # the file with the identified coefficients' truth values

@@ -1,44 +1,56 @@
-"""Bags as identification sources: ``identify --bag`` and the arrays the batch methods take."""
+"""Bags as identification sources: ``identify --bag`` (one bag or several) and the arrays the
+batch methods take.
+
+`identify --bag A [--bag B ...]` is one path (:func:`identify_replayed`): the vehicle resolved
+once (given, or named by the bags' metadata), every bag replayed through the live identifier's
+logic (offline/replay.py), the replays paired into core.identification.results.Record, and the
+records identified together by core.identification.pipeline.identify_with_diagnosis; one bag
+is a list of one. :func:`identify_bag` and :func:`identify_bags` print and document it.
+"""
+from dataclasses import dataclass, replace
+import math
 import time
 
 import numpy as np
 
 from auv_ident.analysis import results as ex
-from auv_ident.analysis.identification import diagnosed, identify_records
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
-from auv_ident.core.identification.batch import Result
-from auv_ident.core.identification.noise_fit import fit_noise_runs
-from auv_ident.core.identification.selection import identify_auto, parse_request
-from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.errors import ConfigError
+from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.noise_fit import fit_noise
+from auv_ident.core.identification.pipeline import identify_with_diagnosis
+from auv_ident.core.identification.results import (
+    Identification,
+    PassEstimate,
+    SelectionRequest,
+)
 from auv_ident.core.model.hydrodynamics import Model
-from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import N_CURRENT, N_STATE
-from auv_ident.offline.replay import bag_custom_data, replay_bag
+from auv_ident.core.model.state import N_CURRENT
+from auv_ident.offline.replay import bag_custom_data, bag_settings, replay_bag
 from auv_ident.session.record import exact_hold
+from auv_ident.session.settings import coefficient_request, IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
+REPLAY_REJECT_LIMIT = 0.02     # a replay rejecting more than this fraction is made again
 
-def _meta_noise(meta):
-    """(12,) the sensor noise 1-sigma a bag's custom data (bag_custom_data) stores (bags our
-    simulator wrote), else the default sensor suite's."""
-    try:
-        vals = np.array([float(v) for v in meta.get('auv_ident.noise_std', '').split()])
-    except ValueError:
-        vals = np.zeros(0)
-    return vals if vals.shape == (N_STATE,) and np.all(vals > 0) else DEFAULT_NOISE_STD.copy()
+
+def _simulated(meta):
+    """Whether a bag is our simulator's (its custom data say so): its truth is the vehicle
+    file's values."""
+    return meta.get('auv_ident.simulated') == 'true'
 
 
 def _meta_truth(meta, model):
     """The model's coefficients as the truth (the vehicle file's values) for a bag our
     simulator wrote (its custom data says so), else None: another program's bag has no
     known truth."""
-    return model.theta_true[:model.p_coef] if meta.get('auv_ident.simulated') == 'true' else None
+    return model.theta_true[:model.p_coef] if _simulated(meta) else None
 
 
 def _bag_current_truth(meta):
     """(3,) the current a simulated bag flew in (zeros: still water), or None if not ours."""
-    if meta.get('auv_ident.simulated') != 'true':
+    if not _simulated(meta):
         return None
     try:
         vals = np.array([float(v) for v in meta.get('auv_ident.current', '0 0 0').split()])
@@ -48,296 +60,370 @@ def _bag_current_truth(meta):
 
 
 def _exact_hold(rr):
-    """(t, Y, U) of a replay for the batch methods: the samples with a command, and the
-    command changes between them as samples without a measurement (timing.with_command_changes:
-    the exact zero-order hold the EKF pass followed)."""
+    """The Record of a replay for the batch methods: the samples with a command, and the
+    command changes between samples as samples without a measurement
+    (timing.with_command_changes: the exact zero-order hold the EKF pass followed)."""
     return exact_hold(rr.t, rr.Y, rr.U, rr.t_cmd, rr.U_cmd)
 
 
-def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
-                 refine_pass=True, progress=None, noise_source='message', max_command_age=None,
-                 current=DEFAULT_CURRENT, current_down=False, velocity_reference=None,
-                 mass_inverse='default'):
+def bags_vehicle(paths, metas, vehicle=None):
+    """The vehicle of a bag identification, resolved once: `vehicle` (a Vehicle, a name or a
+    YAML path) if given, else the one the bags' metadata name (NPS AUV II when they name none).
+    Raises BagError naming the bag when the bags name different vehicles."""
+    if vehicle is not None:
+        return load_vehicle(vehicle)
+    specs = [m.get('auv_ident.vehicle') or 'nps_auv2' for m in metas]
+    found = {spec: load_vehicle(spec) for spec in dict.fromkeys(specs)}
+    first = found[specs[0]]
+    for p, spec in zip(paths, specs):
+        if found[spec].name != first.name:
+            raise BagError(f"{p}: vehicle {found[spec].name!r}, the other bags' is "
+                           f'{first.name!r}: one model needs one vehicle')
+    return first
+
+
+@dataclass
+class Replays:
+    """The bags replayed as the identifier would have read them (:func:`replay_bags`).
+
+    replays : the ReplayResult of each bag (the last made)
+    noise_std : (12,) the configured noise of the identification (the first replays' median)
+    again : None, or {'first_rejected', 'first_samples', 'noise_std', 'q_state'} when the
+        replays were made again with the noise model from the data
+    """
+
+    replays: list
+    noise_std: np.ndarray
+    again: dict = None
+
+    @property
+    def rejected(self):
+        return sum(rr.rejected for rr in self.replays)
+
+    @property
+    def accepted(self):
+        return sum(rr.accepted for rr in self.replays)
+
+    def records(self):
+        """The replays as Records (their exact zero-order hold)."""
+        return [_exact_hold(rr) for rr in self.replays]
+
+
+def replay_bags(paths, replay, cfg_of):
+    """Replay every bag (replay(path, noise_std, q_state, noise_source) -> ReplayResult); if
+    they reject more than REPLAY_REJECT_LIMIT of their odometry (a first pass whose configured
+    noise is far too small for the data throws away good samples as outliers), replay them
+    again with the noise model read off the accepted samples (core/identification/noise_fit.py:
+    the effective measurement noise and, for model error, the matched process noise).
+
+    cfg_of(model, noise) -> FilterConfig of the configured noise. Returns Replays."""
+    rrs = [replay(p, None, None, None) for p in paths]
+    for p, rr in zip(paths, rrs):
+        if rr.accepted < 2:
+            raise BagError(f'{p}: only {rr.accepted} odometry samples could be used '
+                           f'(rejected: {dict(rr.reasons)})')
+    first = Replays(rrs, np.median(np.array([rr.noise_std for rr in rrs]), axis=0))
+    total = first.rejected + first.accepted
+    if first.rejected <= REPLAY_REJECT_LIMIT * total:
+        return first
+    model = rrs[0].model
+    pre = fit_noise(model, cfg_of(model, first.noise_std), first.records(), T=rrs[0].T)
+    again = [replay(p, pre.effective_std, pre.effective_q, 'parameter') for p in paths]
+    note = {'first_rejected': int(first.rejected), 'first_samples': int(total),
+            'noise_std': [float(x) for x in pre.effective_std],
+            'q_state': [float(x) for x in pre.effective_q]}
+    return Replays(again, first.noise_std, note)
+
+
+@dataclass
+class BagIdentification:
+    """`identify --bag` over one bag or several (:func:`identify_replayed`).
+
+    paths, metas : the bags and their custom data (bag_custom_data)
+    replays : Replays (the bags as the identifier read them)
+    cfg : FilterConfig of the configured noise the identification started from
+    result : the Identification (one coefficient set from all bags)
+    auto : whether the coefficients were chosen from the data
+    velocity_reference : what the bags' velocities are ('ground' or 'water')
+    settings : the IdentifierSettings the replays started from (several bags: current 'none'
+        when not given); noise_given, q_given : whether noise_std, q_state were given
+    """
+
+    paths: list
+    metas: list
+    replays: Replays
+    cfg: FilterConfig
+    result: Identification
+    auto: bool
+    velocity_reference: str
+    settings: IdentifierSettings = None
+    noise_given: bool = False
+    q_given: bool = False
+
+    @property
+    def vehicle(self):
+        return self.result.model.vehicle
+
+
+def identify_replayed(paths, settings=None, refine_pass=True, progress=None):
+    """`identify --bag`'s path, for one bag or several (module docstring).
+
+    Each bag is replayed as the identifier would have read it (its accepted measurements, its
+    commands held, the noise of its messages; made again with the noise from the data if they
+    rejected more than REPLAY_REJECT_LIMIT, see replay_bags); then the noise model from all
+    runs' innovations, the EKF pass over the runs in turn, the refinement on all of them with
+    the sandwich covariance within each run, identifiability and the diagnosis
+    (core.identification.pipeline.identify_with_diagnosis). With one bag and the configured
+    noise right, the EKF pass is the replay's (the live node's) and the refinement starts from
+    it. Coefficients 'auto[,NAME,...]': the set is chosen from the data
+    (core/identification/selection.py), started at the vehicle file.
+
+    settings : IdentifierSettings (None: the defaults), the identifier node's; every one
+    applies to the replays, a setting not given coming from each bag's metadata where that
+    says it (offline/replay.py bag_settings); the noise model and the refinement take the
+    coefficients, initial_offset, the current, velocity_reference and mass_inverse from them.
+    Several bags: noise_mode must be 'fixed' (the noise model comes from the data); the
+    current is 'none' unless a known one is given (one current per run is not estimated);
+    noise_std and q_state, given, are where the configured noise starts instead of the
+    messages' (median over the bags). Returns a BagIdentification."""
+    t0 = time.perf_counter()
+    settings = settings or IdentifierSettings()
+    several = len(paths) > 1
+    if several:
+        if settings.noise_mode != 'fixed':
+            raise ConfigError('several bags are identified with the fixed noise of their '
+                              'messages and the noise model from the data: --noise-mode '
+                              'applies to one bag')
+        if 'current' not in settings.given:
+            settings = settings.with_values(current='none')
+        if settings.current_option.estimate:
+            raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); '
+                           'one current per run is not estimated')
+    metas = [bag_custom_data(p) for p in paths]
+    v = bags_vehicle(paths, metas, settings.vehicle if 'vehicle' in settings.given else None)
+    auto, names = coefficient_request(v, settings.coefficients)
+    vrefs = {settings.velocity_reference if 'velocity_reference' in settings.given
+             else bag_settings(p).get('velocity_reference', 'ground') for p in paths}
+    if len(vrefs) > 1:
+        raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
+                       'give --velocity-reference')
+    vref = vrefs.pop()
+    noise_given, q_given = 'noise_std' in settings.given, 'q_state' in settings.given
+    initial_offset = settings.initial_offset
+
+    def replay(path, noise, q, source):
+        # the vehicle resolved once, by its file (a YAML path stays that file)
+        changes = {'vehicle': v.path, 'coefficients': names, 'velocity_reference': vref}
+        if several:
+            changes['noise_source'] = source or ('parameter' if noise_given
+                                                 else settings.noise_source)
+        elif source is not None:
+            changes['noise_source'] = source
+        for name, value in (('noise_std', noise), ('q_state', q)):
+            if value is not None:
+                changes[name] = value
+        return replay_bag(path, settings.over(bag_settings(path)).with_values(**changes))
+
+    def cfg_of(model, noise):
+        cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
+                             noise_std=noise, initial_offset=initial_offset)
+        if several and q_given:
+            cfg.q_state = np.asarray(settings.q_state, dtype=float)
+        return cfg
+
+    replays = replay_bags(paths, replay, cfg_of)
+    first = replays.replays[0]
+    model = first.model         # the replay's (a YAML path stays that file)
+    cfg = cfg_of(model, replays.noise_std)
+    if auto:
+        # the replays only paired the samples (their EKF passes identified the named or
+        # default set); the coefficients come from the data, started at the file
+        def make_model(coefs):
+            return Model(model.vehicle, list(coefs) + list(model.current_names),
+                         mass_inverse=model.mass_inverse, current=model.current,
+                         velocity_reference=model.velocity_reference)
+        res = identify_with_diagnosis(None, cfg, replays.records(), T=first.T,
+                                      refine_pass=refine_pass, progress=progress,
+                                      auto=SelectionRequest(make_model, tuple(names)),
+                                      judge_nis=None)
+    else:
+        # one bag with the configured noise right: the replay's EKF pass (the live node's) is
+        # kept; several bags were replayed each on its own, not in turn
+        kept = (PassEstimate(first.estimate, first.cov)
+                if len(paths) == 1 and replays.again is None else None)
+        res = identify_with_diagnosis(model, cfg, replays.records(), T=first.T,
+                                      refine_pass=refine_pass, progress=progress,
+                                      ekf_pass=kept, judge_nis='reported')
+    res = replace(res, truth=(res.model.theta_true[:res.model.p_coef]
+                              if all(_simulated(m) for m in metas) else None),
+                  initial=_initial(res, first), steps=replays.accepted,
+                  mean_nis_per_dof=_mean_nis(res, replays, auto),
+                  wall_s=time.perf_counter() - t0)
+    if replays.again is not None:
+        res.diagnosis.messages.append(_replayed_note(replays.again, replays.rejected))
+    return BagIdentification(paths=list(paths), metas=metas, replays=replays, cfg=cfg,
+                             result=res, auto=auto, velocity_reference=vref, settings=settings,
+                             noise_given=noise_given, q_given=q_given)
+
+
+def _initial(res, first):
+    """The coefficients' start: the vehicle file's values of a chosen set, else the replay's
+    initial guesses."""
+    if res.selection is not None:
+        v = res.model.vehicle
+        return np.array([v.values[v.index(n)] for n in res.selection.chosen])
+    return first.initial[:res.model.p_coef]
+
+
+def _mean_nis(res, replays, auto):
+    """The mean NIS/dof reported: with one bag the replay's (what the live node showed); with
+    several the reported EKF pass's; NaN for a chosen set (the replays' filters identified
+    another set)."""
+    if auto:
+        return math.nan
+    if len(replays.replays) == 1:
+        return replays.replays[0].mean_nis_per_dof
+    return res.noise.reported_pass.mean_nis_per_dof
+
+
+def identify_bag(path, settings=None, refine_pass=True, progress=None):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag, made again
     with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
     model, the batch refinement on the paired arrays at their stamps, identifiability and the
-    diagnosis; with coefficients 'auto[,NAME,...]' the set is chosen from the data
-    (core/identification/selection.py). Returns (JSON document, printable table).
+    diagnosis; with coefficients ['auto', NAME, ...] the set is chosen from the data
+    (core/identification/selection.py). :func:`identify_replayed` of one bag. Returns (JSON
+    document, printable table).
 
-    noise_source, max_command_age : as IdentSession (the message covariances are the noise
-    where they are usable; a held command stays in force however old)
-    current, current_down : the water current (IdentSession's settings of the same names:
-    'estimate' by default, 'none', or a known 'N,E[,D]' in m/s)
-    velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
-    'ground')
-    mass_inverse : 'default' (the vehicle file's), 'exact' or 'mss_literal'
-    (core.model.hydrodynamics.Model;
-    with 'exact' the added-mass coefficients can be identified, and `auto` may choose them)"""
-    t0 = time.perf_counter()
-    meta = bag_custom_data(path)
-    auto, names = parse_request(load_vehicle(vehicle or meta.get('auv_ident.vehicle')
-                                             or 'nps_auv2'), coefficients)
-    meta_noise = _meta_noise(meta)
-    if velocity_reference is None:
-        velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
-
-    def replay(p, noise, q, source):
-        return replay_bag(p, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
-                          initial_offset=initial_offset,
-                          noise_std=meta_noise if noise is None else noise,
-                          noise_source=source or noise_source, q_state=q,
-                          max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=velocity_reference,
-                          mass_inverse=mass_inverse)
-
-    def cfg_of(model, noise):
-        return ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
-                              noise_std=noise, initial_offset=initial_offset)
-
-    (rr,), noise, again = _replays([path], replay, cfg_of)
-    v = rr.model.vehicle      # the replay's (a YAML path stays that file)
-    model = rr.model
-    truth = _meta_truth(meta, model)
-    rec = _exact_hold(rr)
-    selection = None
-    initial = rr.initial[:model.p_coef]
-    mean_nis = rr.mean_nis_per_dof
-    if auto:
-        # the replay only paired the samples (its EKF pass identified the named or default
-        # set); the coefficients come from the data (core/identification/selection.py), started at
-        # the file
-        def make_model(coefs):
-            return Model(v, list(coefs) + list(rr.model.current_names),
-                         mass_inverse=rr.model.mass_inverse, current=rr.model.current,
-                         velocity_reference=rr.model.velocity_reference)
-        t, Y, U = rec
-        model, ekf_est, ekf_cov, est, cov, fit, selection = identify_auto(
-            make_model, cfg_of(model, noise), t, Y, U, named=names, T=rr.T,
-            refine_pass=refine_pass, progress=progress)
-        truth = (model.theta_true[:model.p_coef]
-                 if meta.get('auv_ident.simulated') == 'true' else None)
-        initial = np.array([v.values[v.index(n)] for n in selection.chosen])
-        mean_nis = float('nan')     # the replay's filter identified another set
-        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis = diagnosed(
-            model, [rec], rr.T, fit, ekf_est, ekf_cov, est, cov, mean_nis, refine_pass)
-    else:
-        # the noise model from the data (core/identification/noise_fit.py): with the configured
-        # noise right, the EKF pass is the replay's (the live node's) and the refinement starts
-        # from it
-        est_c, cov_c, ekf_c, ekf_cov_c, cur, verdicts, diagnosis, fit = identify_records(
-            model, cfg_of(model, noise), [rec], rr.T, refine_pass, progress,
-            ekf_pass=None if again else (rr.estimate, rr.cov))
-    res = Result(names=model.theta_names[:model.p_coef], estimate=est_c,
-                 std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
-                 ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
-                 truth=truth, steps=rr.accepted, wall_s=time.perf_counter() - t0,
-                 mean_nis_per_dof=mean_nis, refined=refine_pass, current=cur)
-    if again is not None:
-        diagnosis['messages'].append(_replayed_note(again, rr.rejected))
+    settings : IdentifierSettings (None: the defaults), the identifier node's: every one
+        applies to the replay (a setting not given comes from the bag's metadata where that
+        says it: offline/replay.py bag_settings); with mass_inverse 'exact' the added-mass
+        coefficients can be identified, and auto may choose them"""
+    b = identify_replayed([path], settings, refine_pass=refine_pass, progress=progress)
+    settings = b.settings
+    res, rr, meta = b.result, b.replays.replays[0], b.metas[0]
+    v, diagnosis, selection = b.vehicle, res.diagnosis, res.selection
     head = (f'{v.title}: identified {", ".join(res.names)} from bag {path} '
             f'({rr.accepted} odometry samples used, {rr.rejected} rejected, {rr.commands} '
             f'actuator commands; frame {rr.frame})')
-    if meta.get('auv_ident.simulated') == 'true':
+    if _simulated(meta):
         head += (f'\nsimulated by auv_ident: manoeuvre {meta.get("auv_ident.maneuver")!r}, seed '
                  f'{meta.get("auv_ident.seed")}; truth = the vehicle file values')
-    start = ('automatic selection, initial guesses at the vehicle file' if auto else
-             f'initial guesses {100 * initial_offset:+.0f} % from the vehicle file')
+    start = ('automatic selection, initial guesses at the vehicle file' if b.auto else
+             f'initial guesses {100 * settings.initial_offset:+.0f} % from the vehicle file')
     head += (f'\n{start}; noise '
-             f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
-                                              if refine_pass else 'EKF pass only'))
-    over = ('ground (DVL bottom lock)' if velocity_reference == 'ground'
+             f'adaptation: {settings.noise_mode}; '
+             + ('EKF pass + batch refinement (filter-error ML)' if refine_pass
+                else 'EKF pass only'))
+    over = ('ground (DVL bottom lock)' if b.velocity_reference == 'ground'
             else 'water (water-track DVL)')
-    head += (f'\nwater current: {parse_current(current, current_down).describe()}; velocity '
+    head += (f'\nwater current: {settings.current_option.describe()}; velocity '
              f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
-                                  'noise_mode': noise_mode, 'noise_source': noise_source,
-                                  'mass_inverse': model.mass_inverse,
-                                  'noise_std': [float(x) for x in noise],
+                                  'noise_mode': settings.noise_mode,
+                                  'noise_source': settings.noise_source,
+                                  'mass_inverse': res.model.mass_inverse,
+                                  'noise_std': [float(x) for x in b.replays.noise_std],
                                   'time_origin_ns': rr.time_origin_ns,
-                                  'noise_model': fit.document(),
-                                  'diagnosis': diagnosis, 'identifiability': verdicts,
+                                  'noise_model': res.noise.document(),
+                                  'diagnosis': diagnosis.document(),
+                                  'identifiability': diagnosis.identifiability,
                                   'rejection_reasons': dict(rr.reasons),
-                                  'replayed_with_noise_model': again,
+                                  'replayed_with_noise_model': b.replays.again,
                                   'selection': None if selection is None
                                   else selection.document()},
                          current_truth=_bag_current_truth(meta))
-    head = diagnosis['messages'][0] + '\n' + head
+    head = diagnosis.messages[0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
              f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
-             + ''.join('\n- ' + m for m in diagnosis['messages'][1:])
+             + ''.join('\n- ' + m for m in diagnosis.messages[1:])
              + ('' if selection is None else '\n' + '\n'.join(selection.summary())))
     return doc, table
 
 
-def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noise_std=None,
-               q_state=None, mass_inverse='default'):
+# what the replay that pairs a bag's arrays for the batch methods takes (bag_source)
+PAIRING_SETTINGS = frozenset({'vehicle', 'coefficients', 'noise_std', 'q_state',
+                              'velocity_reference', 'mass_inverse'})
+
+
+def bag_source(path, settings=None):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
-    pairs them estimates the current (so that its innovation gate judges samples with it); the
-    caller's model says what to do with the current. noise_std, q_state : (12,) the
-    measurement and per-step state process noise 1-sigma the replay's gate judges samples with
-    (None: the messages' and the default; a real run needs the noise its identification used,
-    docs/kvlcc2.md, or the gate rejects its samples). mass_inverse : the replay model's M^-1
-    ('default': the vehicle file's; core.model.hydrodynamics.Model), which the Source's vehicle
-    then says
-    (Vehicle.with_mass_inverse), so that every Model made of it forms M^-1 so."""
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    pairs them takes the PAIRING_SETTINGS of `settings` (IdentifierSettings; None: the
+    defaults, and the bag's metadata: offline/replay.py bag_settings), the identifier's
+    defaults for the rest: it estimates the current (so that its innovation gate judges samples
+    with it); the caller's model says what to do with the current. noise_std, q_state given:
+    the measurement and per-step state process noise 1-sigma the replay's gate judges samples
+    with (noise_source then 'parameter'; a real run needs the noise its identification used,
+    docs/kvlcc2.md, or the gate rejects its samples). mass_inverse: the replay model's M^-1,
+    which the Source's vehicle then says (Vehicle.with_mass_inverse), so that every Model made
+    of it forms M^-1 so."""
+    settings = settings or IdentifierSettings()
+    given = {n: getattr(settings, n) for n in settings.given & PAIRING_SETTINGS}
+    if 'noise_std' in given:
+        given['noise_source'] = 'parameter'
     meta = bag_custom_data(path)
-    vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
-    given = {} if noise_std is None else {'noise_source': 'parameter'}
-    if q_state is not None:
-        given['q_state'] = np.asarray(q_state, dtype=float)
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=(_meta_noise(meta) if noise_std is None
-                               else np.asarray(noise_std, dtype=float)),
-                    velocity_reference=vr, mass_inverse=mass_inverse, **given)
+    rr = replay_bag(path, IdentifierSettings.from_values(**given))
+    vr = rr.model.velocity_reference
     # the replay's vehicle (a YAML path stays that file), forming M^-1 as the replay did
     v = rr.model.vehicle.with_mass_inverse(rr.model.mass_inverse)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
     truth = _meta_truth(meta, Model(v, names))
-    noise = rr.noise_std
-    t, Y, U = _exact_hold(rr)
-    return Source(vehicle=v, names=names, t=t, Y=Y, U=U, T=rr.T,
-                  noise_std=noise, description=f'bag {path} ({rr.accepted} samples)',
+    rec = _exact_hold(rr)
+    return Source(vehicle=v, names=names, t=rec.t, Y=rec.Y, U=rec.U, T=rr.T,
+                  noise_std=rr.noise_std, description=f'bag {path} ({rr.accepted} samples)',
                   truth=truth, seed=meta.get('auv_ident.seed'),
                   maneuver=meta.get('auv_ident.maneuver', ''),
                   current_truth=_bag_current_truth(meta), velocity_reference=vr,
                   time_origin_ns=rr.time_origin_ns)
 
 
-REPLAY_REJECT_LIMIT = 0.02     # a replay rejecting more than this fraction is made again
-
-
-def _replays(paths, replay, cfg_of):
-    """Replay every bag (replay(path, noise_std, q_state, noise_source) -> ReplayResult); if
-    they reject more than REPLAY_REJECT_LIMIT of their odometry (a first pass whose configured
-    noise is far too small for the data throws away good samples as outliers), replay them
-    again with the noise model read off the accepted samples (core/identification/noise_fit.py: the
-    effective measurement noise and, for model error, the matched process noise).
-
-    cfg_of(model, noise) -> FilterConfig of the configured noise. Returns (replays, the
-    configured noise (12,) (the first replays' median), note: None or {'first_rejected',
-    'first_samples', 'noise_std', 'q_state'} of the replay made again)."""
-    rrs = [replay(p, None, None, None) for p in paths]
-    for p, rr in zip(paths, rrs):
-        if rr.accepted < 2:
-            raise BagError(f'{p}: only {rr.accepted} odometry samples could be used '
-                           f'(rejected: {dict(rr.reasons)})')
-        if rr.vehicle != rrs[0].vehicle:
-            raise BagError(f"{p}: vehicle {rr.vehicle!r}, the other bags' is "
-                           f'{rrs[0].vehicle!r}: one model needs one vehicle')
-    rejected = sum(rr.rejected for rr in rrs)
-    total = rejected + sum(rr.accepted for rr in rrs)
-    noise = np.median(np.array([rr.noise_std for rr in rrs]), axis=0)
-    if rejected <= REPLAY_REJECT_LIMIT * total:
-        return rrs, noise, None
-    model = rrs[0].model
-    cfg = cfg_of(model, noise)
-    pre = fit_noise_runs(model, cfg, [_exact_hold(rr) for rr in rrs], T=rrs[0].T)
-    again = [replay(p, pre.effective_std, pre.effective_q, 'parameter') for p in paths]
-    note = {'first_rejected': int(rejected), 'first_samples': int(total),
-            'noise_std': [float(x) for x in pre.effective_std],
-            'q_state': [float(x) for x in pre.effective_q]}
-    return again, noise, note
-
-
-def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
-                  progress=None, noise_source='message', max_command_age=None,
-                  velocity_reference=None, noise_std=None, q_state=None, current='none',
-                  current_down=False, mass_inverse='default'):
+def identify_bags(paths, settings=None, refine_pass=True, progress=None):
     """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle,
-    by identify_bag's steps over all of them: each bag replayed as the identifier would have
-    read it (its accepted measurements, its commands held, the noise of its messages; made
-    again with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT, see
-    _replays), then the noise model from all runs' innovations, the EKF pass over the runs in
-    turn and the refinement on all of them with it (core.identification.noise_fit.
-    identify_runs_with_noise_model), the sandwich covariance within each run,
-    identifiability and the diagnosis (printed first, and in the JSON as identify_bag's).
+    :func:`identify_replayed` over all of them (each bag from its own initial state, the noise
+    model from all runs' innovations, the EKF pass over the runs in turn, the refinement on all
+    of them with the sandwich covariance within each run; identifiability and the diagnosis
+    printed first, and in the JSON as identify_bag's).
 
-    noise_std, q_state : (12,) the measurement and per-step state process noise 1-sigma (the
-        states' units) to start from instead of the messages' (median over the bags) and the
-        default; the noise model from the data still applies
-    current, current_down : 'none' (still water, default) or a known current 'N,E[,D]' in m/s
-        that all runs flew in; one current per run is not estimated
-    mass_inverse : as identify_bag
+    settings : IdentifierSettings (None: the defaults), as identify_bag's, except: noise_std,
+        q_state given: the measurement and per-step state process noise 1-sigma to start from
+        instead of the messages' (median over the bags) and the default (the noise model from
+        the data still applies); current not given: 'none' (still water), else a known current
+        'N,E[,D]' in m/s that all runs flew in; noise_mode 'fixed'.
     Returns (JSON document, printable table)."""
-    t0 = time.perf_counter()
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    if str(current).strip().lower() == 'estimate':
-        raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); one '
-                       'current per run is not estimated')
-    metas = {p: bag_custom_data(p) for p in paths}
-    vrefs = {velocity_reference or metas[p].get('auv_ident.velocity_reference', 'ground')
-             for p in paths}
-    if len(vrefs) > 1:
-        raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
-                       'give --velocity-reference')
-    vref = vrefs.pop()
-
-    def replay(path, noise, q, source):
-        given = noise_std if noise is None else noise
-        return replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
-                          initial_offset=initial_offset,
-                          noise_std=_meta_noise(metas[path]) if given is None else given,
-                          noise_source=source or (noise_source if noise_std is None
-                                                  else 'parameter'),
-                          q_state=q_state if q is None else q,
-                          max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=vref,
-                          mass_inverse=mass_inverse)
-
-    def cfg_of(model, noise):
-        cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
-                             noise_std=noise, initial_offset=initial_offset)
-        if q_state is not None:
-            cfg.q_state = np.asarray(q_state, dtype=float)
-        return cfg
-
-    rrs, noise, again = _replays(paths, replay, cfg_of)
-    model = rrs[0].model
-    v = model.vehicle
-    rejected = sum(rr.rejected for rr in rrs)
-    cfg = cfg_of(model, noise)
-    records = [_exact_hold(rr) for rr in rrs]
-    est, cov, ekf_est, ekf_cov, cur, verdicts, diagnosis, fit = identify_records(
-        model, cfg, records, rrs[0].T, refine_pass, progress)
-    truths = [_meta_truth(metas[p], model) for p in paths]
-    truth = truths[0] if all(tr is not None for tr in truths) else None
-    steps = sum(len(r[0]) for r in records)
-    run = fit.ekf_run
-    res = Result(names=model.theta_names[:model.p_coef], estimate=est,
-                 std=np.sqrt(np.diag(cov)), cov=cov, ekf_estimate=ekf_est,
-                 ekf_std=np.sqrt(np.diag(ekf_cov)), initial=rrs[0].initial[:model.p_coef],
-                 truth=truth, steps=steps, wall_s=time.perf_counter() - t0,
-                 mean_nis_per_dof=run['mean_nis_per_dof'], refined=refine_pass, current=cur,
-                 noise_model=fit.document(), identifiability=verdicts, diagnosis=diagnosis)
-    if again is not None:
-        diagnosis['messages'].append(_replayed_note(again, rejected))
+    b = identify_replayed(paths, settings, refine_pass=refine_pass, progress=progress)
+    settings = b.settings
+    res, v, fit = b.result, b.vehicle, b.result.noise
+    rejected = b.replays.rejected
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
-                                  'noise_mode': 'fixed', 'noise_source': noise_source,
-                                  'mass_inverse': model.mass_inverse,
-                                  'noise_std': [float(x) for x in noise],
-                                  'q_state': [float(x) for x in cfg.q_state],
-                                  'replayed_with_noise_model': again,
-                                  'rejection_reasons': _reasons(rrs)},
-                         current_truth=_common([_bag_current_truth(metas[p]) for p in paths]))
+                                  'noise_mode': 'fixed',
+                                  'noise_source': settings.noise_source,
+                                  'mass_inverse': res.model.mass_inverse,
+                                  'noise_std': [float(x) for x in b.replays.noise_std],
+                                  'q_state': [float(x) for x in b.cfg.q_state],
+                                  'replayed_with_noise_model': b.replays.again,
+                                  'rejection_reasons': _reasons(b.replays.replays),
+                                  **({} if res.selection is None
+                                     else {'selection': res.selection.document()})},
+                         current_truth=_common([_bag_current_truth(m) for m in b.metas]))
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
-            f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
-            f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
-            'configured noise ' + ("the messages' (median over the bags)" if noise_std is None
-                                   else 'as given')
-            + ('' if q_state is None else ', state process noise as given')
+            f'({", ".join(str(p) for p in paths)}; {res.steps} samples, {rejected} rejected)'
+            f'\ninitial guesses {100 * settings.initial_offset:+.0f} % from the vehicle file; '
+            'configured noise ' + ('as given' if b.noise_given
+                                   else "the messages' (median over the bags)")
+            + (', state process noise as given' if b.q_given else '')
             + ', then the noise model from the data; '
             + ('EKF pass over the runs in turn + batch refinement on all of them'
                if refine_pass else 'EKF pass over the runs in turn')
-            + f'\nwater current: {parse_current(current, current_down).describe()}')
-    head = diagnosis['messages'][0] + '\n' + head
+            + f'\nwater current: {settings.current_option.describe()}')
+    messages = res.diagnosis.messages
+    head = messages[0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
              f'NIS/dof {res.mean_nis_per_dof:.3f} (the reported EKF pass; with the configured '
-             f'noise {fit.configured_pass["mean_nis_per_dof"]:.4g})'
+             f'noise {fit.configured_pass.mean_nis_per_dof:.4g})'
              + (f', refined cost per residual {fit.refine_cost:.3f}' if refine_pass else '')
              + f', wall {res.wall_s:.2f} s'
-             + ''.join('\n- ' + m for m in diagnosis['messages'][1:]))
+             + ''.join('\n- ' + m for m in messages[1:])
+             + ('' if res.selection is None else '\n' + '\n'.join(res.selection.summary())))
     return doc, table
 
 

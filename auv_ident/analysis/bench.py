@@ -22,6 +22,7 @@ from auv_ident.core.filter import ekf as K
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.ekf import new_workspace, rk4_step_into
 from auv_ident.core.identification.batch import identify, run_ekf
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import COEFFICIENTS, EULER, Input, N_STATE, VEHICLE
 from auv_ident.core.simulation.simulate import simulate
@@ -115,13 +116,13 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     T = run.T
     # warm up the compiled code (numba caches it on disk; first call loads it)
-    run_ekf(AugmentedEKF(m, cfg, T), run.t[:50], run.y[:50], run.u[:50])
+    run_ekf(AugmentedEKF(m, cfg, T), [Record(run.t[:50], run.y[:50], run.u[:50])])
 
     def compiled_loop():
         f = AugmentedEKF(m, cfg, T)
         t0 = time.perf_counter()
-        stats, _, _ = run_ekf(f, run.t, run.y, run.u)
-        return stats[1] / (time.perf_counter() - t0)
+        steps = run_ekf(f, [Record(run.t, run.y, run.u)]).steps
+        return steps / (time.perf_counter() - t0)
 
     n_stream = min(3000, len(run.t) - 1)
 
@@ -140,14 +141,14 @@ def bench(duration=600.0, filterpy_steps=3000, repeats=5):
     steps_per_s, stream_rate, fp_rate = rates['ours'], rates['streaming'], rates['filterpy']
     model_us = _model_step_us(m, run, 3000)
     t0 = time.perf_counter()
-    identify(m, run.t, run.y, run.u, cfg, T=T, refine_pass=True)
+    identify(m, [Record(run.t, run.y, run.u)], cfg, T=T, refine_pass=True)
     full_s = time.perf_counter() - t0
     # memory: a 1-hour run through the same loop must not grow the process
     long = simulate(truth, 'ident', duration=3600.0, seed=2)
     rss0 = _rss_mb()
     f = AugmentedEKF(m, cfg, T)
     t0 = time.perf_counter()
-    run_ekf(f, long.t, long.y, long.u)
+    run_ekf(f, [Record(long.t, long.y, long.u)])
     hour_s = time.perf_counter() - t0
     rss1 = _rss_mb()
     return {

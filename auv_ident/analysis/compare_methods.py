@@ -27,7 +27,7 @@ method refuses keeps its initial guess in that method's model.
 
 ROS-free; the sources come from analysis/experiments.load_source.
 """
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 import json
 import math
 import time
@@ -41,10 +41,12 @@ from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.identification.equation_error import equation_error
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
 from auv_ident.core.identification.output_error import DEFAULT_SEGMENT_S, output_error
+from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.ukf import run_ukf
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import State, STATE_NAMES
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
+from auv_ident.session.settings import IdentifierSettings
 
 METHODS = ('ekf', 'ukf', 'filter_error', 'output_error', 'equation_error')
 HOLDOUT_FRACTION = 0.2      # final part of the record kept for validation without --validate
@@ -63,24 +65,37 @@ def parse_methods(text):
     return names
 
 
+@dataclass
+class MethodResult:
+    """One method's answer: estimate and 1-sigma (p,) (NaN: not given), {name: reason} of the
+    coefficients it refused, notes, and the noise model it read off the data (the EKF pass's,
+    which the other methods then use)."""
+
+    estimate: np.ndarray
+    std: np.ndarray
+    refused: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    noise: object = None
+
+
 def _ekf(model, cfg, t, Y, U, T):
-    ekf_est, ekf_cov, _, _, fit = identify_with_noise_model(model, cfg, t, Y, U, T=T,
-                                                            refine_pass=False)
-    notes = list(fit.notes)
-    return ekf_est, np.sqrt(np.diag(ekf_cov)), {}, notes, fit
+    est = identify_with_noise_model(model, cfg, [Record(t, Y, U)], T=T, refine_pass=False)
+    return MethodResult(est.ekf_estimate, np.sqrt(np.diag(est.ekf_cov)),
+                        notes=list(est.noise.notes), noise=est.noise)
 
 
 def _filter_error(model, cfg, t, Y, U, T):
-    _, _, est, cov, fit = identify_with_noise_model(model, cfg, t, Y, U, T=T, refine_pass=True)
+    est = identify_with_noise_model(model, cfg, [Record(t, Y, U)], T=T, refine_pass=True)
+    fit = est.noise
     notes = [f'{fit.covariance} covariance']
     if not fit.refine_converged:
         notes.append(f'refinement did not converge: {fit.refine_message}')
-    return est, np.sqrt(np.diag(cov)), {}, notes
+    return MethodResult(est.estimate, np.sqrt(np.diag(est.cov)), notes=notes)
 
 
 def _ukf(model, cfg, t, Y, U, T):
     r = run_ukf(model, cfg, t, Y, U, T=T)
-    return r.theta, r.theta_std, {}, [f'mean NIS/dof {r.mean_nis_per_dof:.3f}']
+    return MethodResult(r.theta, r.theta_std, notes=[f'mean NIS/dof {r.mean_nis_per_dof:.3f}'])
 
 
 def _output_error(model, cfg, t, Y, U, T):
@@ -90,13 +105,13 @@ def _output_error(model, cfg, t, Y, U, T):
              + ' '.join(r.channels)]
     if not r.converged:
         notes.append('the search stopped at its evaluation limit')
-    return r.theta, r.theta_std, {}, notes
+    return MethodResult(r.theta, r.theta_std, notes=notes)
 
 
 def _equation_error(model, cfg, t, Y, U, T):
     r = equation_error(model, t, Y, U, measured=cfg.measured, T=T)
     notes = [f'R^2 {eq} {v:.3f}' for eq, v in r.r_squared.items()]
-    return r.estimate, r.std, dict(r.refused), notes
+    return MethodResult(r.estimate, r.std, dict(r.refused), notes)
 
 
 RUNNERS = {'ekf': _ekf, 'ukf': _ukf, 'filter_error': _filter_error,
@@ -194,12 +209,11 @@ def compare_methods(source, validation=None, methods=METHODS, initial_offset=0.5
             doc['methods'][name] = entry
             continue
         entry['wall_s'] = time.perf_counter() - t0
-        est, std, refused, notes = out[:4]
-        if name == 'ekf':
-            fit = out[4]
-            if fit.used:       # the other methods use the noise the data showed
-                cfg_run = replace(cfg, noise_std=fit.effective_std.copy())
-        entry['notes'] = notes
+        est, std, refused = out.estimate, out.std, out.refused
+        if out.noise is not None and out.noise.used:
+            # the other methods use the noise the data showed
+            cfg_run = replace(cfg, noise_std=out.noise.effective_std.copy())
+        entry['notes'] = out.notes
         for i, n in enumerate(names):
             c = {'estimate': _jsonable(est[i]), 'std': _jsonable(std[i]),
                  'error_pct': (None if truth is None or not np.isfinite(est[i])
@@ -244,19 +258,22 @@ def read_truth(path, names):
             from None
 
 
-def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
-                    coefficients='', validate=None, truth=None):
+def compare_sources(settings=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
+                    validate=None, truth=None):
     """(source, validation or None) for the command line: --simulate M or --bag A, and
-    --validate B (a bag); truth: a JSON file with the true coefficients (read_truth), for bags
+    --validate B (a bag); settings: IdentifierSettings of which the vehicle and coefficients
+    apply (load_source); truth: a JSON file with the true coefficients (read_truth), for bags
     not written by our simulator."""
-    source = load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                         seed=seed, duration=duration, coefficients=coefficients)
+    settings = settings or IdentifierSettings()
+    source = load_source(IdentifierSettings.from_values(
+        **{n: getattr(settings, n) for n in settings.given & {'vehicle', 'coefficients'}}),
+        simulate_maneuver=simulate_maneuver, bag=bag, seed=seed, duration=duration)
     if truth:
         source = replace(source, truth=read_truth(truth, source.names))
     validation = None
     if validate:
-        validation = load_source(vehicle=source.vehicle.name, bag=validate,
-                                 coefficients=','.join(source.names))
+        validation = load_source(IdentifierSettings.from_values(
+            vehicle=source.vehicle.name, coefficients=source.names), bag=validate)
     return source, validation
 
 

@@ -4,26 +4,38 @@ ROS-free (bags come in through analysis/bag_identify.py). Every figure printed h
 reproduced with the command shown next to it in docs/.
 """
 import contextlib
+from dataclasses import dataclass
 import time
 
 import numpy as np
 
 from auv_ident.analysis.bag_identify import bag_source
-from auv_ident.analysis.identification import identify_with_diagnosis
 from auv_ident.analysis.results import coefficient_list, DEFAULT_NOISE_MODE, make_config, Source
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.identification.pipeline import identify_with_diagnosis
+from auv_ident.core.identification.results import Identification, Record
 from auv_ident.core.model.current import parse_current
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD, perturbed_values
 from auv_ident.core.model.state import Input
-from auv_ident.core.simulation.simulate import simulate
+from auv_ident.core.simulation.simulate import Run, simulate
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 DEFAULT_DURATION = 600.0     # s of the identification run
 DEFAULT_MANEUVER = 'ident'
 
 
-def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
+@dataclass
+class SimulatedIdentification:
+    """identify_simulated's outcome: the Identification (core.identification.results; its
+    model the one identified) and the simulated run (core.simulation.simulate.Run)."""
+
+    result: Identification
+    run: Run
+
+
+def identify_simulated(vehicle, names, cfg, maneuver=DEFAULT_MANEUVER, seed=0,
                        duration=DEFAULT_DURATION, rpm=None, refine_pass=True, hist_every=0,
                        mass_inverse='default', progress=None, process_std=None, current='none',
                        sim_current=None, velocity_reference='ground', noise_level=1.0,
@@ -31,7 +43,8 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     """Simulate the truth (vehicle file values, in the water current sim_current (3,) m/s NED
     if given), then identify with the current option `current` ('estimate', 'none' or 'N,E[,D]',
     core/model/current.py) and the velocity reference of the simulated sensor, with the noise model
-    from the data and a diagnosis (analysis/identification.py). Returns (Result, Run, Model).
+    from the data and a diagnosis (core/identification/pipeline.py). vehicle : a Vehicle, or its
+    name or YAML path. Returns a SimulatedIdentification.
 
     Data the identifier's assumptions do not hold for (issue #14), neither told to it:
     noise_level, noise_tau : the measurement noise is noise_level x cfg.noise_std, first-order
@@ -41,7 +54,7 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
         U(1 - perturb, 1 + perturb) in the truth (default_rng([seed, 2]),
         core.model.sensors.perturbed_values), the identifier keeps the file's values: a wrong
         prior"""
-    v = load_vehicle(vehicle_name)
+    v = load_vehicle(vehicle)
     values = (perturbed_values(v, perturb, np.random.default_rng([seed, 2]), keep=names)
               if perturb else None)
     truth = Model(v, mass_inverse=mass_inverse, coefficient_values=values)
@@ -57,29 +70,28 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     opt = parse_current(current)
     m = Model(v, list(names) + opt.names, mass_inverse=mass_inverse, current=opt.fixed,
               velocity_reference=velocity_reference)
-    res = identify_with_diagnosis(m, cfg, run.t, run.y, run.u, T=run.T,
+    res = identify_with_diagnosis(m, cfg, [Record(run.t, run.y, run.u)], T=run.T,
                                   refine_pass=refine_pass, hist_every=hist_every,
                                   truth=m.theta_true[:m.p_coef], progress=progress)
-    return res, run, m
+    return SimulatedIdentification(res, run)
 
 
-def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
-                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None,
-                sim_current=None, velocity_reference=None, mass_inverse='default'):
+def load_source(settings=None, simulate_maneuver=None, bag=None, seed=0,
+                duration=DEFAULT_DURATION, rpm=None, process_std=None, sim_current=None):
     """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
-    NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
-    or what a bag of our simulator says). mass_inverse: M^-1 of the model that simulates or
-    pairs the run ('default': the vehicle file's; core.model.hydrodynamics.Model); the Source's
-    vehicle
-    then says it (its `mass_inverse`), so that every Model made of it uses it."""
+    NED if given) or --bag PATH (bag_identify.bag_source). settings: IdentifierSettings (None:
+    the defaults) of which the vehicle, coefficients, velocity_reference (what the velocities
+    are; not given: what a bag of our simulator says, else 'ground') and mass_inverse (M^-1 of
+    the model that simulates or pairs the run; the Source's vehicle then says it, so that every
+    Model made of it uses it) apply."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
+    settings = settings or IdentifierSettings()
     if bag:
-        return bag_source(bag, vehicle=vehicle, coefficients=coefficients,
-                          velocity_reference=velocity_reference, mass_inverse=mass_inverse)
-    v = load_vehicle(vehicle or 'nps_auv2').with_mass_inverse(mass_inverse)
-    names = coefficient_list(v, coefficients)
-    vr = velocity_reference or 'ground'
+        return bag_source(bag, settings)
+    v = load_vehicle(settings.vehicle).with_mass_inverse(settings.mass_inverse)
+    names = coefficient_list(v, settings.coefficients)
+    vr = settings.velocity_reference
     run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,
                    process_std=process_std, current=sim_current, velocity_reference=vr)
     m = Model(v, names)
@@ -105,10 +117,10 @@ def _mc_case(args):
      tau, noise_level, noise_tau, perturb) = args
     cfg = make_config(names, noise_mode=noise_mode, initial_offset=offset, tau=tau)
     try:
-        res, _, _ = identify_simulated(vehicle.local_path(), names, cfg, maneuver=maneuver,
-                                       seed=seed, duration=duration, rpm=rpm,
-                                       refine_pass=refine_pass, noise_level=noise_level,
-                                       noise_tau=noise_tau, perturb=perturb)
+        res = identify_simulated(vehicle.local_path(), names, cfg, maneuver=maneuver,
+                                 seed=seed, duration=duration, rpm=rpm,
+                                 refine_pass=refine_pass, noise_level=noise_level,
+                                 noise_tau=noise_tau, perturb=perturb).result
     except ArithmeticError as err:      # DomainError / DivergenceError: a diverged run
         return {'seed': seed, 'offset': offset, 'diverged': str(err)}
     e = res.estimate - res.truth
@@ -121,8 +133,8 @@ def _mc_case(args):
             'ekf_error_pct': res.error_pct('ekf_estimate').tolist(),
             'ekf_z': ((res.ekf_estimate - res.truth) / res.ekf_std).tolist(),
             'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s,
-            'consistent': res.diagnosis['consistent'],
-            'noise_model_used': res.noise_model['used']}
+            'consistent': res.diagnosis.consistent,
+            'noise_model_used': bool(res.noise.used)}
 
 
 def _mc_warm_up(case):
@@ -130,7 +142,7 @@ def _mc_warm_up(case):
     _mc_case(case[:6] + (MC_WARM_UP_DURATION_S,) + case[7:])
 
 
-def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
+def montecarlo(vehicle, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT_NOISE_MODE,
                maneuver=DEFAULT_MANEUVER, duration=DEFAULT_DURATION, rpm=None, refine_pass=True,
                jobs=2, progress=None, tau=10.0, scheduler=None, noise_level=1.0, noise_tau=0.0,
                perturb=0.0):
@@ -144,9 +156,12 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
     The cases run as tasks on the Dask engine (analysis/engine.py): on the cluster at
     `scheduler` if given, else on a local cluster of `jobs` worker processes, or one after the
     other in this process for jobs <= 1. Each case is a function of its seed and offset only,
-    and the statistics are taken in case order, so every way gives the same numbers."""
+    and the statistics are taken in case order, so every way gives the same numbers.
+
+    vehicle : a Vehicle, or its name or YAML path (its file's content goes to the workers)."""
     from auv_ident.analysis import engine  # distributed is imported only when used
-    vehicle = engine.VehicleText.read(vehicle_name)
+    v = load_vehicle(vehicle)
+    vehicle = engine.VehicleText.read(v.path)
     cases = [(vehicle, names, noise_mode, off, s, maneuver, duration, rpm, refine_pass,
               tau, noise_level, noise_tau, perturb) for s in range(seeds) for off in offsets]
     t0 = time.perf_counter()
@@ -166,7 +181,7 @@ def montecarlo(vehicle_name, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DE
                 progress()
     ok = [r for r in out if 'diverged' not in r]
     p = len(names)
-    stats = {'vehicle': vehicle_name, 'coefficients': names, 'maneuver': maneuver,
+    stats = {'vehicle': v.name, 'coefficients': names, 'maneuver': maneuver,
              'duration_s': duration, 'seeds': seeds, 'offsets': list(offsets),
              'noise_mode': noise_mode, 'tau_s': tau, 'refined': refine_pass,
              'noise_level': noise_level, 'noise_tau_s': noise_tau, 'perturb': perturb,

@@ -1,7 +1,7 @@
 """The report's honesty sections: the diagnosis, the noise model read off the data, the
 identifiability of each coefficient, and the innovations' autocorrelation figure.
 
-Everything comes from the result document (analysis/identification.py fills `diagnosis`,
+Everything comes from the result document (core/identification/pipeline.py fills `diagnosis`,
 `noise_model` and `identifiability`), so `report` shows what `identify --json` says.
 """
 import math

@@ -8,12 +8,14 @@ import numpy as np
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.session.settings import names_of
 
 DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R wins on accuracy
 
-def coefficient_list(vehicle, text):
-    """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
-    names = [n.strip() for n in (text or '').split(',') if n.strip()]
+def coefficient_list(vehicle, coefficients):
+    """Names of the `coefficients` setting ('A,B,C' or a sequence, read by
+    session.settings.names_of; empty: the vehicle's paper default), validated."""
+    names = list(names_of('coefficients', coefficients or ()))
     if names and names[0].lower() == 'auto':
         raise ConfigError('--coefficients auto chooses from a recorded run: use it with '
                           'identify --bag or report --bag (a simulated run: simulate --out '
@@ -91,7 +93,10 @@ def current_warnings(cur):
 
 
 def result_dict(vehicle, res, extra=None, current_truth=None):
-    """The JSON document of `identify --json` (schema in docs/report.md)."""
+    """The JSON document of `identify --json` (schema in docs/report.md) of an
+    Identification (core.identification.results); `extra`: more entries, after the
+    identification's (its noise_model, identifiability and diagnosis where extra places
+    them, if it does)."""
     err = res.error_pct()
     ekf_err = res.error_pct('ekf_estimate')
     coeffs = {}
@@ -112,11 +117,16 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
          'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
          + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
             else 'dimensional SI') + ')',
-         'current': current_dict(getattr(res, 'current', None), current_truth),
-         'warnings': current_warnings(getattr(res, 'current', None))}
-    for key in ('noise_model', 'identifiability', 'diagnosis'):
-        if getattr(res, key, None) is not None:
-            d[key] = getattr(res, key)
+         'current': current_dict(res.current, current_truth),
+         'warnings': current_warnings(res.current)}
+    extra = extra or {}
+    judged = {} if res.diagnosis is None else {
+        'noise_model': None if res.noise is None else res.noise.document(),
+        'identifiability': res.diagnosis.identifiability,
+        'diagnosis': res.diagnosis.document()}
+    for key, value in judged.items():
+        if value is not None and key not in extra:
+            d[key] = value
     if extra:
         d.update(extra)
     return d

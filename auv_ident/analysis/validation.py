@@ -50,6 +50,7 @@ from auv_ident.core.simulation.prediction import (
     rmse,
     theil,
 )
+from auv_ident.session.settings import IdentifierSettings
 
 DEFAULT_HOLDOUT = 0.25          # fraction of the identification run held out (its final part)
 HORIZONS = (1, 10, 100)         # K of the K-step-ahead prediction (measurement samples)
@@ -331,13 +332,7 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
     t = np.asarray(run_t, dtype=float)
     Y = np.asarray(run_Y, dtype=float)
     U = np.asarray(run_U, dtype=float)
-    if Y.ndim != 2 or Y.shape[1] != N_STATE or len(Y) != len(t) or len(U) != len(t):
-        raise ConfigError(f'validation run: t, Y, U must have N rows and Y 12 columns, got '
-                          f'{t.shape}, {Y.shape}, {U.shape}')
-    if int(np.sum(np.any(np.isfinite(Y), axis=1))) < MIN_SAMPLES:
-        raise ConfigError(f'validation run {source}: fewer than {MIN_SAMPLES} measured samples')
-    if not np.all(np.isfinite(U)):
-        raise ConfigError(f'validation run {source}: commands missing (NaN) on some rows')
+    _check_run(t, Y, U, source)
     prior = Model(vehicle, velocity_reference=velocity_reference)
     identified = _model_with(vehicle, Model(vehicle, names).coefficients_with(estimate),
                              current, velocity_reference)
@@ -358,36 +353,64 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
         for K in horizons:
             k_step[K][name] = k_step_on_measurements(f, t, U, Y, K, x0, max_step)
 
-    def merged(preds):
-        out = {STATE_NAMES[i]: {} for i in measured_idx}
-        for name, X in preds.items():
-            for ch, sc in _scores(Y, X, measured_idx).items():
-                out[ch].update({k + SUFFIX[name]: v for k, v in sc.items()})
-        return out
+    dt = float(np.median(np.diff(t[np.any(np.isfinite(Y), axis=1)])))
+    prediction = {f'K{K}': {'horizon_samples': K, 'horizon_s': K * dt,
+                            'channels': _merged_scores(Y, k_step[K], measured_idx)}
+                  for K in horizons}
+    return RunValidation(source=source, t=t, Y=Y, U=U, x0=x0, filled=filled, free=free,
+                         k_step=k_step,
+                         channels=_free_run_scores(Y, free, failed, measured_idx),
+                         prediction=prediction, failed_at=failed,
+                         current=None if current is None else np.asarray(current, float),
+                         velocity_reference=velocity_reference, x0_window=float(x0_window),
+                         derived=_derived_scores(Y, free, failed, measured_idx))
 
-    channels = merged(free)
-    for name, at in failed.items():     # a model that stopped early is not scored on a part
+
+def _check_run(t, Y, U, source):
+    """ConfigError naming the run if its arrays do not fit together, it has too few measured
+    samples or commands are missing."""
+    if Y.ndim != 2 or Y.shape[1] != N_STATE or len(Y) != len(t) or len(U) != len(t):
+        raise ConfigError(f'validation run: t, Y, U must have N rows and Y 12 columns, got '
+                          f'{t.shape}, {Y.shape}, {U.shape}')
+    if int(np.sum(np.any(np.isfinite(Y), axis=1))) < MIN_SAMPLES:
+        raise ConfigError(f'validation run {source}: fewer than {MIN_SAMPLES} measured samples')
+    if not np.all(np.isfinite(U)):
+        raise ConfigError(f'validation run {source}: commands missing (NaN) on some rows')
+
+
+def _merged_scores(Y, preds, measured_idx):
+    """{channel: {'fit_percent', 'rmse', 'theil' with each model's SUFFIX}} of the predictions
+    {model: (N, 12)} against the measurements Y on the measured channels."""
+    out = {STATE_NAMES[i]: {} for i in measured_idx}
+    for name, X in preds.items():
+        for ch, sc in _scores(Y, X, measured_idx).items():
+            out[ch].update({k + SUFFIX[name]: v for k, v in sc.items()})
+    return out
+
+
+def _free_run_scores(Y, free, failed, measured_idx):
+    """_merged_scores of the free runs; a model that stopped early (failed {model: s or None})
+    is not scored on a part: NaN."""
+    channels = _merged_scores(Y, free, measured_idx)
+    for name, at in failed.items():
         if at is not None:
             for ch in channels.values():
                 for key in ('fit_percent', 'rmse', 'theil'):
                     ch[key + SUFFIX[name]] = float('nan')
-    derived = {}
-    if State.U in measured_idx and State.V in measured_idx:
-        derived['U'] = {}
-        for name, X in free.items():
-            at = failed[name]
-            sc = ({'fit_percent': float('nan'), 'rmse': float('nan'), 'theil': float('nan')}
-                  if at is not None else _speed_scores(Y, X))
-            derived['U'].update({k + SUFFIX[name]: v for k, v in sc.items()})
-    dt = float(np.median(np.diff(t[np.any(np.isfinite(Y), axis=1)])))
-    prediction = {f'K{K}': {'horizon_samples': K, 'horizon_s': K * dt,
-                            'channels': merged(k_step[K])} for K in horizons}
-    return RunValidation(source=source, t=t, Y=Y, U=U, x0=x0, filled=filled, free=free,
-                         k_step=k_step, channels=channels, prediction=prediction,
-                         failed_at=failed,
-                         current=None if current is None else np.asarray(current, float),
-                         velocity_reference=velocity_reference, x0_window=float(x0_window),
-                         derived=derived)
+    return channels
+
+
+def _derived_scores(Y, free, failed, measured_idx):
+    """{'U': scores with each model's SUFFIX} of the total speed of the free runs when the run
+    measures u and v (NaN for a model that stopped early), else {}."""
+    if State.U not in measured_idx or State.V not in measured_idx:
+        return {}
+    speed = {}
+    for name, X in free.items():
+        sc = ({'fit_percent': float('nan'), 'rmse': float('nan'), 'theil': float('nan')}
+              if failed[name] is not None else _speed_scores(Y, X))
+        speed.update({k + SUFFIX[name]: v for k, v in sc.items()})
+    return {'U': speed}
 
 
 def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=None,
@@ -400,9 +423,9 @@ def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=N
     far smaller noise; None: the messages' and the default); kwargs: validate_on_run's
     horizons, max_step, x0_window. Returns (RunValidation, Source)."""
     from auv_ident.analysis.bag_identify import bag_source
-    run = bag_source(bag, vehicle=vehicle.path, coefficients=','.join(names),
-                     velocity_reference=velocity_reference, noise_std=noise_std,
-                     q_state=q_state)
+    run = bag_source(bag, IdentifierSettings.from_values(
+        vehicle=vehicle.path, coefficients=names, velocity_reference=velocity_reference,
+        noise_std=noise_std, q_state=q_state))
     val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
                           source=run.description, velocity_reference=run.velocity_reference,
                           include_truth=run.truth is not None, truth_current=run.current_truth,

@@ -165,7 +165,7 @@ class _McapFile:
                 summary = self.reader.get_summary()
             except Exception as exc:  # a corrupt file can break the parser in any way
                 raise BagError(f'{self.path}: corrupted MCAP file ({type(exc).__name__}: '
-                               f'{exc})') from None
+                               f'{exc})') from exc
             stats = summary.statistics if summary is not None else None
             if summary is not None and (summary.chunk_indexes or (
                     stats is not None and stats.message_count == 0)):
@@ -260,7 +260,7 @@ class _McapFile:
             records = breakup_chunk(chunk, validate_crc=True)
         except Exception as exc:  # CRC mismatch, bad compression, ...
             raise BagError(f'{self.path}: corrupted MCAP chunk ({type(exc).__name__}: '
-                           f'{exc})') from None
+                           f'{exc})') from exc
         return Counter(r.channel_id for r in records if isinstance(r, Message))
 
     def _iter_indexed(self, topics):
@@ -274,7 +274,7 @@ class _McapFile:
                 return
             except Exception as exc:  # CRC mismatch, bad compression, short read, ...
                 raise BagError(f'{self.path}: corrupted MCAP chunk ({type(exc).__name__}: '
-                               f'{exc})') from None
+                               f'{exc})') from exc
             yield item
 
     def iter_raw(self, topics):
@@ -300,7 +300,7 @@ def _read_chunk(fh, index, path):
         stream.read8()
         return Chunk.read(stream)
     except Exception as exc:  # a corrupt index or chunk can fail in any way
-        raise BagError(f'{path}: corrupted MCAP chunk ({type(exc).__name__}: {exc})') from None
+        raise BagError(f'{path}: corrupted MCAP chunk ({type(exc).__name__}: {exc})') from exc
 
 
 def _normalized(name):
@@ -415,7 +415,7 @@ def _mcap_ros2_decoder(schema):
         with contextlib.redirect_stderr(io.StringIO()):
             return DecoderFactory().decoder_for('cdr', schema)
     except Exception as exc:
-        raise _Undecodable(f'definition not parsed ({_first_line(exc)})') from None
+        raise _Undecodable(f'definition not parsed ({_first_line(exc)})') from exc
 
 
 class _Decoder:
@@ -467,7 +467,7 @@ class _Decoder:
             except KeyError:
                 raise _Undecodable(self.problem(msgtype)) from None
             except Exception as exc:  # mcap_ros2 fails in assorted ways on bad CDR
-                raise _Undecodable(_first_line(exc)) from None
+                raise _Undecodable(_first_line(exc)) from exc
         try:
             return store.deserialize_cdr(data, msgtype)
         except Exception as exc:  # rosbags' SerdeError, or a KeyError for a broken type
@@ -478,7 +478,7 @@ class _Decoder:
             decode = msgdef.deserialize_cdr_le if data[1] else msgdef.deserialize_cdr_be
             msg, pos = decode(memoryview(data)[4:], 0, msgdef.cls, store)
         except Exception:  # the payload itself is bad: report rosbags' own reason
-            raise _Undecodable(_first_line(strict_error)) from None
+            raise _Undecodable(_first_line(strict_error)) from strict_error
         left = len(data) - 4 - pos
         if left > _MAX_TRAILING:
             raise _Undecodable(f'{left} bytes left over after the message, more than '
@@ -596,7 +596,7 @@ def _iterate(files, selected, decoder, path, strict):
             except _Undecodable as exc:
                 if strict:
                     raise BagError(f'{path}: topic {topic}: undecodable {msgtype} payload at '
-                                   f'{t_ns} ns ({exc})') from None
+                                   f'{t_ns} ns ({exc})') from exc
                 if topic not in warned:
                     warned.add(topic)
                     log.warning('%s: topic %s: undecodable %s payload at %d ns (%s); skipping '

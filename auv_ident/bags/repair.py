@@ -328,7 +328,7 @@ def repair_bag(path, out=None):
             try:
                 results.append(_repair_file(f, dest, out))
             except OSError as exc:
-                raise BagError(f'{f}: repair failed: {exc}') from None
+                raise BagError(f'{f}: repair failed: {exc}') from exc
     except BaseException:
         if out is not None:
             shutil.rmtree(dest, ignore_errors=True)  # no half-written output bag

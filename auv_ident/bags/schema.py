@@ -169,8 +169,8 @@ def _duration_dict(value, key):
     if isinstance(value, dict):
         try:
             return {'sec': int(value['sec']), 'nsec': int(value['nsec'])}
-        except (KeyError, TypeError, ValueError):
-            raise BagError(f'QoS {key} must be {{sec, nsec}}, got {value!r}') from None
+        except (KeyError, TypeError, ValueError) as err:
+            raise BagError(f'QoS {key} must be {{sec, nsec}}, got {value!r}') from err
     ns = getattr(value, 'nanoseconds', value)  # rclpy Duration or integer ns
     if not isinstance(ns, numbers.Integral):
         raise BagError(f'QoS {key} must be a Duration, int ns or {{sec, nsec}}, got {value!r}')
@@ -195,9 +195,9 @@ def qos_to_dict(qos=None):
     else:
         try:
             items = [(k, getattr(qos, k)) for k in DEFAULT_QOS]
-        except AttributeError:
+        except AttributeError as err:
             raise BagError(
-                f'QoS must be None, a dict or an rclpy QoSProfile, got {qos!r}') from None
+                f'QoS must be None, a dict or an rclpy QoSProfile, got {qos!r}') from err
     for key, value in items:
         if key in _QOS_ENUMS:
             name = getattr(value, 'name', value)  # rclpy policy enums: KEEP_LAST -> keep_last

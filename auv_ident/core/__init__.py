@@ -12,9 +12,10 @@ import os
 
 from auv_ident.core.compiled_cache import register
 
-# The files holding the numba code compiled with cache=True and every core module that code
-# reads (it freezes their constants and inlines their functions): numba's cache of each is
-# keyed on all of them together (compiled_cache.py). test_ekf checks the list is complete.
+# The files holding the numba code compiled with a cache (compiled_cache.cached_njit) and every
+# core module that code reads (it freezes their constants and inlines their functions): numba's
+# cache of each is keyed on all of them together (compiled_cache.py). test_ekf checks the list
+# is complete.
 COMPILED_SOURCES = ('errors.py', 'model/state.py', 'model/vehicle.py', 'model/monomials.py',
                     'model/current_terms.py', 'model/planar.py', 'model/hydrodynamics.py',
                     'filter/ekf.py', 'filter/timing.py', 'filter/propagation.py',

@@ -7,11 +7,14 @@ Two rules:
   (O_CREAT | O_EXCL: it never opens what someone else created or linked there), then renamed
   over the target in one step, so a reader sees the old file or the new one, never half of
   one, and a symlink planted at a predictable temporary name redirects nothing.
-- :func:`private_dir`: what the package keeps between runs (vehicle files sent to campaign
-  workers, compiled kernels) lives in a folder of the user's own, created 0700 and checked
-  before use: owned by this user, not a symlink, no access for others. A folder under a shared
-  /tmp whose name anyone can guess is refused when it fails the check, never trusted.
+- :func:`private_folder` / :func:`private_dir`: what the package keeps between runs (vehicle
+  files sent to campaign workers, generated model kernels, numba's cache) lives in a folder of
+  the user's own ($AUV_IDENT_CACHE, else ~/.cache/auv_ident, else <temp>/auv_ident-<uid>),
+  created 0700 and checked before use: owned by this user, not a symlink, writable by no one
+  else. A folder under a shared /tmp whose name anyone can guess is refused when it fails the
+  check, never trusted.
 """
+from collections.abc import Iterator
 import os
 from pathlib import Path
 import stat
@@ -19,7 +22,7 @@ import tempfile
 
 from auv_ident.core.errors import ConfigError
 
-CACHE_ENV = 'AUV_IDENT_CACHE'      # overrides where private_dir's folders are
+CACHE_ENV = 'AUV_IDENT_CACHE'      # the first place private folders are made
 
 
 def _umask():
@@ -55,51 +58,74 @@ def write_atomic(path, data, mode=None):
     return path
 
 
-def _cache_root():
+def _unsafe(path: str) -> str | None:
+    """Why `path` is no private folder of this user's (None if it is one)."""
+    st = os.lstat(path)
+    if stat.S_ISLNK(st.st_mode):
+        return 'a symbolic link'
+    if not stat.S_ISDIR(st.st_mode):
+        return 'not a folder'
+    if st.st_uid != os.geteuid():
+        return f'owned by another user (uid {st.st_uid})'
+    if st.st_mode & 0o022:
+        return f'writable by other users (mode {stat.S_IMODE(st.st_mode):o})'
+    return None
+
+
+def private_candidates(name: str) -> Iterator[str]:
+    """The places of the private folder `name`, best first: $AUV_IDENT_CACHE/name if set, the
+    user's cache folder ($XDG_CACHE_HOME or ~/.cache)/auv_ident/name, then
+    <temp>/auv_ident-<uid>/name."""
     env = os.environ.get(CACHE_ENV, '').strip()
     if env:
-        return Path(env)
-    xdg = os.environ.get('XDG_CACHE_HOME', '').strip()
-    home = Path(xdg) if xdg else Path.home() / '.cache'
-    return home / 'auv_ident'
+        yield os.path.join(env, name)
+    xdg = os.environ.get('XDG_CACHE_HOME', '')
+    cache = xdg if os.path.isabs(xdg) else os.path.join(os.path.expanduser('~'), '.cache')
+    yield os.path.join(cache, 'auv_ident', name)
+    yield os.path.join(tempfile.gettempdir(), f'auv_ident-{os.geteuid()}', name)
 
 
-def check_private(folder):
-    """ConfigError naming `folder` unless it is a real folder (not a symlink) owned by this
-    user with no permissions for group or others."""
-    folder = Path(folder)
-    try:
-        st = os.lstat(folder)
-    except OSError as err:
-        raise ConfigError(f'{folder}: cannot use it as a private folder ({err.strerror})'
-                          ) from err
-    if stat.S_ISLNK(st.st_mode) or not stat.S_ISDIR(st.st_mode):
-        raise ConfigError(f'{folder}: not a folder of its own (a symlink or a file); '
-                          'refusing to use it: remove it')
-    if st.st_uid != os.geteuid():
-        raise ConfigError(f'{folder}: owned by user id {st.st_uid}, not by this user '
-                          f'({os.geteuid()}); refusing to use what another user made')
-    if st.st_mode & 0o077:
-        raise ConfigError(f'{folder}: permissions {stat.S_IMODE(st.st_mode):o} let others in '
-                          '(0700 expected); refusing to use it: chmod 700 it or remove it')
-    return folder
+def make_private(path: str, parent: bool = True) -> None:
+    """Create the folder `path` (and its parent, with `parent`) with mode 0700 where missing,
+    and check that it (and its parent) is a folder of this user's, no symbolic link, writable
+    by no one else; PermissionError naming it and why if not (OSError if it cannot be made)."""
+    for p in (os.path.dirname(path), path) if parent else (path,):
+        os.makedirs(p, mode=0o700, exist_ok=True)
+        why = _unsafe(p)
+        if why is not None:
+            raise PermissionError(f'{p} is {why}')
 
 
-def private_dir(*parts):
-    """A folder of this user's own for what the package keeps between runs:
-    $AUV_IDENT_CACHE, else $XDG_CACHE_HOME/auv_ident, else ~/.cache/auv_ident, then `parts`.
-    Every level from the root down is created 0700 if absent and checked (check_private);
-    ConfigError naming the folder if it cannot be made or fails the check."""
-    folder = _cache_root()
-    for part in ('',) + tuple(parts):
-        if part:
-            if part in ('.', '..') or '/' in part or os.sep in part:
-                raise ConfigError(f'private folder name {part!r}: one plain name expected')
-            folder = folder / part
+def private_folder(name: str, tried: list[str] | None = None) -> str | None:
+    """The first usable private folder `name` of :func:`private_candidates` (made if missing),
+    or None; the refused places, with why, are appended to `tried`."""
+    for path in private_candidates(name):
         try:
-            folder.mkdir(mode=0o700, parents=not part, exist_ok=True)
+            make_private(path)
+            return path
         except OSError as err:
-            raise ConfigError(f'{folder}: cannot create a private folder ({err.strerror}); '
-                              f'set {CACHE_ENV} to a folder of your own') from err
-        check_private(folder)
-    return folder
+            if tried is not None:
+                tried.append(f'{path} ({err.strerror or err})')
+    return None
+
+
+def private_dir(name: str, *parts: str) -> Path:
+    """A private folder for what the package keeps between runs: :func:`private_folder`
+    `name`, then the sub-folders `parts`, each made 0700 and checked; ConfigError naming every
+    place tried when none is usable."""
+    for part in (name, *parts):
+        if part in ('', '.', '..') or '/' in part or os.sep in part:
+            raise ConfigError(f'private folder name {part!r}: one plain name expected')
+    tried: list[str] = []
+    folder = private_folder(name, tried)
+    if folder is None:
+        raise ConfigError(f'no usable private folder for {name!r} (tried: {"; ".join(tried)}); '
+                          f'set {CACHE_ENV} to a folder of your own')
+    for part in parts:
+        folder = os.path.join(folder, part)
+        try:
+            make_private(folder, parent=False)
+        except OSError as err:
+            raise ConfigError(f'{folder}: not usable as a private folder '
+                              f'({err.strerror or err})') from err
+    return Path(folder)

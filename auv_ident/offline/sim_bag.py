@@ -93,17 +93,17 @@ def odometry_msg(t_ns, x12, frame='ned', pose_cov=None, twist_cov=None, frame_id
             twist=twist, covariance=np.array(tcov, dtype=np.float64).reshape(36)))
 
 
-def joint_state_msg(t_ns, u6):
-    """Return a rosbags sensor_msgs/JointState of actuator vector ``u6`` stamped ``t_ns``.
+def joint_state_msg(t_ns, u7):
+    """Return a rosbags sensor_msgs/JointState of actuator vector ``u7`` stamped ``t_ns``.
 
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N);
+    ``u7 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N);
     layout of :mod:`auv_ident.session.messages` (actuator_joint_fields). ``effort`` (the
     thrust on the propeller joint, zeros elsewhere) is never empty:
     a message ending with an empty float64 sequence is exactly what rclpy (Fast-CDR) pads with
     up to 8 extra bytes and strict decoders (rosbags) reject, so no writer of these messages
     should produce one.
     """
-    position, velocity, effort = actuator_joint_fields(u6)
+    position, velocity, effort = actuator_joint_fields(u7)
     return _T['sensor_msgs/msg/JointState'](
         header=_header(t_ns, ''), name=list(JOINT_NAMES), position=np.array(position),
         velocity=np.array(velocity), effort=np.array(effort))

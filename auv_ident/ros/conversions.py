@@ -73,10 +73,10 @@ def state_to_odometry(t_sec, x12, frame='ned', pose_cov=None, twist_cov=None,
     return msg
 
 
-def actuators_to_joint_state(t_sec, u6):
-    """Return a sensor_msgs/JointState for actuator vector ``u6`` at time ``t_sec`` (s).
+def actuators_to_joint_state(t_sec, u7):
+    """Return a sensor_msgs/JointState for actuator vector ``u7`` at time ``t_sec`` (s).
 
-    ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N).
+    ``u7 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]`` (rad, rpm, N).
     """
     msg = JointState()
     msg.header.stamp = sec_to_stamp(t_sec)
@@ -84,6 +84,6 @@ def actuators_to_joint_state(t_sec, u6):
     # effort holds the thrust and zeros, never []: rclpy/Fast-CDR pads a message that ends
     # with an empty float64 sequence and rosbags' strict reader then refuses every recorded
     # command (ros_stack.md section 3)
-    msg.position, msg.velocity, msg.effort = actuator_joint_fields(u6)
+    msg.position, msg.velocity, msg.effort = actuator_joint_fields(u7)
     return msg
 

@@ -1,9 +1,11 @@
 """Online identification of hydrodynamic coefficients: ``ros2 run auv_ident identifier``.
 
 Thin layer over :class:`auv_ident.session.session.IdentSession` (message conversion, rejection
-policy, the augmented EKF through core.filter.stream.StreamIdentifier, recovery, health rule).
-Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's messages in
-log-time order, so a recorded run replays to the same estimates.
+policy, the augmented EKF through core.filter.stream.StreamIdentifier, recovery, health rule):
+the node builds the messages and publishes them; what they hold comes from the session layer
+(the /diagnostics values: session/status.py; the frame algebra: session/messages.py).
+Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's
+messages in log-time order, so a recorded run replays to the same estimates.
 
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these)
@@ -14,10 +16,10 @@ is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed 
         ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
 
 Publications
-    ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good in
-        auv_ident/session/session.py: fused, finite, positive definite, innovations
-        consistent; during a divergence nothing is published, so the latched value stays the
-        last good estimate):
+    ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good, the
+        last good estimate rule of auv_ident/session/guard.py: fused, finite, positive
+        definite, innovations consistent; during a divergence nothing is published, so the
+        latched value stays the last good estimate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
         (vehicle file's units); velocity = 1-sigma; effort empty. The names and their number
         are fixed for the run, except once with ``coefficients`` [auto, ...] (below): at the
@@ -42,7 +44,7 @@ Publications
             or the divergence guard: innovations inconsistent for 1 s) within the last 200
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
             updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
-            (rules and reset in auv_ident/session/session.py);
+            (rules and reset in auv_ident/session/guard.py);
         WARN 'waiting for data': no update since start-up or the last restart;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
@@ -52,10 +54,12 @@ Publications
     values: accepted, rejected (odometry), commands, commands_rejected, errors (filter resets
     by the reset rule: core errors and divergence-guard resets), guard_resets, outliers
     (innovation gate), repairs (covariance repairs), time_jumps (confirmed backward jumps),
-    internal_errors (unexpected exceptions caught in a callback; 0 unless there is a bug),
-    last_error, mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis,
-    last_dof, last_stamp (of the last good estimate), then per coefficient <name> and
-    <name>_std of the last good estimate (repr floats), R_<channel> (adapted measurement
+    actuator_publishers (on the actuator topic, checked at 1 Hz), internal_errors (unexpected
+    exceptions caught in a callback; 0 unless there is a bug), last_error, mean_nis_per_dof,
+    nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
+    last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
+    session/live_diagnosis.py), then per coefficient <name>, <name>_std and <name>_verdict of
+    the last good estimate (repr floats), R_<channel> (adapted measurement
     variance of u ... psi) and Q_<name> (coefficient random-walk variance). With
     ``coefficients`` [auto, ...] also auto_state ('choosing', 'chosen' or 'failed'),
     auto_window_s, auto_data_s (s of odometry kept, or the choice was made from),
@@ -70,13 +74,13 @@ Services (std_srvs/srv/Trigger)
     ``~/save``: write the estimate file to ``save_path`` (fails if save_path is empty).
 
 Errors never stop the node: rejected messages (the rejection policy and plausibility rule of
-auv_ident/session/session.py: conversion errors, wrong frame, non-finite or implausible values,
+auv_ident/session/screening.py: conversion errors, wrong frame, non-finite or implausible values,
 zero, duplicate, out-of-order stamps, backward time jumps, no command yet, outliers) are warnings
 naming the problem, rate-limited per topic and problem (WarningLimiter: at most one line per
 kind every 5 s, with the count of those suppressed), so a flood of one problem never hides
 another. A filter fault (core error or divergence guard) is logged as an error (at most one
 per second), reported as ERROR on /diagnostics at once, and handled by the reset rule of
-auv_ident/session/session.py (vehicle states restart, coefficients from the last good estimate
+auv_ident/session/guard.py (vehicle states restart, coefficients from the last good estimate
 with inflated covariance); the last good estimate stays available (latched ~/estimate, ~/save).
 Nothing non-finite is published. An unexpected exception inside a callback (a bug) is caught,
 logged as one line, counted in internal_errors and handled by the same reset rule, so the
@@ -84,31 +88,19 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/session/session.py) of the last good estimate;
-with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
-JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
+null, "steps": accepted updates}`` (auv_ident/session/estimate_file.py) of the last good
+estimate; with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen
+the offline JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
 Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady
 clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
 
-Parameters (``config/identifier.yaml`` documents each with units and default; read once at
-start-up, declared read-only)
-    ``vehicle`` ('nps_auv2'), ``coefficients`` (empty = the vehicle's identify_default, or the
-    warm-start file's list; [auto] or [auto, NAME, ...] = chosen from the data, below),
-    ``auto_window`` (120.0 s), ``initial`` (empty = file value * (1 + initial_offset); with
-    [auto] for the running set), ``initial_offset`` (0.5),
-    ``noise_mode`` ('fixed' | 'paper' | 'paper_q' | 'matching'), ``tau`` (10.0 s), ``lam``
-    (the paper's lambda, 2e-3; ``lambda`` would shadow a Python keyword in code),
-    ``noise_std`` (12, DEFAULT_NOISE_STD), ``q_state`` (12, DEFAULT_Q_STATE), ``p0_rel``
-    (1.0), ``q_theta_rel`` (1e-5), ``measured`` (channel names, default all 12), ``frame``
-    ('ned' | 'enu'), ``sample_time`` (0.05 s), ``max_gap`` (5.0 s), ``max_bridge``
-    (0.0 = 0.25 s; not yet in config/identifier.yaml), ``mass_inverse`` ('default'),
-    ``current`` ('estimate' | 'none' | 'N,E[,D]'), ``current_down`` (false),
-    ``velocity_reference`` ('ground' | 'water'), ``current_sd0`` (0.5 m/s), ``current_walk``
-    (0.0 m/s/sqrt(s); docs/current.md), ``max_command_age`` (0: none), ``noise_source``
-    ('message'), ``save_path`` (''), ``warm_start`` (''). An empty list means the default
-    (ROS turns ``[]`` into "not set"). Bad values (or types) print one line naming the
-    parameter and exit with status 2 (ros/toolkit.py).
+Parameters (read once at start-up, declared read-only): every field of
+:class:`auv_ident.session.settings.IdentifierSettings`, declared from the fields (name, default,
+type, description with unit and choices; config/identifier.yaml and the docs/ros.md table are
+made from the same fields), and ``save_path`` (''). An empty list means the default (ROS turns
+``[]`` into "not set"). Bad values (or types) print one line naming the parameter and exit with
+status 2 (ros/toolkit.py).
 
 Coefficients chosen from the data (``coefficients`` [auto] or [auto, NAME, ...], as offline
 ``identify --bag --coefficients auto[,NAME,...]``; auv_ident/session/auto_choice.py): the node
@@ -141,10 +133,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.core.filter.augmented import DEFAULT_Q_STATE
-from auv_ident.core.filter.ekf import MODES
-from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (
     declare_parameters,
@@ -156,10 +144,18 @@ from auv_ident.ros.toolkit import (
     spin,
     STREAM_QOS,
 )
-from auv_ident.session.auto_choice import AUTO_WINDOW_S, run_in_thread
+from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S
+from auv_ident.session.messages import (
+    current_indices,
+    current_twist_fields,
+    DEFAULT_FRAME_IDS,
+    NS_PER_S,
+)
 from auv_ident.session.session import Event, IdentSession
+from auv_ident.session.settings import help_text, IdentifierSettings, settings_fields
+from auv_ident.session.settings_text import SAVE_PATH
+from auv_ident.session.status import diagnostic_values
 from auv_ident.session.warning_limiter import WarningLimiter
 
 NODE_NAME = 'identifier'
@@ -172,69 +168,21 @@ LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR}
 
 
-def _names(name, value):
-    return list(value or [])
+def _parameter(f):
+    """The node parameter of a setting (session/settings.py): its name, default (the
+    Parameter.Type of an empty list: ROS cannot type one) and description."""
+    kind = f.metadata['kind']
+    if kind not in ('strings', 'floats'):
+        return Param(f.name, f.default, help_text(f))
+    return Param(f.name, list(f.default) if f.default else _LIST_TYPES[kind], help_text(f),
+                 optional_list)
 
 
-# IdentSession checks the values (ParameterError naming the parameter); here only the type and
-# "unset" (ROS turns [] into "not set") are settled.
-_PARAMETERS = (
-    Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path'),
-    Param('coefficients', Parameter.Type.STRING_ARRAY,
-          "coefficients to identify; empty = the vehicle file's identify_default; [auto] or "
-          '[auto, NAME, ...] = chosen from the first auto_window s of data, NAME always '
-          'included', _names),
-    Param('auto_window', AUTO_WINDOW_S, 'seconds of accepted odometry the coefficients [auto] '
-                                        'choice is made from [s]'),
-    Param('initial', Parameter.Type.DOUBLE_ARRAY,
-          "initial guesses, same order [vehicle file's units]; empty = truth * (1 + "
-          'initial_offset)', _names),
-    Param('initial_offset', 0.5, 'relative offset of the initial guesses from the file values '
-                                 'when initial is empty [-]'),
-    Param('noise_mode', 'fixed', 'noise adaptation: ' + ', '.join(MODES)),
-    Param('tau', 10.0, 'time constant of the forgetting factor of the adaptation [s]'),
-    Param('lam', 2e-3, "the paper's lambda of the adaptation [-]"),
-    Param('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
-          'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi '
-          '[rad]', optional_list),
-    Param('q_state', [float(v) for v in DEFAULT_Q_STATE],
-          'per-step process noise 1-sigma of the 12 states (units as noise_std)',
-          optional_list),
-    Param('p0_rel', 1.0, 'initial 1-sigma of each coefficient, fraction of |initial guess| '
-                         '[-]'),
-    Param('q_theta_rel', 1e-5, 'per-step random-walk 1-sigma of each coefficient, fraction of '
-                               '|initial guess| [-]'),
-    Param('measured', list(STATE_NAMES), 'measured channels among ' + ' '.join(STATE_NAMES),
-          _names),
-    Param('frame', 'ned', "convention of the incoming Odometry: 'ned' or 'enu'"),
-    Param('sample_time', 0.05, 'nominal sample time and longest single prediction step [s]'),
-    Param('max_gap', 5.0, 'a longer gap between odometry stamps restarts the vehicle states '
-                          '(coefficients kept) [s]'),
-    Param('max_bridge', 0.0, 'longest gap between odometry stamps bridged by time updates; a '
-                             'longer one restarts the vehicle states (coefficients kept); 0 = '
-                             '0.25 s [s]'),
-    Param('mass_inverse', 'default', "M^-1: 'default' (vehicle file's choice), 'exact' or "
-                                     "'mss_literal'"),
-    Param('max_command_age', 0.0, "odometry whose command in force is older than this is "
-                                  "rejected as 'stale command'; 0 = no limit (a held command "
-                                  'stays in force: drivers publish on change) [s]'),
-    Param('noise_source', 'message', "measurement noise: 'message' (the Odometry covariance "
-                                     'diagonals where finite and positive, noise_std elsewhere) '
-                                     "or 'parameter' (noise_std)"),
-    Param('current', 'estimate', "the water current: 'estimate' (with the coefficients, "
-                                 "published as current_n, current_e), 'none' (still water) or "
-                                 "'N,E[,D]' (a known current, NED) [m/s]"),
-    Param('current_down', False, 'also estimate the down component of the current [-]'),
-    Param('velocity_reference', 'ground', "twist.linear is over 'ground' (DVL bottom lock) or "
-                                          "through the 'water' (water-track DVL)"),
-    Param('current_sd0', 0.5, 'initial 1-sigma of each estimated horizontal current component '
-                              '[m/s]'),
-    Param('current_walk', 0.0, 'random walk of the estimated current; 0 = constant '
-                               '[m/s/sqrt(s)]'),
-    Param('save_path', '', 'estimate JSON written on ~/save and on shutdown; empty = none'),
-    Param('warm_start', '', 'estimate JSON to start from (estimate and covariance); empty = '
-                            'none'),
-)
+_LIST_TYPES = {'strings': Parameter.Type.STRING_ARRAY, 'floats': Parameter.Type.DOUBLE_ARRAY}
+# every identifier setting, checked by IdentifierSettings (ParameterError naming the
+# parameter; here only the type and "unset" are settled: ROS turns [] into "not set"), and the
+# node's own save_path
+_PARAMETERS = tuple(_parameter(f) for f in settings_fields()) + (Param(*SAVE_PATH),)
 
 
 class IdentifierNode(Node):
@@ -242,11 +190,12 @@ class IdentifierNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        settings = declare_parameters(self, _PARAMETERS)
-        self.save_path = settings.pop('save_path')
+        values = declare_parameters(self, _PARAMETERS)
+        self.save_path = values.pop('save_path')
         # ParameterError names a bad parameter; an 'auto' choice runs in a worker thread, so
         # that the callbacks go on taking (and keeping) messages while it runs
-        self.session = IdentSession(**settings, auto_runner=run_in_thread)
+        self.session = IdentSession(IdentifierSettings.from_values(**values),
+                                    auto_runner=run_in_thread)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
@@ -285,7 +234,7 @@ class IdentifierNode(Node):
             clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'identifying {", ".join(self.names)} of {self.session.vehicle.name} '
-            f'(noise mode {settings["noise_mode"]}, frame {self.session.frame}, initial '
+            f'(noise mode {self.session.settings.noise_mode}, frame {self.session.frame}, initial '
             f'{np.array2string(self.session.theta0, precision=5)})'
             + ('' if self.session.auto is None else
                f'; coefficients [auto]: the set is chosen from the first '
@@ -302,8 +251,7 @@ class IdentifierNode(Node):
         self._covariance.layout.dim = [
             MultiArrayDimension(label='row:' + joined, size=p, stride=p * p),
             MultiArrayDimension(label='col:' + joined, size=p, stride=p)]
-        self._current_index = [self.names.index(n) if n in self.names else -1
-                               for n in CURRENT_NAMES]
+        self._current_index = current_indices(self.names)
 
     def _follow_choice(self, diagnostics=True):
         """After a session call: log what the 'auto' choice has to say (it started, switched
@@ -433,74 +381,26 @@ class IdentifierNode(Node):
             self.publish_current(est.header.stamp, estimate, cov)
 
     def publish_current(self, stamp, estimate, cov):
-        """~/current: the estimated water current in the world frame of ``frame`` (NED north,
-        east, down; ENU east, north, up), twist.linear, with its covariance in the linear block
-        (row-major 6x6; the angular part is 0 with covariance 0: the current model is
-        irrotational, Fossen 2021 sec. 10.3). A component that is not estimated (down, by
-        default) is 0 with variance 0: it is given, not measured."""
-        ned = np.zeros(3)
-        C = np.zeros((3, 3))
-        for a, i in enumerate(self._current_index):
-            if i < 0:
-                continue
-            ned[a] = estimate[i]
-            for b, j in enumerate(self._current_index):
-                if j >= 0:
-                    C[a, b] = cov[i, j]
-        if self.session.frame == 'enu':       # NED -> ENU: (E, N, -D), a signed permutation
-            perm, sign = [1, 0, 2], np.array([1.0, 1.0, -1.0])
-            ned = ned[perm] * sign
-            C = C[np.ix_(perm, perm)] * np.outer(sign, sign)
+        """~/current: the estimated water current in the world frame of ``frame``, with its
+        covariance (session/messages.py current_twist_fields: the frame algebra)."""
+        linear, covariance = current_twist_fields(estimate, cov, self._current_index,
+                                                  self.session.frame)
         msg = self._current
         msg.header.stamp = stamp
         lin = msg.twist.twist.linear
-        lin.x, lin.y, lin.z = (float(v) for v in ned)
-        full = np.zeros((6, 6))
-        full[:3, :3] = C
-        msg.twist.covariance = array('d', full.ravel().tobytes())
+        lin.x, lin.y, lin.z = (float(v) for v in linear)
+        msg.twist.covariance = array('d', covariance.tobytes())
         self.pub_current.publish(msg)
 
     # -- diagnostics --
 
     def diagnostic_status(self):
-        """The DiagnosticStatus of the rule in the module docstring."""
+        """The DiagnosticStatus of the rule in the module docstring: the session's health and
+        values (session/status.py), with the node's own counts."""
         s = self.session
         h = s.health()
-        f = s.stream.ekf
-        est, cov = s.best()
-        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-
-        def num(v):
-            v = float(v)
-            return repr(v) if np.isfinite(v) else 'n/a'
-
-        values = [('accepted', str(s.odom_accepted)), ('rejected', str(s.odom_rejected)),
-                  ('commands', str(s.cmd_accepted)),
-                  ('commands_rejected', str(s.cmd_rejected)),
-                  ('errors', str(s.errors)), ('guard_resets', str(s.guard_resets)),
-                  ('outliers', str(s.outliers)), ('repairs', str(s.repairs)),
-                  ('time_jumps', str(s.time_jumps)),
-                  ('actuator_publishers', str(self.actuator_publishers)),
-                  ('internal_errors', str(self.internal_errors)),
-                  ('last_error', s.last_error),
-                  ('mean_nis_per_dof', num(h.mean_nis_per_dof)),
-                  ('nis_band', f'{num(h.band[0])} {num(h.band[1])}'),
-                  ('nis_window', str(h.window)),
-                  ('guard_median_nis_per_dof', num(s.guard_median())),
-                  ('last_nis', num(s.last_nis)), ('last_dof', str(s.last_dof)),
-                  ('last_stamp', 'n/a' if s.last_good is None
-                   else num(s.last_good.stamp_ns * 1e-9))]
-        verdicts, diagnosis = s.diagnosis(h)
-        values += [('consistent', {True: 'true', False: 'false', None: 'not judged'}[
-            diagnosis['consistent']]), ('diagnosis', diagnosis['messages'][0])]
-        values += [(f'diagnosis_{i}', m) for i, m in enumerate(diagnosis['messages'][1:], 1)]
-        for name, v, sd in zip(self.names, est, std):
-            values += [(name, num(v)), (name + '_std', num(sd)),
-                       (name + '_verdict', verdicts[name]['verdict'])]
-        if s.auto is not None:
-            values += s.auto.diagnostic_values()
-        values += [('R_' + n, num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
-        values += [('Q_' + n, num(v)) for n, v in zip(self.names, np.diag(f.Q)[12:])]
+        values = diagnostic_values(s, h, [('actuator_publishers', str(self.actuator_publishers)),
+                                          ('internal_errors', str(self.internal_errors))])
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
                                 hardware_id=s.vehicle.name,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
@@ -511,7 +411,7 @@ class IdentifierNode(Node):
         that the actuator topic stopped is that no publisher is left. Then warn (rate-limited)
         while odometry still arrives. Returns the number of publishers."""
         count = self.sub_actuators.get_publisher_count()
-        accepted = self.session.odom_accepted
+        accepted = self.session.counters.odom_accepted
         if count == 0 and accepted > self._odom_at_last_check:
             line = self._warn_limit(('actuators', 'no publisher'),
                                     'actuators: no publisher left on the actuator topic while '
@@ -533,7 +433,7 @@ class IdentifierNode(Node):
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S
-                and self.session.odom_accepted != self._saved_steps):
+                and self.session.counters.odom_accepted != self._saved_steps):
             self._last_autosave = now
             ok, message = self.save()
             if not ok:
@@ -580,9 +480,10 @@ class IdentifierNode(Node):
         """On shutdown: write save_path if set, and log the final estimate."""
         est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        self._final_log('INFO', f'{self.session.odom_accepted} updates, '
-                                f'{self.session.odom_rejected} rejected, {self.session.errors} '
-                                'filter resets; last good estimate: ' + ', '.join(
+        counters = self.session.counters
+        self._final_log('INFO', f'{counters.odom_accepted} updates, {counters.odom_rejected} '
+                                f'rejected, {counters.errors} filter resets; last good '
+                                'estimate: ' + ', '.join(
                                     f'{n} = {v:.6g} +- {s:.2g}'
                                     for n, v, s in zip(self.names, est, std)))
         if self.save_path:

@@ -113,7 +113,8 @@ def compute_latency(run, n_samples):
     """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
     from auv_ident.ros.sim_messages import sample_messages
     from auv_ident.session.session import IdentSession
-    s = IdentSession(sample_time=float(run.T))
+    from auv_ident.session.settings import IdentifierSettings
+    s = IdentSession(IdentifierSettings.from_values(sample_time=float(run.T)))
     s.warm_up()
     out = []
     for k in range(min(n_samples, len(run.t))):
@@ -125,6 +126,167 @@ def compute_latency(run, n_samples):
                 s.on_odom(msg)
                 out.append((time.perf_counter() - t0) * 1e3)
     return _percentiles(out)
+
+
+class _Receiver:
+    """The load test's side of the estimates and /diagnostics: per sample k, when its estimate
+    arrived (perf_counter and system clock) and its DDS timestamps; the last diagnostics."""
+
+    def __init__(self, n, T_ns):
+        self.n, self.T_ns = n, T_ns
+        self.recv_t = np.full(n, np.nan)
+        self.cb_wall = np.zeros(n, dtype=np.int64)
+        self.est_source = np.zeros(n, dtype=np.int64)
+        self.est_received = np.zeros(n, dtype=np.int64)
+        self.last_k = -1
+        self.estimates = 0
+        self.bad_estimates = 0
+        self.diag = None
+
+    def on_estimate(self, msg, info=None):
+        now = time.perf_counter()
+        now_wall = time.time_ns()
+        s_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        k = int(round(s_ns / self.T_ns))
+        self.estimates += 1
+        # math on the array.array values: no numpy conversion per estimate in the receiver
+        if not (all(map(math.isfinite, msg.position)) and all(map(math.isfinite, msg.velocity))):
+            self.bad_estimates += 1
+        if 0 <= k < self.n and math.isnan(self.recv_t[k]):
+            self.recv_t[k] = now
+            self.cb_wall[k] = now_wall
+            if info is not None:
+                self.est_source[k] = info['source_timestamp']
+                self.est_received[k] = info['received_timestamp']
+            self.last_k = max(self.last_k, k)
+
+    def on_diag(self, msg):
+        for st in msg.status:
+            if st.name == 'auv_ident identifier':
+                self.diag = {v.key: v.value for v in st.values}
+
+    def all_counted(self):
+        """The last estimate is in, and a /diagnostics report counts every message."""
+        d = self.diag
+        return (d is not None and int(d['accepted']) + int(d['rejected']) >= self.n
+                and self.last_k >= self.n - 1)
+
+
+class _RssSampler:
+    """The identifier's resident memory, sampled every RSS_PERIOD_S in a thread."""
+
+    def __init__(self, pid, stop):
+        self.samples = []               # (perf_counter, kB)
+        self._pid, self._stop = pid, stop
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            kb = _rss_kb(self._pid)
+            if kb is not None:
+                self.samples.append((time.perf_counter(), kb))
+            self._stop.wait(RSS_PERIOD_S)
+
+    def at(self, t):
+        """The last sample at or before t (MB), NaN if none."""
+        before = [kb for tt, kb in self.samples if t is not None and tt <= t]
+        return before[-1] / 1024.0 if before else math.nan
+
+    def figures(self, t_first_est, t_steady, t_end):
+        rss_mb = np.array([kb for _, kb in self.samples], dtype=float) / 1024.0
+        steady = self.at(t_steady)
+        end = self.at(t_end)
+        after_steady = [kb / 1024.0 for tt, kb in self.samples
+                        if t_steady is not None and tt >= t_steady]
+        return {'first_estimate': self.at(t_first_est), 'start': steady, 'end': end,
+                'max': float(rss_mb.max()) if rss_mb.size else math.nan,
+                'growth': end - steady,
+                'max_growth': (max(after_steady) - steady) if after_steady else math.nan,
+                'samples': int(rss_mb.size)}
+
+
+class _Pacing:
+    """What the paced publishing loop measured (perf_counter instants, s)."""
+
+    def __init__(self):
+        self.t_start = self.t_end = None
+        self.t_first_est = None
+        self.t_steady = None                # RSS from here on is the steady state
+        self.waits = 0                      # waits for the identifier's backlog to shrink
+        self.cpu_start = None
+
+
+def _wait_for_identifier(node, pubs, proc, err_path, timeout):
+    """Return once the identifier subscribed to both topics, matched (0.5 s for its side of
+    the match) and publishes estimates; RuntimeError if it dies or times out."""
+    from auv_ident.ros.toolkit import SubscriberWait
+    wait = SubscriberWait(node, pubs, nodes=['identifier'],
+                          topics=[p.topic_name for p in pubs], timeout=timeout, settle=0.5)
+    while True:
+        ready = wait.poll()
+        if ready and node.count_publishers(ESTIMATE_TOPIC):
+            return
+        if proc.poll() is not None or ready is False:
+            raise RuntimeError('identifier did not start: ' + _tail(err_path))
+        time.sleep(0.02)
+
+
+def _publish_paced(payloads, pubs, period, receiver, proc, err_path, max_backlog, progress,
+                   pub_t, pub_wall):
+    """Publish sample k's (actuators, odometry) bytes at t_start + k period, waiting while
+    the identifier is more than max_backlog samples behind; returns the _Pacing."""
+    pub_act, pub_odom = pubs
+    n = len(payloads)
+    pace = _Pacing()
+    pace.t_start = time.perf_counter()
+    pace.cpu_start = (_cpu_s(proc.pid), _cpu_s())
+    k_steady = max(1, n // 10)
+    for k in range(n):
+        due = pace.t_start + k * period
+        while True:
+            now = time.perf_counter()
+            if k - receiver.last_k > max_backlog:
+                pace.waits += 1
+                time.sleep(0.0005)
+                if proc.poll() is not None:
+                    raise RuntimeError('identifier died: ' + _tail(err_path))
+                continue
+            if now < due:
+                time.sleep(min(due - now, 0.002))
+                continue
+            break
+        act, odom = payloads[k]
+        pub_act.publish(act)
+        pub_t[k] = time.perf_counter()
+        pub_wall[k] = time.time_ns()
+        pub_odom.publish(odom)
+        if pace.t_first_est is None and receiver.last_k >= 0:
+            pace.t_first_est = time.perf_counter()
+        if k == k_steady:
+            pace.t_steady = time.perf_counter()
+        if progress is not None and k % 2000 == 0:
+            progress(k, n)
+    pace.t_end = time.perf_counter()
+    return pace
+
+
+def _stop_identifier(proc):
+    """SIGINT, as Ctrl-C; killed after 20 s. Returns its exit code."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        return proc.wait(timeout=20.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait()
+
+
+def _read_json(path):
+    try:
+        with open(path, encoding='utf-8') as fh:
+            return json.load(fh)
+    except (OSError, ValueError):
+        return None
 
 
 def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle='nps_auv2',
@@ -147,7 +309,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     from auv_ident.core.model.hydrodynamics import Model
     from auv_ident.core.simulation.simulate import simulate
     from auv_ident.ros.sim_messages import sample_messages
-    from auv_ident.ros.toolkit import STREAM_QOS, SubscriberWait
+    from auv_ident.ros.toolkit import STREAM_QOS
     from auv_ident.vehicles import load_vehicle
 
     if not (rate_hz > 0 and sim_seconds > 0 and real_time_factor >= 0):
@@ -159,14 +321,13 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                    seed=seed)
     sim_s = time.perf_counter() - t_sim
     n = len(run.t)
-    T_ns = int(round(T * 1e9))
     compute = compute_latency(run, compute_samples) if compute_samples else None
 
-    own_log_dir = log_dir is None
-    log_dir = tempfile.mkdtemp(prefix='auv_ident_loadtest_') if own_log_dir else str(log_dir)
+    log_dir = tempfile.mkdtemp(prefix='auv_ident_loadtest_') if log_dir is None else str(log_dir)
     save = os.path.join(log_dir, 'estimate.json')
+    err_path = os.path.join(log_dir, 'identifier.err')
     out = open(os.path.join(log_dir, 'identifier.out'), 'w')
-    err = open(os.path.join(log_dir, 'identifier.err'), 'w')
+    err = open(err_path, 'w')
     proc = subprocess.Popen(
         [sys.executable, '-m', 'auv_ident', 'run', 'identifier', '--ros-args',
          '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}'],
@@ -179,189 +340,85 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
                              key=lambda item: item[0] != '/actuators'))
                 for k in range(n)]
     pub_t = np.full(n, np.nan)
-    recv_t = np.full(n, np.nan)
     # the same path on the system clock, split at the DDS timestamps of the estimate
     pub_wall = np.zeros(n, dtype=np.int64)
-    est_source = np.zeros(n, dtype=np.int64)
-    est_received = np.zeros(n, dtype=np.int64)
-    cb_wall = np.zeros(n, dtype=np.int64)
-    state = {'last_k': -1, 'estimates': 0, 'diag': None, 'bad_estimates': 0}
-    rss = []                    # (perf_counter, kB)
+    receiver = _Receiver(n, int(round(T * 1e9)))
     stop = threading.Event()
 
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('auv_ident_loadtest', context=ctx)
-
-    def on_estimate(msg, info=None):
-        now = time.perf_counter()
-        now_wall = time.time_ns()
-        s_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        k = int(round(s_ns / T_ns))
-        state['estimates'] += 1
-        # math on the array.array values: no numpy conversion per estimate in the receiver
-        if not (all(map(math.isfinite, msg.position)) and all(map(math.isfinite, msg.velocity))):
-            state['bad_estimates'] += 1
-        if 0 <= k < n and math.isnan(recv_t[k]):
-            recv_t[k] = now
-            cb_wall[k] = now_wall
-            if info is not None:
-                est_source[k] = info['source_timestamp']
-                est_received[k] = info['received_timestamp']
-            state['last_k'] = max(state['last_k'], k)
-
-    def on_diag(msg):
-        for st in msg.status:
-            if st.name == 'auv_ident identifier':
-                state['diag'] = {v.key: v.value for v in st.values}
-
     if split:
         # the SingleThreadedExecutor: Jazzy's EventsExecutor cannot pass the MessageInfo
         node.create_subscription(JointState, ESTIMATE_TOPIC,
-                                 lambda msg, info: on_estimate(msg, info), STREAM_QOS)
+                                 lambda msg, info: receiver.on_estimate(msg, info), STREAM_QOS)
         ex = SingleThreadedExecutor(context=ctx)
     else:
-        node.create_subscription(JointState, ESTIMATE_TOPIC, on_estimate, STREAM_QOS)
+        node.create_subscription(JointState, ESTIMATE_TOPIC, receiver.on_estimate, STREAM_QOS)
         ex = EventsExecutor(context=ctx)
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 100)
-    pub_act = node.create_publisher(JointState, '/actuators', STREAM_QOS)
-    pub_odom = node.create_publisher(Odometry, '/odom', STREAM_QOS)
+    node.create_subscription(DiagnosticArray, '/diagnostics', receiver.on_diag, 100)
+    pubs = (node.create_publisher(JointState, '/actuators', STREAM_QOS),
+            node.create_publisher(Odometry, '/odom', STREAM_QOS))
     ex.add_node(node)
     spin_thread = threading.Thread(target=lambda: _spin(ex, stop), daemon=True)
     spin_thread.start()
-
-    def sample_rss():
-        while not stop.is_set():
-            kb = _rss_kb(proc.pid)
-            if kb is not None:
-                rss.append((time.perf_counter(), kb))
-            stop.wait(RSS_PERIOD_S)
-    rss_thread = threading.Thread(target=sample_rss, daemon=True)
-    rss_thread.start()
+    rss = _RssSampler(proc.pid, stop)
 
     result = {}
-    waits = 0
     try:
-        # the identifier subscribed to both topics and matched; 0.5 s for its side of the match
-        wait = SubscriberWait(node, [pub_act, pub_odom], nodes=['identifier'],
-                              topics=[pub_act.topic_name, pub_odom.topic_name],
-                              timeout=start_timeout, settle=0.5)
-        while True:
-            ready = wait.poll()
-            if ready and node.count_publishers(ESTIMATE_TOPIC):
-                break
-            if proc.poll() is not None or ready is False:
-                raise RuntimeError('identifier did not start: '
-                                   + _tail(os.path.join(log_dir, 'identifier.err')))
-            time.sleep(0.02)
-        t_start = time.perf_counter()
-        cpu_start = (_cpu_s(proc.pid), _cpu_s())
-        t_first_est = None
-        k_steady = max(1, n // 10)
-        rss_steady_t = None
+        _wait_for_identifier(node, pubs, proc, err_path, start_timeout)
         period = 0.0 if real_time_factor == 0 else T / real_time_factor
-        for k in range(n):
-            due = t_start + k * period
-            while True:
-                now = time.perf_counter()
-                if k - state['last_k'] > max_backlog:
-                    waits += 1
-                    time.sleep(0.0005)
-                    if proc.poll() is not None:
-                        raise RuntimeError('identifier died: '
-                                           + _tail(os.path.join(log_dir, 'identifier.err')))
-                    continue
-                if now < due:
-                    time.sleep(min(due - now, 0.002))
-                    continue
-                break
-            act, odom = payloads[k]
-            pub_act.publish(act)
-            pub_t[k] = time.perf_counter()
-            pub_wall[k] = time.time_ns()
-            pub_odom.publish(odom)
-            if t_first_est is None and state['last_k'] >= 0:
-                t_first_est = time.perf_counter()
-            if k == k_steady:
-                rss_steady_t = time.perf_counter()
-            if progress is not None and k % 2000 == 0:
-                progress(k, n)
-        t_pub_end = time.perf_counter()
+        pace = _publish_paced(payloads, pubs, period, receiver, proc, err_path, max_backlog,
+                              progress, pub_t, pub_wall)
         # drain: the last estimate, then a /diagnostics report counting every message
         deadline = time.monotonic() + drain_timeout
-        while time.monotonic() < deadline:
-            d = state['diag']
-            if (d is not None and int(d['accepted']) + int(d['rejected']) >= n
-                    and state['last_k'] >= n - 1):
-                break
-            if proc.poll() is not None:
-                break
+        while (time.monotonic() < deadline and not receiver.all_counted()
+               and proc.poll() is None):
             time.sleep(0.05)
         t_drained = time.perf_counter()
         cpu_end = (_cpu_s(proc.pid), _cpu_s())
         time.sleep(2 * RSS_PERIOD_S)
         rss_end_t = time.perf_counter()
-        proc.send_signal(signal.SIGINT)
-        try:
-            rc = proc.wait(timeout=20.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
-        d = state['diag'] or {}
-        lat = (recv_t - pub_t) * 1e3
+        rc = _stop_identifier(proc)
+        d = receiver.diag or {}
+        lat = (receiver.recv_t - pub_t) * 1e3
         got = np.isfinite(lat)
         lat = lat[got]
         parts = {}
         if split:
-            parts = {'to_estimate_publish': (est_source - pub_wall)[got] * 1e-6,
-                     'estimate_transfer': (est_received - est_source)[got] * 1e-6,
-                     'receiver': (cb_wall - est_received)[got] * 1e-6}
+            parts = {'to_estimate_publish': (receiver.est_source - pub_wall)[got] * 1e-6,
+                     'estimate_transfer':
+                         (receiver.est_received - receiver.est_source)[got] * 1e-6,
+                     'receiver': (receiver.cb_wall - receiver.est_received)[got] * 1e-6}
         if samples_path:
-            np.savez(samples_path, pub_t=pub_t, recv_t=recv_t, pub_wall=pub_wall,
-                     est_source=est_source, est_received=est_received, cb_wall=cb_wall)
-        saved = None
-        try:
-            with open(save, encoding='utf-8') as fh:
-                saved = json.load(fh)
-        except (OSError, ValueError):
-            pass
-
-        def rss_at(t):
-            before = [kb for tt, kb in rss if t is not None and tt <= t]
-            return before[-1] / 1024.0 if before else math.nan
-        rss_mb = np.array([kb for _, kb in rss], dtype=float) / 1024.0
-        steady = rss_at(rss_steady_t)
-        end = rss_at(rss_end_t)
-        after_steady = [kb / 1024.0 for tt, kb in rss
-                        if rss_steady_t is not None and tt >= rss_steady_t]
+            np.savez(samples_path, pub_t=pub_t, recv_t=receiver.recv_t, pub_wall=pub_wall,
+                     est_source=receiver.est_source, est_received=receiver.est_received,
+                     cb_wall=receiver.cb_wall)
+        saved = _read_json(save)
         result = {
             'vehicle': vehicle, 'rate_hz': float(rate_hz), 'sim_seconds': float(run.t[-1]),
             'samples': n, 'real_time_factor': float(real_time_factor),
-            'achieved_real_time_factor': float(run.t[-1] / max(t_pub_end - t_start, 1e-9)),
-            'wall_publish_s': float(t_pub_end - t_start),
-            'wall_drain_s': float(t_drained - t_pub_end), 'simulate_s': sim_s,
+            'achieved_real_time_factor':
+                float(run.t[-1] / max(pace.t_end - pace.t_start, 1e-9)),
+            'wall_publish_s': float(pace.t_end - pace.t_start),
+            'wall_drain_s': float(t_drained - pace.t_end), 'simulate_s': sim_s,
             'published_odom': n, 'published_actuators': n,
             'accepted': int(d.get('accepted', -1)), 'rejected': int(d.get('rejected', -1)),
             'commands': int(d.get('commands', -1)),
             'commands_rejected': int(d.get('commands_rejected', -1)),
             'filter_resets': int(d.get('errors', -1)),
             'internal_errors': int(d.get('internal_errors', -1)),
-            'estimates_received': int(state['estimates']),
-            'non_finite_estimates': int(state['bad_estimates']),
+            'estimates_received': int(receiver.estimates),
+            'non_finite_estimates': int(receiver.bad_estimates),
             'latency_ms': _percentiles(lat),
             'latency_parts_ms': {k: _percentiles(v) for k, v in parts.items()},
             'compute_ms': compute,
             # CPU per sample while publishing and draining: a figure the other processes on
             # the machine hardly disturb, unlike the latency tail
-            'cpu_us_per_sample': {'identifier': (cpu_end[0] - cpu_start[0]) / n * 1e6,
-                                  'loadtest': (cpu_end[1] - cpu_start[1]) / n * 1e6},
-            'rss_mb': {'first_estimate': rss_at(t_first_est), 'start': steady, 'end': end,
-                       'max': float(rss_mb.max()) if rss_mb.size else math.nan,
-                       'growth': end - steady,
-                       'max_growth': (max(after_steady) - steady) if after_steady
-                       else math.nan,
-                       'samples': int(rss_mb.size)},
-            'backlog_waits': waits, 'max_backlog': max_backlog,
+            'cpu_us_per_sample': {'identifier': (cpu_end[0] - pace.cpu_start[0]) / n * 1e6,
+                                  'loadtest': (cpu_end[1] - pace.cpu_start[1]) / n * 1e6},
+            'rss_mb': rss.figures(pace.t_first_est, pace.t_steady, rss_end_t),
+            'backlog_waits': pace.waits, 'max_backlog': max_backlog,
             'identifier_exit_code': rc,
             'saved_steps': None if saved is None else int(saved['steps']),
             'log_dir': log_dir,
@@ -374,7 +431,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
         out.close()
         err.close()
         spin_thread.join(timeout=5.0)
-        rss_thread.join(timeout=5.0)
+        rss.thread.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         fastdds = os.path.join(os.path.dirname(sys.executable), 'fastdds')

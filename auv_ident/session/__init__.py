@@ -1,7 +1,11 @@
 """Session layer: what one message does, without ROS. Takes arrays and stamps; reads
 ROS-shaped messages by duck typing only.
 
-- session.py: IdentSession, the identifier's per-message logic (array API and message adapters);
+- session.py: IdentSession, the identifier's per-message logic (array API and message adapters),
+  composed of the parts below;
+- guarded_filter.py: GuardedFilter, one filter's per-message update (the session's running
+  filter and the 'auto' choice's chosen filter alike);
+- status.py: the counters and health of a session, and its /diagnostics values;
 - screening.py: rejection policy, frame-id and plausibility rules (pure functions);
 - guard.py: divergence guard, reset rule, health rule; the Event/LastGood/Health records;
 - settings.py: parameter checks (ParameterError) and the choice lists;

@@ -45,18 +45,10 @@ import time
 
 import numpy as np
 
-from auv_ident.core.errors import AuvIdentError, DivergenceError, DomainError
+from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.filter.stream import StreamIdentifier
 from auv_ident.core.identification.selection import choose_coefficients
-from auv_ident.session.guard import (
-    checked_coefficients,
-    COV_BLOWUP_FACTOR,
-    FUSED_CODES,
-    GUARD_WINDOW,
-    GuardWindow,
-    LastGood,
-    NisWindow,
-)
+from auv_ident.session.guarded_filter import FILTER_FAULTS, GuardedFilter
 from auv_ident.session.record import exact_hold, median_noise_std, paired
 
 AUTO_WINDOW_S = 120.0   # s of accepted odometry the choice is made from (docs/ros.md: why)
@@ -142,30 +134,24 @@ class ChoiceResult:
 
 
 class ChosenFilter:
-    """The chosen set's streaming filter, fed the kept record with the session's rules: the
-    same pairing, gate and covariance repair (core.filter.stream), the same estimate check
-    (guard.checked_coefficients), health and guard windows, and last good estimate. Where the
-    session would reset the filter (a core error, a sustained guard), this raises
-    ChoiceFailed instead: a set whose filter fails on the data it was chosen from is not
-    taken."""
+    """The chosen set's streaming filter, fed the kept record with the session's per-message
+    rule: a :class:`~auv_ident.session.guarded_filter.GuardedFilter`, as the session's own
+    (the same pairing, gate, covariance repair, estimate check, health and guard windows and
+    last good estimate). Where the session would reset the filter (a core error, a sustained
+    guard), this raises ChoiceFailed instead: a set whose filter fails on the data it was
+    chosen from is not taken. At the switch its filter becomes the session's."""
 
     def __init__(self, stream, guard_on):
-        self.stream = stream
-        f = stream.ekf
-        self.names = list(f.names)
-        self.std_limits = (COV_BLOWUP_FACTOR * f.prior_scale).tolist()
-        self.guard_on = guard_on
-        self.nis_window = NisWindow()
-        self.guard_window = GuardWindow()
-        self.last_good = None
+        self.filter = GuardedFilter(stream, guard_on)
+        self.names = self.filter.names
         self.samples = 0        # odometry entries fed
         self.updates = 0        # of which accepted
         self.rejected = Counter()
 
     def feed(self, entries):
         """Feed kept entries in order; raises ChoiceFailed where the session would reset."""
-        stream = self.stream
-        f = stream.ekf
+        filt = self.filter
+        stream = filt.stream
         for entry in entries:
             kind = entry[0]
             if kind == COMMAND:
@@ -176,32 +162,20 @@ class ChosenFilter:
                 continue
             _, t, stamp_ns, y, r = entry
             self.samples += 1
-            if r is not None:
-                f.use_measurement_variances(r)
             try:
-                out = stream.add_measurement(t, y)
-                if out.accepted:
-                    est, cov, std = checked_coefficients(f, t, self.names, self.std_limits)
-            except (DomainError, DivergenceError) as err:
+                step = filt.update(t, stamp_ns, y, r)
+            except FILTER_FAULTS as err:
                 raise ChoiceFailed(f'the filter of the chosen set failed on the kept data at '
                                    f'{t:.3f} s: {type(err).__name__}: {err}') from None
-            fused = out.code in FUSED_CODES
-            nis, dof = float(f.nis), int(f.dof)
-            window = self.guard_window
-            if fused and self.guard_on and dof > 0 and window.add(t, nis, dof):
+            if step.sustained:
+                window = filt.guard_window
                 raise ChoiceFailed(f'the filter of the chosen set diverged on the kept data: '
                                    f'innovations inconsistent since {window.since:.3f} s '
                                    f'(guard median NIS/dof {window.median():.4g})')
-            if not out.accepted:
-                self.rejected[out.code] += 1
+            if not step.accepted:
+                self.rejected[step.code] += 1
                 continue
             self.updates += 1
-            if fused and dof > 0 and math.isfinite(nis):
-                self.nis_window.add(nis, dof)
-            gross = (self.guard_on and len(self.nis_window) >= GUARD_WINDOW
-                     and self.nis_window.gross())
-            if window.since is None and not gross:
-                self.last_good = LastGood(stamp_ns, est, std, cov)
 
 
 def choose_and_feed(job):
@@ -218,14 +192,14 @@ def choose_and_feed(job):
     if len(measurements) < 2:
         raise ChoiceFailed(f'{len(measurements)} odometry sample(s) kept: nothing to choose '
                            'from')
-    t, Y, U = exact_hold(*paired(commands, measurements))
+    record = exact_hold(*paired(commands, measurements))
     # the noise the running filter used; the selection's filter runs with it fixed
     cfg = replace(job.cfg, noise_std=median_noise_std(variances, job.noise_variances),
                   mode='fixed')
     # one thread: the choice runs beside the live identifier, which keeps the other core for
     # the messages (offline, the same sensitivities take every core)
-    selection, _ = choose_coefficients(job.make_model, cfg, t, Y, U, named=job.named, T=job.T,
-                                       max_bridge=job.max_bridge, threads=1)
+    selection = choose_coefficients(job.make_model, cfg, [record], named=job.named, T=job.T,
+                                    max_bridge=job.max_bridge, threads=1).selection
     choice_wall_s = time.perf_counter() - start
     if not selection.chosen:
         # 'auto' alone on data that determine no coefficient: a filter of the current alone
@@ -295,18 +269,24 @@ class AutoChoice:
         """True while the job runs."""
         return self.job is not None
 
-    # -- what the session keeps --
+    # -- what the session keeps (nothing once the choice is over) --
 
     def keep_command(self, t, u):
-        self.kept.append((COMMAND, t, u))
+        """Keep an accepted command u (7,) stamped t (s)."""
+        if self.kept is not None:
+            self.kept.append((COMMAND, t, u))
 
     def keep_command_rejected(self, t):
-        self.kept.append((COMMAND_REJECTED, t))
+        """Keep the stamp t (s) of a rejected command (the stream's command_rejected)."""
+        if self.kept is not None:
+            self.kept.append((COMMAND_REJECTED, t))
 
     def keep_odometry(self, t, stamp_ns, y, r, code):
         """Keep an accepted odometry sample; returns True when the window just filled (the
         caller starts the job). code : the stream's code ('time jump': a confirmed backward
         jump of the time line)."""
+        if self.kept is None:
+            return False
         if code == 'time jump' and self.job is None:
             # a new time line: the window restarts on it; commands stamped up to now may be
             # the new line's (the stream held them for the jump), later ones are the old one's
@@ -341,6 +321,16 @@ class AutoChoice:
         result = job.result()           # raises the job's exception
         result.chosen_filter.feed(self.kept[self.taken:])
         return result
+
+    def poll(self):
+        """The ChoiceResult to switch to if the job has just finished with one (as
+        :meth:`finished`); None if there is none, it still runs, or it failed: the failure
+        is then recorded (:meth:`fail`) and the running set stays."""
+        try:
+            return self.finished()
+        except Exception as err:                 # noqa: BLE001 - the running set stays
+            self.fail(err)
+            return None
 
     def chose(self, result, stamp_ns):
         """Record the switch to result's set (CHOSEN); the kept record is dropped."""

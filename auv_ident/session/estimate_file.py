@@ -29,16 +29,20 @@ from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
 
-def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps):
-    """The JSON-ready dict of an estimate (schema in the module docstring)."""
+def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps, selection=None):
+    """The JSON-ready dict of an estimate (schema in the module docstring); selection : the
+    live choice's block (AutoChoice.document()), or None for none."""
     est = [float(v) for v in estimate]
     cov = np.asarray(cov, dtype=float)
-    return {'vehicle': vehicle, 'coefficients': list(names), 'estimate': est,
-            'std': [float(v) for v in np.sqrt(np.clip(np.diag(cov), 0.0, None))],
-            'covariance': [[float(v) for v in row] for row in cov],
-            'stamp': None if stamp_ns is None else stamp_ns / NS_PER_S,
-            'stamp_ns': None if stamp_ns is None else int(stamp_ns),
-            'steps': int(steps)}
+    doc = {'vehicle': vehicle, 'coefficients': list(names), 'estimate': est,
+           'std': [float(v) for v in np.sqrt(np.clip(np.diag(cov), 0.0, None))],
+           'covariance': [[float(v) for v in row] for row in cov],
+           'stamp': None if stamp_ns is None else stamp_ns / NS_PER_S,
+           'stamp_ns': None if stamp_ns is None else int(stamp_ns),
+           'steps': int(steps)}
+    if selection is not None:
+        doc['selection'] = selection
+    return doc
 
 def write_estimate_json(path, doc):
     """Write an estimate document atomically (a fresh temporary file, then one rename:

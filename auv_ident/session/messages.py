@@ -1,5 +1,9 @@
 """ROS-shaped messages read into numpy arrays, and the NED/FRD <-> ENU/FLU frame algebra.
 
+The one place of the frame algebra: odometry read (:func:`odometry_to_state`) and written
+(:func:`odometry_fields`), and the estimated water current published in the world frame of a
+convention (:func:`current_twist_fields`).
+
 Reading is duck-typed (attribute access only), so rclpy messages and rosbags-decoded ones are
 read alike and this module imports no ROS package: the session layer and the bag layer both
 use it. Building ROS messages (rclpy classes) is :mod:`auv_ident.ros.conversions`.
@@ -15,9 +19,9 @@ State vector ``x12 = [u v w p q r x y z phi theta psi]``:
   NED is ``R = Rz(psi) Ry(theta) Rx(phi)``. Angles leaving this module are canonical:
   ``phi, psi`` in (-pi, pi], ``theta`` in [-pi/2, pi/2].
 
-Actuator vector ``u6 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]``
-(core.model.state.Input; the name predates the thrust): rudder, stern planes, bow planes, port bow
-plane, starboard bow plane (rad), propeller speed (rpm) and measured propeller thrust (N).
+Actuator vector ``u7 = [delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm, thrust]``
+(core.model.state.Input): rudder, stern planes, bow planes, port bow plane, starboard bow
+plane (rad), propeller speed (rpm) and measured propeller thrust (N).
 
 nav_msgs/Odometry (REP-105 semantics):
 
@@ -37,9 +41,10 @@ Two frame conventions, selected by the string ``frame``:
 - ``'ned'``: world NED, body FRD; default frame ids ``'odom_ned'`` / ``'base_link_frd'``.
 - ``'enu'`` (REP-103): world ENU, body FLU; default frame ids ``'odom'`` / ``'base_link'``.
 
-NED/FRD -> ENU/FLU: position ``(y, x, -z)``; body vectors (linear and angular) ``(x, -y, -z)``;
-orientation ``q_enu_flu = q(NED->ENU) * q_ned_frd * q(FRD->FLU)``. In Euler angles this is
-exactly ``(phi, -theta, pi/2 - psi)``, so the pose covariance transforms with
+NED/FRD -> ENU/FLU: position and every world vector (the water current) ``(y, x, -z)``; body
+vectors (linear and angular) ``(x, -y, -z)``; orientation
+``q_enu_flu = q(NED->ENU) * q_ned_frd * q(FRD->FLU)``. In Euler angles this is exactly
+``(phi, -theta, pi/2 - psi)``, so the pose covariance transforms with
 ``T_pose = blockdiag(P, E)``, ``P = [[0,1,0],[1,0,0],[0,0,-1]]``, ``E = diag(1,-1,-1)``, and the
 twist covariance with ``T_twist = blockdiag(E, E)``: ``C' = T C T^T``. All T are signed
 permutations, so the transforms are exact and their own inverses (T^-1 = T^T).
@@ -62,7 +67,7 @@ import numpy as np
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import AuvIdentError
-from auv_ident.core.model.state import FINS, Input, N_INPUT
+from auv_ident.core.model.state import CURRENT_NAMES, FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
 
@@ -467,13 +472,52 @@ def odometry_variances(msg, frame='ned'):
 
 
 # ---------------------------------------------------------------------------------------------
+# The water current
+
+
+def current_indices(names):
+    """[i_north, i_east, i_down]: where each water-current component (core.model.state
+    CURRENT_NAMES) is among the identified parameters' names, -1 for one not identified."""
+    return [names.index(n) if n in names else -1 for n in CURRENT_NAMES]
+
+
+def current_twist_fields(estimate, cov, indices, frame='ned'):
+    """What a geometry_msgs/TwistWithCovariance of the estimated water current holds in
+    convention ``frame``: ``(linear (3,), covariance (36,))``.
+
+    estimate (p,), cov (p, p) : the identified parameters and their covariance; indices :
+    :func:`current_indices` of their names. linear is the current where the water goes in the
+    world frame (NED: north, east, down; ENU: east, north, up; m/s); covariance is the 6x6
+    twist covariance, row-major, with the current's covariance in the linear block. A
+    component not identified is 0 with variance 0 (it is given, not measured), and so is the
+    angular part (the current model is irrotational, Fossen 2021 sec. 10.3).
+    """
+    _check_frame(frame)
+    lin = np.zeros(3)       # NED
+    C = np.zeros((3, 3))
+    for a, i in enumerate(indices):
+        if i < 0:
+            continue
+        lin[a] = estimate[i]
+        for b, j in enumerate(indices):
+            if j >= 0:
+                C[a, b] = cov[i, j]
+    if frame == 'enu':      # world NED -> ENU: (E, N, -D), the position's signed permutation
+        lin = _signed_perm(lin, _POS_PERM, _POS_SIGN)
+        C = _signed_perm_cov(C, _POS_PERM, _POS_SIGN)
+    full = np.zeros((6, 6))
+    full[:3, :3] = C
+    return lin, full.ravel()
+
+
+# ---------------------------------------------------------------------------------------------
 # JointState
 
 
 
 
 def joint_state_to_actuators(msg):
-    """Return ``(t_sec, u6)`` from a JointState in the layout of :data:`JOINT_NAMES`.
+    """Return ``(t_sec, u7)`` from a JointState in the layout of :data:`JOINT_NAMES`.
 
     Joints are matched by name in any order; other joints are ignored. Raises ConversionError
     for a missing or duplicated joint, or a position/velocity array whose length differs from
@@ -507,19 +551,19 @@ def joint_state_to_actuators(msg):
     if missing:
         raise ConversionError(
             f'JointState lacks joint(s) {missing}; present: {names}')
-    u6 = np.empty(N_INPUT)
+    u7 = np.empty(N_INPUT)
     for k, name in enumerate(JOINT_NAMES[FINS]):
-        u6[k] = position[index[name]]
-    u6[Input.N_RPM] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
-    u6[Input.THRUST] = effort[index[PROPELLER_JOINT]] if len(effort) else 0.0
-    return stamp_to_sec(stamp), u6
+        u7[k] = position[index[name]]
+    u7[Input.N_RPM] = velocity[index[PROPELLER_JOINT]] / RPM_TO_RAD_S
+    u7[Input.THRUST] = effort[index[PROPELLER_JOINT]] if len(effort) else 0.0
+    return stamp_to_sec(stamp), u7
 
 
-def actuator_joint_fields(u6):
-    """(position, velocity, effort) lists of floats of the actuator JointState of u6 (7,)
+def actuator_joint_fields(u7):
+    """(position, velocity, effort) lists of floats of the actuator JointState of u7 (7,)
     (module docstring: fins in position, shaft speed in rad/s in velocity, thrust in effort).
     Raises ConversionError for a vector of another length."""
-    u = _as_vector(u6, N_INPUT, 'u6')
+    u = _as_vector(u7, N_INPUT, 'u7')
     n = len(JOINT_NAMES)
     position = [float(v) for v in u[FINS]] + [0.0]
     velocity = [0.0] * (n - 1) + [float(u[Input.N_RPM]) * RPM_TO_RAD_S]

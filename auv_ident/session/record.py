@@ -13,6 +13,7 @@ import bisect
 import numpy as np
 
 from auv_ident.core.filter.timing import with_command_changes
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.state import N_INPUT, N_STATE
 
 
@@ -43,12 +44,12 @@ def paired(commands, measurements):
 
 
 def exact_hold(t, Y, U, t_cmd, U_cmd):
-    """(t, Y, U) for the batch methods: the samples with a command, and the command changes
-    between them as samples without a measurement (the exact zero-order hold the streaming
-    filter followed)."""
+    """The Record (core.identification.results) the batch methods take: the samples with a
+    command, and the command changes between them as samples without a measurement (the exact
+    zero-order hold the streaming filter followed)."""
     ok = np.all(np.isfinite(U), axis=1)
     t2, Y2, U2, _ = with_command_changes(t[ok], Y[ok], U[ok], t_cmd, U_cmd)
-    return t2, Y2, U2
+    return Record(t2, Y2, U2)
 
 
 def median_noise_std(variances, default_variances):

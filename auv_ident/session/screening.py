@@ -1,8 +1,9 @@
 """Screening of one message before it reaches the filter: pure functions of arrays and strings.
 
 Rejection policy of :class:`auv_ident.session.session.IdentSession` (the message is dropped,
-counted under ``'<topic>: <code>'`` in ``IdentSession.reasons`` and reported with a reason
-naming the problem; the filter is untouched). Codes, in the order they are checked:
+counted under ``'<topic>: <code>'`` in ``IdentSession.counters.reasons`` (session/status.py)
+and reported with a reason naming the problem; the filter is untouched). Codes, in the order
+they are checked:
 
 - ``conversion``: the message could not be read (wrong message type, missing or duplicated
   joint, zero quaternion, array lengths that do not match the joint names, ...:
@@ -17,8 +18,8 @@ naming the problem; the filter is untouched). Codes, in the order they are check
 - ``implausible``: a value no vehicle produces, i.e. wrong units or a wrong frame (the
   plausibility rule below);
 - from StreamIdentifier (core/filter/stream.py, its docstring has the time rules): ``no command``,
-  ``stale command`` (the command in force is older than 1 s), ``command unknown`` (a
-  newer command in the interval was rejected: the input is unknown), ``zero stamp``,
+  ``stale command`` (the command in force is older than max_command_age, when set), ``command
+  unknown`` (a newer command in the interval was rejected: the input is unknown), ``zero stamp``,
   ``duplicate stamp``, ``out of order``, ``time jump backwards`` (until five consistent
   messages confirm it), ``outlier`` (innovation gate, session/guard.py). Accepted with a
   note: ``gap`` (more than max_bridge, 0.25 s, without odometry: vehicle states restarted),
@@ -125,23 +126,44 @@ def implausible_states(x12, channels):
         f'{STATE_BOUNDS[i]:g})' for i in bad) + ' (wrong units or frame?)'
 
 
-def command_problem(u6, t, fin_limit, shaft_limit):
+def odometry_problem(x12, t, frame_id, child_frame_id, frame, first_ids, channels):
+    """(code, text) if odometry breaks a rule, else None: the frame-id rule
+    (:func:`frame_problem`), then non-finite and implausible values (:func:`nonfinite_states`,
+    :func:`implausible_states`).
+
+    x12 : list of 12 floats (NED/FRD); t : its stamp (s), for the text
+    frame_id, child_frame_id, frame, first_ids : as :func:`frame_problem`
+    channels : the measured states (State indices), the only ones judged
+    """
+    problem = frame_problem(frame_id, child_frame_id, frame, first_ids)
+    if problem is not None:
+        return problem[0], f'{problem[1]} at {t:.9f} s'
+    bad = nonfinite_states(x12, channels)
+    if bad:
+        return 'non-finite', f'non-finite field(s) {", ".join(bad)} at {t:.9f} s'
+    text = implausible_states(x12, channels)
+    if text:
+        return 'implausible', f'{text} at {t:.9f} s'
+    return None
+
+
+def command_problem(u7, t, fin_limit, shaft_limit):
     """(code, text) if an actuator command breaks the rules, else None.
 
-    u6 : list of 7 floats, fins (rad), shaft speed (rpm), thrust (N); t : its stamp (s), for
+    u7 : list of 7 floats, fins (rad), shaft speed (rpm), thrust (N); t : its stamp (s), for
         the text (a non-finite thrust is a non-finite command too)
     fin_limit (rad), shaft_limit (rpm) : the vehicle's limits
     """
-    if not all(map(math.isfinite, u6)):
-        return 'non-finite', f'non-finite command {[float(v) for v in u6]} at {t:.9f} s'
+    if not all(map(math.isfinite, u7)):
+        return 'non-finite', f'non-finite command {[float(v) for v in u7]} at {t:.9f} s'
     fin_bound = FIN_LIMIT_FACTOR * fin_limit
-    fins = [k for k in range(N_FINS) if abs(u6[k]) > fin_bound]
+    fins = [k for k in range(N_FINS) if abs(u7[k]) > fin_bound]
     if fins:
-        bad = ', '.join(f'{JOINT_NAMES[k]} = {u6[k]:.6g} rad' for k in fins)
+        bad = ', '.join(f'{JOINT_NAMES[k]} = {u7[k]:.6g} rad' for k in fins)
         return 'implausible', (f'implausible fin angle(s) {bad} at {t:.9f} s: beyond '
                                f'{FIN_LIMIT_FACTOR:g}x the {fin_limit:.4g} rad limit (degrees '
                                'given as radians?)')
-    n_rpm = u6[Input.N_RPM]
+    n_rpm = u7[Input.N_RPM]
     if abs(n_rpm) > SHAFT_LIMIT_FACTOR * shaft_limit:
         return 'implausible', (f'implausible shaft speed {n_rpm:.6g} rpm at {t:.9f} s: beyond '
                                f'{SHAFT_LIMIT_FACTOR:g}x the {shaft_limit:.6g} rpm limit (rpm '

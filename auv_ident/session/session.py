@@ -3,8 +3,8 @@
 :class:`IdentSession` is everything the identifier node does per message, minus ROS. Its
 array API takes what a message says as plain arrays and stamps:
 
-- :meth:`IdentSession.add_command` ``(stamp_ns, u6)``: an actuator command, fins (rad) and
-  shaft speed (rpm) in the layout of core/model/state.py's ``Input``;
+- :meth:`IdentSession.add_command` ``(stamp_ns, u7)``: an actuator command, fins (rad),
+  shaft speed (rpm) and thrust (N) in the layout of core/model/state.py's ``Input``;
 - :meth:`IdentSession.add_odometry` ``(stamp_ns, x12, frame_id, child_frame_id)``: a
   measured state ``[u v w p q r x y z phi theta psi]`` in NED/FRD (as
   :func:`auv_ident.session.messages.odometry_to_state` returns it) with the message's frame
@@ -16,50 +16,42 @@ read sensor_msgs/JointState and nav_msgs/Odometry objects (rclpy or rosbags, duc
 rejected as ``conversion``. Each call returns an :class:`~auv_ident.session.guard.Event`.
 
 Per message the session screens (rejection policy, frame-id and plausibility rules:
-session/screening.py), feeds :class:`auv_ident.core.filter.stream.StreamIdentifier` (pairing with
-commands, time rules), checks the estimate, runs the divergence guard and reset rule, keeps
-the last good estimate and the health windows (session/guard.py). The identifier node
-(``ros/identifier_node.py``) and :func:`auv_ident.offline.replay.replay_bag` both drive one
-IdentSession with the messages in arrival (log-time) order, so the same message sequence
-gives identical events and estimates online and offline. The estimate file (``~/save``,
-``warm_start``) is session/estimate_file.py. With ``coefficients`` ['auto', ...] the session
-also keeps the accepted messages of the first ``auto_window`` s and switches, once, to the set
-chosen from them (session/auto_choice.py; :meth:`IdentSession.poll_choice`).
+session/screening.py), then hands the odometry to its running filter,
+:class:`~auv_ident.session.guarded_filter.GuardedFilter` (``IdentSession.filter``: the
+measurement variances, :class:`auv_ident.core.filter.stream.StreamIdentifier`'s pairing with
+commands and time rules, the estimate check, the divergence guard, the health window and the
+last good estimate; the rules are session/guard.py's), applies the reset rule when the filter
+reports a fault, and counts what happened (``IdentSession.counters``, session/status.py: the
+/diagnostics counters and the health rule). The identifier node (``ros/identifier_node.py``)
+and :func:`auv_ident.offline.replay.replay_bag` both drive one IdentSession with the messages
+in arrival (log-time) order, so the same message sequence gives identical events and
+estimates online and offline. The estimate file (``~/save``, ``warm_start``) is
+session/estimate_file.py. With ``coefficients`` ['auto', ...] the session also keeps the
+accepted messages of the first ``auto_window`` s and switches, once, to the set chosen from
+them (session/auto_choice.py, whose chosen filter is a GuardedFilter too; the switch:
+:meth:`IdentSession.poll_choice`).
 """
-from collections import Counter
-import math
-
 import numpy as np
 
-from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter.augmented import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE, FilterConfig
+from auv_ident.core.errors import AuvIdentError, ConfigError
+from auv_ident.core.filter.augmented import DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
-from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
-from auv_ident.session.auto_choice import AUTO_WINDOW_S, AutoChoice, ChoiceJob
+from auv_ident.session.auto_choice import AutoChoice, ChoiceJob
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.guard import (
-    checked_coefficients,
-    COV_BLOWUP_FACTOR,
     Event,
-    FUSED_CODES,
-    GROSS_NIS_FACTOR,
     GUARD_FACTOR,
-    GUARD_PROBATION,
     GUARD_SECONDS,
-    GUARD_WINDOW,
-    GuardWindow,
     Health,
     innovation_gate,
-    judge_health,
     LastGood,
-    NisWindow,
     RESET_COV_INFLATION,
-    reset_start,
 )
+from auv_ident.session.guarded_filter import FILTER_FAULTS, GuardedFilter
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (
     _as_vector,
@@ -71,28 +63,16 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
-from auv_ident.session.screening import (
-    command_problem,
-    frame_problem,
-    implausible_states,
-    nonfinite_states,
-)
+from auv_ident.session.screening import command_problem, odometry_problem
 from auv_ident.session.settings import (
-    choice,
     coefficient_list,
     coefficient_request,
-    FRAMES,
-    MASS_INVERSES,
-    max_command_age as command_age_limit,
+    IdentifierSettings,
     noise_model,
-    NOISE_MODES,
-    NOISE_SOURCES,
     ParameterError,
-    positive,
-    relative_offset,
-    timing,
     vehicle_named,
 )
+from auv_ident.session.status import Counters
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -106,52 +86,16 @@ class IdentSession:
     """Online identification from arrays or ROS messages, ROS-graph-free (the node's
     per-message logic; module docstring).
 
-    Every keyword is named like the identifier node's parameter it comes from, and a bad value
-    raises :class:`ParameterError` naming it.
-
     Parameters
     ----------
-    vehicle : str, vehicle name or YAML path
-    coefficients : sequence of str, coefficients to identify (empty: the vehicle's
-        identify_default, or the warm-start file's list), or ['auto', NAME, ...]: chosen from
-        the first auto_window s of data, NAME always included (session/auto_choice.py)
-    auto_window : s of accepted odometry the 'auto' choice is made from (> 0)
-    auto_runner : work -> concurrent.futures.Future that runs the choice (auto_choice.py:
-        run_inline, the default, or run_in_thread, the node's)
-    initial : sequence of float, initial guesses (empty: truth * (1 + initial_offset))
-    initial_offset : float, relative start offset when `initial` is empty
-    noise_mode : one of settings.NOISE_MODES ('fixed', 'paper', 'paper_q', 'matching')
-    tau : s, forgetting time constant; lam : the paper's lambda
-    noise_std : (12,) measurement 1-sigma (state units); q_state : (12,) per-step process 1-sigma
-    p0_rel, q_theta_rel : initial and per-step random-walk 1-sigma of theta, relative
-    measured : channel names (empty: all 12)
-    frame : one of settings.FRAMES ('ned', 'enu'), convention of the incoming Odometry
-    sample_time : s, nominal sample time and longest single prediction step
-    max_gap : s, a longer gap restarts the vehicle states (coefficients kept); also the
-        horizon of backward time jumps and stale commands (core/filter/stream.py)
-    max_bridge : s, longest gap between odometry stamps bridged by time updates; a longer one
-        restarts the vehicle states too (0 or None: settings.MAX_BRIDGE_S = 0.25 s, at least
-        one sample time, at most max_gap; see core/filter/stream.py for why)
-    mass_inverse : one of settings.MASS_INVERSES ('default', 'exact', 'mss_literal')
-    warm_start : '' or an estimate JSON path (start from its estimate and covariance; the
-        coefficients only: a previous run's current is not this run's)
+    settings : :class:`~auv_ident.session.settings.IdentifierSettings`, every identification
+        setting, checked (its fields say each one's meaning, unit and default; build one from
+        keywords with ``IdentifierSettings.from_values(vehicle='remus100', ...)``); None: the
+        defaults. What needs the vehicle file (coefficient names, the warm-start file, the
+        initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
-    max_command_age : s, a command in force older than this makes the odometry 'stale command'
-        (None or 0, the default: no limit, a held command stays in force: drivers that publish
-        only on change send nothing while a fin is held)
-    noise_source : 'message' (default): the Odometry covariance diagonals are the measurement
-        variances of each message where they are finite and positive, noise_std for the other
-        channels (one notice names them); 'parameter': noise_std always
-    current : 'estimate' (default), 'none', or 'N,E[,D]' (m/s NED, a known current): the water
-        current (core/model/current.py). Estimated by default because every AUV runs in one and 0.1
-        m/s left out biases the coefficients beyond their error bars, while estimating a zero
-        current costs nothing measurable;
-        'none' is still water, the filter of before (bit for bit)
-    current_down : bool, also estimate the down component (with current 'estimate')
-    velocity_reference : 'ground' (DVL in bottom lock, default) or 'water' (water-track DVL:
-        twist.linear is the velocity through the water)
-    current_sd0 : m/s, initial 1-sigma of each estimated current component
-    current_walk : m/s/sqrt(s), random walk of the estimated current (0: constant)
+    auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
+        choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
 
     The identified parameters (``names``) are the coefficients, then the estimated current
     components ('current_n', 'current_e'[, 'current_d']).
@@ -161,60 +105,48 @@ class IdentSession:
     so that float seconds keep the stamps' ns resolution (an epoch-scale float second resolves
     only ~0.2 us). A zero stamp after stamps on a wall-clock origin is rejected as
     'zero stamp' (an unset header.stamp).
+
+    Parts: ``filter``, the running GuardedFilter (``stream``, ``last_good`` and ``theta0`` are
+    its); ``counters``, the /diagnostics Counters (session/status.py); ``auto``, the
+    AutoChoice of coefficients ['auto', ...] (None: the set is fixed).
     """
 
-    def __init__(self, vehicle='nps_auv2', coefficients=(), initial=(), initial_offset=0.5,
-                 noise_mode='fixed', tau=10.0, lam=2e-3, noise_std=None, q_state=None,
-                 p0_rel=1.0, q_theta_rel=1e-5, measured=(), frame='ned', sample_time=0.05,
-                 max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
-                 max_bridge=None, max_command_age=None, noise_source='message',
-                 current=DEFAULT_CURRENT, current_down=False, velocity_reference='ground',
-                 current_sd0=DEFAULT_CURRENT_SD0, current_walk=0.0,
-                 auto_window=AUTO_WINDOW_S, auto_runner=None):
-        self.vehicle = vehicle_named(vehicle)
-        self.frame = choice('frame', frame, FRAMES)
-        choice('mass_inverse', mass_inverse, MASS_INVERSES)
-        choice('noise_mode', noise_mode, NOISE_MODES)
-        T, max_gap, self.max_bridge = timing(sample_time, max_gap, max_bridge)
-        self.max_command_age = command_age_limit(max_command_age, max_gap)
-        self.noise_source = choice('noise_source', noise_source, NOISE_SOURCES)
-        tau, lam, p0_rel = (positive(name, v) for name, v in
-                            (('tau', tau), ('lam', lam), ('p0_rel', p0_rel)))
-        q_theta_rel = positive('q_theta_rel', q_theta_rel, allow_zero=True)
-        initial_offset = relative_offset('initial_offset', initial_offset)
-        noise, qs, mask = noise_model(noise_std, q_state, measured, DEFAULT_NOISE_STD,
-                                      DEFAULT_Q_STATE)
+    def __init__(self, settings=None, keep_arrays=False, auto_runner=None):
+        settings = IdentifierSettings() if settings is None else settings
+        self.settings = settings
+        self.vehicle = vehicle_named(settings.vehicle)
+        self.frame = settings.frame
+        T, max_gap, self.max_bridge = settings.timing
+        self.max_command_age = settings.command_age_limit
+        self.noise_source = settings.noise_source
+        noise, qs, mask = noise_model(settings.noise_std, settings.q_state, settings.measured,
+                                      DEFAULT_NOISE_STD, DEFAULT_Q_STATE)
         # a planar vehicle's held states are not measurements (core/model/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
-        auto, coefficients = coefficient_request(self.vehicle, coefficients)
-        auto_window = positive('auto_window', auto_window)
+        auto, coefficients = coefficient_request(self.vehicle, settings.coefficients)
+        warm_start = settings.warm_start
         if auto and warm_start:
             raise ParameterError('warm_start', "coefficients ['auto', ...] chooses the set from "
                                  'the data; a warm-start file fixes it: give one or the other')
         warm = load_estimate_json(warm_start) if warm_start else None
-        canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
-                                                      warm_start, warm)
-        try:
-            self.current_option = parse_current(current, bool(current_down))
-        except ConfigError as err:
-            raise ParameterError('current_down' if current_down and str(current).strip()
-                                 != 'estimate' else 'current', str(err)) from None
-        self.velocity_reference = choice('velocity_reference', velocity_reference,
-                                         VELOCITY_REFERENCES)
-        current_sd0 = positive('current_sd0', current_sd0)
-        current_walk = positive('current_walk', current_walk, allow_zero=True)
-        self._mass_inverse = mass_inverse
+        canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients,
+                                                      settings.initial, warm_start, warm)
+        self.current_option = settings.current_option
+        self.velocity_reference = settings.velocity_reference
+        self._mass_inverse = settings.mass_inverse
         try:
             self.model = self._model_of(canon)
         except ConfigError as err:
             raise ParameterError('mass_inverse', str(err)) from None
 
-        self.cfg = FilterConfig(coefficients=canon, initial=init, initial_offset=initial_offset,
-                                p0_rel=p0_rel, q_theta_rel=q_theta_rel, q_state=qs,
-                                noise_std=noise, measured=mask, mode=noise_mode, tau=tau,
-                                lam=lam, theta_cov0=self.warm_cov, current_sd0=current_sd0,
-                                current_walk=current_walk)
+        self.cfg = FilterConfig(coefficients=canon, initial=init,
+                                initial_offset=settings.initial_offset, p0_rel=settings.p0_rel,
+                                q_theta_rel=settings.q_theta_rel, q_state=qs, noise_std=noise,
+                                measured=mask, mode=settings.noise_mode, tau=settings.tau,
+                                lam=settings.lam, theta_cov0=self.warm_cov,
+                                current_sd0=settings.current_sd0,
+                                current_walk=settings.current_walk)
         self.T = T
         self.max_gap = max_gap
         self.names = list(self.model.theta_names)
@@ -223,49 +155,28 @@ class IdentSession:
         self._measured_states = tuple(int(i) for i in np.flatnonzero(mask))
         self._all_measured = bool(mask.all())
         self.keep_arrays = keep_arrays
-        self.commands = []          # (t, u6) in arrival order, if keep_arrays
+        self.commands = []          # (t, u7) in arrival order, if keep_arrays
         self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
         self.variances = []         # (12,) R diagonal used by each accepted update, if kept
         self.time_origin_ns = None  # stamps are taken relative to this (class docstring)
         self.notices = []           # one-time notes for the caller to log (then clear)
         self._fallback_noted = set()
         self.noise_default = np.asarray(noise, dtype=float) ** 2    # R diagonal of noise_std
-        self._R_now = self.noise_default.copy()
-        self.guard_on = noise_mode != 'paper'   # the divergence guard (session/guard.py)
+        self.guard_on = settings.noise_mode != 'paper'   # the divergence guard (session/guard.py)
         self.gate = innovation_gate() if self.guard_on else None
         try:
-            self.stream = self._new_stream()
+            # the running filter under the per-message rule (session/guarded_filter.py)
+            self.filter = GuardedFilter(self._new_stream(), self.guard_on)
         except ConfigError as err:  # what the checks above did not catch
             raise ParameterError('initial', str(err)) from None
-        self.theta0 = self.stream.ekf.theta0.copy()
-        self.blowup_std = COV_BLOWUP_FACTOR * self.stream.ekf.prior_scale
-        self._blowup_std = self.blowup_std.tolist()
         v = self.vehicle.par
         self.fin_limit = float(v[P_FIN])        # rad
         self.shaft_limit = float(v[P_NMAX])     # rpm
-        # counters (the node's /diagnostics)
-        self.odom_accepted = 0
-        self.odom_rejected = 0
-        self.cmd_accepted = 0
-        self.cmd_rejected = 0
-        self.errors = 0
-        self.last_error = ''
-        self.reasons = Counter()
-        self.outliers = 0
-        self.repairs = 0
-        self.guard_resets = 0
-        self.time_jumps = 0
-        self.last_good = None
-        self.last_nis = math.nan
-        self.last_dof = 0
-        self._since_error = None    # updates since the last reset (None: no reset yet)
-        self._nis_window = NisWindow()      # the health window
-        self._guard_window = GuardWindow()  # the divergence guard's window
-        self._after_reset = False   # a fault reset, and the guard window not yet full since
-        self._reset_from_good = False   # the last reset started from last_good, none good since
+        self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
-        self.auto = AutoChoice(coefficients, auto_window, auto_runner) if auto else None
+        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
+                     else None)
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -273,7 +184,27 @@ class IdentSession:
                      mass_inverse=self._mass_inverse, current=self.current_option.fixed,
                      velocity_reference=self.velocity_reference)
 
-    # -- filter lifecycle --
+    # -- the running filter (session/guarded_filter.py) and its life cycle --
+
+    @property
+    def stream(self):
+        """The running filter's core.filter.stream.StreamIdentifier."""
+        return self.filter.stream
+
+    @property
+    def last_good(self):
+        """The last good estimate (a guard.LastGood), None before the first."""
+        return self.filter.last_good
+
+    @property
+    def theta0(self):
+        """(p,) the running filter's start-up prior of the identified parameters."""
+        return self.filter.theta0
+
+    @property
+    def started(self):
+        """True once the current filter has fused a measurement."""
+        return self.filter.started
 
     def _new_stream(self, keep_commands_from=None, start_from=None):
         """A fresh StreamIdentifier: from the start-up configuration, or (start_from, a
@@ -287,16 +218,11 @@ class IdentSession:
             s.copy_commands_from(keep_commands_from)
         return s
 
-    def _clear_windows(self):
-        self._nis_window.clear()
-        self._guard_window.clear()
-
     def reset(self):
         """Restart the filter from the start-up configuration (the ~/reset service): buffered
         commands, counters and the last good estimate are kept; the frame ids are forgotten."""
-        self.stream = self._new_stream(keep_commands_from=self.stream)
+        self.filter.restart(self._new_stream(keep_commands_from=self.filter.stream))
         self._frame_ids = None
-        self._clear_windows()
 
     def recover(self, reason, stamp_ns=None):
         """Apply the reset rule after an unexpected error outside the core (the node's last
@@ -306,19 +232,24 @@ class IdentSession:
     def _fault_reset(self, code, reason, stamp_ns):
         """The reset rule (session/guard.py): vehicle states from the next measurement,
         coefficients from the last good estimate with inflated covariance."""
-        self.errors += 1
-        self.last_error = reason
-        self._since_error = 0
-        start_from = reset_start(self.last_good, code, self._reset_from_good)
-        self._reset_from_good = start_from is not None
-        self.stream = self._new_stream(keep_commands_from=self.stream, start_from=start_from)
-        self._clear_windows()
-        self._after_reset = self.guard_on
+        self.counters.fault(reason)
+        filt = self.filter
+        start_from = filt.fault_start(code)
+        filt.restart(self._new_stream(keep_commands_from=filt.stream, start_from=start_from),
+                     fault=True)
         start = ('the last good estimate (covariance x '
                  f'{RESET_COV_INFLATION:g})' if start_from is not None
                  else 'the start-up configuration')
         return Event('error', f'odom: {reason} (filter reset: vehicle states from the next '
                               f'measurement, coefficients from {start})', stamp_ns, code=code)
+
+    def _guard_reset(self, t, stamp_ns):
+        self.counters.guard_resets += 1
+        window = self.filter.guard_window
+        return self._fault_reset('guard', f'innovations inconsistent for '
+                                          f'{t - window.since:.3f} s (median NIS/dof '
+                                          f'{window.median():.4g} over the last {len(window)} '
+                                          f'updates, above {GUARD_FACTOR:g})', stamp_ns)
 
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
@@ -337,44 +268,54 @@ class IdentSession:
         except AuvIdentError:
             pass    # only a warm-up: the real data decide
 
-    @property
-    def started(self):
-        """True once the current filter has fused a measurement."""
-        return self.stream.ekf.xa is not None
+    # -- the estimate, its file, health and diagnosis --
 
     def best(self):
-        """(estimate, covariance) to report: the last good one, else current()."""
-        if self.last_good is not None:
-            return self.last_good.estimate.copy(), self.last_good.cov.copy()
-        return self.current()
+        """(estimate, covariance) to report: the last good one, else estimate_now()."""
+        return self.filter.best()
 
-    def current(self):
+    def estimate_now(self):
         """(estimate, covariance) now: the filter's, the last good one, or the prior."""
-        f = self.stream.ekf
-        if f.xa is not None:
-            return f.theta, f.theta_cov
-        if self.last_good is not None:
-            return self.last_good.estimate.copy(), self.last_good.cov.copy()
-        return self.theta0.copy(), self.stream.ekf.theta_cov0.copy()
+        return self.filter.estimate_now()
 
     def document(self):
-        """The estimate file's dict of the best estimate (the last good one, else the prior)."""
+        """The estimate file's dict of the best estimate (the last good one, else the prior;
+        session/estimate_file.py)."""
         est, cov = self.best()
-        stamp = self.last_good.stamp_ns if self.last_good is not None else None
-        doc = estimate_document(self.vehicle.name, self.names, est, cov, stamp,
-                                self.odom_accepted)
+        good = self.last_good
+        return estimate_document(self.vehicle.name, self.names, est, cov,
+                                 None if good is None else good.stamp_ns,
+                                 self.counters.odom_accepted,
+                                 None if self.auto is None else self.auto.document())
+
+    def health(self):
+        """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
+        return self.counters.health(self.filter)
+
+    def diagnosis(self, health=None):
+        """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
+        identified parameter its verdict from the best estimate's covariance against the
+        prior, and {'consistent': True | False | None, 'messages': [...]}."""
+        est, cov = self.best()
+        prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
+        verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
+        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts)
         if self.auto is not None:
-            doc['selection'] = self.auto.document()
-        return doc
+            # while choosing or after a failure the set is provisional: that comes first
+            line = self.auto.diagnosis_line(self.coefficient_names)
+            diagnosis['messages'].insert(0 if self.auto.state != 'chosen' else 1, line)
+        return verdicts, diagnosis
 
     # -- coefficients ['auto', ...] (session/auto_choice.py) --
 
-    def _start_choice(self):
+    def _start_choice(self, running_from):
         """The window is full: hand the choice to the runner, with a snapshot of what it
-        needs (it may run in another thread; it reads nothing the session changes)."""
+        needs (it may run in another thread; it reads nothing the session changes).
+        running_from : the LastGood (or None) the running filter's coefficients start from,
+        the last good estimate before the message that filled the window."""
         running = {}
-        if self.last_good is not None:
-            running = dict(zip(self.coefficient_names, self.last_good.estimate.tolist()))
+        if running_from is not None:
+            running = dict(zip(self.coefficient_names, running_from.estimate.tolist()))
         auto = self.auto
         auto.start(ChoiceJob(
             make_model=self._model_of, cfg=self.cfg, named=auto.named, running=running,
@@ -391,35 +332,31 @@ class IdentSession:
         auto = self.auto
         if auto is None or not auto.running:
             return False
-        try:
-            result = auto.finished()
-        except Exception as err:                 # noqa: BLE001 - the running set stays
-            auto.fail(err)
-            return True
-        if result is None:
-            return False
-        f = result.chosen_filter
-        self.model, self.cfg, self.stream = result.model, result.cfg, f.stream
+        result = auto.poll()
+        if result is not None:
+            self._switch(result)
+        return not auto.running
+
+    def _switch(self, result):
+        """Identify the chosen set from now on: its model, configuration and fed filter (a
+        GuardedFilter, with its estimate, covariance, windows and last good estimate)
+        replace the running ones; the resets and probation were the running filter's."""
+        self.model, self.cfg, self.filter = result.model, result.cfg, result.chosen_filter.filter
         self.names = list(self.model.theta_names)
         self.coefficient_names = list(result.selection.chosen)
-        self.theta0 = self.stream.ekf.theta0.copy()
-        self.blowup_std = COV_BLOWUP_FACTOR * self.stream.ekf.prior_scale
-        self._blowup_std = self.blowup_std.tolist()
-        self._nis_window, self._guard_window = f.nis_window, f.guard_window
-        self.last_good, self.warm_cov = f.last_good, None
-        # the resets and probation were the running filter's; the chosen one had none
-        self._since_error, self._after_reset, self._reset_from_good = None, False, False
-        self.last_nis, self.last_dof = float(self.stream.ekf.nis), int(self.stream.ekf.dof)
-        auto.chose(result, None if f.last_good is None else f.last_good.stamp_ns)
-        return True
+        self.warm_cov = None
+        ekf = self.filter.stream.ekf
+        self.counters.new_filter(float(ekf.nis), int(ekf.dof))
+        good = self.filter.last_good
+        self.auto.chose(result, None if good is None else good.stamp_ns)
 
     # -- the array API --
 
-    def add_command(self, stamp_ns, u6):
+    def add_command(self, stamp_ns, u7):
         """Buffer an actuator command. Returns an Event.
 
         stamp_ns : int, header stamp (ns)
-        u6 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/model/state.py ``Input``
+        u7 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/model/state.py ``Input``
             order; copied
         """
         try:
@@ -427,10 +364,10 @@ class IdentSession:
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err))
         try:
-            u6 = _as_vector(u6, N_INPUT, 'u6').copy()
+            u7 = _as_vector(u7, N_INPUT, 'u7').copy()
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
-        return self._command(stamp_ns, u6)
+        return self._command(stamp_ns, u7)
 
     def add_odometry(self, stamp_ns, x12, frame_id='', child_frame_id='', variances=None):
         """Fuse an odometry sample. Returns an Event.
@@ -466,10 +403,10 @@ class IdentSession:
         stamp_ns = None
         try:
             stamp_ns = header_stamp_ns(msg)
-            _, u6 = joint_state_to_actuators(msg)
+            _, u7 = joint_state_to_actuators(msg)
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
-        return self._command(stamp_ns, u6)
+        return self._command(stamp_ns, u7)
 
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement (in the `frame` convention). Returns an Event."""
@@ -487,16 +424,12 @@ class IdentSession:
     # -- what one message does --
 
     def _reject(self, what, code, reason, stamp_ns=None):
-        if what == 'odom':
-            self.odom_rejected += 1
-        else:
-            self.cmd_rejected += 1
-            if stamp_ns is not None and code != 'zero stamp':
-                t = self._time(stamp_ns)
-                self.stream.command_rejected(t)
-                if self.auto is not None and self.auto.kept is not None:
-                    self.auto.keep_command_rejected(t)
-        self.reasons[f'{what}: {code}'] += 1
+        self.counters.rejected(what, code)
+        if what != 'odom' and stamp_ns is not None and code != 'zero stamp':
+            t = self._time(stamp_ns)
+            self.stream.command_rejected(t)
+            if self.auto is not None:
+                self.auto.keep_command_rejected(t)
         return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
     def _time(self, stamp_ns):
@@ -528,34 +461,25 @@ class IdentSession:
                                 'them (noise_source message)')
         return np.where(ok, variances, self.noise_default)
 
-    def _use_variances(self, f, r):
-        """Make r the measurement noise of filter f (fixed mode: R; adaptive modes: R0, the
-        reference the adaptation starts from and is bounded by), and of its start-up
-        covariance."""
-        if f is getattr(self, '_R_filter', None) and np.array_equal(r, self._R_now):
-            return
-        f.use_measurement_variances(r)
-        self._R_filter, self._R_now = f, r
-
-    def _command(self, stamp_ns, u6):
-        """add_command after reading: stamp_ns int, u6 a (7,) float array of our own."""
+    def _command(self, stamp_ns, u7):
+        """add_command after reading: stamp_ns int, u7 a (7,) float array of our own."""
         if self.auto is not None and self.auto.running:
             self.poll_choice()
         zero = self._zero_stamp('actuators', stamp_ns)
         if zero is not None:
             return zero
         t = self._time(stamp_ns)
-        problem = command_problem(u6.tolist(), t, self.fin_limit, self.shaft_limit)
+        problem = command_problem(u7.tolist(), t, self.fin_limit, self.shaft_limit)
         if problem is not None:
             return self._reject('actuators', problem[0], problem[1], stamp_ns)
-        out = self.stream.add_command(t, u6)
+        out = self.stream.add_command(t, u7)
         if not out.accepted:
             return self._reject('actuators', out.code, out.reason, stamp_ns)
         if self.keep_arrays:
-            self.commands.append((t, u6))
-        if self.auto is not None and self.auto.kept is not None:
-            self.auto.keep_command(t, u6)
-        self.cmd_accepted += 1
+            self.commands.append((t, u7))
+        if self.auto is not None:
+            self.auto.keep_command(t, u7)
+        self.counters.cmd_accepted += 1
         return Event('command', '', stamp_ns)
 
     def _odometry(self, stamp_ns, x12, frame_id, child_frame_id, variances=None):
@@ -566,134 +490,41 @@ class IdentSession:
         if zero is not None:
             return zero
         t = self._time(stamp_ns)
-        problem = frame_problem(frame_id, child_frame_id, self.frame, self._frame_ids)
+        problem = odometry_problem(x12.tolist(), t, frame_id, child_frame_id, self.frame,
+                                   self._frame_ids, self._measured_states)
         if problem is not None:
-            return self._reject('odom', problem[0], f'{problem[1]} at {t:.9f} s', stamp_ns)
-        values = x12.tolist()
-        bad = nonfinite_states(values, self._measured_states)
-        if bad:
-            return self._reject('odom', 'non-finite', f'non-finite field(s) {", ".join(bad)} '
-                                                      f'at {t:.9f} s', stamp_ns)
-        text = implausible_states(values, self._measured_states)
-        if text:
-            return self._reject('odom', 'implausible', f'{text} at {t:.9f} s', stamp_ns)
+            return self._reject('odom', problem[0], problem[1], stamp_ns)
         y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
-        stream = self.stream
-        f = stream.ekf
-        r = None
-        if variances is not None:
-            r = self._measurement_variances(variances)
-            self._use_variances(f, r)
+        r = None if variances is None else self._measurement_variances(variances)
+        filt = self.filter
+        before = filt.last_good
         try:
-            out = stream.add_measurement(t, y)
-            if out.accepted:
-                est, cov, std = checked_coefficients(f, t, self.names, self._blowup_std)
-        except (DomainError, DivergenceError) as err:
+            step = filt.update(t, stamp_ns, y, r)
+        except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
-        code = out.code
-        fused = code in FUSED_CODES      # an update was computed
-        if code == 'repaired':
-            self.repairs += 1
-        elif code == 'time jump':
-            self.time_jumps += 1
-        nis, dof = float(f.nis), int(f.dof)
-        window = self._guard_window
-        sustained = fused and self.guard_on and dof > 0 and window.add(t, nis, dof)
-        if not out.accepted:
-            if code == 'outlier':
-                self.outliers += 1
-            ev = self._reject('odom', code, out.reason, stamp_ns)
-            if sustained:
-                return self._guard_reset(t, stamp_ns)
-            return ev
-        self.odom_accepted += 1
-        self.last_nis, self.last_dof = nis, dof
-        if fused and dof > 0 and math.isfinite(nis):
-            self._nis_window.add(nis, dof)
-        if self._since_error is not None:
-            self._since_error += 1
+        self.counters.filtered(step.code)
+        if not step.accepted:
+            ev = self._reject('odom', step.code, step.reason, stamp_ns)
+            return self._guard_reset(t, stamp_ns) if step.sustained else ev
+        self._taken(t, stamp_ns, y, r, step, before)
+        if step.sustained:
+            return self._guard_reset(t, stamp_ns)
+        if step.good:
+            if self._frame_ids is None:
+                self._frame_ids = (frame_id, child_frame_id)
+            return Event('update', f'odom: {step.reason}' if step.reason else '', stamp_ns,
+                         step.estimate, step.std, step.cov, step.nis, step.dof, step.code, True)
+        reason = ('odom: ' + (step.reason + '; ' if step.reason else '') + filt.why_not_good()
+                  + ': not taken as good')
+        return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
+                     step.dof, 'guard', False)
+
+    def _taken(self, t, stamp_ns, y, r, step, before):
+        """Count and keep an accepted odometry sample (y, its variances r or None); start the
+        'auto' choice, from the last good estimate before it, when its window fills."""
+        self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
             self.measurements.append((t, y))
             self.variances.append(self.noise_default if r is None else r)
-        auto = self.auto
-        if (auto is not None and auto.kept is not None
-                and auto.keep_odometry(t, stamp_ns, y, r, code)):
-            self._start_choice()
-        if sustained:
-            return self._guard_reset(t, stamp_ns)
-        if (self._after_reset and len(window) >= GUARD_WINDOW
-                and window.median() <= GUARD_PROBATION):
-            self._after_reset = False
-        good = (window.since is None and not self._after_reset
-                and not self.gross_inconsistency())
-        if good:
-            self._reset_from_good = False
-            self.last_good = LastGood(stamp_ns, est, std, cov)
-            if self._frame_ids is None:
-                self._frame_ids = (frame_id, child_frame_id)
-            return Event('update', f'odom: {out.reason}' if out.reason else '', stamp_ns, est,
-                         std, cov, nis, dof, code, True)
-        if window.since is not None:
-            why = (f'innovations inconsistent since {window.since:.3f} s (guard median NIS/dof '
-                   f'{window.median():.4g})')
-        elif self._after_reset:
-            why = (f'probation after the filter reset ({len(window)} of {GUARD_WINDOW} '
-                   f'updates, median NIS/dof {window.median():.4g}, needs <= '
-                   f'{GUARD_PROBATION:g})')
-        else:
-            why = (f'mean NIS/dof {self.mean_nis_per_dof():.4g} over the last '
-                   f'{len(self._nis_window)} updates is more than {GROSS_NIS_FACTOR:g}x its '
-                   'chi-square band')
-        reason = 'odom: ' + (out.reason + '; ' if out.reason else '') + why + ': not taken as good'
-        return Event('update', reason, stamp_ns, est, std, cov, nis, dof, 'guard', False)
-
-    def _guard_reset(self, t, stamp_ns):
-        self.guard_resets += 1
-        window = self._guard_window
-        return self._fault_reset('guard', f'innovations inconsistent for '
-                                          f'{t - window.since:.3f} s (median NIS/dof '
-                                          f'{window.median():.4g} over the last {len(window)} '
-                                          f'updates, above {GUARD_FACTOR:g})', stamp_ns)
-
-    # -- guard and health --
-
-    def guard_median(self):
-        """Median NIS/dof over the divergence guard's window (outliers included); NaN if
-        empty."""
-        return self._guard_window.median()
-
-    def guard_inconsistent(self):
-        """True if the divergence guard is on and its window is full and inconsistent."""
-        return self.guard_on and self._guard_window.inconsistent()
-
-    def mean_nis_per_dof(self):
-        """Mean NIS per dof over the health window (NaN if empty)."""
-        return self._nis_window.mean()
-
-    def gross_inconsistency(self):
-        """True if the health window's mean NIS/dof is above GROSS_NIS_FACTOR x the upper edge
-        of its band (what health() reports as ERROR 'diverging'); such updates are not good.
-        Judged once the window holds GUARD_WINDOW updates, with the divergence guard on."""
-        window = self._nis_window
-        return self.guard_on and len(window) >= GUARD_WINDOW and window.gross()
-
-    def health(self):
-        """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
-        est, cov = self.current()
-        return judge_health(self._nis_window, self.guard_inconsistent(), self._since_error,
-                            self.started, est, cov)
-
-    def diagnosis(self, health=None):
-        """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
-        identified parameter its verdict from the best estimate's covariance against the
-        prior, and {'consistent': True | False | None, 'messages': [...]}."""
-        est, cov = self.best()
-        prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
-        verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
-        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts)
-        if self.auto is not None:
-            # while choosing or after a failure the set is provisional: that comes first
-            line = self.auto.diagnosis_line(self.coefficient_names)
-            diagnosis['messages'].insert(0 if self.auto.state != 'chosen' else 1, line)
-        return verdicts, diagnosis
-
+        if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
+            self._start_choice(before)

@@ -30,9 +30,10 @@ def test_added_mass_with_pitch_damping_through_the_api():
     assert [(v.coefficients[v.index(n)].equation, v.coefficients[v.index(n)].added_mass_col)
             for n in ADDED_MASS + ['Z_w']] == [(2, 2), (4, 4), (2, -1)]
     cfg = make_config(names, initial_offset=0.5)
-    res, run, model = identify_simulated('nps_auv2', names, cfg, maneuver='ident', seed=0,
-                                         duration=300.0, mass_inverse='exact')
-    assert model.mass_inverse == 'exact' and run.t[-1] == 300.0
+    sim = identify_simulated('nps_auv2', names, cfg, maneuver='ident', seed=0, duration=300.0,
+                             mass_inverse='exact')
+    res = sim.result
+    assert res.model.mass_inverse == 'exact' and sim.run.t[-1] == 300.0
     truth = Model(v, names, mass_inverse='exact').theta_true
     assert np.array_equal(res.truth, truth)                       # the vehicle file values
     assert np.allclose(res.initial, 1.5 * truth)                  # started 50 % off

@@ -25,6 +25,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import SIM_EPOCH_NS, write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 DAY_NS = 86_400 * 1_000_000_000
@@ -100,7 +101,8 @@ def test_good_and_corrupt_bags_give_their_rows(archive, cluster, tmp_path):
     assert sorted(rows) == sorted(good + bad)
     with Client(cluster.scheduler_address) as client:
         workers = set(client.scheduler_info()['workers'])
-    doc, _ = identify_bag(good[1], vehicle='nps_auv2')     # the same bag, in this process
+    # the same bag, in this process
+    doc, _ = identify_bag(good[1], IdentifierSettings.from_values(vehicle='nps_auv2'))
     for k, bag in enumerate(good):
         r = rows[bag]
         assert r['status'] == 'ok' and r['error'] == '' and r['worker'] in workers
@@ -191,8 +193,8 @@ def test_montecarlo_on_dask_gives_the_numbers_of_the_serial_loop(cluster):
     assert serial['cases'] == 4 and serial['diverged'] == 0
     # and a case is what identify_simulated gives with the vehicle by name (no engine at all)
     cfg = make_config(['Z_w', 'M_ds'], initial_offset=-0.5)
-    res, _, _ = identify_simulated('nps_auv2', ['Z_w', 'M_ds'], cfg, seed=1, duration=BAG_S,
-                                   refine_pass=False)
+    res = identify_simulated('nps_auv2', ['Z_w', 'M_ds'], cfg, seed=1, duration=BAG_S,
+                             refine_pass=False).result
     run = next(r for r in serial['runs'] if (r['seed'], r['offset']) == (1, -0.5))
     assert run['error_pct'] == res.error_pct().tolist()
 

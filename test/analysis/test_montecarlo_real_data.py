@@ -21,11 +21,12 @@ def test_a_perturbed_truth_is_flagged_by_the_diagnosis():
     cfg = make_config(FIVE)
     """600 s: shorter runs do not always carry enough evidence (300 s, seed 1: the residual-
     input cross-correlation reached 4.5 sd, just at its limit)."""
-    res, run, m = identify_simulated('nps_auv2', FIVE, cfg, duration=600.0, seed=1,
-                                     perturb=0.2)
-    exact, run0, _ = identify_simulated('nps_auv2', FIVE, cfg, duration=600.0, seed=1)
+    perturbed = identify_simulated('nps_auv2', FIVE, cfg, duration=600.0, seed=1,
+                                   perturb=0.2)
+    file = identify_simulated('nps_auv2', FIVE, cfg, duration=600.0, seed=1)
+    res, exact = perturbed.result, file.result
     assert np.array_equal(res.truth, exact.truth)       # the identified ones are kept
-    assert not np.allclose(run.x, run0.x)               # but the vehicle flies differently
-    assert exact.diagnosis['consistent']
-    assert not res.diagnosis['consistent']
-    assert 'inadequate' in res.diagnosis['messages'][0]
+    assert not np.allclose(perturbed.run.x, file.run.x)   # but the vehicle flies differently
+    assert exact.diagnosis.consistent
+    assert not res.diagnosis.consistent
+    assert 'inadequate' in res.diagnosis.messages[0]

@@ -96,8 +96,8 @@ def test_read_back_with_our_reader(bag):
     t, x12, pcov, _ = sm.odometry_to_state(got[0][2])
     assert sm.sec_to_ns(t) == T0_NS
     np.testing.assert_array_equal(pcov, np.asarray(EXPECTED[0][2].pose.covariance).reshape(6, 6))
-    t, u6 = sm.joint_state_to_actuators(got[1][2])
-    np.testing.assert_array_equal(u6, sm.joint_state_to_actuators(EXPECTED[1][2])[1])
+    t, u7 = sm.joint_state_to_actuators(got[1][2])
+    np.testing.assert_array_equal(u7, sm.joint_state_to_actuators(EXPECTED[1][2])[1])
 
 
 def test_rclpy_joint_state_needs_the_fallback():

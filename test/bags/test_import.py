@@ -41,6 +41,7 @@ from auv_ident.session.messages import (
     odometry_variances,
     RPM_TO_RAD_S,
 )
+from auv_ident.session.settings import IdentifierSettings
 
 REPO = Path(helpers.REPO)
 DATA = REPO.parent / 'shared' / 'realdata' / 'kvlcc2_hsva'
@@ -179,14 +180,14 @@ def test_hsva_bag_topics_stamps_and_messages(s_run, s_bag):
         assert np.all(var[~meas] == UNMEASURED_VARIANCE)
         ta, js = act[k]
         assert ta == t_ns and list(js.name) == list(JOINT_NAMES)
-        _, u6 = joint_state_to_actuators(js)            # today's reader
-        assert u6[Input.DELTA_R] == pytest.approx(math.radians(a[k, 8]), abs=1e-15)
-        assert not np.any(u6[1:5])
-        assert u6[Input.N_RPM] == pytest.approx(613.77, rel=1e-12)
+        _, u7 = joint_state_to_actuators(js)            # today's reader
+        assert u7[Input.DELTA_R] == pytest.approx(math.radians(a[k, 8]), abs=1e-15)
+        assert not np.any(u7[1:5])
+        assert u7[Input.N_RPM] == pytest.approx(613.77, rel=1e-12)
         assert js.velocity[5] == pytest.approx(10.2295 * 2 * math.pi, rel=1e-12)
         assert list(js.effort) == [0.0] * 5 + [a[k, 10]]          # thrust (N), propeller
-        assert u6[Input.THRUST] == a[k, 10]                       # read as the thrust input
-        assert js.velocity[5] / RPM_TO_RAD_S == pytest.approx(u6[Input.N_RPM])
+        assert u7[Input.THRUST] == a[k, 10]                       # read as the thrust input
+        assert js.velocity[5] / RPM_TO_RAD_S == pytest.approx(u7[Input.N_RPM])
 
 
 def test_hsva_bag_metadata_and_bag_info(s_run, s_bag):
@@ -217,8 +218,10 @@ def test_replay_reads_every_message_without_a_rejection(s_run, s_bag):
     command screening, time line): every odometry and every command accepted. The model is
     NPS AUV II's with a wide noise and the file's measured channels, so that no innovation gate
     (a model question, not a reading one) can reject anything."""
-    res = replay_bag(s_bag, vehicle='nps_auv2', noise_source='parameter',
-                     noise_std=np.full(12, 10.0), measured=tuple(MEASURED))
+    res = replay_bag(s_bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                           noise_source='parameter',
+                                                           noise_std=np.full(12, 10.0),
+                                                           measured=tuple(MEASURED)))
     n = len(s_run.t_ns)
     assert (res.accepted, res.rejected, res.commands, res.errors) == (n, 0, n, 0)
     assert not res.reasons

@@ -1,10 +1,8 @@
-"""Tests of the independent test-data generator (test/independent_data.py) itself: its stamps,
+"""Tests of the independent test-data generator (offline/independent_data.py) itself: its stamps,
 commands, bag layout, noise, current, truth vehicle and integrator. Short runs only."""
 import json
 import math
 
-import independent_data as gen
-from independent_data import DataConfig, generate
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -16,6 +14,8 @@ from auv_ident.bags.reader import read_bag
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.trim import trim_speed
 from auv_ident.core.model.vehicle import vehicle_from_file
+from auv_ident.offline import independent_data as gen
+from auv_ident.offline.independent_data import DataConfig, generate
 from auv_ident.session.messages import joint_state_to_actuators, odometry_to_state
 from auv_ident.vehicles import load_vehicle
 

@@ -8,6 +8,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification import batch
 from auv_ident.core.identification.batch import difference_threads, FilterErrorResiduals, refine
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
@@ -28,7 +29,7 @@ def test_forward_differences_on_threads_equal_one_thread(record):
     model = Model(v, NAMES)
     theta = model.theta_true * 1.05
     steps = 1e-4 * np.abs(theta)
-    fer = FilterErrorResiduals(model, cfg, [(run.t, run.y, run.u)], T=run.T)
+    fer = FilterErrorResiduals(model, cfg, [Record(run.t, run.y, run.u)], T=run.T)
     r1, J1, failed1 = fer.forward_differences(theta, steps, threads=1)
     r3, J3, failed3 = fer.forward_differences(theta, steps, threads=3)
     assert failed1 == failed3 == []
@@ -45,9 +46,10 @@ def test_refinement_on_threads_equals_one_thread(record, monkeypatch):
     out = {}
     for threads in ('1', '2'):
         monkeypatch.setenv('AUV_IDENT_THREADS', threads)
-        out[threads] = refine(model, cfg, run.t, run.y, run.u, start, T=run.T, max_nfev=5)
-    assert np.array_equal(out['1'][0], out['2'][0])
-    assert np.array_equal(out['1'][1], out['2'][1])
+        out[threads] = refine(model, cfg, [Record(run.t, run.y, run.u)], start, T=run.T,
+                              max_nfev=5)
+    assert np.array_equal(out['1'].estimate, out['2'].estimate)
+    assert np.array_equal(out['1'].cov, out['2'].cov)
 
 
 @pytest.mark.parametrize('text', ['0', '-2', 'two', '1.5'])
@@ -70,7 +72,8 @@ def test_refinement_without_scipy_workers_gives_the_same(record, monkeypatch):
     v, run, cfg = record
     model = Model(v, NAMES)
     start = model.theta_true * 1.1
-    threaded = refine(model, cfg, run.t, run.y, run.u, start, T=run.T, max_nfev=5)
+    threaded = refine(model, cfg, [Record(run.t, run.y, run.u)], start, T=run.T, max_nfev=5)
     monkeypatch.setattr(batch, 'LEAST_SQUARES_WORKERS', False)
-    serial = refine(model, cfg, run.t, run.y, run.u, start, T=run.T, max_nfev=5)
-    assert np.array_equal(threaded[0], serial[0]) and np.array_equal(threaded[1], serial[1])
+    serial = refine(model, cfg, [Record(run.t, run.y, run.u)], start, T=run.T, max_nfev=5)
+    assert np.array_equal(threaded.estimate, serial.estimate)
+    assert np.array_equal(threaded.cov, serial.cov)

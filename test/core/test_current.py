@@ -1,11 +1,9 @@
 """The water current: the model in a current against its equations (Fossen 2021 sec. 10.3) and
 finite differences, the option and the identifiability verdict, and our simulator's current
-against the independent generator's (test/independent_data.py). Identification on
+against the independent generator's (offline/independent_data.py). Identification on
 independent bags with a current: test_current_identification.py."""
 import math
 
-import independent_data as gen
-from independent_data import DataConfig, generate
 import numpy as np
 import pytest
 
@@ -20,6 +18,8 @@ from auv_ident.core.model.current import (
 from auv_ident.core.model.hydrodynamics import CURRENT_GROUND, CURRENT_NONE, CURRENT_WATER, Model
 from auv_ident.core.model.state import CURRENT_NAMES, LINEAR, State
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.offline import independent_data as gen
+from auv_ident.offline.independent_data import DataConfig, generate
 from auv_ident.vehicles import load_vehicle
 
 VEHICLES = ('nps_auv2', 'remus100')

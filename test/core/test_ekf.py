@@ -6,17 +6,19 @@ import shutil
 import subprocess
 import sys
 
+import numba
 import numpy as np
 import pytest
 
 import auv_ident.core as core
-from auv_ident.core import compiled_cache
+from auv_ident.core import compiled_cache, safe_files
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DimensionError
 from auv_ident.core.filter import ekf as K
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
 from auv_ident.core.identification.batch import identify, run_ekf
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import COEFFICIENTS, EULER, NU, POSITION, State, VEHICLE
 from auv_ident.core.simulation.simulate import simulate
@@ -191,7 +193,7 @@ def test_covariance_stays_symmetric_positive_definite_over_a_long_run():
     m = Model(NPS, NAMES)
     run = simulate(Model(NPS), 'ident', duration=900.0, seed=2)
     f = AugmentedEKF(m, FilterConfig(coefficients=NAMES), run.T)
-    _, hist, _ = run_ekf(f, run.t, run.y, run.u, hist_every=100)
+    hist = run_ekf(f, [Record(run.t, run.y, run.u)], hist_every=100).history
     assert np.array_equal(f.P, f.P.T)
     assert np.linalg.eigvalsh(f.P).min() > 0
     assert np.all(np.isfinite(hist['std'])) and np.all(hist['std'] > 0)
@@ -201,8 +203,8 @@ def test_short_run_converges_within_a_few_percent(short_run):
     m = Model(NPS, NAMES)
     for offset in (0.5, -0.5):
         cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
-        res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False,
-                       truth=m.theta_true)
+        res = identify(m, [Record(short_run.t, short_run.y, short_run.u)], cfg,
+                       refine_pass=False, truth=m.theta_true)
         err = np.abs(res.error_pct())
         assert err.max() < 5.0, dict(zip(NAMES, err))
 
@@ -211,7 +213,7 @@ def test_refinement_is_consistent_and_independent_of_the_start(short_run):
     m = Model(NPS, NAMES)
     ests = []
     for offset in (0.5, -0.5):
-        res = identify(m, short_run.t, short_run.y, short_run.u,
+        res = identify(m, [Record(short_run.t, short_run.y, short_run.u)],
                        FilterConfig(coefficients=NAMES, initial_offset=offset),
                        truth=m.theta_true)
         assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
@@ -226,14 +228,15 @@ def test_subset_of_channels_and_missing_samples_still_identify(short_run):
     measured = np.ones(12, dtype=bool)
     measured[6:8] = False                      # no USBL x, y
     cfg = FilterConfig(coefficients=NAMES, measured=measured)
-    res = identify(m, short_run.t, y, short_run.u, cfg, refine_pass=False, truth=m.theta_true)
+    res = identify(m, [Record(short_run.t, y, short_run.u)], cfg, refine_pass=False,
+                   truth=m.theta_true)
     assert np.abs(res.error_pct()).max() < 5.0
 
 
 def test_stream_identifier_equals_the_compiled_loop(short_run):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
-    res = identify(m, short_run.t, short_run.y, short_run.u, cfg, refine_pass=False)
+    res = identify(m, [Record(short_run.t, short_run.y, short_run.u)], cfg, refine_pass=False)
     s = StreamIdentifier(m, cfg, short_run.T)
     # actuator commands arrive with the odometry of the same stamp; order must not matter
     for k, t in enumerate(short_run.t):
@@ -302,11 +305,11 @@ def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compile
     g.start(short_run.y[0], short_run.u[0, 5])
     for k in range(1, 50):
         g.step(short_run.u[k - 1], short_run.y[k])
-    run_ekf(f, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    run_ekf(f, [Record(short_run.t[:50], short_run.y[:50], short_run.u[:50])])
     np.testing.assert_allclose(g.xa, f.xa, rtol=1e-12)
     # the default prior differs (diagonal), so the prior did matter
     d = AugmentedEKF(m, FilterConfig(coefficients=NAMES, initial=th0), short_run.T)
-    run_ekf(d, short_run.t[:50], short_run.y[:50], short_run.u[:50])
+    run_ekf(d, [Record(short_run.t[:50], short_run.y[:50], short_run.u[:50])])
     assert not np.allclose(d.xa[12:], f.xa[12:], rtol=1e-6)
     h = AugmentedEKF(m, FilterConfig(coefficients=NAMES), short_run.T)
     h.set_prior(th0, C)
@@ -330,64 +333,81 @@ def _compiled_core_closure(core):
     compiled, imports = set(), {}
     for path in core.rglob('*.py'):
         if '__pycache__' in path.parts:
-            continue        # generated kernels (model/monomials.py), not sources
+            continue        # numba caches of older versions, not sources
         name = path.relative_to(core).as_posix()
         tree = ast.parse(path.read_text())
         names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
         names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
-        if names & {'njit', 'jit', 'cfunc', 'intrinsic', 'kernel'}:
+        if names & {'njit', 'cached_njit', 'jit', 'cfunc', 'intrinsic', 'kernel'}:
             compiled.add(name)
         imports[name] = set()
         for n in ast.walk(tree):
             if isinstance(n, ast.ImportFrom) and (n.module or '').startswith('auv_ident.core.'):
                 mod = n.module[len('auv_ident.core.'):].replace('.', '/')
                 imports[name] |= {f'{mod}.py'} | {f'{mod}/{a.name}.py' for a in n.names}
-    todo = list(compiled - {'__init__.py', 'compiled_cache.py'})
+    # the cache's and the files' mechanism, no compiled code
+    mechanism = {'__init__.py', 'compiled_cache.py', 'safe_files.py'}
+    todo = list(compiled - mechanism)
     seen = set()
     while todo:
         name = todo.pop()
-        if name not in seen:
+        if name not in seen | mechanism:
             seen.add(name)
             todo.extend(i for i in imports.get(name, ()) if (core / i).is_file())
     return seen
 
 
-def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source():
-    """Every function the core caches is stamped with the digest of all compiled core sources,
-    and that list holds every module with numba code and everything such code imports."""
+def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source(short_run):
+    """Every function the core caches has its cache in the folder named after the digest of
+    all compiled core sources, outside the package (numba writes the loop's index there), and
+    that list holds every module with numba code and everything such code imports; nothing
+    in the core asks numba for a cache but through compiled_cache.cached_njit."""
     folder = pathlib.Path(core.__file__).parent
     assert _compiled_core_closure(folder) == set(core.COMPILED_SOURCES)
-    digest = compiled_cache.group_digest(str(folder), core.COMPILED_SOURCES)
-    for fn in (K.run_filter, K.rk4_step_into, K.new_workspace):
-        locator = fn._cache._impl.locator
-        assert isinstance(locator, compiled_cache.GroupStampLocator)
-        assert locator.get_source_stamp() == digest
+    for path in folder.rglob('*.py'):
+        if path.name != 'compiled_cache.py' and '__pycache__' not in path.parts:
+            for n in ast.walk(ast.parse(path.read_text())):
+                assert not (isinstance(n, ast.keyword) and n.arg == 'cache'), path
+    group = compiled_cache.cache_folder_of(K.__file__)
+    base = os.environ.get('NUMBA_CACHE_DIR') or safe_files.private_folder('numba')
+    assert group == compiled_cache.group_folder(base, str(folder), core.COMPILED_SOURCES)
+    assert not pathlib.Path(group).is_relative_to(folder.parent)
+    for name in core.COMPILED_SOURCES:
+        assert compiled_cache.cache_folder_of(str(folder / name)) == group
+    r = short_run
+    run_ekf(AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), r.T),
+            r.t[:50], r.y[:50], r.u[:50])
+    assert list(pathlib.Path(group).rglob('ekf.run_filter-*.nbi'))
 
 
-def test_editing_model_py_makes_the_cached_ekf_loop_stale(tmp_path):
-    """The stamp numba checks for ekf.py's functions changes when model.py (which they inline)
-    changes, and not when a file outside the compiled sources does."""
+def test_editing_the_model_makes_the_cached_ekf_loop_stale(tmp_path, monkeypatch):
+    """The cache folder of ekf.py's functions changes when model/hydrodynamics.py (which they
+    inline) changes, and not when a file outside the compiled sources does."""
+    monkeypatch.setattr(numba.config, 'CACHE_DIR', str(tmp_path / 'numba'))  # as NUMBA_CACHE_DIR
     folder = tmp_path / 'core'
     shutil.copytree(pathlib.Path(core.__file__).parent, folder,
                     ignore=shutil.ignore_patterns('__pycache__'))
     compiled_cache.register(str(folder), core.COMPILED_SOURCES)
+    ekf_py = str(folder / 'filter/ekf.py')
+    before = compiled_cache.cache_folder_of(ekf_py)
+    assert os.path.dirname(before) == str(tmp_path / 'numba')
 
-    def stamp():
-        loc = compiled_cache.GroupStampLocator.from_function(K.run_filter.py_func,
-                                                             str(folder / 'filter/ekf.py'))
-        return loc.get_source_stamp()
-    before = stamp()
+    def fresh():
+        compiled_cache.register(str(folder), core.COMPILED_SOURCES)   # forget the folder
+        return compiled_cache.cache_folder_of(ekf_py)
     with open(folder / 'filter/stream.py', 'a') as fh:
         fh.write('# an edit outside the compiled sources\n')
-    assert stamp() == before
+    assert fresh() == before
     with open(folder / 'model/hydrodynamics.py', 'a') as fh:
         fh.write('# an edit of the model\n')
-    assert stamp() != before
+    after = fresh()
+    assert after != before and os.path.dirname(after) == os.path.dirname(before)
 
 
-_CALLEE = 'from numba import njit\n\n\n@njit(cache=True)\ndef g(x):\n    return x + {}\n'
-_CALLER = ('from numba import njit\n\nfrom .callee import g\n\n\n'
-           '@njit(cache=True)\ndef f(x):\n    return g(x)\n')
+_CALLEE = '{head}\n\n@{deco}\ndef g(x):\n    return x + {increment}\n'
+_CALLER = '{head}\n\nfrom .callee import g\n\n\n@{deco}\ndef f(x):\n    return g(x)\n'
+_HEADS = {'numba': ('from numba import njit\n', 'njit(cache=True)'),
+          'group': ('from auv_ident.core.compiled_cache import cached_njit\n', 'cached_njit()')}
 _RUN = ('import sys\n'
         'from auv_ident.core import compiled_cache\n'
         'if sys.argv[1] == "group":\n'
@@ -400,16 +420,21 @@ _RUN = ('import sys\n'
 def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_path):
     """End to end in fresh processes: numba alone keeps running a cached caller with its old
     callee after an edit of the callee's file (the problem); with the file pair registered as a
-    group, the edit is seen, and unchanged code still loads from the cache."""
+    group and compiled by cached_njit, the edit is seen, unchanged code still loads from the
+    cache, and nothing is written beside the sources."""
     pkg = tmp_path / 'pkg'
     pkg.mkdir()
     (pkg / '__init__.py').write_text('')
-    (pkg / 'caller.py').write_text(_CALLER)
     repo = pathlib.Path(core.__file__).parents[2]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(repo)]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(repo)]),
+               XDG_CACHE_HOME=str(tmp_path / 'cache'), PYTHONDONTWRITEBYTECODE='1')
+    env.pop('NUMBA_CACHE_DIR', None)
 
     def run(mode, increment):
-        (pkg / 'callee.py').write_text(_CALLEE.format(increment))
+        head, deco = _HEADS[mode]
+        (pkg / 'caller.py').write_text(_CALLER.format(head=head, deco=deco))
+        (pkg / 'callee.py').write_text(_CALLEE.format(head=head, deco=deco,
+                                                      increment=increment))
         r = subprocess.run([sys.executable, '-c', _RUN, mode, str(pkg)], capture_output=True,
                            text=True, env=env, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
@@ -422,6 +447,9 @@ def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_pat
     assert run('group', 1) == (2, 1)               # unchanged: from the cache
     assert run('group', 2) == (3, 0)               # callee edited: recompiled
     assert run('group', 2) == (3, 1)
+    assert sorted(p.name for p in pkg.iterdir()) == ['__init__.py', 'callee.py', 'caller.py']
+    groups = list((tmp_path / 'cache' / 'auv_ident' / 'numba').iterdir())
+    assert len(groups) == 2 and all(list(g.rglob('caller.f-*.nbi')) for g in groups)
 
 
 def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
@@ -434,7 +462,7 @@ def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     m = Model(v, names)
     cfg = FilterConfig(coefficients=names, initial_offset=0.5)
     f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, run.t, run.y, run.u)
+    run_ekf(f, [Record(run.t, run.y, run.u)])
     g = AugmentedEKF(m, cfg, run.T)
     g.start(run.y[0], run.u[0, 5])
     for k in range(1, len(run.t)):

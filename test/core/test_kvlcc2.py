@@ -10,9 +10,11 @@ from kvlcc2_data import load_run, require_runs, RUNS
 import numpy as np
 import pytest
 
-from auv_ident.core.identification.batch import identify_runs
+from auv_ident.core.identification.batch import identify
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 TOOL = Path(__file__).resolve().parents[2] / 'tools' / 'kvlcc2_identify.py'
@@ -47,7 +49,7 @@ def test_identified_from_both_starboard_runs_predicts_the_port_runs():
     runs = {r: load_run(r) for r in RUNS}
     noise = tool.measurement_noise(runs['Z_10_10_S'][1], runs['Z_10_10_S'][0])
     t0 = time.perf_counter()
-    res = identify_runs(model, [runs[r] for r in tool.TRAIN], tool.config(v, names, noise))
+    res = identify(model, [Record(*runs[r]) for r in tool.TRAIN], tool.config(v, names, noise))
     wall = time.perf_counter() - t0
     assert wall < 60.0
     fits = tool.validate(model, res.estimate, {r: runs[r] for r in tool.GOALS})
@@ -63,7 +65,7 @@ def test_identified_from_both_starboard_runs_predicts_the_port_runs():
 def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     """`import --format hsva` then `identify --bag A --bag B` with the real-data noise gives
     the coefficients of the same steps on the arrays of test/kvlcc2_data.py (the noise model
-    from the data, core.identification.noise_fit.identify_runs_with_noise_model; same samples, same
+    from the data, core.identification.noise_fit.identify_with_noise_model; same samples, same
     filter
     settings: the bags keep every value in float64)."""
     require_runs(('Z_10_10_S', 'Z_20_10_S'))
@@ -81,18 +83,19 @@ def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     runs = [load_run(r) for r in tool.TRAIN]
     cfg = tool.config(v, v.identify_default, tool.measurement_noise(runs[0][1], runs[0][0]))
     from auv_ident.analysis.results import make_config
-    from auv_ident.core.identification.noise_fit import identify_runs_with_noise_model
+    from auv_ident.core.identification.noise_fit import identify_with_noise_model
     # the filter settings of the bag path (its prior: the vehicle file's values, p0_rel 1;
     # every channel fused, the unmeasured ones as the zeros the bags hold at 1-sigma 1): the
     # noise model is read off the EKF pass, so that pass must be the same
     bag_cfg = make_config(v.identify_default, noise_mode='fixed', initial_offset=0.0,
                           noise_std=cfg.noise_std)
     bag_cfg.q_state = cfg.q_state
-    _, _, want, _, _ = identify_runs_with_noise_model(Model(v, v.identify_default), bag_cfg,
-                                                      [(t, np.nan_to_num(Y), U)
-                                                       for t, Y, U in runs])
-    doc, _ = identify_bags(bags, initial_offset=0.0, noise_std=cfg.noise_std,
-                           q_state=cfg.q_state)
+    want = identify_with_noise_model(Model(v, v.identify_default), bag_cfg,
+                                     [Record(t, np.nan_to_num(Y), U)
+                                      for t, Y, U in runs]).estimate
+    doc, _ = identify_bags(bags, IdentifierSettings.from_values(initial_offset=0.0,
+                                                                noise_std=cfg.noise_std,
+                                                                q_state=cfg.q_state))
     assert doc['rejected'] == 0
     got = np.array([doc['coefficients'][n]['estimate'] for n in v.identify_default])
     np.testing.assert_allclose(got, want, rtol=1e-3)

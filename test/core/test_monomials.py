@@ -1,11 +1,14 @@
 """Tier 1: the generated monomial kernel against a plain reading of the vehicle's term table,
 and its file cache."""
+import os
+
 import numpy as np
 import pytest
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import monomials
 from auv_ident.core.model.monomials import kernel_source, monomial_kernel, NZ
+from auv_ident.core.safe_files import make_private
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 
@@ -74,6 +77,31 @@ def test_kernel_is_built_once_per_table_and_loaded_from_its_file(tmp_path, monke
     assert monomial_kernel(v.terms_i, v.terms_s) is first
     files = list(tmp_path.glob('auv_ident_monomials_*.py'))
     assert len(files) == 1 and kernel_source(v.terms_i, v.terms_s) in files[0].read_text()
+    assert not list(tmp_path.glob('*.tmp'))          # written through a temporary file
+
+
+def test_generated_kernels_go_to_a_private_folder_of_the_user(tmp_path, monkeypatch):
+    """By default the kernels go to the user's cache folder, made 0700, never into the
+    package; a folder that is a symbolic link or writable by others is refused."""
+    monkeypatch.delenv('AUV_IDENT_KERNEL_CACHE', raising=False)
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path / 'cache'))
+    path = monomials._write_source('k', 'x = 1\n')
+    folder = tmp_path / 'cache' / 'auv_ident' / 'kernels'
+    assert path == str(folder / 'k.py')
+    assert folder.stat().st_mode & 0o777 == 0o700
+    assert folder.parent.stat().st_mode & 0o777 == 0o700
+    package = os.path.dirname(os.path.dirname(os.path.abspath(monomials.__file__)))
+    assert all(not d.startswith(package) for d in monomials._cache_dirs())
+    for bad, why in (('link', 'a symbolic link'), ('open', 'writable by other users')):
+        root = tmp_path / bad / 'auv_ident'
+        root.parent.mkdir()
+        if bad == 'link':
+            root.symlink_to(folder.parent)
+        else:
+            root.mkdir()
+            os.chmod(root, 0o777)
+        with pytest.raises(PermissionError, match=why):
+            make_private(str(root / 'kernels'))
 
 
 def test_unwritable_cache_folders_fall_back_then_fail_clearly(tmp_path, monkeypatch):

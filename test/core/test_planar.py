@@ -5,7 +5,8 @@ import pytest
 
 from auv_ident.core.errors import ConfigError, DimensionError
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
-from auv_ident.core.identification.batch import identify, identify_runs
+from auv_ident.core.identification.batch import identify
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
 from auv_ident.core.model.vehicle import _build
@@ -132,7 +133,7 @@ def _runs():
     runs = []
     for seed in (1, 2):
         run = simulate(truth, 'zigzag', duration=80.0, T=0.1, seed=seed, noise_std=noise)
-        runs.append((run.t, run.y, run.u))
+        runs.append(Record(run.t, run.y, run.u))
     return v, noise, runs
 
 
@@ -143,11 +144,11 @@ def test_one_model_from_two_simulated_planar_runs_recovers_the_truth():
     measured[FREE] = True
     cfg = FilterConfig(coefficients=NAMES, initial_offset=0.2, p0_rel=0.5, noise_std=noise,
                        measured=measured)
-    both = identify_runs(m, runs, cfg, truth=m.theta_true)
+    both = identify(m, runs, cfg, truth=m.theta_true)
     z = (both.estimate - m.theta_true) / both.std
     assert np.all(np.abs(z) < 4.0), dict(zip(NAMES, z))
     assert np.all(np.abs(both.error_pct()) < 5.0), dict(zip(NAMES, both.error_pct()))
     # the error bars use both runs: narrower than from either run alone
-    one = identify(m, *runs[0], cfg)
+    one = identify(m, runs[:1], cfg)
     assert np.all(both.std < one.std)
-    assert both.steps == sum(len(r[0]) for r in runs)
+    assert both.steps == sum(r.samples for r in runs)

@@ -5,8 +5,9 @@ import stat
 
 import pytest
 
+from auv_ident.core import safe_files
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.safe_files import check_private, private_dir, write_atomic
+from auv_ident.core.safe_files import private_dir, write_atomic
 
 
 def test_write_atomic_follows_no_planted_symlink(tmp_path):
@@ -43,18 +44,24 @@ def test_private_dir_is_made_0700_and_checked(tmp_path, monkeypatch):
     for level in (d, d.parent, d.parent.parent):
         assert stat.S_IMODE(level.stat().st_mode) == 0o700
     with pytest.raises(ConfigError, match='one plain name'):
-        private_dir('..')
+        private_dir('vehicles', '..')
 
 
-def test_a_planted_or_open_folder_is_refused(tmp_path, monkeypatch):
+def test_a_planted_or_open_folder_is_passed_over_or_refused(tmp_path, monkeypatch):
+    """A planted symlink or a folder open to others is never used: private_dir goes on to
+    the next place, and names every refused one when none is left."""
     elsewhere = tmp_path / 'elsewhere'
     elsewhere.mkdir(mode=0o700)
-    link = tmp_path / 'link'
-    link.symlink_to(elsewhere)
-    with pytest.raises(ConfigError, match='symlink'):
-        check_private(link)
-    monkeypatch.setenv('AUV_IDENT_CACHE', str(tmp_path / 'cache'))
-    (tmp_path / 'cache').mkdir()
-    os.chmod(tmp_path / 'cache', 0o777)
-    with pytest.raises(ConfigError, match='permissions 777 let others in'):
+    cache = tmp_path / 'cache'
+    cache.mkdir(mode=0o700)
+    (cache / 'vehicles').symlink_to(elsewhere)
+    monkeypatch.setenv('AUV_IDENT_CACHE', str(cache))
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path / 'xdg'))
+    d = private_dir('vehicles')
+    assert d == tmp_path / 'xdg' / 'auv_ident' / 'vehicles'      # the link passed over
+    os.chmod(tmp_path / 'xdg' / 'auv_ident', 0o777)
+    monkeypatch.setattr(safe_files, 'private_candidates',
+                        lambda name: iter([str(cache / name),
+                                           str(tmp_path / 'xdg' / 'auv_ident' / name)]))
+    with pytest.raises(ConfigError, match='a symbolic link.*writable by other users'):
         private_dir('vehicles')

@@ -7,6 +7,7 @@ import pytest
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.selection import forward_stepwise, identify_auto, parse_request
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
@@ -15,18 +16,18 @@ from auv_ident.vehicles import load_vehicle
 
 def test_request_syntax_and_errors_name_the_culprit():
     v = load_vehicle('nps_auv2')
-    assert parse_request(v, 'auto') == (True, [])
-    assert parse_request(v, ' AUTO , z_ds,Y_v') == (True, ['Z_ds', 'Y_v'])
-    assert parse_request(v, 'Z_ds,K_v') == (False, ['Z_ds', 'K_v'])
-    assert parse_request(v, '') == (False, [])
+    assert parse_request(v, ['auto']) == (True, [])
+    assert parse_request(v, [' AUTO ', ' z_ds', 'Y_v']) == (True, ['Z_ds', 'Y_v'])
+    assert parse_request(v, ('Z_ds', 'K_v')) == (False, ['Z_ds', 'K_v'])
+    assert parse_request(v, []) == (False, [])
     with pytest.raises(ConfigError, match="unknown coefficient 'Q_xyz'"):
-        parse_request(v, 'auto,Q_xyz')
+        parse_request(v, ['auto', 'Q_xyz'])
     with pytest.raises(ConfigError, match='must come first'):
-        parse_request(v, 'Z_ds,auto')
+        parse_request(v, ['Z_ds', 'auto'])
     with pytest.raises(ConfigError, match='Z_ds is listed twice'):
-        parse_request(v, 'auto,Z_ds,z_ds')
+        parse_request(v, ['auto', 'Z_ds', 'z_ds'])
     with pytest.raises(ConfigError, match='water current'):
-        parse_request(v, 'auto,current_n')
+        parse_request(v, ['auto', 'current_n'])
 
 
 def test_stepwise_takes_what_reduces_the_residual_and_leaves_out_the_rest_with_reasons():
@@ -61,9 +62,9 @@ def test_auto_on_a_short_simulated_run_picks_the_wrong_excited_coefficients():
         c[v.index(name)] *= factor
     run = simulate(Model(v, coefficient_values=c), 'ident', duration=150.0, seed=2)
     cfg = FilterConfig(coefficients=[], noise_std=run.noise_std, mode='fixed')
-    model, _, _, est, cov, fit, sel = identify_auto(lambda names: Model(v, list(names)), cfg,
-                                                    run.t, run.y, run.u, named=['X_pp'],
-                                                    T=run.T)
+    out = identify_auto(lambda names: Model(v, list(names)), cfg,
+                        [Record(run.t, run.y, run.u)], named=['X_pp'], T=run.T)
+    model, est, cov, sel = out.model, out.estimate, out.cov, out.selection
     assert sel.chosen[0] == 'X_pp' and sel.named == ['X_pp']
     for name in ('Z_w', 'N_r', 'M_uq'):
         assert name in sel.chosen, (name, sel.left_out.get(name))

@@ -21,6 +21,7 @@ from auv_ident.core.filter.timing import (
     time_steps,
 )
 from auv_ident.core.identification.batch import identify, refine, run_ekf
+from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import EULER, Input
@@ -93,7 +94,7 @@ def test_irregular_stamps_identify_as_well_as_a_uniform_grid_with_honest_sigmas(
     cfg = FilterConfig(coefficients=NAMES)
     res = {}
     for name, (t, Y, U, _) in records.items():
-        res[name] = r = identify(m, t, Y, U, cfg, T=T, truth=m.theta_true)
+        res[name] = r = identify(m, [Record(t, Y, U)], cfg, T=T, truth=m.theta_true)
         assert np.all(np.abs(r.estimate - r.truth) < 3.0 * r.std), (name, r.error_pct())
     # as precise as the uniform grid (7 % fewer samples, a gap), as accurate in absolute terms
     assert np.all(res['irregular'].std < 1.5 * res['uniform'].std)
@@ -101,7 +102,7 @@ def test_irregular_stamps_identify_as_well_as_a_uniform_grid_with_honest_sigmas(
         worst = {k: np.abs(r.error_pct(which)).max() for k, r in res.items()}
         assert max(worst.values()) < 3.0, (which, worst)
     t, Y, U, _ = records['irregular']
-    naive = identify(m, np.arange(len(t)) * T, Y, U, cfg, T=T, truth=m.theta_true)
+    naive = identify(m, [Record(np.arange(len(t)) * T, Y, U)], cfg, T=T, truth=m.theta_true)
     assert np.abs(naive.error_pct()).max() > 20.0 * np.abs(res['irregular'].error_pct()).max()
 
 
@@ -117,7 +118,7 @@ def test_a_uniform_grid_takes_the_old_fixed_T_path_bit_for_bit(records):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES, mode='matching')
     f = AugmentedEKF(m, cfg, T)
-    _, hist, _ = run_ekf(f, t + 1000.0, Y, U, hist_every=100)
+    hist = run_ekf(f, [Record(t + 1000.0, Y, U)], hist_every=100).history
     assert np.allclose(hist['t'], t[::100], rtol=0.0, atol=1e-9)      # since the first sample
     g = AugmentedEKF(m, cfg, T)
     g.start(Y[0], U[0, Input.N_RPM])
@@ -149,7 +150,7 @@ def test_the_stream_and_the_batch_pass_apply_one_time_rule(records):
     its own stamp is paired by its stamp (same result)."""
     t, Y, U, _ = records['irregular']
     f = AugmentedEKF(Model(NPS, NAMES), FilterConfig(coefficients=NAMES), T)
-    run_ekf(f, t, Y, U)
+    run_ekf(f, [Record(t, Y, U)])
     for order in ('command first', 'odometry first'):
         s, outs = _stream(t, Y, U, order)
         assert s.rejected == 0 and [o.code for o in outs].count('gap') == 1
@@ -183,11 +184,11 @@ def test_refine_uses_the_stamps(records):
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
     start = m.theta_true * 1.05
-    est, cov, s2 = refine(m, cfg, t, Y, U, start, T=T)
-    assert np.all(np.abs(est - m.theta_true) < 3.0 * np.sqrt(np.diag(cov)))
-    assert s2 < 1.5
-    _, _, s2_naive = refine(m, cfg, np.arange(len(t)) * T, Y, U, start, T=T, max_nfev=5)
-    assert s2_naive > 3.0 * s2
+    ref = refine(m, cfg, [Record(t, Y, U)], start, T=T)
+    assert np.all(np.abs(ref.estimate - m.theta_true) < 3.0 * np.sqrt(np.diag(ref.cov)))
+    assert ref.cost < 1.5
+    naive = refine(m, cfg, [Record(np.arange(len(t)) * T, Y, U)], start, T=T, max_nfev=5)
+    assert naive.cost > 3.0 * ref.cost
 
 
 @pytest.mark.parametrize('t,needle', [
@@ -202,7 +203,7 @@ def test_bad_sample_times_are_one_clear_error(t, needle):
     Y = np.tile(np.r_[0.6, np.zeros(7), 10.0, 0.0, 0.0, 0.0], (4, 1))
     U = np.tile(np.r_[np.zeros(5), 500.0, 0.0], (4, 1))
     with pytest.raises(DataError, match=needle):
-        run_ekf(f, t, Y, U)
+        run_ekf(f, [Record(t, Y, U)])
 
 
 def test_check_times_and_nominal_sample_time():

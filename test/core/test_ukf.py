@@ -8,6 +8,7 @@ import pytest
 from auv_ident.analysis.results import make_config
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.batch import identify
+from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.ukf import run_ukf, unscented_mean_cov, UnscentedSettings
 from auv_ident.core.model.state import N_STATE, State
 
@@ -17,7 +18,7 @@ def ukf_and_ekf():
     model, run = light_run()
     cfg = make_config(model.theta_names, noise_std=LIGHT_NOISE_STD.copy())
     ukf = run_ukf(model, cfg, run.t, run.y, run.u, T=run.T)
-    ekf = identify(model, run.t, run.y, run.u, cfg, T=run.T, refine_pass=False)
+    ekf = identify(model, [Record(run.t, run.y, run.u)], cfg, T=run.T, refine_pass=False)
     return model, ukf, ekf
 
 

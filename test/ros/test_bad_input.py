@@ -52,7 +52,7 @@ from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import euler_to_quat, RPM_TO_RAD_S
 from auv_ident.session.session import GUARD_SECONDS, IdentSession
-from auv_ident.session.settings import ParameterError
+from auv_ident.session.settings import IdentifierSettings, ParameterError
 from auv_ident.vehicles import load_vehicle
 
 DURATION = 30.0
@@ -438,7 +438,7 @@ def reference(run):
     s = IdentSession()
     _feed_session(s, [m for k in range(len(run.t)) for m in _sample(run, k)
                       if not (SEG[0] <= k < SEG[1] and m[0] == ODOM_TOPIC)])
-    assert s.odom_rejected == 0 and s.errors == 0
+    assert s.counters.odom_rejected == 0 and s.counters.errors == 0
     return s.last_good.estimate
 
 
@@ -456,7 +456,7 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
                   ).theta_true
 
     # 1. offline, no bag
-    session = IdentSession(**case.settings)
+    session = IdentSession(IdentifierSettings.from_values(**case.settings))
     logged = []
 
     class _Log:
@@ -465,13 +465,13 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
     warn = ReplayWarnings(logger=_Log())
     events = _feed_session(session, messages, warn)
     warn.summary()
-    keys = set(session.reasons)
-    assert case.expect <= keys, (keys, session.reasons)
-    assert keys <= case.expect | case.allow, session.reasons
-    assert case.resets[0] <= session.errors <= case.resets[1], session.last_error
+    keys = set(session.counters.reasons)
+    assert case.expect <= keys, (keys, session.counters.reasons)
+    assert keys <= case.expect | case.allow, session.counters.reasons
+    assert case.resets[0] <= session.counters.errors <= case.resets[1], session.counters.last_error
     for key in keys:      # each problem is named in the (count-limited) replay log
         assert any(key.split(': ')[0] in line for line in logged), key
-    assert len(logged) <= 4 * len(keys) + 3 * session.errors
+    assert len(logged) <= 4 * len(keys) + 3 * session.counters.errors
 
     # 2. the live node's callbacks (same session logic, its publishers and log recorded)
     node = _node(ctx, **case.settings)
@@ -481,7 +481,7 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
         wall = time.monotonic() - t0
         assert node.internal_errors == 0
         assert [e.kind for e in node_events] == [e.kind for e in events]
-        assert node.session.reasons == session.reasons
+        assert node.session.counters.reasons == session.counters.reasons
         _assert_finite_published(node)
         assert len(node.pub_estimate.msgs) == sum(e.good for e in events)
         # rate limit: at most one line per (topic, code) per 5 s, and each names its problem
@@ -505,8 +505,8 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
     if case.bag:
         bag = tmp_path / 'bag'
         _write_bag(bag, messages)
-        res = replay_bag(bag, warn=False, **case.settings)
-        assert dict(res.reasons) == dict(session.reasons)
+        res = replay_bag(bag, IdentifierSettings.from_values(**case.settings), warn=False)
+        assert dict(res.reasons) == dict(session.counters.reasons)
         assert np.array_equal(res.estimate, session.last_good.estimate)
 
     # recovery: every update from 3 s after the segment on is good, the estimate is close to
@@ -569,7 +569,7 @@ def test_forced_non_positive_definite_covariance_is_repaired(run, ctx):
         ev = evs[-1]
         assert ev.kind == 'update' and ev.code == 'repaired' and ev.good
         assert 'not positive definite' in ev.reason and 'repaired' in ev.reason
-        assert node.session.repairs == 1 and node.session.errors == 0
+        assert node.session.counters.repairs == 1 and node.session.counters.errors == 0
         p = node.session.model.p_coef      # the coefficients (the current follows them)
         assert np.all(np.abs(ev.estimate[:p] - before[:p]) < 0.05 * np.abs(before[:p]))
         assert any('repaired' in t for lv, t in node.log_lines)
@@ -602,7 +602,7 @@ def test_unrepairable_covariance_resets_from_the_last_good_estimate(run, ctx, tm
         # restarted from the last good estimate with 4x its covariance
         ev = _feed_node(node, _clean(run, [301]))[-1]
         assert ev.kind == 'update'
-        est, cov = node.session.current()
+        est, cov = node.session.estimate_now()
         assert np.allclose(np.sqrt(np.diag(cov)), 2.0 * good.std, rtol=0.02)
         assert np.allclose(est, good.estimate, rtol=1e-3)
         _feed_node(node, _clean(run, range(302, len(run.t))))
@@ -632,8 +632,8 @@ def test_absurd_burst_never_reaches_the_estimate_and_long_bursts_reset(run, ctx)
             if SEG[0] <= k < SEG[0] + 60:
                 assert ev.kind in ('rejected', 'error') or not ev.good
                 levels.append(node.diagnostic_status().level)
-                resets.append(node.session.guard_resets)
-        assert node.session.outliers >= 40 and node.session.guard_resets >= 1
+                resets.append(node.session.counters.guard_resets)
+        assert node.session.counters.outliers >= 40 and node.session.counters.guard_resets >= 1
         assert DiagnosticStatus.ERROR in levels
         # ERROR as soon as the guard's window is inconsistent; the reset GUARD_SECONDS later
         inconsistent_for = T * (resets.index(1) - levels.index(DiagnosticStatus.ERROR))
@@ -673,7 +673,7 @@ def test_every_distinct_problem_is_named_while_another_floods(run, ctx):
                     if lv == 'warning' and 'states no usable covariance' not in t]
         assert len([t for t in warnings if 'non-finite' in t]) == 1
         assert len([t for t in warnings if 'implausible fin' in t]) == 1
-        assert node.session.reasons['odom: non-finite'] == 40
+        assert node.session.counters.reasons['odom: non-finite'] == 40
         time.sleep(0.01)
         node._warn_limit.period = 0.0          # the next line carries the suppressed count
         _feed_node(node, bad(SEG[0]))
@@ -827,10 +827,10 @@ BAD_PARAMETERS = [
                          ids=[f'{n}={v!r}'[:40] for n, v in BAD_PARAMETERS])
 def test_absurd_parameter_is_one_clear_error(name, value, good_bag):
     with pytest.raises(ParameterError) as info:
-        IdentSession(**{name: value})
+        IdentSession(IdentifierSettings(**{name: value}))
     assert f'parameter {name!r}' in str(info.value)
     with pytest.raises(ParameterError) as info:      # the offline replay: same check
-        replay_bag(good_bag, warn=False, **{name: value})
+        replay_bag(good_bag, IdentifierSettings(**{name: value}), warn=False)
     assert f'parameter {name!r}' in str(info.value)
 
 
@@ -838,14 +838,14 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
     bad = tmp_path / 'bad.json'
     bad.write_text('{"vehicle": "nps_auv2", "coefficients": ["Z_w"], "estimate": [1.0, 2.0]')
     with pytest.raises(ParameterError, match="parameter 'warm_start'"):
-        IdentSession(warm_start=str(bad))
+        IdentSession(IdentifierSettings.from_values(warm_start=str(bad)))
     s = IdentSession()
     _feed_session(s, _clean(run, range(100)))
     doc = s.document()
     doc['covariance'][0][0] = -1.0                  # not positive definite
     write_estimate_json(tmp_path / 'neg.json', doc)
     with pytest.raises(ParameterError, match='not positive definite'):
-        IdentSession(warm_start=str(tmp_path / 'neg.json'))
+        IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'neg.json')))
 
 
 # --- processes ----------------------------------------------------------------------------
@@ -951,11 +951,11 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
     # saved on SIGTERM, a later run starts from it
     doc = json.loads(save.read_text())
     assert doc['steps'] == int(kv['accepted']) and np.all(np.isfinite(doc['covariance']))
-    warm = IdentSession(warm_start=str(save))
+    warm = IdentSession(IdentifierSettings.from_values(warm_start=str(save)))
     p = warm.model.p_coef        # a warm start takes the coefficients; the current starts afresh
     assert doc['coefficients'][p:] == ['current_n', 'current_e']
     assert np.array_equal(warm.theta0[:p], doc['estimate'][:p])
-    assert np.allclose(warm.current()[1][:p, :p], np.asarray(doc['covariance'])[:p, :p])
+    assert np.allclose(warm.estimate_now()[1][:p, :p], np.asarray(doc['covariance'])[:p, :p])
 
 
 # --- legitimate data are untouched; persistence ------------------------------------------------
@@ -975,14 +975,16 @@ def test_legitimate_data_pass_untouched():
                                         ('nps_auv2', 0.005, 'ned', False, 'paper_q')]:
         r = simulate(Model(load_vehicle(vehicle)), 'zigzag', duration=20.0, T=T, seed=4,
                      process_std=DEFAULT_PROCESS_STD if pn else None)
-        s = IdentSession(vehicle=vehicle, sample_time=T, frame=frame, noise_mode=mode)
+        s = IdentSession(IdentifierSettings.from_values(vehicle=vehicle, sample_time=T,
+                                                        frame=frame, noise_mode=mode))
         good = 0
         for k in range(len(r.t)):
             for topic, _, m in sample_messages(r, k, frame, with_truth=False):
                 ev = s.on_actuators(m) if topic == ACTUATOR_TOPIC else s.on_odom(m)
                 good += ev.good
-        assert (s.odom_rejected, s.cmd_rejected, s.outliers, s.repairs, s.errors) == \
-            (0, 0, 0, 0, 0), (vehicle, s.reasons, s.last_error)
+        c = s.counters
+        assert (c.odom_rejected, c.cmd_rejected, c.outliers, c.repairs, c.errors) == \
+            (0, 0, 0, 0, 0), (vehicle, c.reasons, c.last_error)
         assert good == len(r.t)
 
 

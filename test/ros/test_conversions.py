@@ -285,12 +285,40 @@ def test_odometry_errors():
         sm.odometry_to_state(unset, frame='NED')
 
 
+def test_current_twist_is_the_world_vector_in_either_convention():
+    """~/current's fields: the current where the water goes in the world frame (NED: north,
+    east, down; ENU: east, north, up, as a position maps), its covariance in the linear block
+    of the 6x6, a component not identified 0 with variance 0."""
+    names = ['Z_ds', 'current_n', 'current_e']
+    est = np.array([-0.07, 0.3, -0.2])
+    cov = np.array([[1e-4, 1e-6, 2e-6], [1e-6, 4e-4, 5e-5], [2e-6, 5e-5, 9e-4]])
+    index = sm.current_indices(names)
+    assert index == [1, 2, -1]
+    lin, c36 = sm.current_twist_fields(est, cov, index, 'ned')
+    assert list(lin) == [0.3, -0.2, 0.0] and c36.shape == (36,)
+    c = c36.reshape(6, 6)
+    assert np.array_equal(c[:2, :2], cov[1:, 1:]) and not c[2:].any() and not c[:, 2:].any()
+    lin, c36 = sm.current_twist_fields(est, cov, index, 'enu')
+    assert list(lin) == [-0.2, 0.3, -0.0]
+    c = c36.reshape(6, 6)
+    assert c[0, 0] == 9e-4 and c[1, 1] == 4e-4 and c[0, 1] == c[1, 0] == 5e-5
+    assert not c[2:].any() and not c[:, 2:].any()
+    # with the down component: the map of a position (odometry_fields)
+    down = np.array([0.3, -0.2, 0.05])
+    lin, _ = sm.current_twist_fields(down, np.eye(3), [0, 1, 2], 'enu')
+    x12 = np.zeros(12)
+    x12[6:9] = down
+    assert np.array_equal(lin, sm.odometry_fields(x12, 'enu')[0])
+    with pytest.raises(ConversionError, match='frame'):
+        sm.current_twist_fields(est, cov, index, 'nwu')
+
+
 # --- JointState -------------------------------------------------------------------------------
 
 
 def test_joint_state_layout_and_round_trip():
-    u6 = np.array([0.1, -0.2, 0.05, -0.03, 0.04, 1200.0, 41.25])
-    msg = rc.actuators_to_joint_state(3.25, u6)
+    u7 = np.array([0.1, -0.2, 0.05, -0.03, 0.04, 1200.0, 41.25])
+    msg = rc.actuators_to_joint_state(3.25, u7)
     assert list(msg.name) == ['rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
                               'bow_plane_starboard', 'propeller']
     assert list(msg.position) == [0.1, -0.2, 0.05, -0.03, 0.04, 0.0]
@@ -301,7 +329,7 @@ def test_joint_state_layout_and_round_trip():
     assert list(msg.effort) == [0.0] * 5 + [41.25]
     t, u2 = sm.joint_state_to_actuators(msg)
     assert t == 3.25
-    np.testing.assert_allclose(u2, u6, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(u2, u7, rtol=1e-14, atol=0)
 
 
 def test_joint_state_matches_by_name_in_any_order():
@@ -340,7 +368,7 @@ def test_joint_state_errors():
                               effort=[0.0] * 5)
     with pytest.raises(ConversionError, match='effort'):
         sm.joint_state_to_actuators(short_effort)
-    with pytest.raises(ConversionError, match='u6'):
+    with pytest.raises(ConversionError, match='u7'):
         rc.actuators_to_joint_state(0.0, np.zeros(6))
     with pytest.raises(ConversionError, match='JointState'):
         sm.joint_state_to_actuators(rc.state_to_odometry(0.0, np.zeros(12)))

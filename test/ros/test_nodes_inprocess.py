@@ -46,6 +46,7 @@ from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.ros.simulator_node import SimulatorNode
 from auv_ident.session.messages import stamp_to_ns
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 CONFIG = os.path.join(REPO, 'config')
@@ -344,10 +345,10 @@ def test_identifier_reads_odometry_bytes_as_the_messages(ctx, nodes, run):
             assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
                                                             expected.reason)
             assert np.array_equal(got.estimate, expected.estimate)
-    assert ident.session.odom_accepted == 60
+    assert ident.session.counters.odom_accepted == 60
     ev = ident.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
     assert ev.kind == 'rejected' and ev.code == 'conversion' and 'Undecodable' in ev.reason
-    assert ident.session.odom_rejected == 1 and ident.internal_errors == 0
+    assert ident.session.counters.odom_rejected == 1 and ident.internal_errors == 0
 
 
 def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypatch):
@@ -381,7 +382,7 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
     # a wrong message type on the odometry callback
     ev = ident.on_odom(JointState())
     assert ev.kind == 'rejected'
-    assert ident.session.odom_rejected == 4 and ident.session.cmd_rejected == 2
+    assert ident.session.counters.odom_rejected == 4 and ident.session.counters.cmd_rejected == 2
     assert ident.session.last_good is good
 
     # a core error: logged, ERROR on /diagnostics, filter restarted, last good kept
@@ -393,12 +394,12 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
     st = ident.diagnostic_status()
     assert st.level == DiagnosticStatus.ERROR and st.message == 'diverging'
     assert ident.session.last_good is good and not ident.session.started
-    est, _ = ident.session.current()
+    est, _ = ident.session.estimate_now()
     assert np.array_equal(est, good.estimate)
     # the restarted filter takes data again (buffered commands kept)
     events = _feed(ident, messages[3 * 41:3 * 60])
     assert events and all(e.kind == 'update' for e in events)
-    assert ident.session.errors == 1
+    assert ident.session.counters.errors == 1
     assert ident.diagnostic_status().level == DiagnosticStatus.ERROR   # until 200 updates
 
 
@@ -458,7 +459,7 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     nodes.append(warm)
     p = warm.session.model.p_coef    # the coefficients; the current starts afresh
     assert np.array_equal(warm.session.theta0[:p], doc['estimate'][:p])
-    est, cov = warm.session.current()
+    est, cov = warm.session.estimate_now()
     assert np.allclose(cov[:p, :p], np.asarray(doc['covariance'])[:p, :p])
     ev = _feed(warm, _ordered_messages(run)[:6])[-1]
     assert ev.kind == 'update'
@@ -479,7 +480,7 @@ def test_replay_bag_reads_metadata_and_names_a_missing_topic(run, tmp_path):
     assert res.frame == 'enu' and res.vehicle == 'nps_auv2'
     # the same run in NED, fed in the bag's order with the bag's stamps (the bag's epoch:
     # float-second stamps at 2024 carry ~1e-7 s rounding, which moves estimates by ~1e-4)
-    s = IdentSession(frame='ned')
+    s = IdentSession(IdentifierSettings.from_values(frame='ned'))
     ups = replay_messages([m for k in range(len(run.t)) for m in bag_sample_messages(run, k)], s)
     assert res.accepted == len(ups) == len(run.t) and res.rejected == 0
     assert np.allclose(res.estimate, ups[-1][1], rtol=1e-9, atol=0)

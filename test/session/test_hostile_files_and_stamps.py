@@ -87,5 +87,5 @@ def test_the_session_rejects_messages_with_an_invalid_stamp():
     odom.twist.twist.linear.x = 1.5
     ev = s.on_odom(odom)
     assert ev.kind == 'rejected' and ev.code == 'conversion' and 'nanosec' in ev.reason
-    assert s.reasons['odom: conversion'] == 1
+    assert s.counters.reasons['odom: conversion'] == 1
     assert np.isfinite(s.theta0).all()

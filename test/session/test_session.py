@@ -24,6 +24,7 @@ from auv_ident.session.guard import (
     NIS_WINDOW,
     NisWindow,
 )
+from auv_ident.session.guarded_filter import GuardedFilter
 from auv_ident.session.messages import (
     ConversionError,
     joint_state_to_actuators,
@@ -32,7 +33,14 @@ from auv_ident.session.messages import (
     stamp_to_ns,
 )
 from auv_ident.session.session import IdentSession
-from auv_ident.session.settings import FRAMES, MASS_INVERSES, NOISE_MODES, ParameterError
+from auv_ident.session.settings import (
+    FRAMES,
+    IdentifierSettings,
+    MASS_INVERSES,
+    NOISE_MODES,
+    ParameterError,
+)
+from auv_ident.session.status import diagnostic_values
 from auv_ident.vehicles import load_vehicle
 
 T = 0.05
@@ -103,14 +111,14 @@ def test_array_api_gives_the_events_of_the_message_api(run, case):
     a = _feed_messages(by_message, messages)
     b = _feed_arrays(by_array, messages)
     _assert_same_events(a, b)
-    assert by_message.reasons == by_array.reasons
+    assert by_message.counters.reasons == by_array.counters.reasons
     if case == 'clean':
-        assert not by_message.reasons and all(e.accepted for e in a)
+        assert not by_message.counters.reasons and all(e.accepted for e in a)
     else:
         assert {'odom: non-finite', 'odom: implausible', 'odom: wrong frame',
                 'actuators: implausible', 'odom: duplicate stamp',
-                'odom: outlier'} <= set(by_message.reasons)
-        assert by_message.guard_resets >= 1
+                'odom: outlier'} <= set(by_message.counters.reasons)
+        assert by_message.counters.guard_resets >= 1
     assert by_message.document() == by_array.document()
     h1, h2 = by_message.health(), by_array.health()
     assert (h1.level, h1.message, h1.window) == (h2.level, h2.message, h2.window)
@@ -120,8 +128,8 @@ def test_array_api_takes_ned_arrays_whatever_the_frame_setting(run):
     """An 'enu' session reads ENU/FLU messages; its array API takes the NED/FRD state that
     odometry_to_state(msg, 'enu') returns, and gives the same events."""
     messages = _messages(run, 'enu')
-    a = _feed_messages(IdentSession(frame='enu'), messages)
-    b = _feed_arrays(IdentSession(frame='enu'), messages, 'enu')
+    a = _feed_messages(IdentSession(IdentifierSettings.from_values(frame='enu')), messages)
+    b = _feed_arrays(IdentSession(IdentifierSettings.from_values(frame='enu')), messages, 'enu')
     _assert_same_events(a, b)
     assert all(e.accepted for e in a)
 
@@ -135,8 +143,8 @@ def test_array_api_rejects_unreadable_arrays_by_name(run):
     assert ev.code == 'conversion' and 'x12 must have shape (12,)' in ev.reason
     assert ev.stamp_ns == 10
     ev = s.add_command(np.int64(10), ['a'] * 6)
-    assert ev.code == 'conversion' and 'u6 is not numeric' in ev.reason
-    assert s.reasons == {'odom: conversion': 2, 'actuators: conversion': 1}
+    assert ev.code == 'conversion' and 'u7 is not numeric' in ev.reason
+    assert s.counters.reasons == {'odom: conversion': 2, 'actuators: conversion': 1}
     # numpy integer stamps and plain lists are taken
     assert s.add_command(np.int64(0), list(run.u[0])).kind == 'command'
     assert s.add_odometry(np.int64(0), list(run.y[0])).kind == 'update'
@@ -308,6 +316,47 @@ def test_nis_band_brackets_one_and_narrows_with_dof():
     assert lo1 < lo2 < 1.0 < hi2 < hi1
 
 
+# --- the parts: one filter's update rule, the status ---------------------------------------
+
+
+def test_the_session_updates_through_one_guarded_filter(run):
+    """The session's per-odometry update is GuardedFilter.update (the rule the 'auto'
+    choice's chosen filter follows too): a GuardedFilter of its own, fed the same samples
+    after the session's screening, gives the same updates, last good estimate and windows."""
+    s = IdentSession()
+    g = GuardedFilter(s._new_stream(), s.guard_on)
+    for k in range(120):
+        stamp_ns = round(run.t[k] * 1e9)
+        t = stamp_ns / 1e9                      # the session's time line: origin 0
+        s.add_command(stamp_ns, run.u[k])
+        g.stream.add_command(t, run.u[k].copy())
+        ev = s.add_odometry(stamp_ns, run.y[k])
+        step = g.update(t, stamp_ns, run.y[k].copy())
+        assert (ev.kind == 'update') == step.accepted and ev.good == step.good, k
+        assert np.array_equal(ev.estimate, step.estimate) and ev.nis == step.nis, k
+    assert s.filter is not g and np.array_equal(s.last_good.cov, g.last_good.cov)
+    assert s.filter.mean_nis_per_dof() == g.mean_nis_per_dof()
+    assert s.filter.guard_median() == g.guard_median()
+
+
+def test_status_values_are_the_diagnostics_without_ros(run):
+    s = IdentSession()
+    _feed_messages(s, _corrupted(run))
+    h = s.health()
+    values = diagnostic_values(s, h, [('internal_errors', '0')])
+    keys = [k for k, _ in values]
+    assert keys[:10] == ['accepted', 'rejected', 'commands', 'commands_rejected', 'errors',
+                         'guard_resets', 'outliers', 'repairs', 'time_jumps', 'internal_errors']
+    kv = dict(values)
+    c = s.counters
+    assert kv['accepted'] == str(c.odom_accepted) and kv['errors'] == str(c.errors) != '0'
+    assert kv['rejected'] == str(sum(n for key, n in c.reasons.items()
+                                     if key.startswith('odom: ')))
+    assert kv['last_error'] == c.last_error and kv['nis_window'] == str(h.window)
+    assert kv['Z_ds'] == repr(float(s.best()[0][s.names.index('Z_ds')]))
+    assert {'R_u', 'R_psi', 'Q_Z_ds', 'Z_ds_std', 'Z_ds_verdict', 'diagnosis'} <= set(kv)
+
+
 # --- parameters -------------------------------------------------------------------------------
 
 
@@ -315,13 +364,13 @@ def test_choice_lists_are_defined_once():
     """The session's choice lists are the core's, and every choice takes effect."""
     assert NOISE_MODES == tuple(MODES)
     for mode in NOISE_MODES:
-        assert IdentSession(noise_mode=mode).cfg.mode == mode
+        assert IdentSession(IdentifierSettings.from_values(noise_mode=mode)).cfg.mode == mode
     for frame in FRAMES:
-        assert IdentSession(frame=frame).frame == frame
+        assert IdentSession(IdentifierSettings.from_values(frame=frame)).frame == frame
     file_choice = load_vehicle('nps_auv2').mass_inverse     # what 'default' means for it
     assert file_choice in MASS_INVERSES and file_choice != 'default'
     for mi in MASS_INVERSES:
-        model = IdentSession(mass_inverse=mi).model
+        model = IdentSession(IdentifierSettings.from_values(mass_inverse=mi)).model
         assert model.mass_inverse == (file_choice if mi == 'default' else mi)
         assert model.mass_inverse == Model(load_vehicle('nps_auv2'), mass_inverse=mi).mass_inverse
 
@@ -361,26 +410,26 @@ BAD_SETTINGS = [
                          ids=[f'{n}={v!r}'[:40] for n, v, _ in BAD_SETTINGS])
 def test_bad_setting_is_a_parameter_error_naming_it(name, value, needle):
     with pytest.raises(ParameterError) as info:
-        IdentSession(**{name: value})
+        IdentSession(IdentifierSettings(**{name: value}))
     assert info.value.name == name
     assert str(info.value).startswith(f'parameter {name!r}: ') and needle in str(info.value)
 
 
 def test_current_down_without_estimating_the_current_is_a_parameter_error():
     with pytest.raises(ParameterError, match="parameter 'current_down': current-down needs"):
-        IdentSession(current='none', current_down=True)
+        IdentSession(IdentifierSettings.from_values(current='none', current_down=True))
 
 
 def test_current_settings_reach_the_model_and_the_names():
-    s = IdentSession(current='estimate', current_down=True, velocity_reference='water',
-                     current_walk=1e-3)
+    s = IdentSession(IdentifierSettings.from_values(current='estimate', current_down=True,
+                                                    velocity_reference='water', current_walk=1e-3))
     assert s.names[-3:] == ['current_n', 'current_e', 'current_d']
     assert s.model.velocity_reference == 'water' and s.model.p_coef == len(s.names) - 3
     assert s.stream.ekf.Q0[-1, -1] == pytest.approx(1e-6 * s.T)
-    given = IdentSession(current='0.1, -0.2')
+    given = IdentSession(IdentifierSettings.from_values(current='0.1, -0.2'))
     assert given.names == given.coefficient_names and list(given.model.current) == [0.1, -0.2,
                                                                                     0.0]
-    assert IdentSession(current='none').model.current_mode == 0
+    assert IdentSession(IdentifierSettings.from_values(current='none')).model.current_mode == 0
 
 
 def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
@@ -390,11 +439,11 @@ def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
     doc = s.document()
     doc['estimate'][-2:] = [0.3, -0.2]        # a current in the file
     write_estimate_json(tmp_path / 'est.json', doc)
-    warm = IdentSession(warm_start=str(tmp_path / 'est.json'))
+    warm = IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'est.json')))
     assert warm.names == s.names
     assert np.array_equal(warm.theta0[:-2], doc['estimate'][:-2])
     assert list(warm.theta0[-2:]) == [0.0, 0.0]
-    assert np.allclose(warm.current()[1][-2:, -2:], np.eye(2) * 0.5 ** 2)
+    assert np.allclose(warm.estimate_now()[1][-2:, -2:], np.eye(2) * 0.5 ** 2)
 
 
 def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
@@ -402,11 +451,14 @@ def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
     doc = IdentSession().document()
     write_estimate_json(tmp_path / 'est.json', doc)
     with pytest.raises(ParameterError, match="parameter 'initial': give either"):
-        IdentSession(warm_start=str(tmp_path / 'est.json'), initial=[1.0] * 5)
+        IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'est.json'),
+                                                    initial=[1.0] * 5))
     with pytest.raises(ParameterError, match="parameter 'warm_start': .* for vehicle"):
-        IdentSession(vehicle='remus100', warm_start=str(tmp_path / 'est.json'))
+        IdentSession(IdentifierSettings.from_values(vehicle='remus100',
+                                                    warm_start=str(tmp_path / 'est.json')))
     with pytest.raises(ParameterError, match="parameter 'warm_start': .* holds"):
-        IdentSession(coefficients=['Z_w'], warm_start=str(tmp_path / 'est.json'))
+        IdentSession(IdentifierSettings.from_values(coefficients=['Z_w'],
+                                                    warm_start=str(tmp_path / 'est.json')))
 
 
 def test_a_planar_vehicle_neither_reads_nor_screens_its_held_states():
@@ -414,7 +466,8 @@ def test_a_planar_vehicle_neither_reads_nor_screens_its_held_states():
     heave, a measured roll): the session reads u v r x y psi and leaves the rest held."""
     v = load_vehicle('kvlcc2_hsva')
     run = simulate(Model(v), 'zigzag', duration=10.0, T=0.1, seed=1)
-    s = IdentSession(vehicle='kvlcc2_hsva', coefficients=['N_r'], sample_time=0.1)
+    s = IdentSession(IdentifierSettings.from_values(vehicle='kvlcc2_hsva', coefficients=['N_r'],
+                                                    sample_time=0.1))
     assert list(np.flatnonzero(s.measured)) == [State.U, State.V, State.R, State.X, State.Y,
                                                 State.PSI]
     held = [State.W, State.P, State.Q, State.Z, State.PHI, State.THETA]

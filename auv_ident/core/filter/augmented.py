@@ -103,9 +103,24 @@ class FilterConfig:
     current_walk: float = 0.0
 
     def validate(self, p):
+        """ConfigError / DimensionError naming the first bad field, for a filter of p
+        coefficients."""
         if self.mode not in K.MODES:
             raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
                               + ', '.join(K.MODES))
+        self._validate_state_noise()
+        _positive(self, ('p0_rel', 'tau', 'lam', 'r_bound'), '')
+        if not np.isfinite(self.q_theta_rel) or self.q_theta_rel < 0:
+            raise ConfigError(f'q_theta_rel = {self.q_theta_rel!r} must be >= 0')
+        if self.initial is not None and np.asarray(self.initial).shape != (p,):
+            raise DimensionError(f'initial guesses: expected {p} values, got '
+                                 f'{np.asarray(self.initial).shape}')
+        if self.theta_cov0 is not None:
+            check_theta_cov(self.theta_cov0, p)
+        self._validate_current()
+
+    def _validate_state_noise(self):
+        """The vehicle states' process and measurement noise and the measured channels."""
         for name, arr, shape in (('q_state', self.q_state, (N_STATE,)),
                                  ('noise_std', self.noise_std, (N_STATE,)),
                                  ('measured', self.measured, (N_STATE,))):
@@ -119,21 +134,10 @@ class FilterConfig:
         m = np.asarray(self.measured, dtype=bool)
         if np.any(np.asarray(self.noise_std)[m] <= 0):
             raise ConfigError('noise_std must be positive on every measured channel')
-        for name in ('p0_rel', 'tau', 'lam', 'r_bound'):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
-                raise ConfigError(f'{name} = {v!r} must be a positive number')
-        if not np.isfinite(self.q_theta_rel) or self.q_theta_rel < 0:
-            raise ConfigError(f'q_theta_rel = {self.q_theta_rel!r} must be >= 0')
-        if self.initial is not None and np.asarray(self.initial).shape != (p,):
-            raise DimensionError(f'initial guesses: expected {p} values, got '
-                                 f'{np.asarray(self.initial).shape}')
-        if self.theta_cov0 is not None:
-            check_theta_cov(self.theta_cov0, p)
-        for name in ('current_sd0', 'current_down_sd0'):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
-                raise ConfigError(f'{name} = {v!r} m/s must be a positive number')
+
+    def _validate_current(self):
+        """The water current's prior and random walk."""
+        _positive(self, ('current_sd0', 'current_down_sd0'), ' m/s')
         if not np.isfinite(self.current_walk) or self.current_walk < 0:
             raise ConfigError(f'current_walk = {self.current_walk!r} m/s/sqrt(s) must be >= 0')
         if self.current_initial is not None:
@@ -141,6 +145,14 @@ class FilterConfig:
             if c.shape != (N_CURRENT,) or not np.all(np.isfinite(c)):
                 raise ConfigError(f'current_initial must be 3 finite numbers (north, east, down '
                                   f'm/s), got {self.current_initial!r}')
+
+
+def _positive(config, names, unit):
+    """ConfigError unless each field `names` of `config` is a positive finite number."""
+    for name in names:
+        v = getattr(config, name)
+        if not np.isfinite(v) or v <= 0:
+            raise ConfigError(f'{name} = {v!r}{unit} must be a positive number')
 
 
 def check_theta_cov(C, p):
@@ -470,9 +482,9 @@ def repair_covariance(P, ref_std, floor=COV_REPAIR_FLOOR):
             raise DivergenceError('covariance overflows its reference scale: cannot be repaired')
         try:
             lam, V = np.linalg.eigh(C)
-        except np.linalg.LinAlgError:
+        except np.linalg.LinAlgError as err:
             raise DivergenceError('covariance eigen-decomposition failed: cannot be '
-                                  'repaired') from None
+                                  'repaired') from err
         fixed = (V * np.maximum(lam, floor)) @ V.T
         fixed = 0.5 * (fixed + fixed.T) * np.outer(d, d)
     if not np.all(np.isfinite(fixed)):

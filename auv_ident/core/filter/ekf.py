@@ -33,9 +33,10 @@ Noise adaptation (`mode`), gamma = 1 - exp(-T/tau) (Eq. 20, "t" read as the samp
 from collections import namedtuple
 import math
 
-from numba import njit, uint64
+from numba import uint64
 import numpy as np
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.model.hydrodynamics import (
     CURRENT_GROUND,
     kernel,
@@ -97,7 +98,7 @@ def new_outputs(n, N, hist_every=0, want_white=False):
 Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new Fa M O idx kpg')
 
 
-@njit(cache=True)
+@cached_njit()
 def new_workspace(n, n_coef):
     """Workspace for an augmented state of size n and a vehicle with n_coef coefficients (the
     coefficient arrays hold the water current after them; a caller may pass n_coef + 3)."""
@@ -111,7 +112,7 @@ def new_workspace(n, n_coef):
                      np.empty(N_STATE, dtype=np.int64), np.empty((3, n)))
 
 
-@njit(cache=True)
+@cached_njit()
 def rk4_jacobian_step(xa, ui, cm, T, want_jac, xa_next, Fa):
     """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
     ws = new_workspace(xa.shape[0], cm.c0.shape[0])
@@ -251,7 +252,7 @@ def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):  # noqa: C901
     return OK
 
 
-@njit(cache=True)
+@cached_njit()
 def propagate_covariance(Fa, P, Q, P_out, M, O):
     """P_out = Fa P Fa^T + Q, symmetric, for Fa = [[Phi, Psi], [0, I]] (parameters constant).
 
@@ -286,7 +287,7 @@ def wrap(a):
 
 # predict, update and adapt are inlined into run_filter (inline='always'): a call from compiled
 # code costs numba two reference-count operations per array argument, some 50 arrays a step.
-@njit(cache=True, inline='always')
+@cached_njit(inline='always')
 def predict(xa, P, ui, Q, cm, T, xa_out, P_out, ws):
     """Time update (Eqs. 9-10) over T seconds with the inputs ui held; ws.Fa holds the
     transition Jacobian afterwards. Returns a status code."""
@@ -357,7 +358,7 @@ def _update_sequential(xa, P, y, R, idx, m, xa_out, P_out, innov, S_diag, white,
     return _finish_update(xa_out, P_out, nis, m)
 
 
-@njit(cache=True, inline='always')
+@cached_njit(inline='always')
 def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):  # noqa: C901
     """Measurement update (Eqs. 11-13), Joseph form.
 
@@ -490,7 +491,7 @@ def update(xa, P, y, measured, R, xa_out, P_out, innov, S_diag, white, ws):  # n
     return _finish_update(xa_out, P_out, nis, m)
 
 
-@njit(cache=True, inline='always')
+@cached_njit(inline='always')
 def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_diag, P_prior,
           Q, R, Q0, R0):
     """Adapt Q and R in place after an update (see the module docstring for each mode)."""
@@ -528,7 +529,7 @@ def adapt(mode, gamma, lam, T, r_bound, q_floor, theta_prev, xa_post, innov, S_d
             Q[N_STATE + i, N_STATE + i] = min(max(q, q_floor * q0), q0)
 
 
-@njit(cache=True, inline='always')
+@cached_njit(inline='always')
 def restart_states(xa, P, x0, sd0):
     """Restart the vehicle states in place: xa[:12] = x0 (12,), their covariance diag(sd0^2)
     (sd0 (12,), 1-sigma) uncorrelated with the coefficients, whose estimate and covariance
@@ -544,7 +545,7 @@ def restart_states(xa, P, x0, sd0):
 
 
 # nogil: the finite differences of batch.py run one filter per thread
-@njit(cache=True, nogil=True)
+@cached_njit(nogil=True)
 def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):  # noqa: C901
     """Run the filter over samples k = 0..N-1: update with Y[0], then for each k > 0 cross the
     interval as `timeline` says (time updates with U[k-1] held, or a restart of the vehicle

@@ -5,15 +5,15 @@ unscented filter (ukf.py) and the shooting segments of the output error (output_
 Kept apart from those modules so that the numba cache's group of compiled sources
 (core/__init__.py COMPILED_SOURCES) holds only this file and what it imports.
 """
-from numba import njit
 import numpy as np
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.filter import ekf as K
 from auv_ident.core.model.hydrodynamics import OK
 from auv_ident.core.model.state import N_STATE
 
 
-@njit(cache=True)
+@cached_njit()
 def propagate_sigma_points(X, ui, cm, h, X_out, ws):
     """X_out[i] = one RK4 step of h seconds of sigma point X[i] ((2n+1, n) rows, augmented
     states) with the inputs ui held; cm the model's CompiledModel, ws its ekf.Workspace.
@@ -25,7 +25,7 @@ def propagate_sigma_points(X, ui, cm, h, X_out, ws):
     return OK
 
 
-@njit(cache=True)
+@cached_njit()
 def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
     """Free run of each segment: X[k] (12,) the model's state at sample k. Segment s starts at
     the first sample k with seg[k] = s, from X0[s] (12,); seg[k] = -1 before the first start.

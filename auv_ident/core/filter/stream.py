@@ -117,7 +117,7 @@ class StreamIdentifier:
         self.cmd_t = []
         self.cmd_u = []
         self.cmd_latest = None      # largest command stamp seen
-        self.cmd_jump = deque(maxlen=CMD_BUFFER_MAX)   # (t, u6) held for a backward jump
+        self.cmd_jump = deque(maxlen=CMD_BUFFER_MAX)   # (t, u7) held for a backward jump
         self.cmd_bad = []           # sorted stamps of recently rejected commands
         self.t_prev = None
         self.accepted = 0
@@ -129,23 +129,24 @@ class StreamIdentifier:
 
     # -- commands --
 
-    def add_command(self, t, u6):
-        """Buffer an actuator command (fins rad, shaft rpm) stamped t. Returns an Outcome."""
-        u6 = np.asarray(u6, dtype=float)
+    def add_command(self, t, u7):
+        """Buffer an actuator command u7 (7,: fins rad, shaft rpm, thrust N) stamped t.
+        Returns an Outcome."""
+        u7 = np.asarray(u7, dtype=float)
         if t == 0.0 and self.cmd_latest is not None and self.cmd_latest > 0.0:
             return Outcome(False, f'zero stamp after {self.cmd_latest:.9f} s (header.stamp not '
                                   'set?)', 'zero stamp')
         self.cmd_latest = t if self.cmd_latest is None else max(self.cmd_latest, t)
         if self.t_prev is not None and t < self.t_prev - self.max_gap:
-            self.cmd_jump.append((t, u6))
+            self.cmd_jump.append((t, u7))
             return Outcome(True, f'stamp {t:.9f} s more than max_gap before the odometry '
                                  f'({self.t_prev:.9f} s): held for a time jump', 'held')
         i = bisect.bisect_right(self.cmd_t, t)
         if i > 0 and self.cmd_t[i - 1] == t:
-            self.cmd_u[i - 1] = u6          # same stamp: the later message wins
+            self.cmd_u[i - 1] = u7          # same stamp: the later message wins
             return Outcome(True)
         self.cmd_t.insert(i, t)
-        self.cmd_u.insert(i, u6)
+        self.cmd_u.insert(i, u7)
         # keep a short history: only commands at or after t_prev can still be used
         if self.t_prev is not None and len(self.cmd_t) > _PRUNE_AT:
             j = bisect.bisect_right(self.cmd_t, self.t_prev) - 1

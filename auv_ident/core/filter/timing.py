@@ -20,22 +20,22 @@ same stamps give the same filter either way:
 """
 import math
 
-from numba import njit
 import numpy as np
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import DataError
 
 DEFAULT_MAX_BRIDGE = 0.25   # s, longest interval crossed by time updates (longer: restart)
 NS = 1e9                    # stamps' resolution: 1 / NS s
 
 
-@njit(cache=True)
+@cached_njit()
 def interval(t_prev, t):
     """t - t_prev (s) rounded to the stamps' resolution (1 ns)."""
     return np.rint((t - t_prev) * NS) / NS
 
 
-@njit(cache=True)
+@cached_njit()
 def time_step(dt, max_step, max_bridge):
     """(n, h): the time update over dt (s) is n RK4 steps of h = dt / n (s), each at most
     max_step; n = 0 (h = dt) when dt > max_bridge, the vehicle states restart instead."""
@@ -45,7 +45,7 @@ def time_step(dt, max_step, max_bridge):
     return n, dt / n
 
 
-@njit(cache=True)
+@cached_njit()
 def time_steps(t, max_step, max_bridge):
     """(n (N,) int, h (N,)): time_step of every interval of the stamps t (N,) (s); entry k
     crosses [t_{k-1}, t_k] (entry 0, before the first sample, is n = 0, h = 0)."""

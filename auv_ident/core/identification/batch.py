@@ -25,7 +25,6 @@ the rules of timing.py (RK4 steps of at most max_step with the command held, a r
 vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
 """
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 import inspect
 import os
 import threading
@@ -43,41 +42,15 @@ from auv_ident.core.filter.timing import (
     nominal_sample_time,
     time_steps,
 )
-from auv_ident.core.model.current import split_current
+from auv_ident.core.identification.results import (
+    Estimate,
+    FilterPass,
+    Identification,
+    Record,
+    Refinement,
+)
 from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
-from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
-
-
-@dataclass
-class Result:
-    """Outcome of identify(): final estimates with 1-sigma and covariance."""
-
-    names: list
-    estimate: np.ndarray
-    std: np.ndarray
-    cov: np.ndarray
-    ekf_estimate: np.ndarray
-    ekf_std: np.ndarray
-    initial: np.ndarray
-    truth: object          # array or None
-    steps: int
-    wall_s: float
-    mean_nis_per_dof: float
-    refined: bool
-    history: dict = field(default_factory=dict)
-    R_final: object = None
-    Q_final: object = None
-    current: object = None   # core.model.current.CurrentEstimate, or None (still water, not asked)
-    # set by analysis.identification.identify_with_diagnosis (None from identify() alone):
-    noise_model: dict = None      # core.identification.noise_fit.NoiseFit.document()
-    identifiability: dict = None  # per coefficient verdicts (core/identification/diagnosis.py)
-    diagnosis: dict = None        # {'consistent', 'messages', 'checks'}
-
-    def error_pct(self, which='estimate'):
-        if self.truth is None:
-            return None
-        est = getattr(self, which)
-        return 100.0 * (est - self.truth) / np.abs(self.truth)
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE
 
 
 def _record(t, Y, U):
@@ -90,6 +63,13 @@ def _record(t, Y, U):
         raise DimensionError(f'Y must be (N, 12) and U (N, {N_INPUT}) with N >= 1; got '
                              f'{Y.shape} and {U.shape}')
     return check_times(t, Y.shape[0]), Y, U
+
+
+def _records(runs):
+    """The runs (Records) with their arrays contiguous and checked (_record); at least one."""
+    if not runs:
+        raise DimensionError('identification needs at least one run')
+    return [Record(*_record(r.t, r.Y, r.U)) for r in runs]
 
 
 def _timeline(f, t, Y, U, max_step, max_bridge):
@@ -110,26 +90,9 @@ def _timeline(f, t, Y, U, max_step, max_bridge):
     return K.Timeline(n_sub, h, x0, sd0)
 
 
-def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
-            max_bridge=DEFAULT_MAX_BRIDGE):
-    """Run the AugmentedEKF `f` over a record with the compiled loop, started from Y[0].
-
-    Parameters
-    ----------
-    f : AugmentedEKF (its state is replaced by the result)
-    t : (N,) sample times (s), strictly increasing; jitter, dropouts and gaps allowed
-    Y : (N, 12) measurements (NaN: missing)
-    U : (N, 7) inputs, U[k] the command in force over [t_k, t_k+1) (zero-order hold)
-    hist_every : record histories every this many samples (0: none)
-    want_white : return the whitened innovations (N, 12)
-    max_step : s, longest RK4 step of a time update (None: the filter's sample time f.T)
-    max_bridge : s, a longer interval restarts the vehicle states (timing.py)
-
-    Returns (stats, histories, whitened innovations); the histories' 't' is the time of each
-    recorded sample since the first (s). Raises DomainError/DivergenceError naming the
-    sample.
-    """
-    t, Y, U = _record(t, Y, U)
+def _run_one(f, t, Y, U, hist_every, want_white, max_step, max_bridge):
+    """The compiled loop over one checked record from Y[0]: (stats, histories, whitened
+    innovations); the filter's state is replaced by the result."""
     N = Y.shape[0]
     m = f.model
     timeline = _timeline(f, t, Y, U, max_step, max_bridge)
@@ -153,26 +116,46 @@ def run_ekf(f, t, Y, U, hist_every=0, want_white=False, max_step=None,
     return stats, hist, out.white
 
 
-def run_ekf_runs(f, runs, hist_every=0, want_white=False, max_step=None,
-                 max_bridge=DEFAULT_MAX_BRIDGE):
-    """run_ekf over several runs in turn: each run starts its vehicle states from its own first
-    measurement, the coefficients (and any identified current) from where the previous run
-    left them, with their covariance (AugmentedEKF.set_prior). runs: list of (t, Y, U).
+def run_ekf(f, runs, hist_every=0, want_white=False, max_step=None,
+            max_bridge=DEFAULT_MAX_BRIDGE):
+    """Run the AugmentedEKF `f` over one run or several in turn with the compiled loop.
 
-    Returns (stats (5,) summed over the runs (stats[0] the last status), the last run's
-    histories, the list of each run's whitened innovations (N_i, 12) (None each without
-    want_white))."""
+    Each run starts its vehicle states from its own first measurement, the coefficients (and
+    any identified current) from where the previous run left them, with their covariance
+    (AugmentedEKF.set_prior).
+
+    Parameters
+    ----------
+    f : AugmentedEKF (its state is replaced by the result)
+    runs : list of Record (t strictly increasing; jitter, dropouts and gaps allowed; Y NaN:
+        missing; U[k] the command in force over [t_k, t_k+1), zero-order hold)
+    hist_every : record histories every this many samples (0: none)
+    want_white : keep each run's whitened innovations (N_i, 12) (FilterPass.whites)
+    max_step : s, longest RK4 step of a time update (None: the filter's sample time f.T)
+    max_bridge : s, a longer interval restarts the vehicle states (timing.py)
+
+    Returns a FilterPass: stats (5,) summed over the runs (stats[0] the last status), the last
+    run's histories (their 't' the time of each recorded sample since that run's first, s),
+    theta0 the first run's start. Raises DomainError/DivergenceError naming the sample.
+    """
+    runs = _records(runs)
+    theta0 = f.theta0.copy()
     total = np.zeros(5)
     whites = []
-    for i, (t, Y, U) in enumerate(runs):
+    hist = {}
+    for i, r in enumerate(runs):
         if i > 0:       # carry the coefficients' estimate and covariance into the next run
             f.set_prior(f.theta, f.theta_cov)
-        stats, hist, white = run_ekf(f, t, Y, U, hist_every=hist_every, want_white=want_white,
-                                     max_step=max_step, max_bridge=max_bridge)
+        stats, hist, white = _run_one(f, r.t, r.Y, r.U, hist_every, want_white, max_step,
+                                      max_bridge)
         total[1:] += stats[1:]
         total[0] = stats[0]
-        whites.append(white.copy() if want_white else None)
-    return total, hist, whites
+        if want_white:
+            whites.append(white.copy())
+    return FilterPass(stats=total, history=hist, R=f.R.copy(), Q=f.Q.copy(), theta0=theta0,
+                      theta=f.theta.copy(), theta_cov=f.theta_cov.copy(),
+                      mean_nis_per_dof=float(total[2] / max(1.0, total[3])),
+                      steps=int(total[1]), whites=whites)
 
 
 class FilterErrorResiduals:
@@ -185,17 +168,17 @@ class FilterErrorResiduals:
     with respect to every candidate coefficient.
 
     model : Model whose theta are the parameters; cfg : FilterConfig (its noise, q_state and
-    measured channels are used); runs : a list of (t, Y, U) records (as for run_ekf); T (s) the
+    measured channels are used); runs : a list of Record (as for run_ekf); T (s) the
     nominal sample time (None: the first run's median interval); max_step, max_bridge as for
     run_ekf.
     """
 
     def __init__(self, model, cfg, runs, T=None, max_step=None,
                  max_bridge=DEFAULT_MAX_BRIDGE):
-        runs = [_record(*r) for r in runs]
         if not runs:
             raise DimensionError('the filter-error residuals need at least one run')
-        T = nominal_sample_time(runs[0][0]) if T is None else T
+        runs = _records(runs)
+        T = nominal_sample_time(runs[0].t) if T is None else T
         self.model = model
         fixed_cfg = FilterConfig(coefficients=[], initial=None, q_state=cfg.q_state,
                                  noise_std=cfg.noise_std, measured=cfg.measured, mode='fixed')
@@ -206,11 +189,11 @@ class FilterErrorResiduals:
         self.settings = f.settings()
         # per run: (Y, U, timeline, x0, P0)
         self.legs = []
-        for t, Y, U in runs:
-            timeline = _timeline(f, t, Y, U, max_step, max_bridge)
-            x0, P0 = f.initial_estimate(Y[0], U[0, Input.N_RPM])
-            self.legs.append((Y, U, timeline, x0, P0))
-        self.bounds = np.cumsum([0] + [r[1].shape[0] for r in runs])
+        for r in runs:
+            timeline = _timeline(f, r.t, r.Y, r.U, max_step, max_bridge)
+            x0, P0 = f.initial_estimate(r.Y[0], r.U[0, Input.N_RPM])
+            self.legs.append((r.Y, r.U, timeline, x0, P0))
+        self.bounds = np.cumsum([0] + [r.Y.shape[0] for r in runs])
         self._local = threading.local()     # each thread fills its own output buffers
         self.white = self._buffers()[1]
 
@@ -297,30 +280,20 @@ def difference_threads():
         return max(1, os.cpu_count() or 1)
 
 
-def refine(model, cfg, t, Y, U, theta_start, T=None, max_step=None,
-           max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
-    """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p,).
+def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE,
+           max_nfev=60, progress=None, details=False):
+    """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p), over one
+    run or several of one vehicle: one theta for all of them.
 
-    t, Y, U, max_step, max_bridge as for run_ekf; T (s) the nominal sample time (None: the
-    median interval of t). Returns (theta, cov, cost per residual), and with details=True a
-    fourth item, a dict: 'J' (N * 12, p) the Jacobian of the whitened innovations with respect
-    to theta, 'white' (N, 12) those innovations at the solution (NaN: no measurement),
-    'converged' (bool), 'message' (the optimiser's), 'nfev'. cov is (J^T J)^-1 times the cost
-    per residual when that exceeds 1 (the white-noise covariance;
-    core/identification/uncertainty.py has the
-    one for coloured residuals)."""
-    return refine_runs(model, cfg, [(t, Y, U)], theta_start, T=T, max_step=max_step,
-                       max_bridge=max_bridge, max_nfev=max_nfev, progress=progress,
-                       details=details)
-
-
-def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
-                max_bridge=DEFAULT_MAX_BRIDGE, max_nfev=60, progress=None, details=False):
-    """Pass 2 over several runs of one vehicle: one theta for all of them. runs: a list of
-    (t, Y, U) records (as for run_ekf), each filtered from its own first measurement; the
-    residual vector is the runs' whitened innovations stacked in order (so 'white' of details
-    is (sum N, 12) and 'J' (sum N * 12, p)), and the covariance uses all of them. T (s): the
-    nominal sample time (None: the first run's median interval). Otherwise as refine()."""
+    runs : a list of Record (as for run_ekf), each filtered from its own first measurement; the
+    residual vector is the runs' whitened innovations stacked in order, and the covariance uses
+    all of them. T (s): the nominal sample time (None: the first run's median interval);
+    max_step, max_bridge as for run_ekf. Returns a Refinement: theta, cov, the cost per
+    residual, the Jacobian (sum N * 12, p) of the whitened innovations with respect to theta,
+    whether the optimiser converged, its message and evaluations, and with details=True the
+    innovations at the solution, white (sum N, 12) (NaN: no measurement). cov is (J^T J)^-1
+    times the cost per residual when that exceeds 1 (the white-noise covariance;
+    core/identification/uncertainty.py has the one for coloured residuals)."""
     p = model.p
     fer = FilterErrorResiduals(model, cfg, runs, T=T, max_step=max_step,
                                max_bridge=max_bridge)
@@ -351,11 +324,11 @@ def refine_runs(model, cfg, runs, theta_start, T=None, max_step=None,
     except np.linalg.LinAlgError:
         raise DivergenceError('batch refinement: the coefficients are not identifiable from '
                               'this run (singular information matrix)') from None
-    if not details:
-        return sol.x * scale, cov, s2
-    residuals(sol.x)            # the innovations at the solution (the last call may differ)
-    return sol.x * scale, cov, s2, {'J': J, 'white': white.copy(), 'converged': sol.status > 0,
-                                    'message': sol.message, 'nfev': sol.nfev}
+    if details:
+        residuals(sol.x)        # the innovations at the solution (the last call may differ)
+    return Refinement(estimate=sol.x * scale, cov=cov, cost=s2, jacobian=J,
+                      converged=sol.status > 0, message=sol.message, nfev=sol.nfev,
+                      white=white.copy() if details else None)
 
 
 def parameter_scale(model, theta):
@@ -366,54 +339,33 @@ def parameter_scale(model, theta):
     return scale
 
 
-def identify(model, t, Y, U, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
+def identify(model, runs, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
              progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
-    """Identify model.theta_names from measurements Y (N, 12) stamped t (N,) (s) and inputs
-    U (N, 7), U[k] the command held over [t_k, t_k+1).
+    """Identify model.theta_names from one run or several of the vehicle, with the configured
+    noise (core/identification/pipeline.py identifies with the noise model from the data).
 
-    T (s): the nominal sample time (None: the median interval of t); max_step, max_bridge: as
-    for run_ekf; truth: the true coefficients (p_coef,), if known. Returns a Result: the
-    coefficients in names/estimate/std/cov, the water current (if the model identifies or
-    is given one) in Result.current."""
-    return identify_runs(model, [(t, Y, U)], cfg, T=T, refine_pass=refine_pass,
-                         hist_every=hist_every, truth=truth, progress=progress,
-                         max_step=max_step, max_bridge=max_bridge)
+    runs : list of Record (measurements Y (N, 12) stamped t (N,) (s), inputs U (N, 7), U[k]
+        the command held over [t_k, t_k+1))
+    T (s): the nominal sample time (None: the first run's median interval); max_step,
+    max_bridge: as for run_ekf; truth: the true coefficients (p_coef,), if known.
 
-
-def identify_runs(model, runs, cfg, T=None, refine_pass=True, hist_every=0, truth=None,
-                  progress=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE):
-    """One set of model.theta_names from several runs of the vehicle: runs is a list of
-    (t (N,), Y (N, 12), U (N, 7)) records, each as identify() takes one.
-
-    The EKF pass runs the runs one after the other: each starts its vehicle states from its
-    own first measurement, the coefficients (and any identified current) from where the
-    previous run left them, with their covariance (AugmentedEKF.set_prior). The refinement fits
-    one theta to all runs' innovations stacked (refine_runs), so the 1-sigma uses all the data.
-    T (s): the nominal sample time (None: the first run's median interval). Result.steps and
-    mean_nis_per_dof are over all runs, Result.history that of the last run."""
+    The EKF pass runs the runs one after the other (run_ekf). The refinement fits one theta to
+    all runs' innovations stacked (refine), so the 1-sigma uses all the data. Returns an
+    Identification: the coefficients in names/estimate/std/cov, the water current (if the
+    model identifies or is given one) in current; steps and mean_nis_per_dof over all runs,
+    history that of the last run."""
     t0 = time.perf_counter()
-    runs = [_record(*r) for r in runs]
-    if not runs:
-        raise DimensionError('identification needs at least one run')
-    T = nominal_sample_time(runs[0][0]) if T is None else T
+    runs = _records(runs)
+    T = nominal_sample_time(runs[0].t) if T is None else T
     f = AugmentedEKF(model, cfg, T)
-    initial = f.theta0[:model.p_coef].copy()     # the first run's start (set_prior moves it)
-    stats, hist, _ = run_ekf_runs(f, runs, hist_every=hist_every, max_step=max_step,
-                                  max_bridge=max_bridge)
-    steps, nis, dof = int(stats[1]), stats[2], stats[3]
-    ekf_est, ekf_cov = f.theta, f.theta_cov
-    est, cov = ekf_est, ekf_cov
+    ekf = run_ekf(f, runs, hist_every=hist_every, max_step=max_step, max_bridge=max_bridge)
+    est = Estimate(model=model, ekf_estimate=ekf.theta, ekf_cov=ekf.theta_cov,
+                   estimate=ekf.theta, cov=ekf.theta_cov)
     if refine_pass and model.p > 0:
-        est, cov, _ = refine_runs(model, cfg, runs, ekf_est, T=T, max_step=max_step,
-                                  max_bridge=max_bridge, progress=progress)
-    psi = np.concatenate([Y[:, State.PSI] for _, Y, _ in runs])
-    est_c, cov_c, ekf_c, ekf_cov_c, current = split_current(model, est, cov, ekf_est, ekf_cov,
-                                                            psi)
-    wall = time.perf_counter() - t0
-    return Result(names=list(model.theta_names[:model.p_coef]), estimate=est_c,
-                  std=np.sqrt(np.diag(cov_c)), cov=cov_c, ekf_estimate=ekf_c,
-                  ekf_std=np.sqrt(np.diag(ekf_cov_c)), initial=initial,
-                  truth=None if truth is None else np.asarray(truth, float),
-                  steps=steps, wall_s=wall, mean_nis_per_dof=float(nis / max(1.0, dof)),
-                  refined=refine_pass, history=hist, R_final=f.R.copy(), Q_final=f.Q.copy(),
-                  current=current)
+        ref = refine(model, cfg, runs, ekf.theta, T=T, max_step=max_step,
+                     max_bridge=max_bridge, progress=progress)
+        est.estimate, est.cov = ref.estimate, ref.cov
+    return Identification.of(est, runs, initial=ekf.theta0[:model.p_coef].copy(), truth=truth,
+                             steps=ekf.steps, wall_s=time.perf_counter() - t0,
+                             mean_nis_per_dof=ekf.mean_nis_per_dof, refined=refine_pass,
+                             history=ekf.history, R_final=ekf.R, Q_final=ekf.Q)

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from auv_ident.core.identification.results import Diagnosis
 from auv_ident.core.identification.uncertainty import (
     identifiability,
     input_correlation,
@@ -171,8 +172,9 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
     residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
     (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
     the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
-    lag pairs a residual of one run with an input of another. Returns (verdicts or None,
-    diagnosis dict)."""
+    lag pairs a residual of one run with an input of another. Returns a
+    core.identification.results.Diagnosis (its identifiability None without the refined
+    residuals)."""
     verdicts = xcorr = None
     if fit is not None and fit.white is not None:
         lags = max(1, int(round(XCORR_SECONDS / dt)))
@@ -188,4 +190,5 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
         xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
                                         cov)
-    return verdicts, diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined)
+    return Diagnosis(identifiability=verdicts,
+                     **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined))

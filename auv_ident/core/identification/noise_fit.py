@@ -39,17 +39,17 @@ AUV's) process noise; matched in 5 passes, q u 2.9e-4 m/s, v 1.9e-4 m/s, r 3.6e-
 0.05 s step; reported EKF pass NIS/dof 0.66 (1228 before), every coefficient within 0.41 sigma
 of the hand-tuned identification (docs/kvlcc2.md, "From bags").
 
-Several runs (identify_runs_with_noise_model): the EKF passes go over the runs in turn
-(core.identification.batch.run_ekf_runs), the levels and AR(1) coefficients are pooled over the
-runs (the whitened innovations of each run stacked with NUM_GAP rows of NaN between them, so that
-no lag pairs samples of different runs), the refinement fits all runs
-(core.identification.batch.refine_runs) and the sandwich covariance sums the lagged scores within
-each run.
+One run or several (a list of core.identification.results.Record; one run is a list of one):
+the EKF passes go over the runs in turn (core.identification.batch.run_ekf), the levels and
+AR(1) coefficients are pooled over the runs (the whitened innovations of each run stacked with
+NUM_GAP rows of NaN between them, so that no lag pairs samples of different runs), the
+refinement fits all runs (core.identification.batch.refine) and the sandwich covariance sums the
+lagged scores within each run.
 
 With noise that matches the configuration (white, right level) nothing changes: the same numbers
 as without this step.
 """
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -57,7 +57,8 @@ import numpy as np
 from auv_ident.core.errors import DivergenceError, DomainError
 from auv_ident.core.filter.augmented import AugmentedEKF
 from auv_ident.core.filter.timing import nominal_sample_time
-from auv_ident.core.identification.batch import refine_runs, run_ekf_runs
+from auv_ident.core.identification.batch import refine, run_ekf
+from auv_ident.core.identification.results import Estimate, FilterPass, NoiseFit
 from auv_ident.core.identification.uncertainty import (
     LJUNG_BOX_LAGS,
     noise_model,
@@ -77,79 +78,6 @@ MAX_PROCESS_STEP = 10.0     # largest factor on q_j per pass
 NUM_GAP = LJUNG_BOX_LAGS    # NaN rows between runs in the pooled innovations (noise_model's lags)
 
 
-@dataclass
-class NoiseFit:
-    """The noise model of a record and what was done with it.
-
-    model : per channel name, noise_model()'s dict (level, ar1, tau_s, ljung_box, p_white,
-        white, samples), from the innovations of the EKF pass with the configured noise
-    configured_std, effective_std : (12,) the configured and the effective 1-sigma
-    used : True if the effective noise replaced the configured one
-    covariance : 'white' ((J^T J)^-1 times the residual variance) or 'sandwich'
-    inflation : (p,) sandwich 1-sigma / white 1-sigma of each coefficient
-    lags : the sandwich's lag window (samples)
-    configured_q, effective_q : (12,) the configured per-step process noise 1-sigma (the
-        states' units) and the one used (the matched one when process_used)
-    process_used : True if the process noise was matched to the innovations (module
-        docstring); process_levels : (12,) the innovation levels of the configured pass
-    bounds : the runs' first rows in the stacked refined residuals ([0, N_1, ..., sum N])
-    refine_cost : the refinement's cost per residual (its mean whitened square; 1 when the
-        noise model holds)
-    """
-
-    model: dict
-    configured_std: np.ndarray
-    effective_std: np.ndarray
-    used: bool
-    covariance: str = 'white'
-    inflation: np.ndarray = None
-    lags: int = 0
-    refine_converged: bool = True
-    refine_message: str = ''
-    notes: list = field(default_factory=list)
-    white: np.ndarray = None        # (N, 12) whitened innovations at the refined solution
-    jacobian: np.ndarray = None     # (N * 12, p) their Jacobian w.r.t. the coefficients
-    # the EKF pass whose estimate is reported (the configured noise's, or the effective
-    # noise's when used): {'stats', 'hist', 'R', 'Q', 'theta0'}
-    # (core.identification.batch.run_ekf's)
-    ekf_run: dict = None
-    configured_pass: dict = None    # the same for the pass with the configured noise
-    configured_q: np.ndarray = None
-    effective_q: np.ndarray = None
-    process_used: bool = False
-    process_levels: np.ndarray = None
-    bounds: list = None
-    refine_cost: float = math.nan
-
-    def document(self):
-        """JSON-ready dict (the result's `noise_model`)."""
-        return {
-            'channels': {n: {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                             for k, v in d.items()} for n, d in self.model.items()},
-            'configured_std': [float(v) for v in self.configured_std],
-            'effective_std': [float(v) for v in self.effective_std],
-            'used': bool(self.used), 'covariance': self.covariance,
-            'inflation': None if self.inflation is None else [float(v) for v in self.inflation],
-            'lags': int(self.lags), 'notes': list(self.notes),
-            'configured_q_state': _floats(self.configured_q),
-            'effective_q_state': _floats(self.effective_q),
-            'process_noise_used': bool(self.process_used),
-            'runs': 1 if self.bounds is None else len(self.bounds) - 1,
-            'configured_mean_nis_per_dof': (None if self.configured_pass is None else
-                                            _finite(self.configured_pass['mean_nis_per_dof'])),
-            'mean_nis_per_dof': (None if self.ekf_run is None else
-                                 _finite(self.ekf_run['mean_nis_per_dof'])),
-            'refined_cost_per_residual': _finite(self.refine_cost)}
-
-
-def _finite(x):
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
-def _floats(a):
-    return None if a is None else [float(v) for v in a]
-
-
 def effective_std(configured_std, model, measured):
     """(12,) 1-sigma carrying the channel's level and AR(1) correlation (module docstring);
     channels without a model (unmeasured, too few samples) keep the configured value."""
@@ -163,19 +91,17 @@ def effective_std(configured_std, model, measured):
     return out
 
 
-def _pass_record(f, stats, hist):
-    return {'stats': stats, 'hist': hist, 'R': f.R.copy(), 'Q': f.Q.copy(),
-            'theta0': f.theta0.copy(), 'theta': f.theta.copy(), 'theta_cov': f.theta_cov.copy(),
-            'mean_nis_per_dof': float(stats[2] / max(1.0, stats[3])), 'steps': int(stats[1])}
-
-
 def _pass(model, cfg, runs, T, max_step, max_bridge, hist_every):
-    """One EKF pass over the runs in turn: (filter, stats, histories, pooled whitened
-    innovations with NUM_GAP NaN rows between runs)."""
-    f = AugmentedEKF(model, cfg, T)
-    stats, hist, whites = run_ekf_runs(f, runs, hist_every=hist_every, want_white=True,
-                                       max_step=max_step, max_bridge=max_bridge)
-    return f, stats, hist, with_gaps(whites, NUM_GAP)
+    """One EKF pass over the runs in turn (FilterPass, with each run's whitened
+    innovations)."""
+    return run_ekf(AugmentedEKF(model, cfg, T), runs, hist_every=hist_every, want_white=True,
+                   max_step=max_step, max_bridge=max_bridge)
+
+
+def _pooled(filter_pass):
+    """(sum N + gaps, 12) the whitened innovations of a pass, the runs' with NUM_GAP NaN rows
+    between them (no lag pairs samples of different runs)."""
+    return with_gaps(filter_pass.whites, NUM_GAP)
 
 
 def _levels(white, measured):
@@ -189,15 +115,27 @@ def _levels(white, measured):
     return out
 
 
+@dataclass
+class ProcessMatch:
+    """The covariance matching's outcome (match_process_noise): the per-step process noise
+    q_state (12,), the last EKF pass (made with it), the passes made and the innovation levels
+    (12,) of the last pass."""
+
+    q_state: np.ndarray
+    last: FilterPass
+    passes: int
+    levels: np.ndarray
+
+
 def match_process_noise(model, cfg, runs, T, first, max_step=None, max_bridge=0.25,
                         hist_every=0):
     """The per-step process noise that explains the one-step prediction errors (module
-    docstring: covariance matching). first: _pass()'s output with cfg. Returns (q_state (12,),
-    the last pass (as _pass), passes made, levels (12,) of that pass)."""
+    docstring: covariance matching). first: the EKF pass with cfg (FilterPass with its
+    whitened innovations). Returns a ProcessMatch."""
     measured = np.asarray(cfg.measured, dtype=bool)
     q = np.asarray(cfg.q_state, dtype=float).copy()
     last = first
-    levels = _levels(first[3], measured)
+    levels = _levels(_pooled(first), measured)
     passes = 0
     while passes < MAX_PROCESS_PASSES:
         ok = np.isfinite(levels)
@@ -214,22 +152,17 @@ def match_process_noise(model, cfg, runs, T, first, max_step=None, max_bridge=0.
             break
         passes += 1
         q, last = q_new, trial
-        levels = _levels(trial[3], measured)
-    return q, last, passes, levels
+        levels = _levels(_pooled(trial), measured)
+    return ProcessMatch(q, last, passes, levels)
 
 
-def fit_noise(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=0.25, hist_every=0):
-    """fit_noise_runs() of one record (t, Y, U)."""
-    return fit_noise_runs(model, cfg, [(t, Y, U)], T, max_step, max_bridge, hist_every)
-
-
-def fit_noise_runs(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_every=0):
-    """Noise model of one or several records (runs: list of (t, Y, U), as
-    core.identification.batch.run_ekf
-    takes one) from an EKF pass over them in turn with the configured noise. Returns NoiseFit
-    (used = whether the effective noise should replace the configured one; configured_pass =
-    that EKF pass, with histories every hist_every samples; process_used = whether the
-    process noise was matched to the data, effective_q the result).
+def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_every=0):
+    """Noise model of one run or several (runs: list of Record, as
+    core.identification.batch.run_ekf takes them) from an EKF pass over them in turn with the
+    configured noise; several: the levels and AR(1) coefficients pooled over the runs. Returns
+    NoiseFit (used = whether the effective noise should replace the configured one;
+    configured_pass = that EKF pass, with histories every hist_every samples; process_used =
+    whether the process noise was matched to the data, effective_q the result).
 
     If that pass leaves the model's domain or diverges (noise far above the configured level
     makes an over-confident filter chase it, e.g. into a negative surge speed), the pass is
@@ -238,7 +171,7 @@ def fit_noise_runs(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, his
     says so; only if every pass fails is the last error raised. Innovations more than
     PROCESS_NOISE_LEVEL times their predicted level: the process noise is matched first
     (module docstring) and the measurement noise model read off the matched pass."""
-    T = nominal_sample_time(runs[0][0]) if T is None else T
+    T = nominal_sample_time(runs[0].t) if T is None else T
     conf = np.asarray(cfg.noise_std, dtype=float)
     measured = np.asarray(cfg.measured, dtype=bool)
     failures = []
@@ -252,19 +185,20 @@ def fit_noise_runs(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, his
             failures.append((factor, err))
     else:
         raise failures[-1][1]
-    levels0 = _levels(first[3], measured)
+    levels0 = _levels(_pooled(first), measured)
     q_conf = np.asarray(cfg.q_state, dtype=float)
     q, last, passes = q_conf.copy(), first, 0
     if np.any(np.nan_to_num(levels0) > PROCESS_NOISE_LEVEL):
-        q, last, passes, _ = match_process_noise(model, cfg_base, runs, T, first, max_step,
-                                                 max_bridge, hist_every)
-    nm = noise_model(last[3], T, STATE_NAMES)
+        matched = match_process_noise(model, cfg_base, runs, T, first, max_step, max_bridge,
+                                      hist_every)
+        q, last, passes = matched.q_state, matched.last, matched.passes
+    nm = noise_model(_pooled(last), T, STATE_NAMES)
     eff = effective_std(base, nm, measured)
     ratio = (eff / conf) ** 2
     used = bool(factor != 1.0 or passes > 0
                 or np.any((ratio > NOISE_MODEL_CHANGE) | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
-                   used=used, configured_pass=_pass_record(*first[:3]), configured_q=q_conf,
+                   used=used, configured_pass=first, configured_q=q_conf,
                    effective_q=q, process_used=passes > 0, process_levels=levels0)
     if failures:
         fit.notes.append(
@@ -294,57 +228,52 @@ def fit_noise_runs(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, his
     return fit
 
 
-def identify_with_noise_model(model, cfg, t, Y, U, T=None, refine_pass=True, max_step=None,
+def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_step=None,
                               max_bridge=0.25, progress=None, ekf_pass=None, hist_every=0):
-    """identify_runs_with_noise_model() of one record (t, Y, U)."""
-    return identify_runs_with_noise_model(model, cfg, [(t, Y, U)], T, refine_pass, max_step,
-                                          max_bridge, progress, ekf_pass, hist_every)
+    """EKF pass and refinement with the noise model from the data, over one run or several
+    (list of Record; several: one coefficient set for all, as core.identification.batch.
+    identify).
 
-
-def identify_runs_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_step=None,
-                                   max_bridge=0.25, progress=None, ekf_pass=None,
-                                   hist_every=0):
-    """EKF pass and refinement with the noise model from the data, over one or several runs
-    (list of (t, Y, U); several: one coefficient set for all,
-    core.identification.batch.identify_runs).
-
-    ekf_pass : (estimate, covariance) of an EKF pass already made with the configured noise
-        (e.g. the bag replay, the live node's path), kept when the configured noise holds
-    Returns (ekf_estimate, ekf_cov, estimate, cov, NoiseFit): the EKF pass with the effective
-    noise (or ekf_pass), and (refine_pass) the refined estimate, started from the EKF pass,
-    with the covariance the residuals support (module docstring); without refine_pass
-    estimate, cov are the EKF pass's. The reported EKF pass's record (histories every
-    hist_every samples, final R and Q) is fit.ekf_run (None when ekf_pass was kept)."""
-    T = nominal_sample_time(runs[0][0]) if T is None else T
-    fit = fit_noise_runs(model, cfg, runs, T, max_step, max_bridge, hist_every=hist_every)
+    ekf_pass : PassEstimate of an EKF pass already made with the configured noise (e.g. the
+        bag replay, the live node's path), kept when the configured noise holds
+    Returns an Estimate: the EKF pass with the effective noise (or ekf_pass), and
+    (refine_pass) the refined estimate, started from the EKF pass, with the covariance the
+    residuals support (module docstring); without refine_pass the final estimate and cov are
+    the EKF pass's. The reported EKF pass (histories every hist_every samples, final R and Q)
+    is its noise.ekf_run (None when ekf_pass was kept)."""
+    T = nominal_sample_time(runs[0].t) if T is None else T
+    fit = fit_noise(model, cfg, runs, T, max_step, max_bridge, hist_every=hist_every)
     cfg_eff = (replace(cfg, noise_std=fit.effective_std.copy(),
                        q_state=fit.effective_q.copy()) if fit.used else cfg)
     if ekf_pass is not None and not fit.used:
-        ekf_est, ekf_cov = (np.array(a, dtype=float) for a in ekf_pass)
+        ekf_est = np.array(ekf_pass.estimate, dtype=float)
+        ekf_cov = np.array(ekf_pass.cov, dtype=float)
     elif not fit.used:      # the configured noise holds: its pass is the EKF pass
         fit.ekf_run = fit.configured_pass
-        ekf_est, ekf_cov = fit.ekf_run['theta'], fit.ekf_run['theta_cov']
+        ekf_est, ekf_cov = fit.ekf_run.theta, fit.ekf_run.theta_cov
     else:
-        f, stats, hist, _ = _pass(model, cfg_eff, runs, T, max_step, max_bridge, hist_every)
-        fit.ekf_run = _pass_record(f, stats, hist)
-        ekf_est, ekf_cov = f.theta.copy(), f.theta_cov.copy()
-    fit.bounds = [int(b) for b in np.cumsum([0] + [len(r[0]) for r in runs])]
+        fit.ekf_run = _pass(model, cfg_eff, runs, T, max_step, max_bridge, hist_every)
+        ekf_est, ekf_cov = fit.ekf_run.theta.copy(), fit.ekf_run.theta_cov.copy()
+    fit.bounds = [int(b) for b in np.cumsum([0] + [len(r.t) for r in runs])]
+    out = Estimate(model=model, ekf_estimate=ekf_est, ekf_cov=ekf_cov, estimate=ekf_est,
+                   cov=ekf_cov, noise=fit)
     if not refine_pass or model.p == 0:
-        return ekf_est, ekf_cov, ekf_est, ekf_cov, fit
-    est, cov, s2, info = refine_runs(model, cfg_eff, runs, ekf_est, T=T, max_step=max_step,
-                                     max_bridge=max_bridge, progress=progress, details=True)
-    fit.refine_converged = bool(info['converged'])
-    fit.white, fit.jacobian = info['white'], info['J']
-    fit.refine_message = str(info['message'])
-    fit.refine_cost = float(s2)
+        return out
+    ref = refine(model, cfg_eff, runs, ekf_est, T=T, max_step=max_step, max_bridge=max_bridge,
+                 progress=progress, details=True)
+    out.estimate, out.cov = ref.estimate, ref.cov
+    fit.refine_converged = bool(ref.converged)
+    fit.white, fit.jacobian = ref.white, ref.jacobian
+    fit.refine_message = str(ref.message)
+    fit.refine_cost = float(ref.cost)
     try:
-        sand, sinfo = sandwich_covariance(info['J'], info['white'], bounds=fit.bounds)
+        sand, sinfo = sandwich_covariance(ref.jacobian, ref.white, bounds=fit.bounds)
     except np.linalg.LinAlgError:
-        return ekf_est, ekf_cov, est, cov, fit
-    white_sd = np.sqrt(np.diag(cov))
+        return out
+    white_sd = np.sqrt(np.diag(ref.cov))
     fit.inflation = np.sqrt(np.clip(np.diag(sand), 0.0, None)) / white_sd
     fit.lags = sinfo['lags']
     if np.any(fit.inflation > SANDWICH_WIDER):
         fit.covariance = 'sandwich'
-        cov = sand
-    return ekf_est, ekf_cov, est, cov, fit
+        out.cov = sand
+    return out

@@ -50,7 +50,7 @@ out with its reason (:class:`Selection`); the left-out ones keep the vehicle fil
 Coefficients the user named are always identified, whatever their figures (the diagnosis then
 calls them weak if they are).
 """
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -58,6 +58,7 @@ import numpy as np
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.identification.batch import FilterErrorResiduals, parameter_scale
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
+from auv_ident.core.identification.results import Choice, Linearisation, Selection
 from auv_ident.core.identification.uncertainty import (
     bandwidth,
     CORRELATION_WEAK,
@@ -76,14 +77,18 @@ SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitiviti
 PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
 
 
-def parse_request(vehicle, text):
-    """`--coefficients` text -> (auto, names).
+def parse_request(vehicle, names):
+    """The `coefficients` setting's names (a sequence: session.settings.names_of reads the
+    command line's 'A,B' text into one) -> (auto, names).
 
-    'auto' alone: choose from the data; 'auto,A,B': choose, always including A and B; 'A,B':
-    exactly these; '': the vehicle's default set (names empty). Names are matched as
+    ['auto']: choose from the data; ['auto', A, B]: choose, always including A and B; [A, B]:
+    exactly these; []: the vehicle's default set (names empty). Names are matched as
     Vehicle.index matches them and returned as the file spells them. Raises ConfigError naming
     an unknown coefficient, a name given twice, or 'auto' anywhere but first."""
-    tokens = [n.strip() for n in (text or '').split(',') if n.strip()]
+    if isinstance(names, str):
+        raise TypeError('parse_request takes a sequence of names, not text')
+    tokens = [str(n).strip() for n in names if str(n).strip()]
+    text = ','.join(tokens)
     auto = bool(tokens) and tokens[0].lower() == AUTO
     rest = tokens[1:] if auto else tokens
     if any(tok.lower() == AUTO for tok in rest):
@@ -119,19 +124,20 @@ def candidate_coefficients(vehicle, mass_inverse):
     return cands, left
 
 
-def sensitivities(model, cfg, t, Y, U, theta, T=None, max_step=None, max_bridge=0.25,
+def sensitivities(model, cfg, runs, theta, T=None, max_step=None, max_bridge=0.25,
                   threads=None):
     """Filter-error residuals at theta and their sensitivities to every parameter (one filter
     run per parameter, on `threads` threads: None =
     core.identification.batch.difference_threads()).
 
     model : Model whose theta are the parameters; cfg : FilterConfig (noise, channels)
+    runs : list of Record (one run or several, their residuals stacked in order)
     theta : (p,) the values to linearise at (file units; current in m/s)
-    Returns (white (N, 12) whitened innovations, NaN = no measurement; J (N * 12, p) their
-    derivatives, zero rows where no measurement; failed: indices of parameters whose step took
-    the model out of its domain (their columns are zero)). Raises DomainError if the filter
-    fails at theta itself."""
-    fer = FilterErrorResiduals(model, cfg, [(t, Y, U)], T=T, max_step=max_step,
+    Returns (white (sum N, 12) whitened innovations, NaN = no measurement; J (sum N * 12, p)
+    their derivatives, zero rows where no measurement; failed: indices of parameters whose step
+    took the model out of its domain (their columns are zero)). Raises DomainError if the
+    filter fails at theta itself."""
+    fer = FilterErrorResiduals(model, cfg, runs, T=T, max_step=max_step,
                                max_bridge=max_bridge)
     theta = np.asarray(theta, dtype=float)
     steps = SENSITIVITY_STEP * parameter_scale(model, theta)
@@ -353,85 +359,13 @@ def prune(names, estimate, cov, keep_always):
         keep.pop(j)
 
 
-@dataclass
-class Selection:
-    """The outcome of the automatic choice.
-
-    chosen : the coefficients identified (named ones first, then in order of entry)
-    named : those the user named (always chosen)
-    left_out : {name: reason} for every other coefficient of the vehicle (file values kept)
-    steps : per coefficient added by the stepwise pass: partial F, relative CRB 1-sigma and
-        largest correlation when it entered
-    candidates : how many coefficients the selection could choose from
-    consider_inflation : per identified parameter, its final 1-sigma over the statistical one
-        (identify_auto; empty when the set was only chosen)
-    reassessed : True when pass 2 ran (identify_auto); False for pass 1 alone
-        (:func:`choose_coefficients`, the live identifier's choice)
-    """
-
-    chosen: list
-    named: list
-    left_out: dict
-    steps: list = field(default_factory=list)
-    candidates: int = 0
-    consider_inflation: dict = field(default_factory=dict)
-    reassessed: bool = True
-
-    def document(self):
-        """JSON-ready dict (the result's `selection`)."""
-        return {'chosen': list(self.chosen), 'named': list(self.named),
-                'left_out': dict(self.left_out), 'steps': list(self.steps),
-                'candidates': int(self.candidates),
-                'consider_inflation': dict(self.consider_inflation),
-                'criteria': {'f_to_enter': F_TO_ENTER, 'rel_std_max': REL_STD_MAX,
-                             'correlation_max': CORRELATION_MAX,
-                             'prior_rel_std': PRIOR_REL_STD,
-                             'method': 'stepwise regression on the filter-error residuals '
-                                       '(partial F with the long-run variance)'
-                                       + (', then identify, re-assess and identify again'
-                                          if self.reassessed else ' (no re-assessment)')}}
-
-    def summary(self):
-        """Lines for the command line: the chosen set, then the left-out ones by reason."""
-        lines = [f'automatic selection: {len(self.chosen)} of {self.candidates} candidate '
-                 'coefficients chosen (' + ', '.join(self.chosen) + ')'
-                 + (f'; named: {", ".join(self.named)}' if self.named else '')]
-        groups = {}
-        for name, why in self.left_out.items():
-            key = why.split(':')[0].split(' (')[0]
-            groups.setdefault(key, []).append(name)
-        if self.consider_inflation:
-            worst = max(self.consider_inflation, key=self.consider_inflation.get)
-            ratio = self.consider_inflation[worst]
-            lines.append("error bars include the errors of the coefficients left at the file's "
-                         f'values ({100 * PRIOR_REL_STD:g} % 1-sigma each, consider analysis): up '
-                         f'to {ratio:.3g}x the statistical ones ({worst})')
-        lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
-                     '`selection`):')
-        for key, members in groups.items():
-            lines.append(f'  {key}: {", ".join(members)}')
-        return lines
+def criteria():
+    """The thresholds of the choice (Selection.criteria, the JSON `selection.criteria`)."""
+    return {'f_to_enter': F_TO_ENTER, 'rel_std_max': REL_STD_MAX,
+            'correlation_max': CORRELATION_MAX, 'prior_rel_std': PRIOR_REL_STD}
 
 
-@dataclass
-class Linearisation:
-    """What pass 1 linearised, for the consider analysis of the final error bars.
-
-    G : (q, q) information J^T J of the whitened residuals at the prior, over every parameter
-        the pass saw (the named and candidate coefficients, the current components, then the
-        added mass only considered)
-    names : (q,) their names; prior : (q,) the values the sensitivities were taken at
-    left_candidates : indices of the coefficients whose errors bias the set when they are left
-        at their prior (the candidates and the considered added mass)
-    """
-
-    G: np.ndarray
-    names: list
-    prior: np.ndarray
-    left_candidates: list
-
-
-def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=None,
+def choose_coefficients(make_model, cfg, runs, named=(), T=None, max_step=None,
                         max_bridge=0.25, threads=None):
     """Pass 1 of the module docstring alone: which coefficients the record asks for.
 
@@ -439,10 +373,11 @@ def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=Non
     runs only this and lets its filter identify the set. Costs one filter run over the record
     per candidate (and per added-mass term the model cannot change), then the stepwise pass.
 
-    make_model, cfg, named, t, Y, U, T, max_step, max_bridge : as identify_auto
+    make_model, cfg, named, runs, T, max_step, max_bridge : as identify_auto
     threads : threads for the sensitivities (None: every usable CPU; the live node asks for 1)
-    Returns (Selection of the chosen set, every other coefficient left out with its reason,
-    Linearisation). Raises DomainError if the filter leaves the model's domain at the prior."""
+    Returns a Choice: the Selection of the chosen set (every other coefficient left out with its
+    reason) and the Linearisation it was made on. Raises DomainError if the filter leaves the
+    model's domain at the prior."""
     named = list(named)
     base = make_model([])
     vehicle = base.vehicle
@@ -452,7 +387,7 @@ def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=Non
     pool = [n for n in cands if n not in named]
     all_model = make_model(named + pool)
     prior = all_model.theta_true
-    white, J, failed = sensitivities(all_model, cfg, t, Y, U, prior, T=T, max_step=max_step,
+    white, J, failed = sensitivities(all_model, cfg, runs, prior, T=T, max_step=max_step,
                                      max_bridge=max_bridge, threads=threads)
     names = list(all_model.theta_names)
     forced = list(range(len(named))) + list(range(all_model.p_coef, all_model.p))
@@ -468,7 +403,7 @@ def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=Non
     if am:
         am_model = Model(vehicle, am + list(base.current_names), mass_inverse='exact',
                          current=base.current, velocity_reference=base.velocity_reference)
-        _, J_am, am_failed = sensitivities(am_model, cfg, t, Y, U, am_model.theta_true, T=T,
+        _, J_am, am_failed = sensitivities(am_model, cfg, runs, am_model.theta_true, T=T,
                                            max_step=max_step, max_bridge=max_bridge,
                                            threads=threads)
         keep_am = [i for i in range(len(am)) if i not in am_failed]
@@ -486,8 +421,8 @@ def choose_coefficients(make_model, cfg, t, Y, U, named=(), T=None, max_step=Non
                         left_candidates=list(range(len(named), all_model.p_coef))
                         + consider_idx)
     sel = Selection(chosen=chosen, named=named, left_out=_in_file_order(vehicle, left_out),
-                    steps=steps, candidates=len(cands), reassessed=False)
-    return sel, lin
+                    steps=steps, candidates=len(cands), reassessed=False, criteria=criteria())
+    return Choice(sel, lin)
 
 
 def _in_file_order(vehicle, reasons):
@@ -495,50 +430,55 @@ def _in_file_order(vehicle, reasons):
     return dict(sorted(reasons.items(), key=lambda kv: order[kv[0]]))
 
 
-def identify_auto(make_model, cfg, t, Y, U, named=(), T=None, refine_pass=True,
+def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
                   max_step=None, max_bridge=0.25, progress=None, hist_every=0):
     """Choose the coefficients from the data and identify them (module docstring).
 
     make_model : names -> Model identifying those coefficients (and the water current as the
         caller wants it; the current components are always in the set)
     cfg : FilterConfig of the record's noise (its coefficients and initial are replaced)
+    runs : list of Record (one run or several: the residuals of all linearised, one set
+        identified from all)
     named : coefficients always identified (file spelling)
-    t, Y, U, T, max_step, max_bridge, refine_pass, progress, hist_every : as
+    T, max_step, max_bridge, refine_pass, progress, hist_every : as
         identify_with_noise_model (the histories are those of the final identification)
-    Returns (model, ekf_estimate, ekf_cov, estimate, cov, NoiseFit, Selection) of the final
-    identification (estimate: the model's theta, coefficients then current)."""
+    Returns the Estimate of the final identification (its model that of the chosen set, its
+    estimate the model's theta, coefficients then current), with its Selection."""
     named = list(named)
-    sel, lin = choose_coefficients(make_model, cfg, t, Y, U, named=named, T=T,
-                                   max_step=max_step, max_bridge=max_bridge)
+    choice = choose_coefficients(make_model, cfg, runs, named=named, T=T, max_step=max_step,
+                                 max_bridge=max_bridge)
+    sel, lin = choice.selection, choice.linearisation
     vehicle = make_model([]).vehicle
     chosen, left_out = sel.chosen, dict(sel.left_out)
 
     def run(coefs, initial):
-        m = make_model(coefs)
         c = replace(cfg, coefficients=list(coefs), initial=np.asarray(initial, dtype=float))
-        return (m,) + identify_with_noise_model(m, c, t, Y, U, T=T, refine_pass=refine_pass,
-                                                max_step=max_step, max_bridge=max_bridge,
-                                                progress=progress, hist_every=hist_every)
+        return identify_with_noise_model(make_model(coefs), c, runs, T=T,
+                                         refine_pass=refine_pass, max_step=max_step,
+                                         max_bridge=max_bridge, progress=progress,
+                                         hist_every=hist_every)
 
     start = [vehicle.values[vehicle.index(n)] for n in chosen]
-    model, ekf_est, ekf_cov, est, cov, fit = run(chosen, start)
-    kept, dropped = prune(model.theta_names, est, cov, set(named) | set(CURRENT_NAMES))
+    out = run(chosen, start)
+    kept, dropped = prune(out.model.theta_names, out.estimate, out.cov,
+                          set(named) | set(CURRENT_NAMES))
     if dropped:
         left_out.update(dropped)
         kept_coefs = [n for n in kept if n not in CURRENT_NAMES]
-        start = [est[model.theta_names.index(n)] for n in kept_coefs]
-        model, ekf_est, ekf_cov, est, cov, fit = run(kept_coefs, start)
+        start = [out.estimate[out.model.theta_names.index(n)] for n in kept_coefs]
+        out = run(kept_coefs, start)
         chosen = kept_coefs
     # error bars that cover the coefficients left at the file's values (consider analysis)
     names = lin.names
-    idx = [names.index(n) for n in model.theta_names]
+    idx = [names.index(n) for n in out.model.theta_names]
     left = [i for i in lin.left_candidates if names[i] not in chosen]
     bias = consider_bias(lin.G, idx, left, PRIOR_REL_STD * np.abs(lin.prior))
-    stat_sd = np.sqrt(np.diag(cov))
-    cov = cov + bias
-    inflation = np.sqrt(np.diag(cov)) / stat_sd
-    sel = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
-                  steps=[s for s in sel.steps if s['name'] in chosen], reassessed=True,
-                  consider_inflation={n: float(inflation[i])
-                                      for i, n in enumerate(model.theta_names)})
-    return model, ekf_est, ekf_cov, est, cov, fit, sel
+    stat_sd = np.sqrt(np.diag(out.cov))
+    out.cov = out.cov + bias
+    inflation = np.sqrt(np.diag(out.cov)) / stat_sd
+    out.selection = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
+                            steps=[s for s in sel.steps if s['name'] in chosen],
+                            reassessed=True,
+                            consider_inflation={n: float(inflation[i])
+                                                for i, n in enumerate(out.model.theta_names)})
+    return out

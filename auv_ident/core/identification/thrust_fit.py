@@ -93,9 +93,9 @@ def _run_data(run):
     else:
         try:
             x, thrust = np.asarray(run.x, dtype=float), np.asarray(run.inputs['thrust'], float)
-        except (AttributeError, KeyError, TypeError):
+        except (AttributeError, KeyError, TypeError) as err:
             raise DataError(f'{run!r:.80} is neither an (x, thrust) tuple nor a measured run '
-                            'with x and inputs["thrust"]') from None
+                            'with x and inputs["thrust"]') from err
     if x.ndim != 2 or x.shape[1] != N_STATE or thrust.shape != (len(x),):
         raise DataError(f'thrust data: x must be (N, {N_STATE}) and thrust (N,), got '
                         f'{x.shape} and {thrust.shape}')

@@ -203,7 +203,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
             sum_nis += nis
             sum_dof += m
     except DivergenceError as err:
-        raise DivergenceError(f'{err} at sample {k} (t = {t[k]:.2f} s)') from None
+        raise DivergenceError(f'{err} at sample {k} (t = {t[k]:.2f} s)') from err
     theta = xa[N_STATE:].copy()
     return UkfResult(names=list(model.theta_names), xa=xa, P=P, theta=theta,
                      theta_cov=P[N_STATE:, N_STATE:].copy(), steps=int(Y.shape[0]),

@@ -205,18 +205,18 @@ def current_identifiability(psi, names, cov, std, coefficient_names=()):
             'correlated_with': partner}
 
 
-def split_current(model, estimate, cov, ekf_estimate, ekf_cov, psi):
-    """Split a parameter vector of `model` (coefficients, then current components) into the
-    coefficients' part and a :class:`CurrentEstimate` (None if the model identifies no current
-    and has none given). Returns (coefficient estimate, cov, EKF estimate, EKF cov, current)."""
+def current_estimate(model, estimate, cov, ekf_estimate, ekf_cov, psi):
+    """The water current of a parameter vector of `model` (coefficients, then current
+    components), as a :class:`CurrentEstimate` (None if the model identifies no current and
+    has none given). estimate, cov, ekf_estimate, ekf_cov : the final and the EKF pass's
+    parameters and covariances; psi : the headings of the record (its identifiability)."""
     pc = model.p_coef
     est = np.asarray(estimate, dtype=float)
     cov = np.asarray(cov, dtype=float)
     ekf_est = np.asarray(ekf_estimate, dtype=float)
     ekf_cov = np.asarray(ekf_cov, dtype=float)
-    out = (est[:pc], cov[:pc, :pc], ekf_est[:pc], ekf_cov[:pc, :pc])
     if not model.current_names and not np.any(model.current != 0.0):
-        return out + (None,)
+        return None
     idx = [CURRENT_NAMES.index(n) for n in model.current_names]
     vc = model.current.copy()
     vc_ekf = model.current.copy()
@@ -228,6 +228,5 @@ def split_current(model, estimate, cov, ekf_estimate, ekf_cov, psi):
     sd_ekf[idx] = np.sqrt(np.diag(ekf_cov)[pc:])
     ident = (current_identifiability(psi, model.theta_names, cov, np.sqrt(np.diag(cov)),
                                      model.theta_names[:pc]) if idx else {})
-    cur = CurrentEstimate(list(model.current_names), vc, sd, cov[pc:, pc:].copy(), vc_ekf,
-                          sd_ekf, model.velocity_reference, ident)
-    return out + (cur,)
+    return CurrentEstimate(list(model.current_names), vc, sd, cov[pc:, pc:].copy(), vc_ekf,
+                           sd_ekf, model.velocity_reference, ident)

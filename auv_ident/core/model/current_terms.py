@@ -6,12 +6,11 @@ that each module stays readable; nothing here allocates (the kernels of model.py
 """
 import math
 
-from numba import njit
-
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.model.monomials import ZZ_DU_DV
 from auv_ident.core.model.state import N_CURRENT, N_NU, N_STATE, State
 
-kernel = njit(cache=True, _nrt=False)     # as model.kernel (no reference counting)
+kernel = cached_njit(_nrt=False)     # as model.kernel (no reference counting)
 
 _U, _V, _W, _P, _Q, _R = (int(s) for s in (State.U, State.V, State.W, State.P, State.Q, State.R))
 _PHI = int(State.PHI)

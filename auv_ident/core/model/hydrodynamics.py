@@ -41,9 +41,9 @@ Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 from collections import namedtuple
 import math
 
-from numba import njit
 import numpy as np
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import DimensionError, DomainError
 from auv_ident.core.model.current_terms import (
     CURRENT_GROUND,
@@ -112,7 +112,7 @@ _Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX[
 # allocates nothing (numba refuses to compile an allocation without NRT); every call of a
 # compiled function with reference counting costs an atomic increment and decrement per array
 # argument, which perf put at about a fifth of an EKF step (README, Speed).
-kernel = njit(cache=True, _nrt=False)
+kernel = cached_njit(_nrt=False)
 
 # Everything the compiled model needs besides the state, the inputs and scratch: built in one
 # place (Model.compiled, Model.compiled_fixed) and handed to the kernels as one argument. A
@@ -155,7 +155,7 @@ STATUS_TEXT = {
 }
 
 
-@njit(cache=True)
+@cached_njit()
 def _sign(a):
     return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else 0.0)
 
@@ -233,7 +233,7 @@ def _restoring(par, sph, cph, sth, cth, want_jac, xdot, A):
 # The strip sum may be reordered (reassoc) and fused (contract): that lets the compiler run four
 # stations at once (2x faster; the sums move by ~1e-16 relative). No-NaN/no-Inf flags are not
 # given, so a NaN still reaches the finiteness checks of state_derivative.
-@njit(cache=True, _nrt=False, fastmath={'reassoc', 'contract', 'nsz'})
+@cached_njit(_nrt=False, fastmath={'reassoc', 'contract', 'nsz'})
 def _crossflow(par, v, w, q, r, want_jac, xdot, A):
     """Cross-flow drag, MSS classic strip sum (skipped when v = w = 0, as MSS does).
 

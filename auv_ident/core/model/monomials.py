@@ -6,10 +6,11 @@ vehicle file. A loop that reads the table at run time spends most of its time on
 itself (index loads, branches on the factor count, a read-modify-write of xdot and A per term):
 0.55 us of each model evaluation, four per EKF step. This module writes the table out as Python
 source with every index a constant, compiles it once with numba as a C callback of signature
-SIG, and keeps it in a file cache keyed on the source, so each vehicle structure is compiled once
-per machine (about 5 s) and loaded in about 0.3 s per process after that. It evaluates in
-about a third of the loop's time (0.54 -> 0.16 us), and gives bit-identical results: every
-output is accumulated in the table's order from its current value, as the loop did.
+SIG, and keeps it in a file cache keyed on the source (a private folder of the user's, never the
+package: _cache_dirs), so each vehicle structure is compiled once per user (about 5 s) and
+loaded in about 0.3 s per process after that. It evaluates in about a third of the loop's time
+(0.54 -> 0.16 us), and gives bit-identical results: every output is accumulated in the table's
+order from its current value, as the loop did.
 
 The kernel does not depend on which coefficients are identified: it writes dprod[ci], the
 derivative of F by coefficient ci (its term's scale times its factor product; each coefficient
@@ -28,6 +29,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.safe_files import make_private, private_candidates
 
 NZ = 21          # length of the factor vector z (vehicle.FACTORS); zz = [z, dz/dx, dU/dv]
 N_STATE_FACTORS = 12   # z[0:6] = u..r (dz/dx = 1), z[6:12] = |u|..|r| (dz/dx = sign)
@@ -127,35 +129,41 @@ def kernel_source(terms_i, terms_s):
 
 
 def _cache_dirs():
+    """Where the generated kernels may go, best first: $AUV_IDENT_KERNEL_CACHE if set, then the
+    user's private cache folder (core/safe_files.py private_candidates); never the package."""
     env = os.environ.get('AUV_IDENT_KERNEL_CACHE')
     if env:
         yield env
-    here = os.path.dirname(os.path.abspath(__file__))
-    yield os.path.join(here, '__pycache__', 'generated')
-    yield os.path.join(os.path.expanduser('~'), '.cache', 'auv_ident', 'kernels')
-    yield os.path.join(tempfile.gettempdir(), f'auv_ident-kernels-{os.getuid()}')
+    yield from private_candidates('kernels')
 
 
 def _write_source(name, text):
-    """Write the kernel's module to the first writable cache folder (atomically: several
-    processes may compile the same vehicle at once). Returns its path."""
+    """Write the kernel's module to the first usable cache folder (created 0700, checked to be
+    the user's own and no symbolic link: its files are imported), through a temporary file of
+    that folder renamed into place (several processes may compile the same vehicle at once).
+    Returns its path."""
     tried = []
+    env = os.environ.get('AUV_IDENT_KERNEL_CACHE')
     for d in _cache_dirs():
         path = os.path.join(d, name + '.py')
         try:
-            os.makedirs(d, exist_ok=True)
+            make_private(d, parent=d != env)     # a folder the user named: itself only
             if os.path.isfile(path):
                 with open(path) as f:
                     if f.read() == text:
                         return path
-            tmp = f'{path}.{os.getpid()}.tmp'
-            with open(tmp, 'w') as f:
-                f.write(text)
-            os.replace(tmp, path)
+            fd, tmp = tempfile.mkstemp(dir=d, prefix=name + '.', suffix='.tmp')
+            try:
+                with os.fdopen(fd, 'w') as f:
+                    f.write(text)
+                os.replace(tmp, path)
+            except BaseException:
+                os.unlink(tmp)
+                raise
             return path
         except OSError as err:
-            tried.append(f'{d} ({err.strerror})')
-    raise ConfigError('no writable folder for the compiled model kernel; set '
+            tried.append(f'{d} ({err.strerror or err})')
+    raise ConfigError('no usable folder for the compiled model kernel; set '
                       'AUV_IDENT_KERNEL_CACHE (tried: ' + ', '.join(tried) + ')')
 
 

@@ -24,12 +24,11 @@ U^2 delta; SNAME 1950, Clarke et al. 1983): it is evaluated only for vehicles wh
 """
 import math
 
-from numba import njit
-
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.model.monomials import NZ, Z_SPEED, ZZ_DU_DV
 from auv_ident.core.model.state import N_STATE
 
-kernel = njit(cache=True, _nrt=False)     # as model.kernel (no reference counting)
+kernel = cached_njit(_nrt=False)     # as model.kernel (no reference counting)
 
 
 @kernel

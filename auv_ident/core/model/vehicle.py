@@ -268,8 +268,8 @@ def vehicle_from_file(path):
     path = os.path.abspath(path)
     try:
         key = (path, os.path.getmtime(path))
-    except OSError:
-        raise ConfigError(f'no vehicle file {path}') from None
+    except OSError as err:
+        raise ConfigError(f'no vehicle file {path}') from err
     if key not in _CACHE:
         with open(path, encoding='utf-8') as fh:
             try:
@@ -284,6 +284,8 @@ _CACHE = {}
 
 
 def _build(raw, path):
+    """The Vehicle of a parsed vehicle file `raw` (read from `path`), or ConfigError naming the
+    file and the first bad entry."""
     where = os.path.basename(path)
     if not isinstance(raw, dict) or 'coefficients' not in raw:
         raise ConfigError(f'{where}: not a vehicle file (no `coefficients:` mapping)')
@@ -311,105 +313,13 @@ def _build(raw, path):
     par[P_XB:P_ZB + 1] = r_B
     par[P_FIN], par[P_NMAX], par[P_U_MIN] = fin, nmax, U_MIN
     free = _dofs(raw, where)
-
-    prop = raw.get('propulsion') or {'model': 'none'}
-    pm = prop.get('model', 'none')
-    if pm not in PROPULSION_MODELS:
-        raise ConfigError(f'{where}: propulsion.model = {pm!r}; known: '
-                          + ', '.join(PROPULSION_MODELS))
-    par[P_PROP] = PROPULSION_MODELS[pm]
-    if pm == 'healey_lienard':
-        par[P_PROP_A] = _num(prop, 'Cd0', where + ' propulsion')
-        par[P_PROP_B] = _num(prop, 'eta_gain', where + ' propulsion')
-        par[P_PROP_C] = _num(prop, 'Ct_gain', where + ' propulsion')
-    elif pm == 'quadratic_thrust':
-        par[P_PROP_A] = _num(prop, 'X_prop', where + ' propulsion')
-        par[P_PROP_B] = _num(prop, 'K_prop', where + ' propulsion')
-        par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
-
-    cf = raw.get('crossflow') or {'model': 'none'}
-    cm = cf.get('model', 'none')
-    if cm not in CROSSFLOW_MODELS:
-        raise ConfigError(f'{where}: crossflow.model = {cm!r}; known: '
-                          + ', '.join(CROSSFLOW_MODELS))
-    par[P_CF] = CROSSFLOW_MODELS[cm]
-    if cm == 'mss_classic_strip':
-        par[P_CF_N] = int(_num(cf, 'stations', where + ' crossflow', positive=True))
-        par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
-        par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
-
-    coefs = []
-    seen = set()
-    craw = raw['coefficients']
-    if not isinstance(craw, dict) or not craw:
-        raise ConfigError(f'{where}: `coefficients:` must be a non-empty mapping')
-    for name, entry in craw.items():
-        cw = f'{where} coefficient {name}'
-        if name in seen:
-            raise ConfigError(f'{cw}: defined twice')
-        seen.add(name)
-        if not isinstance(entry, list) or len(entry) != 4:
-            raise ConfigError(f'{cw}: expected [value, equation, k, multiplier], got {entry!r}')
-        value, eq, k, mult = entry
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f'{cw}: value {value!r} is not a number') from None
-        if not np.isfinite(value):
-            raise ConfigError(f'{cw}: value {value!r} is not finite')
-        if eq not in EQUATIONS:
-            raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
-        if not isinstance(k, int) or not 0 <= k <= 6:
-            raise ConfigError(f'{cw}: k = {k!r} must be an integer 0..6')
-        facs = _parse_multiplier(mult, cw)
-        am_col = facs[1] if facs[0] == 'dot' else -1
-        scale = _term_scale(rho, L, k, facs if am_col < 0 else (), scaling)
-        if am_col >= 0 and not (free[EQUATIONS.index(eq)] and free[am_col]):
-            raise ConfigError(f'{cw}: added mass of a held degree of freedom (dofs: '
-                              f'{raw.get("dofs")}); leave it out')
-        if am_col < 0 and FACTOR_INDEX['U'] in facs:
-            par[P_SPEED_FACTOR] = 1.0
-        coefs.append(Coefficient(str(name), value, EQUATIONS.index(eq), k,
-                                 facs if am_col < 0 else (), scale, am_col))
-
-    terms_i, terms_s, am_i, am_s = [], [], [], []
-    for ci, c in enumerate(coefs):
-        if c.is_added_mass:
-            am_i.append((c.equation, c.added_mass_col, ci))
-            am_s.append(c.scale)
-        else:
-            f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))
-            terms_i.append([c.equation, ci] + f)
-            terms_s.append(c.scale)
-    for eq, const, facs in rigid_body_terms(mass, r_G, I):
-        f = list(facs) + [-1] * (MAX_FACTORS - len(facs))
-        terms_i.append([eq, -1] + f)
-        terms_s.append(const)
-
-    M_RB = rigid_body_mass_matrix(mass, r_G, I)
-    # A held degree of freedom: its acceleration is zero and the constraint takes whatever
-    # force its equation needs, so the free accelerations solve M_ff nu_f_dot = F_f alone.
-    # Identity rows and columns for the held ones make M^-1 = blockdiag(M_ff^-1, I) in every
-    # code path that inverts M (the held rows of f are zeroed afterwards, core/model/planar.py).
-    held_nu = ~free[:N_NU]
-    M_RB[held_nu, :] = 0.0
-    M_RB[:, held_nu] = 0.0
-    M_RB[held_nu, held_nu] = 1.0
-    mass_inverse = raw.get('mass_inverse', 'exact')
-    Minv_literal = None
-    if mass_inverse == 'mss_literal' and not free.all():
-        raise ConfigError(f'{where}: mass_inverse: mss_literal is a 6-DOF inverse; a vehicle '
-                          'with dofs needs exact')
-    if mass_inverse == 'mss_literal':
-        try:
-            Minv_literal = np.array(raw['mss_inverse'], dtype=float)
-        except (KeyError, TypeError, ValueError):
-            raise ConfigError(f'{where}: mass_inverse: mss_literal needs a 6x6 `mss_inverse`') \
-                from None
-        if Minv_literal.shape != (6, 6) or not np.all(np.isfinite(Minv_literal)):
-            raise ConfigError(f'{where}: mss_inverse must be a finite 6x6 matrix')
-    elif mass_inverse != 'exact':
-        raise ConfigError(f'{where}: mass_inverse = {mass_inverse!r}; use exact or mss_literal')
+    _propulsion(raw.get('propulsion') or {'model': 'none'}, where, par)
+    _crossflow(raw.get('crossflow') or {'model': 'none'}, where, par)
+    coefs = _coefficients(raw, where, rho, L, scaling, free)
+    if any(FACTOR_INDEX['U'] in c.factors for c in coefs):
+        par[P_SPEED_FACTOR] = 1.0
+    terms_i, terms_s, am_i, am_s = _term_tables(coefs, rigid_body_terms(mass, r_G, I))
+    mass_inverse, Minv_literal = _mass_inverse(raw, where, free)
 
     v = Vehicle(
         name=str(raw.get('name', os.path.splitext(where)[0])), title=str(raw.get('title', '')),
@@ -417,7 +327,8 @@ def _build(raw, path):
         terms_i=np.array(terms_i, dtype=np.int64).reshape(-1, 2 + MAX_FACTORS),
         terms_s=np.array(terms_s, dtype=float),
         am_i=np.array(am_i, dtype=np.int64).reshape(-1, 3), am_s=np.array(am_s, dtype=float),
-        M_RB=M_RB, Minv_literal=Minv_literal, mass_inverse=mass_inverse,
+        M_RB=_held_rigid_body_mass(mass, r_G, I, free), Minv_literal=Minv_literal,
+        mass_inverse=mass_inverse,
         identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
         cruise_rpm=float(raw.get('cruise_rpm', 500.0)),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
@@ -432,3 +343,122 @@ def _build(raw, path):
     for n in v.identify_default:
         v.index(n)
     return v
+
+
+def _propulsion(prop, where, par):
+    """The file's `propulsion:` block into par (P_PROP and its three constants)."""
+    pm = prop.get('model', 'none')
+    if pm not in PROPULSION_MODELS:
+        raise ConfigError(f'{where}: propulsion.model = {pm!r}; known: '
+                          + ', '.join(PROPULSION_MODELS))
+    par[P_PROP] = PROPULSION_MODELS[pm]
+    if pm == 'healey_lienard':
+        par[P_PROP_A] = _num(prop, 'Cd0', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'eta_gain', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'Ct_gain', where + ' propulsion')
+    elif pm == 'quadratic_thrust':
+        par[P_PROP_A] = _num(prop, 'X_prop', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'K_prop', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
+
+
+def _crossflow(cf, where, par):
+    """The file's `crossflow:` block into par (P_CF and the strip model's constants)."""
+    cm = cf.get('model', 'none')
+    if cm not in CROSSFLOW_MODELS:
+        raise ConfigError(f'{where}: crossflow.model = {cm!r}; known: '
+                          + ', '.join(CROSSFLOW_MODELS))
+    par[P_CF] = CROSSFLOW_MODELS[cm]
+    if cm == 'mss_classic_strip':
+        par[P_CF_N] = int(_num(cf, 'stations', where + ' crossflow', positive=True))
+        par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
+        par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
+
+
+def _coefficients(raw, where, rho, L, scaling, free):
+    """The file's `coefficients:` mapping as Coefficients, in the file's order."""
+    craw = raw['coefficients']
+    if not isinstance(craw, dict) or not craw:
+        raise ConfigError(f'{where}: `coefficients:` must be a non-empty mapping')
+    return [_coefficient(str(name), entry, f'{where} coefficient {name}', rho, L, scaling,
+                         free, raw.get('dofs'))
+            for name, entry in craw.items()]
+
+
+def _coefficient(name, entry, cw, rho, L, scaling, free, dofs):
+    """One `name: [value, equation, k, multiplier]` entry (cw: where, for the messages)."""
+    if not isinstance(entry, list) or len(entry) != 4:
+        raise ConfigError(f'{cw}: expected [value, equation, k, multiplier], got {entry!r}')
+    value, eq, k, mult = entry
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f'{cw}: value {value!r} is not a number') from None
+    if not np.isfinite(value):
+        raise ConfigError(f'{cw}: value {value!r} is not finite')
+    if eq not in EQUATIONS:
+        raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
+    if not isinstance(k, int) or not 0 <= k <= 6:
+        raise ConfigError(f'{cw}: k = {k!r} must be an integer 0..6')
+    facs = _parse_multiplier(mult, cw)
+    am_col = facs[1] if facs[0] == 'dot' else -1
+    scale = _term_scale(rho, L, k, facs if am_col < 0 else (), scaling)
+    if am_col >= 0 and not (free[EQUATIONS.index(eq)] and free[am_col]):
+        raise ConfigError(f'{cw}: added mass of a held degree of freedom (dofs: '
+                          f'{dofs}); leave it out')
+    return Coefficient(name, value, EQUATIONS.index(eq), k, facs if am_col < 0 else (), scale,
+                       am_col)
+
+
+def _term_tables(coefs, rigid_terms):
+    """(terms_i, terms_s, am_i, am_s) as lists: the monomial term table (the coefficients' terms
+    in the file's order, then the rigid-body terms `rigid_terms`) and the added-mass table."""
+    terms_i, terms_s, am_i, am_s = [], [], [], []
+    for ci, c in enumerate(coefs):
+        if c.is_added_mass:
+            am_i.append((c.equation, c.added_mass_col, ci))
+            am_s.append(c.scale)
+        else:
+            f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))
+            terms_i.append([c.equation, ci] + f)
+            terms_s.append(c.scale)
+    for eq, const, facs in rigid_terms:
+        f = list(facs) + [-1] * (MAX_FACTORS - len(facs))
+        terms_i.append([eq, -1] + f)
+        terms_s.append(const)
+    return terms_i, terms_s, am_i, am_s
+
+
+def _held_rigid_body_mass(mass, r_G, I, free):
+    """M_RB (6, 6) with identity rows and columns for the held degrees of freedom."""
+    M_RB = rigid_body_mass_matrix(mass, r_G, I)
+    # A held degree of freedom: its acceleration is zero and the constraint takes whatever
+    # force its equation needs, so the free accelerations solve M_ff nu_f_dot = F_f alone.
+    # Identity rows and columns for the held ones make M^-1 = blockdiag(M_ff^-1, I) in every
+    # code path that inverts M (the held rows of f are zeroed afterwards, core/model/planar.py).
+    held_nu = ~free[:N_NU]
+    M_RB[held_nu, :] = 0.0
+    M_RB[:, held_nu] = 0.0
+    M_RB[held_nu, held_nu] = 1.0
+    return M_RB
+
+
+def _mass_inverse(raw, where, free):
+    """(mass_inverse, Minv_literal): the file's choice of M^-1 ('exact', or 'mss_literal' with
+    its 6x6 `mss_inverse`; None for exact)."""
+    mass_inverse = raw.get('mass_inverse', 'exact')
+    if mass_inverse == 'exact':
+        return mass_inverse, None
+    if mass_inverse != 'mss_literal':
+        raise ConfigError(f'{where}: mass_inverse = {mass_inverse!r}; use exact or mss_literal')
+    if not free.all():
+        raise ConfigError(f'{where}: mass_inverse: mss_literal is a 6-DOF inverse; a vehicle '
+                          'with dofs needs exact')
+    try:
+        Minv_literal = np.array(raw['mss_inverse'], dtype=float)
+    except (KeyError, TypeError, ValueError) as err:
+        raise ConfigError(f'{where}: mass_inverse: mss_literal needs a 6x6 `mss_inverse`') \
+            from err
+    if Minv_literal.shape != (6, 6) or not np.all(np.isfinite(Minv_literal)):
+        raise ConfigError(f'{where}: mss_inverse must be a finite 6x6 matrix')
+    return mass_inverse, Minv_literal

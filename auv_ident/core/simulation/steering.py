@@ -147,9 +147,9 @@ def run_series(run):
         return check_series(*run)
     try:
         return check_series(run.t, run.x[:, State.PSI], run.inputs['rudder'])
-    except (AttributeError, KeyError, IndexError, TypeError):
+    except (AttributeError, KeyError, IndexError, TypeError) as err:
         raise DataError(f'{run!r:.80} is neither a (t, psi, delta) tuple nor a measured run '
-                        'with t, x and inputs["rudder"]') from None
+                        'with t, x and inputs["rudder"]') from err
 
 
 def _held_level(t, d, i0, i1):

@@ -147,14 +147,7 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
     -------
     ZigzagSimulation
     """
-    if first not in ('starboard', 'port'):
-        raise ConfigError(f"first must be 'starboard' or 'port', got {first!r}")
-    if not (rudder_deg > 0 and switch_deg > 0):
-        raise ConfigError(f'rudder and switch angles must be > 0 deg, got {rudder_deg}, '
-                          f'{switch_deg}')
-    if not (step > 0 and duration > step and 0.0 <= execute_time < duration):
-        raise ConfigError(f'need step > 0, duration > step and 0 <= execute_time < duration; '
-                          f'got step {step}, duration {duration}, execute_time {execute_time}')
+    _check_orders(first, rudder_deg, switch_deg, duration, execute_time, step)
     if thrust is not None and thrust_index is None:
         raise ConfigError('a thrust model needs thrust_index: the place of the thrust in u')
     x0 = np.array(x0, dtype=float)
@@ -226,19 +219,37 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
     rudder = U[:, rudder_index].copy()
     order = np.array([helm.ordered(ti) for ti in t])
     T = U[:, thrust_index].copy() if thrust is not None else None
-    measures = None
-    if len(t) >= 3 and np.any(rudder != rudder[0]):
-        try:
-            measures = zigzag_measures(t, X[:, State.PSI], rudder, execute_time=execute_time,
-                                       rudder_deg=rudder_deg, switch_deg=switch_deg)
-        except DataError as exc:
-            # a run too short for the rudder to hold its angle has no measures; its series
-            # are still the simulation's result
-            stopped = stopped or f'no zig-zag measures: {exc}'
+    measures, why_none = _measures(t, X, rudder, execute_time, rudder_deg, switch_deg)
     Xw = X.copy()
     Xw[:, EULER] = wrap_angle(Xw[:, EULER])
     return ZigzagSimulation(t=t, x=Xw, rudder=rudder, order=order, inputs=U, thrust=T,
-                            orders=list(helm.orders), measures=measures, stopped=stopped)
+                            orders=list(helm.orders), measures=measures,
+                            stopped=stopped or why_none)
+
+
+def _check_orders(first, rudder_deg, switch_deg, duration, execute_time, step):
+    """ConfigError unless the helm's orders and the run's grid make sense (simulate_zigzag)."""
+    if first not in ('starboard', 'port'):
+        raise ConfigError(f"first must be 'starboard' or 'port', got {first!r}")
+    if not (rudder_deg > 0 and switch_deg > 0):
+        raise ConfigError(f'rudder and switch angles must be > 0 deg, got {rudder_deg}, '
+                          f'{switch_deg}')
+    if not (step > 0 and duration > step and 0.0 <= execute_time < duration):
+        raise ConfigError(f'need step > 0, duration > step and 0 <= execute_time < duration; '
+                          f'got step {step}, duration {duration}, execute_time {execute_time}')
+
+
+def _measures(t, X, rudder, execute_time, rudder_deg, switch_deg):
+    """(the zig-zag measures of the simulated run or None, why None or None)."""
+    if len(t) < 3 or not np.any(rudder != rudder[0]):
+        return None, None
+    try:
+        return zigzag_measures(t, X[:, State.PSI], rudder, execute_time=execute_time,
+                               rudder_deg=rudder_deg, switch_deg=switch_deg), None
+    except DataError as exc:
+        # a run too short for the rudder to hold its angle has no measures; its series are
+        # still the simulation's result
+        return None, f'no zig-zag measures: {exc}'
 
 
 def _hermite_root(t0, t1, y0, y1, d0, d1):

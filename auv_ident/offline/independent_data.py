@@ -1,5 +1,7 @@
-"""Independent test data: rosbag2 MCAP bags that look like a real AUV's logs, made by a program
-that shares nothing with the identifier except the vehicle model's derivative.
+"""Independent validation data: rosbag2 MCAP bags that look like a real AUV's logs, made by code
+that shares nothing with the identifier except the vehicle model's derivative. A part of the
+package, not of the tests: the campaigns of tools/ measure the identifier on these bags, and
+``compare --truth`` reads the truth.json written beside them.
 
 Why: the identifier is accurate on bags from its own simulator, which samples on a uniform grid,
 publishes every command, adds white noise of the level the filter assumes and uses the very
@@ -44,11 +46,11 @@ rigid-body terms satisfy M_RB nu_dot + C_RB(nu) nu = M_RB nu_r_dot + C_RB(nu_r) 
 
 Usage::
 
-    from independent_data import DataConfig, generate
+    from auv_ident.offline.independent_data import DataConfig, generate
     data = generate(DataConfig(duration=60, odom_rate=10, odom_jitter=0.1), 'out/run1')
     # out/run1/bag (the rosbag2 directory), out/run1/truth.json [, truth_vehicle.yaml]
 
-    python test/independent_data.py --out out/run1 --duration 600 --odom-rate 10 \
+    python -m auv_ident.offline.independent_data --out out/run1 --duration 600 --odom-rate 10 \
         --odom-jitter 0.1 --dropout 0.05 --commands on_change --noise ar1 --noise-tau 1 \
         --noise-level 2 --current-ned=-0.0707,-0.0707,0 --perturb 0.2 \
         --perturb-keep Z_ds,Z_q,Z_w,M_ds,K_v
@@ -67,16 +69,13 @@ import numpy as np
 from scipy.integrate import solve_ivp
 import yaml
 
-if __package__ in (None, ''):  # run as a script: the package is the repository root's
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.trim import trim_speed
+from auv_ident.core.model.vehicle import vehicle_from_file
+from auv_ident.session.messages import JOINT_NAMES
+from auv_ident.vehicles import load_vehicle, resolve_vehicle_path
 
-from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
-from auv_ident.core.model.trim import trim_speed  # noqa: E402
-from auv_ident.core.model.vehicle import vehicle_from_file  # noqa: E402
-from auv_ident.session.messages import JOINT_NAMES  # noqa: E402
-from auv_ident.vehicles import load_vehicle, resolve_vehicle_path  # noqa: E402
-
-GENERATOR = 'test/independent_data.py v1'
+GENERATOR = 'auv_ident.offline.independent_data v1'
 NS = 1_000_000_000
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
@@ -158,6 +157,7 @@ class DataConfig:
     write_states: bool = False         # also write truth_states.npz (truth at the stamps)
 
     def validate(self):
+        """ValueError naming the first bad field."""
         if self.duration <= 0:
             raise ValueError('duration must be > 0')
         if not 0 < self.odom_rate <= 1000:
@@ -168,18 +168,13 @@ class DataConfig:
             raise ValueError('command_jitter must be in [0, 0.5)')
         if not 0 <= self.dropout < 1:
             raise ValueError('dropout must be in [0, 1)')
-        if self.commands not in ('on_change', 'periodic'):
-            raise ValueError("commands must be 'on_change' or 'periodic'")
+        _one_of('commands', self.commands, ('on_change', 'periodic'))
         if not 0 <= self.command_phase < 1.0 / self.command_rate:
             raise ValueError('command_phase must be in [0, 1/command_rate)')
-        if self.noise not in ('white', 'ar1', 'none'):
-            raise ValueError("noise must be 'white', 'ar1' or 'none'")
-        if self.covariance not in ('zero', 'true'):
-            raise ValueError("covariance must be 'zero' or 'true'")
-        if self.dvl not in ('ground', 'water'):
-            raise ValueError("dvl must be 'ground' or 'water'")
-        if self.integrator not in ('dop853', 'rk4'):
-            raise ValueError("integrator must be 'dop853' or 'rk4'")
+        for name, options in (('noise', ('white', 'ar1', 'none')),
+                              ('covariance', ('zero', 'true')), ('dvl', ('ground', 'water')),
+                              ('integrator', ('dop853', 'rk4'))):
+            _one_of(name, getattr(self, name), options)
         if not 0 <= self.perturb < 1:
             raise ValueError('perturb must be in [0, 1)')
         if len(self.current_ned) != 3:
@@ -203,6 +198,13 @@ class DataConfig:
         if np.any(t <= 0):
             raise ValueError('noise_tau must be > 0')
         return t
+
+
+def _one_of(name, value, options):
+    """ValueError unless value is one of options: "name must be 'a', 'b' or 'c'"."""
+    if value not in options:
+        raise ValueError(f'{name} must be ' + ', '.join(map(repr, options[:-1]))
+                         + f' or {options[-1]!r}')
 
 
 @dataclass

@@ -1,0 +1,394 @@
+"""What an identification takes and returns, by name.
+
+One identification (core/identification/pipeline.py) of one run or several:
+
+- :class:`Record` : one run's paired data (t, Y, U), the unit every method takes a list of;
+- :class:`FilterPass` : one pass of the augmented EKF over the runs (its final estimate, its
+  histories, its mean NIS);
+- :class:`NoiseFit` : the noise model read off the data and what was done with it
+  (core/identification/noise_fit.py);
+- :class:`Selection`, :class:`Linearisation`, :class:`Choice` : the automatic choice of the
+  coefficients (core/identification/selection.py);
+- :class:`Estimate` : the model's parameters identified with the noise model (the EKF pass's
+  and the final estimate with their covariances; coefficients, then current components);
+- :class:`Diagnosis` : identifiability and whether the data contradict the assumptions
+  (core/identification/diagnosis.py);
+- :class:`Identification` : what every command reports: the coefficients with their error
+  bars, the water current, the noise model, the diagnosis, the selection.
+"""
+from dataclasses import dataclass, field
+import math
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from auv_ident.core.model.current import current_estimate, CurrentEstimate
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import State
+
+
+@dataclass(frozen=True)
+class Record:
+    """One run of the vehicle, as the identification methods take it.
+
+    t : (N,) sample times (s), strictly increasing; jitter, dropouts and gaps allowed
+    Y : (N, 12) measurements (NaN: missing)
+    U : (N, 7) inputs, U[k] the command in force over [t_k, t_k+1) (zero-order hold)
+    """
+
+    t: np.ndarray
+    Y: np.ndarray
+    U: np.ndarray
+
+    @property
+    def samples(self) -> int:
+        """Rows of the record (measurements and command changes)."""
+        return len(self.t)
+
+
+@dataclass
+class FilterPass:
+    """One pass of the augmented EKF over the runs in turn (core.identification.batch.run_ekf).
+
+    stats : (5,) the compiled loop's statistics summed over the runs (stats[0] the last status)
+    history : the last run's histories (empty without hist_every)
+    R, Q : the final measurement and process noise covariances
+    theta0 : (p,) the start of the first run; theta, theta_cov : the final estimate
+    mean_nis_per_dof, steps : over all runs
+    whites : per run its whitened innovations (N_i, 12) when asked for (want_white), else empty
+    """
+
+    stats: np.ndarray
+    history: dict
+    R: np.ndarray
+    Q: np.ndarray
+    theta0: np.ndarray
+    theta: np.ndarray
+    theta_cov: np.ndarray
+    mean_nis_per_dof: float
+    steps: int
+    whites: list = field(default_factory=list)
+
+
+@dataclass
+class Refinement:
+    """The filter-error refinement's outcome (core.identification.batch.refine).
+
+    estimate : (p,) theta at the optimum; cov : (p, p) its white-noise covariance
+    cost : the cost per residual (its mean whitened square; 1 when the noise model holds)
+    jacobian : (sum N * 12, p) the Jacobian of the whitened innovations with respect to theta
+    converged, message, nfev : the optimiser's verdict, message and function evaluations
+    white : (sum N, 12) the whitened innovations at the optimum (NaN: no measurement), when
+        asked for (details)
+    """
+
+    estimate: np.ndarray
+    cov: np.ndarray
+    cost: float
+    jacobian: np.ndarray
+    converged: bool
+    message: str
+    nfev: int
+    white: Optional[np.ndarray] = None
+
+
+@dataclass(frozen=True)
+class PassEstimate:
+    """The final estimate (p,) and covariance (p, p) of an EKF pass made elsewhere (the bag
+    replay's, the live node's path)."""
+
+    estimate: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass
+class NoiseFit:
+    """The noise model of a record and what was done with it.
+
+    model : per channel name, noise_model()'s dict (level, ar1, tau_s, ljung_box, p_white,
+        white, samples), from the innovations of the EKF pass with the configured noise
+    configured_std, effective_std : (12,) the configured and the effective 1-sigma
+    used : True if the effective noise replaced the configured one
+    covariance : 'white' ((J^T J)^-1 times the residual variance) or 'sandwich'
+    inflation : (p,) sandwich 1-sigma / white 1-sigma of each coefficient
+    lags : the sandwich's lag window (samples)
+    white : (N, 12) whitened innovations at the refined solution; jacobian : (N * 12, p) their
+        Jacobian with respect to the parameters
+    ekf_run : the EKF pass whose estimate is reported (the configured noise's, or the
+        effective noise's when used; None when a pass made elsewhere was kept)
+    configured_pass : the EKF pass with the configured noise
+    configured_q, effective_q : (12,) the configured per-step process noise 1-sigma (the
+        states' units) and the one used (the matched one when process_used)
+    process_used : True if the process noise was matched to the innovations
+        (core/identification/noise_fit.py); process_levels : (12,) the innovation levels of the
+        configured pass
+    bounds : the runs' first rows in the stacked refined residuals ([0, N_1, ..., sum N])
+    refine_cost : the refinement's cost per residual (its mean whitened square; 1 when the
+        noise model holds)
+    """
+
+    model: dict
+    configured_std: np.ndarray
+    effective_std: np.ndarray
+    used: bool
+    covariance: str = 'white'
+    inflation: Optional[np.ndarray] = None
+    lags: int = 0
+    refine_converged: bool = True
+    refine_message: str = ''
+    notes: list = field(default_factory=list)
+    white: Optional[np.ndarray] = None
+    jacobian: Optional[np.ndarray] = None
+    ekf_run: Optional[FilterPass] = None
+    configured_pass: Optional[FilterPass] = None
+    configured_q: Optional[np.ndarray] = None
+    effective_q: Optional[np.ndarray] = None
+    process_used: bool = False
+    process_levels: Optional[np.ndarray] = None
+    bounds: Optional[list] = None
+    refine_cost: float = math.nan
+
+    @property
+    def reported_pass(self) -> Optional[FilterPass]:
+        """The EKF pass whose estimate is reported: ekf_run, or the configured pass when a
+        pass made elsewhere with the configured noise was kept."""
+        return self.ekf_run if self.ekf_run is not None else self.configured_pass
+
+    def document(self) -> dict:
+        """JSON-ready dict (the result's `noise_model`)."""
+        return {
+            'channels': {n: {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                             for k, v in d.items()} for n, d in self.model.items()},
+            'configured_std': [float(v) for v in self.configured_std],
+            'effective_std': [float(v) for v in self.effective_std],
+            'used': bool(self.used), 'covariance': self.covariance,
+            'inflation': None if self.inflation is None else [float(v) for v in self.inflation],
+            'lags': int(self.lags), 'notes': list(self.notes),
+            'configured_q_state': _floats(self.configured_q),
+            'effective_q_state': _floats(self.effective_q),
+            'process_noise_used': bool(self.process_used),
+            'runs': 1 if self.bounds is None else len(self.bounds) - 1,
+            'configured_mean_nis_per_dof': (None if self.configured_pass is None else
+                                            _finite(self.configured_pass.mean_nis_per_dof)),
+            'mean_nis_per_dof': (None if self.ekf_run is None else
+                                 _finite(self.ekf_run.mean_nis_per_dof)),
+            'refined_cost_per_residual': _finite(self.refine_cost)}
+
+
+def _finite(x):
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _floats(a):
+    return None if a is None else [float(v) for v in a]
+
+
+@dataclass
+class Selection:
+    """The outcome of the automatic choice (core/identification/selection.py).
+
+    chosen : the coefficients identified (named ones first, then in order of entry)
+    named : those the user named (always chosen)
+    left_out : {name: reason} for every other coefficient of the vehicle (file values kept)
+    steps : per coefficient added by the stepwise pass: partial F, relative CRB 1-sigma and
+        largest correlation when it entered
+    candidates : how many coefficients the selection could choose from
+    consider_inflation : per identified parameter, its final 1-sigma over the statistical one
+        (identify_auto; empty when the set was only chosen)
+    reassessed : True when pass 2 ran (identify_auto); False for pass 1 alone
+        (choose_coefficients, the live identifier's choice)
+    criteria : the thresholds the choice applied ({'f_to_enter', 'rel_std_max',
+        'correlation_max', 'prior_rel_std'})
+    """
+
+    chosen: list
+    named: list
+    left_out: dict
+    steps: list = field(default_factory=list)
+    candidates: int = 0
+    consider_inflation: dict = field(default_factory=dict)
+    reassessed: bool = True
+    criteria: dict = field(default_factory=dict)
+
+    def document(self) -> dict:
+        """JSON-ready dict (the result's `selection`)."""
+        return {'chosen': list(self.chosen), 'named': list(self.named),
+                'left_out': dict(self.left_out), 'steps': list(self.steps),
+                'candidates': int(self.candidates),
+                'consider_inflation': dict(self.consider_inflation),
+                'criteria': dict(self.criteria,
+                                 method='stepwise regression on the filter-error residuals '
+                                        '(partial F with the long-run variance)'
+                                        + (', then identify, re-assess and identify again'
+                                           if self.reassessed else ' (no re-assessment)'))}
+
+    def summary(self) -> list:
+        """Lines for the command line: the chosen set, then the left-out ones by reason."""
+        lines = [f'automatic selection: {len(self.chosen)} of {self.candidates} candidate '
+                 'coefficients chosen (' + ', '.join(self.chosen) + ')'
+                 + (f'; named: {", ".join(self.named)}' if self.named else '')]
+        groups: dict[str, list[str]] = {}
+        for name, why in self.left_out.items():
+            key = why.split(':')[0].split(' (')[0]
+            groups.setdefault(key, []).append(name)
+        if self.consider_inflation:
+            worst = max(self.consider_inflation, key=lambda n: self.consider_inflation[n])
+            ratio = self.consider_inflation[worst]
+            lines.append("error bars include the errors of the coefficients left at the file's "
+                         f'values ({100 * self.criteria["prior_rel_std"]:g} % 1-sigma each, '
+                         f'consider analysis): up to {ratio:.3g}x the statistical ones '
+                         f'({worst})')
+        lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
+                     '`selection`):')
+        for key, members in groups.items():
+            lines.append(f'  {key}: {", ".join(members)}')
+        return lines
+
+
+@dataclass
+class Linearisation:
+    """What the choice linearised, for the consider analysis of the final error bars.
+
+    G : (q, q) information J^T J of the whitened residuals at the prior, over every parameter
+        the pass saw (the named and candidate coefficients, the current components, then the
+        added mass only considered)
+    names : (q,) their names; prior : (q,) the values the sensitivities were taken at
+    left_candidates : indices of the coefficients whose errors bias the set when they are left
+        at their prior (the candidates and the considered added mass)
+    """
+
+    G: np.ndarray
+    names: list
+    prior: np.ndarray
+    left_candidates: list
+
+
+@dataclass
+class Choice:
+    """The automatic choice alone (core.identification.selection.choose_coefficients): the
+    Selection, and the Linearisation it was made on."""
+
+    selection: Selection
+    linearisation: Linearisation
+
+
+@dataclass(frozen=True)
+class SelectionRequest:
+    """Choose the coefficients from the data (`--coefficients auto[,NAME,...]`).
+
+    make_model : names -> Model identifying those coefficients (and the water current as the
+        caller wants it)
+    named : the coefficients always identified (file spelling)
+    """
+
+    make_model: Callable[[list], Model]
+    named: tuple = ()
+
+
+@dataclass
+class Estimate:
+    """The model's parameters (coefficients, then any current components) identified.
+
+    model : the Model identified (with an automatic choice: of the chosen set)
+    ekf_estimate, ekf_cov : (p,), (p, p) the EKF pass's
+    estimate, cov : the final ones (refined, or the EKF pass's without a refinement); cov the
+        covariance the residuals support (core/identification/noise_fit.py)
+    noise : the noise model (None when identified without one, core.identification.batch)
+    selection : the automatic choice, or None when the coefficients were given
+    """
+
+    model: Model
+    ekf_estimate: np.ndarray
+    ekf_cov: np.ndarray
+    estimate: np.ndarray
+    cov: np.ndarray
+    noise: Optional[NoiseFit] = None
+    selection: Optional[Selection] = None
+
+
+@dataclass
+class Diagnosis:
+    """Do the data contradict the identification's assumptions
+    (core.identification.diagnosis.diagnose)?
+
+    consistent : whether the error bars can be trusted
+    messages : the first says so and why; then the problems and notes
+    checks : the figures behind them
+    identifiability : per parameter verdicts (None without a refinement)
+    """
+
+    consistent: bool
+    messages: list
+    checks: dict
+    identifiability: Optional[dict] = None
+
+    def document(self) -> dict:
+        """JSON-ready dict (the result's `diagnosis`)."""
+        return {'consistent': self.consistent, 'messages': self.messages,
+                'checks': self.checks}
+
+
+@dataclass
+class Identification:
+    """What an identification reports: the coefficients (names, estimate, 1-sigma, covariance,
+    the EKF pass's), the water current split off, and how they were obtained.
+
+    initial : the coefficients' start; truth : their true values when known (else None)
+    steps, mean_nis_per_dof : of the EKF pass reported; wall_s : s the identification took
+    refined : whether the batch refinement ran
+    history, R_final, Q_final : the reported EKF pass's histories and final noise covariances
+    current : the water current (None: still water, not asked)
+    noise, diagnosis, selection : the noise model, the diagnosis and the automatic choice
+        (None when not made: core.identification.batch.identify has neither)
+    model : the Model identified; runs : the records it was identified from
+    """
+
+    names: list
+    estimate: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+    ekf_estimate: np.ndarray
+    ekf_std: np.ndarray
+    initial: np.ndarray
+    truth: Optional[np.ndarray]
+    steps: int
+    wall_s: float
+    mean_nis_per_dof: float
+    refined: bool
+    history: dict = field(default_factory=dict)
+    R_final: Optional[np.ndarray] = None
+    Q_final: Optional[np.ndarray] = None
+    current: Optional[CurrentEstimate] = None
+    noise: Optional[NoiseFit] = None
+    diagnosis: Optional[Diagnosis] = None
+    selection: Optional[Selection] = None
+    model: Optional[Model] = None
+    runs: list = field(default_factory=list)
+
+    def error_pct(self, which: str = 'estimate') -> Optional[np.ndarray]:
+        if self.truth is None:
+            return None
+        est = getattr(self, which)
+        return 100.0 * (est - self.truth) / np.abs(self.truth)
+
+    @classmethod
+    def of(cls, estimate: Estimate, runs: list, **fields: Any) -> 'Identification':
+        """The Identification of `estimate` made from `runs`: the coefficients' part of its
+        parameters, the water current split off (core.model.current.current_estimate, judged
+        on the headings of the runs), the noise model and selection it carries; `fields` the
+        others (initial, truth, steps, wall_s, mean_nis_per_dof, refined, ...)."""
+        model = estimate.model
+        pc = model.p_coef
+        est = np.asarray(estimate.estimate, dtype=float)
+        cov = np.asarray(estimate.cov, dtype=float)
+        ekf_est = np.asarray(estimate.ekf_estimate, dtype=float)
+        ekf_cov = np.asarray(estimate.ekf_cov, dtype=float)
+        psi = np.concatenate([np.asarray(r.Y)[:, State.PSI] for r in runs])
+        current = current_estimate(model, est, cov, ekf_est, ekf_cov, psi)
+        truth = fields.pop('truth', None)
+        return cls(names=list(model.theta_names[:pc]), estimate=est[:pc],
+                   std=np.sqrt(np.diag(cov[:pc, :pc])), cov=cov[:pc, :pc],
+                   ekf_estimate=ekf_est[:pc], ekf_std=np.sqrt(np.diag(ekf_cov[:pc, :pc])),
+                   truth=None if truth is None else np.asarray(truth, float),
+                   current=current, noise=estimate.noise, selection=estimate.selection,
+                   model=model, runs=list(runs), **fields)
