@@ -34,9 +34,9 @@ glider is held at rest: it drifts there with its antenna up).
 from dataclasses import asdict, dataclass, replace
 import math
 
-from numba import njit
 import numpy as np
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.glider.record import G
 
@@ -169,7 +169,7 @@ def steady_flight(params, record):
                   buoyancy=B)
 
 
-@njit(cache=True)
+@cached_njit()
 def _forces(u, w, rho, theta, B, S, cd0, cd1, cla):
     """(F_h, F_up) N on the glider moving at (u, w) (horizontal, up) m/s."""
     speed2 = u * u + w * w
@@ -184,7 +184,7 @@ def _forces(u, w, rho, theta, B, S, cd0, cd1, cla):
     return (-drag * u - lift * w) / speed, (-drag * w + lift * u) / speed + B
 
 
-@njit(cache=True)
+@cached_njit()
 def _accel(u, w, rho, theta, B, m, k1, k2, S, cd0, cd1, cla):
     fh, fv = _forces(u, w, rho, theta, B, S, cd0, cd1, cla)
     # body axes: x along the hull (cos theta, sin theta), z normal (-sin theta, cos theta)
@@ -196,7 +196,7 @@ def _accel(u, w, rho, theta, B, m, k1, k2, S, cd0, cd1, cla):
     return c * ax - s * az, s * ax + c * az
 
 
-@njit(cache=True)
+@cached_njit()
 def _integrate(t, rho, theta, B, surface, m, k1, k2, S, cd0, cd1, cla):
     n = t.shape[0]
     u = np.zeros(n)
