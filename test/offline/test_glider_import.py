@@ -87,7 +87,11 @@ def test_raw_logs_against_the_processed_file(tmp_path):
     battery = log.battery_position
     assert np.all(np.abs(battery) < 1.5 * 0.0254) and np.ptp(battery) > 0.5 * 0.0254
     out = tmp_path / 'raw'
-    write_glider_bag(log, out)
+    assert cli_main(['import', '--format', 'slocum', *map(str, sorted(data.glob('*.[de]bd'))),
+                     '--out', str(out)]) == 0
+    meta = bag_custom_data(out)
+    assert meta['auv_ident.format'] == 'slocum' and meta['auv_ident.measured'] == 'z phi theta psi'
+    assert meta['auv_ident.samples'] == str(len(log.t))
     with pytest.raises(RunFileError, match='no in-situ density'):
         read_glider_bag(out)
 
@@ -104,6 +108,9 @@ def test_bad_glider_inputs_are_named(tmp_path, capsys):
     assert cli_main(['import', '--format', 'npy', str(bad), str(bad),
                      '--out', str(tmp_path / 'x')]) != 0
     assert 'given 2 .npy' in capsys.readouterr().err
+    assert cli_main(['import', '--format', 'npy', str(bad), '--start', '2016-06-23T00:00:00Z',
+                     '--out', str(tmp_path / 'w')]) != 0
+    assert 'carry their own times' in capsys.readouterr().err
     assert cli_main(['import', '--format', 'hsva', str(bad), str(bad),
                      '--out', str(tmp_path / 'y')]) != 0
     assert 'reads one file, not 2' in capsys.readouterr().err
