@@ -347,6 +347,17 @@ def cmd_bag_repair(args):
 def cmd_import(args):
     from auv_ident.offline.import_bag import write_imported_bag
     from auv_ident.offline.importers import read_csv_run, read_hsva
+    if args.format in ('slocum', 'npy'):
+        from auv_ident.offline.glider_import import import_glider_files
+        if args.columns or args.start or args.vehicle:
+            raise AuvIdentError(f'--columns, --start and --vehicle are not for --format '
+                                f'{args.format}: glider logs carry their own times and layout')
+        print('\n'.join(import_glider_files(args.format, args.file, args.out,
+                                             'python -m auv_ident ' + ' '.join(sys.argv[1:]))))
+        return 0
+    if len(args.file) != 1:
+        raise AuvIdentError(f'--format {args.format} reads one file, not {len(args.file)}')
+    args.file = args.file[0]
     if args.format == 'hsva':
         if args.columns:
             raise AuvIdentError('--columns is for --format csv (HSVA files have a fixed layout)')
@@ -627,9 +638,12 @@ def build_parser():
 
     sp = sub.add_parser('import', help='write a measured run (HSVA file, CSV log) as a bag in '
                                        'our topics and frames')
-    sp.add_argument('file', help='the measured run: an HSVA .dat file or a CSV log')
-    sp.add_argument('--format', required=True, choices=('hsva', 'csv'),
-                    help='hsva: HSVA KVLCC2 free-running test file; csv: CSV log with --columns')
+    sp.add_argument('file', nargs='+', help='the measured run: an HSVA .dat file, a CSV log, '
+                                            "a Slocum glider's .dbd/.ebd logs or its npy file")
+    sp.add_argument('--format', required=True, choices=('hsva', 'csv', 'slocum', 'npy'),
+                    help='hsva: HSVA KVLCC2 free-running test file; csv: CSV log with --columns; '
+                         'slocum: Slocum .dbd/.ebd logs (.cac sensor lists beside them); npy: '
+                         "gliderflight's gliderflight_data.npy (docs/glider.md)")
     sp.add_argument('--columns', metavar='MAP.yaml',
                     help='csv: the column map (quantity, unit, frame, sign, time base per '
                          'column; docs/bags.md)')

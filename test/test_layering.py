@@ -5,8 +5,8 @@
 
 - core/: numpy, scipy, numba, yaml and the standard library only; imports nothing else of the
   package (the library one could publish alone); inside it, sub-packages that import one way:
-  model <- filter <- identification, model <- simulation (errors, angles and compiled_cache at
-  core/ serve them all);
+  model <- filter <- identification, model <- simulation, identification and simulation <-
+  glider (errors, angles and compiled_cache at core/ serve them all);
 - vehicles.py (vehicle files by name): core only;
 - session/: core, vehicles, session; no ROS, no bag library;
 - bags/: the rosbag2 MCAP reader, writer, scan and repair: core errors and the bag libraries
@@ -43,6 +43,9 @@ CORE_PARTS = {
     'filter': {'', 'model', 'filter'},
     'identification': {'', 'model', 'filter', 'identification'},
     'simulation': {'', 'model', 'simulation'},
+    # the glider's flight model: its own physics; the sandwich covariance and the fit % of
+    # the others, not the 6-DOF model
+    'glider': {'', 'identification', 'simulation', 'glider'},
 }
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosgraph_msgs',
                 'std_srvs', 'rosidl_runtime_py', 'rpyutils'}

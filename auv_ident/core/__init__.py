@@ -1,12 +1,13 @@
-"""The ROS-free core, in four parts that import one way:
+"""The ROS-free core, in five parts that import one way:
 
-    model  <-  filter  <-  identification
-    model  <-  simulation
+    model  <-  filter  <-  identification  <-  glider
+    model  <-  simulation  <-  glider
 
 model/ (state layout, vehicle files, the hydrodynamic model, the current), filter/ (the
 augmented EKF), identification/ (batch methods, noise model, choice of coefficients,
-uncertainty, diagnosis), simulation/ (manoeuvres, simulator, prediction, zig-zags); errors.py,
-angles.py and compiled_cache.py serve them all."""
+uncertainty, diagnosis), simulation/ (manoeuvres, simulator, prediction, zig-zags), glider/
+(a buoyancy-driven glider's flight model and its calibration); errors.py, angles.py and
+compiled_cache.py serve them all."""
 import os
 
 from auv_ident.core.compiled_cache import register
@@ -17,6 +18,7 @@ from auv_ident.core.compiled_cache import register
 # is complete.
 COMPILED_SOURCES = ('errors.py', 'model/state.py', 'model/vehicle.py', 'model/monomials.py',
                     'model/current_terms.py', 'model/planar.py', 'model/hydrodynamics.py',
-                    'filter/ekf.py', 'filter/timing.py', 'filter/propagation.py')
+                    'filter/ekf.py', 'filter/timing.py', 'filter/propagation.py',
+                    'glider/flight.py', 'glider/record.py')
 
 register(os.path.dirname(os.path.abspath(__file__)), COMPILED_SOURCES)

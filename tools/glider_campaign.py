@@ -1,0 +1,49 @@
+"""The glider campaign (issue #31, docs/glider.md): calibrate the Slocum glider's flight model
+on the first half of its record and validate it on the second, and the reverse, beside a
+steady-state calibration in gliderflight's style on the same split; prints the markdown tables
+(auv_ident/analysis/glider.py says what they hold).
+
+    python -m auv_ident import --format npy \\
+        ../shared/realdata/slocum_comet/gliderflight_data.npy --out /tmp/comet
+    PYTHONPATH=. .venv/bin/python tools/glider_campaign.py /tmp/comet [--json OUT.json] \\
+        [--plot PNG]
+"""
+import argparse
+import json
+from pathlib import Path
+import sys
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from auv_ident.analysis.glider import (  # noqa: E402
+    format_campaign,
+    plot_campaign,
+    run_campaign,
+)
+from auv_ident.core.errors import AuvIdentError  # noqa: E402
+from auv_ident.offline.glider_import import read_glider_bag  # noqa: E402
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('bag', help='a glider bag written by import --format npy')
+    ap.add_argument('--json', help='write the campaign here')
+    ap.add_argument('--plot', metavar='PNG', help='draw the campaign here')
+    a = ap.parse_args(argv)
+    try:
+        record = read_glider_bag(a.bag)
+        result = run_campaign(record)
+    except AuvIdentError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    print('\n'.join(format_campaign(result)))
+    if a.plot:
+        plot_campaign(record, result, a.plot)
+    if a.json:
+        Path(a.json).write_text(json.dumps(result, indent=1, default=float) + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
