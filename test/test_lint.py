@@ -1,6 +1,7 @@
 """The house lint on the package, its tests and tools: ament_flake8's rules for ROS 2 Python
 packages (99 columns, single quotes, google import order, no shadowed builtins, pyflakes and
-pycodestyle errors), run by ruff with tools/ruff.toml."""
+pycodestyle errors) and the complexity gate (mccabe at most 15 per function), run by ruff with
+tools/ruff.toml."""
 from pathlib import Path
 import shutil
 import subprocess
@@ -33,10 +34,13 @@ def test_package_tests_and_tools_pass_the_lint():
 
 def test_the_lint_sees_a_violation(tmp_path):
     """A lint that saw nothing would pass on any code: double quotes, a shadowed builtin, an
-    unused import, imports out of order and a 100-column line are each reported."""
+    unused import, imports out of order, a 100-column line and a function of complexity 16
+    are each reported."""
     bad = tmp_path / 'bad.py'
-    bad.write_text('import sys\nimport os\n\nlist = "x"\nY = 1' + ' ' * 90 + '# long\n')
+    branches = ''.join(f'    if x == {i}:\n        return {i}\n' for i in range(15))
+    bad.write_text('import sys\nimport os\n\nlist = "x"\nY = 1' + ' ' * 90 + '# long\n\n\n'
+                   'def tangled(x):\n' + branches + '    return -1\n')
     r = _run(bad, cwd=tmp_path)
     assert r.returncode == 1
-    for code in ('F401', 'I001', 'A001', 'Q000', 'E501'):
+    for code in ('F401', 'I001', 'A001', 'Q000', 'E501', 'C901'):
         assert code in r.stdout, (code, r.stdout)

@@ -190,15 +190,7 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None):
     settings = settings or IdentifierSettings()
     several = len(paths) > 1
     if several:
-        if settings.noise_mode != 'fixed':
-            raise ConfigError('several bags are identified with the fixed noise of their '
-                              'messages and the noise model from the data: --noise-mode '
-                              'applies to one bag')
-        if 'current' not in settings.given:
-            settings = settings.with_values(current='none')
-        if settings.current_option.estimate:
-            raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); '
-                           'one current per run is not estimated')
+        settings = _several_bags(settings)
     metas = [bag_custom_data(p) for p in paths]
     v = bags_vehicle(paths, metas, settings.vehicle if 'vehicle' in settings.given else None)
     auto, names = coefficient_request(v, settings.coefficients)
@@ -264,6 +256,21 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None):
     return BagIdentification(paths=list(paths), metas=metas, replays=replays, cfg=cfg,
                              result=res, auto=auto, velocity_reference=vref, settings=settings,
                              noise_given=noise_given, q_given=q_given)
+
+
+def _several_bags(settings):
+    """The settings of several bags identified together: the noise mode fixed (the noise
+    model comes from the data), the current 'none' unless a known one is given (one current
+    per run is not estimated); ConfigError/BagError naming the setting otherwise."""
+    if settings.noise_mode != 'fixed':
+        raise ConfigError('several bags are identified with the fixed noise of their messages '
+                          'and the noise model from the data: --noise-mode applies to one bag')
+    if 'current' not in settings.given:
+        settings = settings.with_values(current='none')
+    if settings.current_option.estimate:
+        raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); one '
+                       'current per run is not estimated')
+    return settings
 
 
 def _initial(res, first):
