@@ -1,7 +1,11 @@
 """Command line: python -m auv_ident {simulate,identify,report,bag,import,derivatives,...}.
 
 Expected errors (bad options, bad files, states outside the model's domain) print one clear
-line on stderr and exit with status 2; no traceback.
+line on stderr and exit with status 2; no traceback. `identify` and `report` exit with status
+EXIT_UNTRUSTED (3) when they computed a result that should not be trusted: NOT consistent (the
+data contradict the identification's assumptions) or NOT plausible (the estimates contradict
+the vehicle file or the physics); the first line of the output, result.json's `diagnosis`
+and report.md say why.
 """
 import argparse
 import csv
@@ -81,6 +85,16 @@ def _settings(args):
                                              for f in settings_fields()})
 
 
+EXIT_UNTRUSTED = 3     # a result computed, but NOT consistent or NOT plausible (docstring)
+
+
+def _trust_status(doc):
+    """0 for a result whose diagnosis says it can be trusted, else EXIT_UNTRUSTED."""
+    diagnosis = doc.get('diagnosis') or {}
+    trusted = diagnosis.get('consistent', True) and diagnosis.get('plausible', True)
+    return 0 if trusted else EXIT_UNTRUSTED
+
+
 def _option(name):
     return '--' + name.replace('_', '-')
 
@@ -113,7 +127,7 @@ def cmd_identify(args):
         from auv_ident.analysis import results
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
-    return 0
+    return _trust_status(doc)
 
 
 def _identify_simulated(args, settings):
@@ -292,7 +306,7 @@ def cmd_report(args):
               + ', '.join(f"{k} {v:.3g} {true_val['rms_units'][k]}"
                           for k, v in true_val['rms'].items()))
     print(f"report: {out['report']} and {out['html']}")
-    return 0
+    return _trust_status(doc)
 
 
 def _pct(v):

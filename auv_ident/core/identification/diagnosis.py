@@ -19,10 +19,16 @@ Checks, in the order a user needs them:
 4. Identifiability: per coefficient the relative 1-sigma the run supports, correlations, and a
    verdict with the excitation that would help.
 """
+from dataclasses import replace
 import math
 
 import numpy as np
 
+from auv_ident.core.identification.plausibility import (
+    depth_contradicts_down,
+    implausible_coefficients,
+    what_to_check,
+)
 from auv_ident.core.identification.results import Diagnosis
 from auv_ident.core.identification.uncertainty import (
     identifiability,
@@ -32,7 +38,7 @@ from auv_ident.core.identification.uncertainty import (
     with_gaps,
 )
 from auv_ident.core.model.current import MAX_CURRENT_STD
-from auv_ident.core.model.state import INPUT_NAMES, STATE_NAMES
+from auv_ident.core.model.state import INPUT_NAMES, State, STATE_NAMES
 from auv_ident.core.model.vehicle import EQUATIONS
 
 XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
@@ -166,15 +172,17 @@ def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=
 
 
 def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
-           refined=True):
+           refined=True, depth=None):
     """Identifiability and diagnosis of an identification made with
     core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
     residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
     (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
     the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
-    lag pairs a residual of one run with an input of another. Returns a
+    lag pairs a residual of one run with an input of another. depth : (N,) the runs' measured
+    z (m, NED; NaN where not measured) for the frame's plausibility, or None. Returns a
     core.identification.results.Diagnosis (its identifiability None without the refined
-    residuals)."""
+    residuals); an estimate that is not plausible for the vehicle file
+    (core/identification/plausibility.py) puts 'NOT plausible: ...' on its first line."""
     verdicts = xcorr = None
     if fit is not None and fit.white is not None:
         lags = max(1, int(round(XCORR_SECONDS / dt)))
@@ -190,5 +198,28 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
         xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
                                         cov)
-    return Diagnosis(identifiability=verdicts,
-                     **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined))
+    diagnosis = Diagnosis(identifiability=verdicts,
+                          **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined))
+    return judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth)
+
+
+def judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth=None):
+    """The diagnosis with the plausibility of the estimates for the vehicle file
+    (core/identification/plausibility.py): coefficients of a forbidden sign or far outside the
+    file's prior, and a depth that puts a submerged vehicle above the water, each named on the
+    first line as NOT plausible, with what to check; the consistency line follows."""
+    std = np.sqrt(np.clip(np.diag(np.asarray(cov, dtype=float)), 0.0, None))
+    found = implausible_coefficients(vehicle, list(names), np.asarray(estimate, dtype=float),
+                                     std)
+    frame = '' if depth is None else depth_contradicts_down(
+        depth, heave_free=bool(vehicle.free_states[State.W]))
+    if not found and not frame:
+        return diagnosis
+    reasons = [f.reason for f in found] + ([frame] if frame else [])
+    if found:
+        head = what_to_check(found, frame)
+    else:
+        head = f'NOT plausible: {frame}'
+    diagnosis.checks['implausible'] = reasons
+    return replace(diagnosis, plausible=False, implausible=reasons,
+                   messages=[head] + list(diagnosis.messages))

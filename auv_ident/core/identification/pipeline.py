@@ -20,6 +20,7 @@ from auv_ident.core.identification.diagnosis import assess
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
 from auv_ident.core.identification.results import Identification
 from auv_ident.core.identification.selection import identify_auto
+from auv_ident.core.model.state import State
 
 JUDGE_NIS = ('configured', 'reported', None)
 
@@ -65,8 +66,9 @@ def identify_with_diagnosis(model, cfg, runs, T=None, refine_pass=True, progress
     nis = {'configured': fit.configured_pass.mean_nis_per_dof,
            'reported': reported.mean_nis_per_dof, None: math.nan}[judge_nis]
     U = np.concatenate([np.asarray(r.U) for r in runs])
+    depth = np.concatenate([np.asarray(r.Y)[:, State.Z] for r in runs])
     diagnosis = assess(est.model.vehicle, est.model.theta_names, est.estimate, est.cov, fit, U,
-                       T, nis, refined=refine_pass)
+                       T, nis, refined=refine_pass, depth=depth)
     return Identification.of(est, runs, initial=reported.theta0[:est.model.p_coef].copy(),
                              truth=truth, steps=reported.steps,
                              wall_s=time.perf_counter() - t0,

@@ -312,20 +312,31 @@ class Diagnosis:
     (core.identification.diagnosis.diagnose)?
 
     consistent : whether the error bars can be trusted
-    messages : the first says so and why; then the problems and notes
+    messages : the first says whether the result can be trusted and why (a NOT plausible
+        result says that first); then the problems and notes
     checks : the figures behind them
     identifiability : per parameter verdicts (None without a refinement)
+    plausible : whether the estimates are physically plausible for the vehicle file
+        (core/identification/plausibility.py); implausible : why not, per coefficient
     """
 
     consistent: bool
     messages: list
     checks: dict
     identifiability: Optional[dict] = None
+    plausible: bool = True
+    implausible: list = field(default_factory=list)
+
+    @property
+    def trusted(self) -> bool:
+        """Consistent and plausible: the result and its error bars can be used."""
+        return self.consistent and self.plausible
 
     def document(self) -> dict:
         """JSON-ready dict (the result's `diagnosis`)."""
-        return {'consistent': self.consistent, 'messages': self.messages,
-                'checks': self.checks}
+        return {'consistent': self.consistent, 'plausible': self.plausible,
+                'trusted': self.trusted, 'implausible': list(self.implausible),
+                'messages': self.messages, 'checks': self.checks}
 
 
 @dataclass
