@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import helpers
+import pytest
 
 from auv_ident.cli import EXIT_UNTRUSTED, main
 
@@ -33,3 +34,33 @@ def test_the_right_vehicle_file_is_trusted_and_exits_0(tmp_path, capsys):
     diagnosis = json.loads(out.read_text())['diagnosis']
     assert diagnosis['plausible'] is True and diagnosis['trusted'] is True
     assert diagnosis['implausible'] == []
+
+
+SHIPPED = ('nps_auv2', 'remus100', 'isimi', 'kvlcc2_hsva')
+
+
+@pytest.mark.slow       # 16 identifications of 300 s bags
+def test_every_shipped_file_on_another_vehicles_bag_is_refused_or_flagged(tmp_path_factory):
+    """Each shipped vehicle's bag (300 s, seed 3; zig-zags for the ship) identified with every
+    shipped vehicle file: the right file is trusted (exit 0), every other one is refused (exit
+    2, one line) or flagged NOT plausible / NOT consistent (exit 3); never a confident result."""
+    import subprocess
+    import sys
+    root = tmp_path_factory.mktemp('pairs')
+    for v in SHIPPED:
+        subprocess.run([sys.executable, '-m', 'auv_ident', 'simulate', '--vehicle', v,
+                        '--maneuver', 'zigzag' if v == 'kvlcc2_hsva' else 'ident',
+                        '--duration', '300', '--seed', '3', '--out', str(root / v)],
+                       check=True, capture_output=True, cwd=helpers.REPO, timeout=300)
+    for bag in SHIPPED:
+        for v in SHIPPED:
+            r = subprocess.run([sys.executable, '-m', 'auv_ident', 'identify', '--bag',
+                                str(root / bag), '--vehicle', v],
+                               capture_output=True, text=True, cwd=helpers.REPO, timeout=600)
+            first = r.stdout.splitlines()[0] if r.stdout else ''
+            if bag == v:
+                assert r.returncode == 0 and first.startswith('consistent'), (bag, v, first)
+            else:
+                assert r.returncode in (2, EXIT_UNTRUSTED), (bag, v, r.returncode, first)
+                if r.returncode == EXIT_UNTRUSTED:
+                    assert first.startswith('NOT '), (bag, v, first)
