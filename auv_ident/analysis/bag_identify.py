@@ -165,7 +165,7 @@ class BagIdentification:
         return self.result.model.vehicle
 
 
-def identify_replayed(paths, settings=None, refine_pass=True, progress=None):
+def identify_replayed(paths, settings=None, refine_pass=True, progress=None, together=None):
     """`identify --bag`'s path, for one bag or several (module docstring).
 
     Each bag is replayed as the identifier would have read it (its accepted measurements, its
@@ -185,10 +185,11 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None):
     Several bags: noise_mode must be 'fixed' (the noise model comes from the data); the
     current is 'none' unless a known one is given (one current per run is not estimated);
     noise_std and q_state, given, are where the configured noise starts instead of the
-    messages' (median over the bags). Returns a BagIdentification."""
+    messages' (median over the bags). together: the rules of several bags (identify_bags),
+    also for one (None: for more than one). Returns a BagIdentification."""
     t0 = time.perf_counter()
     settings = settings or IdentifierSettings()
-    several = len(paths) > 1
+    several = len(paths) > 1 if together is None else together
     if several:
         settings = _several_bags(settings)
     metas = [bag_custom_data(p) for p in paths]
@@ -397,7 +398,8 @@ def identify_bags(paths, settings=None, refine_pass=True, progress=None):
         the data still applies); current not given: 'none' (still water), else a known current
         'N,E[,D]' in m/s that all runs flew in; noise_mode 'fixed'.
     Returns (JSON document, printable table)."""
-    b = identify_replayed(paths, settings, refine_pass=refine_pass, progress=progress)
+    b = identify_replayed(paths, settings, refine_pass=refine_pass, progress=progress,
+                          together=True)
     settings = b.settings
     res, v, fit = b.result, b.vehicle, b.result.noise
     rejected = b.replays.rejected

@@ -218,7 +218,8 @@ class IdentifierNode(Node):
         self.pub_current = None
         if any(i >= 0 for i in self._current_index):
             self._current = TwistWithCovarianceStamped()
-            self._current.header.frame_id = DEFAULT_FRAME_IDS[self.session.frame][0]
+            # the world frame of the convention, set at each publication: with frame 'auto'
+            # the first odometry decides it
             self.pub_current = self.create_publisher(TwistWithCovarianceStamped, '~/current',
                                                      LATCHED_QOS)
         self.sub_actuators = self.create_subscription(JointState, 'actuators',
@@ -387,6 +388,7 @@ class IdentifierNode(Node):
                                                   self.session.frame)
         msg = self._current
         msg.header.stamp = stamp
+        msg.header.frame_id = DEFAULT_FRAME_IDS[self.session.frame][0]
         lin = msg.twist.twist.linear
         lin.x, lin.y, lin.z = (float(v) for v in linear)
         msg.twist.covariance = array('d', covariance.tobytes())

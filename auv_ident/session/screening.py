@@ -29,7 +29,9 @@ Frame-id rule: a token ``ned`` or ``frd`` in a frame id names the NED convention
 ``flu`` the ENU one (tokens are the lower-case alphanumeric runs, so 'odom_ned' and
 'base_link_FRD' count, 'friend' does not); ids without such a token, e.g. 'odom'/'base_link',
 are not judged. Odometry whose ids name the other convention than the ``frame`` setting is
-rejected, and so is odometry whose ids differ from those of the first accepted one.
+rejected, and so is odometry whose ids differ from those of the first accepted one. With the
+``frame`` setting 'auto' (the default), the first odometry's ids decide the convention
+(:func:`frame_of_ids`): a token names it; ids without one are REP-103 names (ENU/FLU).
 
 Plausibility rule (wrong units or frames detectable by range; only measured channels):
 |u|, |v|, |w| <= MAX_BODY_SPEED (10 m/s: cm/s or mm/s are caught); |p|, |q|, |r| <=
@@ -88,6 +90,18 @@ def named_conventions(frame_id, child_frame_id):
             if token in FRAME_TOKENS:
                 named.add(FRAME_TOKENS[token])
     return tuple(sorted(named))
+
+
+def frame_of_ids(frame_id, child_frame_id):
+    """The convention ('ned' or 'enu') an odometry's frame ids say, for the frame setting
+    'auto': a ``ned``/``frd`` token NED, an ``enu``/``flu`` token ENU (both named: NED, and the
+    frame-id rule then rejects the messages, naming both); ids without a token name REP-103
+    frames ('odom', 'base_link', 'map': ENU/FLU, REP-103/105); no ids at all: NED, the
+    package's own convention."""
+    named = named_conventions(frame_id, child_frame_id)
+    if named:
+        return 'ned' if 'ned' in named else 'enu'
+    return 'enu' if (frame_id or child_frame_id) else 'ned'
 
 
 def frame_problem(frame_id, child_frame_id, frame, first_ids=None):

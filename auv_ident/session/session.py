@@ -63,7 +63,12 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
-from auv_ident.session.screening import command_problem, odometry_problem
+from auv_ident.session.screening import (
+    command_problem,
+    frame_of_ids,
+    named_conventions,
+    odometry_problem,
+)
 from auv_ident.session.settings import (
     coefficient_list,
     coefficient_request,
@@ -381,6 +386,8 @@ class IdentSession:
             squared; :func:`auv_ident.session.messages.odometry_variances`), or None; used with
             noise_source 'message' where finite and positive
         """
+        if self.frame == 'auto':    # x12 is NED/FRD by contract: the ids only for the rule
+            self.frame = 'ned'
         try:
             stamp_ns = integer_stamp(stamp_ns)
         except ConversionError as err:
@@ -398,6 +405,23 @@ class IdentSession:
 
     # -- the message adapters --
 
+    def _decide_frame(self, frame_id, child_frame_id):
+        """frame 'auto': the convention of the first odometry's frame ids (screening
+        frame_of_ids); a guess (ids without a convention's token) is said once in the
+        notices."""
+        frame = frame_of_ids(frame_id, child_frame_id)
+        if named_conventions(frame_id, child_frame_id):
+            self.frame = frame
+            return
+        why = (f'its frame ids {frame_id!r} / {child_frame_id!r} carry no _ned/_frd token: '
+               'REP-103 names, ENU/FLU' if frame == 'enu'
+               else 'it has no frame ids: NED/FRD, our own convention')
+        self._set_frame(frame, f'the first odometry: {why}; set frame explicitly if wrong')
+
+    def _set_frame(self, frame, why):
+        self.frame = frame
+        self.notices.append(f'frame auto -> {frame} ({why})')
+
     def on_actuators(self, msg):
         """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
         stamp_ns = None
@@ -411,6 +435,9 @@ class IdentSession:
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement (in the `frame` convention). Returns an Event."""
         stamp_ns = None
+        if self.frame == 'auto':
+            self._decide_frame(str(getattr(msg.header, 'frame_id', '') if hasattr(msg, 'header')
+                                   else ''), str(getattr(msg, 'child_frame_id', '')))
         try:
             stamp_ns = header_stamp_ns(msg)
             _, x12 = odometry_state(msg, self.frame)

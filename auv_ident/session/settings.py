@@ -18,7 +18,8 @@ The choice lists are defined once here:
 
 - :data:`NOISE_MODES`: the filter's noise adaptation modes (core.filter.ekf.MODES);
 - :data:`MASS_INVERSES`: how M^-1 is formed (core.model.hydrodynamics.Model's ``mass_inverse``);
-- :data:`FRAMES`: conventions of the incoming Odometry (session.messages, the frame algebra).
+- :data:`FRAMES`: conventions of the incoming Odometry (session.messages, the frame algebra);
+  :data:`FRAME_SETTINGS`: those and 'auto' (from the odometry's frame ids, REP-103).
 """
 from dataclasses import dataclass, field, fields
 import math
@@ -36,6 +37,8 @@ from auv_ident.session.auto_choice import AUTO_WINDOW_S
 from auv_ident.session.messages import FRAMES
 from auv_ident.vehicles import load_vehicle
 
+FRAME_SETTINGS = ('auto',) + FRAMES   # 'auto': the frame ids say (session/screening.py)
+
 NOISE_MODES = tuple(MODES)
 MASS_INVERSES = ('default', 'exact', 'mss_literal')
 NOISE_SOURCES = ('message', 'parameter')   # where R comes from (IdentSession noise_source)
@@ -44,7 +47,8 @@ MAX_SAMPLE_TIME = 1.0   # s: one RK4 step of the model over a longer one is not 
 MAX_SUBSTEPS = 20000    # max_gap / sample_time: the longest bridge of one gap
 MAX_BRIDGE_S = 0.25     # s, default max_bridge: longest gap bridged by time updates
 
-__all__ = ['choice', 'coefficient_list', 'coefficient_request', 'FRAMES', 'help_text',
+__all__ = ['choice', 'coefficient_list', 'coefficient_request', 'FRAME_SETTINGS', 'FRAMES',
+           'help_text',
            'IdentifierSettings', 'MASS_INVERSES', 'MAX_BRIDGE_S', 'max_command_age',
            'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'measured_mask', 'names_of', 'noise_model',
            'NOISE_MODES', 'NOISE_SOURCES', 'number', 'ParameterError', 'positive',
@@ -427,8 +431,10 @@ class IdentifierSettings:
                               kind='strings', check=_measured,
                               note='Others are ignored, even if present in the message. Quote '
                                    'the names in YAML: a bare y is a boolean.')
-    frame: str = setting('ned', 'convention of the incoming Odometry (ned: NED/FRD, enu: '
-                                'REP-103 ENU/FLU)', choices=FRAMES)
+    frame: str = setting('auto', 'convention of the incoming Odometry: auto = from its frame '
+                                 'ids (a _ned/_frd token: NED/FRD; other names, e.g. odom and '
+                                 'base_link: REP-103 ENU/FLU; none: NED), ned = NED/FRD, enu = '
+                                 'REP-103 ENU/FLU', choices=FRAME_SETTINGS)
     sample_time: float = setting(0.05, 'nominal sample time and longest single prediction '
                                        'step', unit='s')
     max_gap: float = setting(5.0, 'a backward time jump larger than this is confirmed by 5 '

@@ -382,7 +382,7 @@ BAD_SETTINGS = [
     ('p0_rel', math.inf, 'positive'),
     ('noise_mode', None, 'use one of fixed'),
     ('noise_mode', 'Fixed', 'use one of fixed'),
-    ('frame', 3, 'use one of ned, enu'),
+    ('frame', 3, 'use one of auto, ned, enu'),
     ('mass_inverse', 'inverse', 'use one of default, exact, mss_literal'),
     ('max_bridge', -0.1, 'positive'),
     ('max_gap', 'long', 'not a number'),
