@@ -67,7 +67,7 @@ def identify(bag, out_json, refine):
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
-    if p.returncode != 0:
+    if p.returncode not in (0, 3):    # 3: computed, NOT consistent/plausible
         return {'failed': True, 'stderr': p.stderr[-2000:], 'stdout': p.stdout[-2000:],
                 'wall': wall}
     doc = json.loads(Path(out_json).read_text())

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from auv_ident.cli import main
+from auv_ident.cli import EXIT_UNTRUSTED, main
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import Input, State
@@ -177,8 +177,10 @@ def test_kvlcc2_mirror_split_from_bags(tmp_path, capsys):
     model = str(tmp_path / 'model.json')
     # no hand-given noise: the noise model and the process noise come from the data
     # (analysis/bag_identify.py identify_bags)
+    # the diagnosis calls this 3-DOF model of a real ship NOT consistent (model error the
+    # residuals show; docs/kvlcc2.md): exit status 3, the model written all the same
     assert main(['identify', '--bag', bags['Z_10_10_S'], '--bag', bags['Z_20_10_S'],
-                 '--vehicle', VEHICLE, '--json', model]) == 0
+                 '--vehicle', VEHICLE, '--json', model]) in (0, EXIT_UNTRUSTED)
     for r, (goal_r, goal_u) in GOALS.items():
         out = tmp_path / f'rep_{r}'
         assert main(['report', '--model', model, '--vehicle', VEHICLE, '--validate', bags[r],
