@@ -27,7 +27,7 @@ from auv_ident.core.identification.results import (
 )
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_CURRENT
-from auv_ident.offline.replay import bag_custom_data, bag_settings, replay_bag
+from auv_ident.offline.replay import bag_custom_data, metadata_settings, replay_bag
 from auv_ident.session.record import exact_hold
 from auv_ident.session.settings import coefficient_request, IdentifierSettings
 from auv_ident.vehicles import load_vehicle
@@ -146,7 +146,7 @@ class BagIdentification:
     auto : whether the coefficients were chosen from the data
     velocity_reference : what the bags' velocities are ('ground' or 'water')
     settings : the IdentifierSettings the replays started from (several bags: current 'none'
-        when not given); noise_given, q_given : whether noise_std, q_state were given
+        when not given)
     """
 
     paths: list
@@ -157,12 +157,20 @@ class BagIdentification:
     auto: bool
     velocity_reference: str
     settings: IdentifierSettings = None
-    noise_given: bool = False
-    q_given: bool = False
 
     @property
     def vehicle(self):
         return self.result.model.vehicle
+
+    @property
+    def noise_given(self):
+        """Whether the configured noise started from a given noise_std (not the messages')."""
+        return 'noise_std' in self.settings.given
+
+    @property
+    def q_given(self):
+        """Whether the state process noise was given (q_state)."""
+        return 'q_state' in self.settings.given
 
 
 def identify_replayed(paths, settings=None, refine_pass=True, progress=None, together=None):
@@ -196,13 +204,14 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
     v = bags_vehicle(paths, metas, settings.vehicle if 'vehicle' in settings.given else None)
     auto, names = coefficient_request(v, settings.coefficients)
     vrefs = {settings.velocity_reference if 'velocity_reference' in settings.given
-             else bag_settings(p).get('velocity_reference', 'ground') for p in paths}
+             else metadata_settings(m).get('velocity_reference', 'ground') for m in metas}
     if len(vrefs) > 1:
         raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
                        'give --velocity-reference')
     vref = vrefs.pop()
     noise_given, q_given = 'noise_std' in settings.given, 'q_state' in settings.given
     initial_offset = settings.initial_offset
+    # replay_bag fills in what each bag's metadata says under these settings
 
     def replay(path, noise, q, source):
         # the vehicle resolved once, by its file (a YAML path stays that file)
@@ -215,7 +224,7 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
         for name, value in (('noise_std', noise), ('q_state', q)):
             if value is not None:
                 changes[name] = value
-        return replay_bag(path, settings.over(bag_settings(path)).with_values(**changes))
+        return replay_bag(path, settings.with_values(**changes))
 
     def cfg_of(model, noise):
         cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
@@ -255,8 +264,7 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
     if replays.again is not None:
         res.diagnosis.messages.append(_replayed_note(replays.again, replays.rejected))
     return BagIdentification(paths=list(paths), metas=metas, replays=replays, cfg=cfg,
-                             result=res, auto=auto, velocity_reference=vref, settings=settings,
-                             noise_given=noise_given, q_given=q_given)
+                             result=res, auto=auto, velocity_reference=vref, settings=settings)
 
 
 def _several_bags(settings):

@@ -37,7 +37,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.identification.batch import difference_threads
-from auv_ident.core.safe_files import private_dir, write_atomic
+from auv_ident.core.safe_files import ensure_content, private_dir
 from auv_ident.vehicles import resolve_vehicle_path
 
 WORKER_ENV = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -78,14 +78,8 @@ class VehicleText:
         (core/safe_files.py: 0700, checked, never a guessable shared /tmp folder), in a folder
         named after the digest; written atomically, and again whenever what is there is not
         this content (a file changed behind our back is never used as is)."""
-        path = private_dir('vehicles', self.digest) / f'{self.name}.yaml'
-        try:
-            same = path.read_text(encoding='utf-8') == self.text
-        except (OSError, UnicodeDecodeError):
-            same = False
-        if not same:
-            write_atomic(path, self.text)
-        return str(path)
+        return str(ensure_content(private_dir('vehicles', self.digest) / f'{self.name}.yaml',
+                                  self.text))
 
 
 class WarmUp(WorkerPlugin):

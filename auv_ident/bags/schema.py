@@ -273,9 +273,10 @@ def read_metadata(bag_dir):
     if not meta.is_file():
         return None
     try:
-        if meta.stat().st_size > MAX_METADATA_BYTES:
-            raise BagError(f'{meta}: {meta.stat().st_size} bytes, more than a rosbag2 '
-                           f'metadata.yaml holds (limit {MAX_METADATA_BYTES})')
+        size = meta.stat().st_size
+        if size > MAX_METADATA_BYTES:
+            raise BagError(f'{meta}: {size} bytes, more than a rosbag2 metadata.yaml holds '
+                           f'(limit {MAX_METADATA_BYTES})')
         text = meta.read_text(encoding='utf-8')
     except (OSError, UnicodeDecodeError) as exc:
         raise BagError(f'{meta}: not a readable rosbag2 metadata.yaml '

@@ -58,6 +58,19 @@ def write_atomic(path, data, mode=None):
     return path
 
 
+def ensure_content(path: str | os.PathLike, text: str, mode: int | None = None) -> Path:
+    """`path` holding `text`: left as it is when it already does (read as UTF-8), else written
+    with :func:`write_atomic` (a file changed behind our back, or unreadable, is written
+    again). Returns the path."""
+    path = Path(path)
+    try:
+        if path.read_text(encoding='utf-8') == text:
+            return path
+    except (OSError, UnicodeDecodeError):
+        pass                # absent or unreadable: written below
+    return write_atomic(path, text, mode)
+
+
 def _unsafe(path: str) -> str | None:
     """Why `path` is no private folder of this user's (None if it is one)."""
     st = os.lstat(path)

@@ -175,7 +175,11 @@ def bag_settings(path):
     sensor noise 1-sigma of a bag our simulator wrote ('auv_ident.velocity_reference',
     'auv_ident.noise_std': 12 positive numbers, else not taken). The defaults under what a
     caller gives (IdentifierSettings.over)."""
-    meta = bag_custom_data(path)
+    return metadata_settings(bag_custom_data(path))
+
+
+def metadata_settings(meta):
+    """bag_settings of custom data already read (bag_custom_data)."""
     raw = {name: meta[key] for name, key in (('vehicle', 'auv_ident.vehicle'),
                                              ('frame', 'auv_ident.frame'),
                                              ('velocity_reference',

@@ -220,6 +220,5 @@ def judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth=None):
         head = what_to_check(found, frame)
     else:
         head = f'NOT plausible: {frame}'
-    diagnosis.checks['implausible'] = reasons
     return replace(diagnosis, plausible=False, implausible=reasons,
                    messages=[head] + list(diagnosis.messages))

@@ -22,14 +22,13 @@ import hashlib
 import importlib.util
 import os
 import sys
-import tempfile
 
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.safe_files import make_private, private_candidates
+from auv_ident.core.safe_files import ensure_content, make_private, private_candidates
 
 NZ = 21          # length of the factor vector z (vehicle.FACTORS); zz = [z, dz/dx, dU/dv]
 N_STATE_FACTORS = 12   # z[0:6] = u..r (dz/dx = 1), z[6:12] = |u|..|r| (dz/dx = sign)
@@ -148,19 +147,7 @@ def _write_source(name, text):
         path = os.path.join(d, name + '.py')
         try:
             make_private(d, parent=d != env)     # a folder the user named: itself only
-            if os.path.isfile(path):
-                with open(path) as f:
-                    if f.read() == text:
-                        return path
-            fd, tmp = tempfile.mkstemp(dir=d, prefix=name + '.', suffix='.tmp')
-            try:
-                with os.fdopen(fd, 'w') as f:
-                    f.write(text)
-                os.replace(tmp, path)
-            except BaseException:
-                os.unlink(tmp)
-                raise
-            return path
+            return str(ensure_content(path, text, mode=0o600))
         except OSError as err:
             tried.append(f'{d} ({err.strerror or err})')
     raise ConfigError('no usable folder for the compiled model kernel; set '
