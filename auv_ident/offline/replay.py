@@ -160,7 +160,7 @@ def session_result(session, updates, settings=None):
     return ReplayResult(
         names=list(session.names), vehicle=session.vehicle.name, frame=session.frame,
         updates=updates, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-        initial=session.theta0.copy(), truth=session.model.theta_true,
+        initial=session.theta0.copy(), truth=session.model.theta_file,
         accepted=session.odom_accepted, rejected=session.odom_rejected,
         commands=session.cmd_accepted, errors=session.errors, reasons=session.reasons,
         t=t, Y=Y, U=U, mean_nis_per_dof=session.mean_nis_per_dof(), health=session.health(),

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from auv_ident.core.errors import ConfigError, DimensionError, DivergenceError, DomainError
-from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter import ekf
 from auv_ident.core.model.current import ned_current
 from auv_ident.core.model.hydrodynamics import STATUS_TEXT
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
@@ -105,9 +105,9 @@ class FilterConfig:
     def validate(self, p):
         """ConfigError / DimensionError naming the first bad field, for a filter of p
         coefficients."""
-        if self.mode not in K.MODES:
+        if self.mode not in ekf.MODES:
             raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
-                              + ', '.join(K.MODES))
+                              + ', '.join(ekf.MODES))
         self._validate_state_noise()
         _positive(self, ('p0_rel', 'tau', 'lam', 'r_bound'), '')
         if not np.isfinite(self.q_theta_rel) or self.q_theta_rel < 0:
@@ -209,7 +209,7 @@ class AugmentedEKF:
         pc = model.p_coef
         cfg.validate(pc)
         self.names = list(model.theta_names)
-        th0 = (model.theta_true[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
+        th0 = (model.theta_file[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
                else np.asarray(cfg.initial, dtype=float).copy())
         if not np.all(np.isfinite(th0)):
             raise ConfigError(f'initial guesses must be finite, got {th0}')
@@ -238,7 +238,7 @@ class AugmentedEKF:
         p = model.p
         n = N_STATE + p
         self.n = n
-        self.ws = K.new_workspace(n, model.n_coef)   # scratch reused by every step
+        self.ws = ekf.new_workspace(n, model.n_coef)   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
@@ -251,7 +251,7 @@ class AugmentedEKF:
                             np.full(len(cur), cfg.current_walk * np.sqrt(self.T))])
         self.Q0 = np.diag(q ** 2)
         self.measured = np.asarray(cfg.measured, dtype=bool) & free
-        self.mode = K.MODES[cfg.mode]
+        self.mode = ekf.MODES[cfg.mode]
         self.gamma = 1.0 - np.exp(-self.T / cfg.tau)
         # Innovation gate (None: off): gate[m] is the largest NIS accepted from an update with
         # m channels; a larger one is not fused (self.gated), see update().
@@ -290,7 +290,7 @@ class AugmentedEKF:
         'fixed' mode, R0 in the adaptive ones (the reference the adaptation starts from and is
         bounded by), and the start-up covariance's (noise_std). For a caller whose noise
         changes per message (the session's message covariances)."""
-        if self.mode == K.MODES['fixed']:
+        if self.mode == ekf.MODES['fixed']:
             np.fill_diagonal(self.R, r)
         np.fill_diagonal(self.R0, r)
         self.noise_std = np.sqrt(r)
@@ -380,12 +380,12 @@ class AugmentedEKF:
         timing.py)."""
         x0, sd0 = self.initial_state(y0, rpm)
         xa, P = self.xa.copy(), self.P.copy()
-        K.restart_states(xa, P, x0, sd0)
+        ekf.restart_states(xa, P, x0, sd0)
         self.xa, self.P = xa, P
         self._update(y0)
 
     def _check(self, st, what):
-        if st == K.OK:
+        if st == ekf.OK:
             return
         if st in STATUS_TEXT:
             raise DomainError(f'{what}: {STATUS_TEXT[st]} (estimate {self.xa})')
@@ -399,7 +399,7 @@ class AugmentedEKF:
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
         theta_prev = self.xa[COEFFICIENTS].copy()
-        st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
+        st, nis, m = ekf.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
                               self.innov, self.S_diag, self.white, self.ws)
         self._check(st, 'measurement update')
         self.gated = False
@@ -407,7 +407,7 @@ class AugmentedEKF:
             # an outlier: keep the prior (as for a missing sample), adapt nothing
             self.nis, self.dof, self.gated = nis, m, True
             return
-        K.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
+        ekf.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
                 theta_prev, xa_b, self.innov, self.S_diag, self.P, self.Q, self.R, self.Q0,
                 self.R0)
         self.xa, self.P = xa_b, P_b
@@ -423,7 +423,7 @@ class AugmentedEKF:
             raise DimensionError(f'inputs must have {N_INPUT} entries, got {u_prev.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
+        st = ekf.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
@@ -443,7 +443,7 @@ class AugmentedEKF:
     def settings(self):
         """The FilterSettings of this filter (its initial Q and R, adaptation, sample time)."""
         c = self.cfg
-        return K.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
+        return ekf.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
                                 self.T, c.r_bound, c.q_floor)
 
     @property

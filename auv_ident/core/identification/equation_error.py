@@ -1,11 +1,11 @@
 """Equation-error least squares (Jategaonkar 2015, ch. 6; Klein & Morelli 2006, regression
 methods): the force equations regressed on the coefficients that enter them linearly.
 
-The model is M nu_dot = F(nu, eta, delta, c) (model.py) and every hydrodynamic or control
-coefficient c_j has one monomial term in one equation e_j: c_j s_j z_a z_b ... (s_j = (rho/2)
-L^k for prime values, vehicle.py), linear in c_j. With the measured velocities smoothed and
-differentiated (Savitzky-Golay, a local cubic over window_s seconds: nu_s, nu_dot_s), each
-sample gives per equation e
+The model is M nu_dot = F(nu, eta, delta, c) (model/hydrodynamics.py) and every hydrodynamic or
+control coefficient c_j has one monomial term in one equation e_j: c_j s_j z_a z_b ... (s_j =
+(rho/2) L^k for prime values, model/vehicle.py), linear in c_j. With the measured velocities
+smoothed and differentiated (Savitzky-Golay, a local cubic over window_s seconds: nu_s,
+nu_dot_s), each sample gives per equation e
 
     y_e = [M (nu_dot_s - f_0(nu_s, eta_s, delta))]_e = sum_{j in e} c_j x_j,
     x_j = dF_e / dc_j = s_j z_a z_b ...

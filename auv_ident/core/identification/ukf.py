@@ -43,7 +43,7 @@ import numpy as np
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter import ekf
 from auv_ident.core.filter.augmented import AugmentedEKF
 from auv_ident.core.filter.propagation import propagate_sigma_points
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
@@ -135,7 +135,7 @@ class MeasurementUpdate:
     def __call__(self, xa, P, y, measured, R):
         """(xa+, P+, NIS, channels used) after fusing the finite measured channels of y (12,).
         Raises DivergenceError when the posterior is not a covariance."""
-        st, nis, m = K.update(xa, P, np.ascontiguousarray(y, dtype=float), measured, R,
+        st, nis, m = ekf.update(xa, P, np.ascontiguousarray(y, dtype=float), measured, R,
                               self.xa, self.P, self.innov, self.S_diag, self.white, self.ws)
         if st != OK:
             raise DivergenceError('UKF: the measurement update lost positive definiteness')
@@ -176,7 +176,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
     lam, Wm, Wc = (unscented or UnscentedSettings()).weights(n)
     gamma = math.sqrt(n + lam)
     Q, R, measured = settings.Q0, settings.R0, np.asarray(settings.measured, dtype=bool)
-    ws = K.new_workspace(n, model.compiled.c0.shape[0])
+    ws = ekf.new_workspace(n, model.compiled.c0.shape[0])
     X_out = np.empty((2 * n + 1, n))
     kalman_update = MeasurementUpdate(n, ws)
     cm = model.compiled
@@ -188,7 +188,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
             if k > 0:
                 if timeline.n_sub[k] == 0:       # a gap: restart the vehicle states
                     xa, P = xa.copy(), P.copy()
-                    K.restart_states(xa, P, timeline.x0[r], timeline.sd0[r])
+                    ekf.restart_states(xa, P, timeline.x0[r], timeline.sd0[r])
                     r += 1
                 for _ in range(timeline.n_sub[k]):
                     X = sigma_points(xa, P, gamma)

@@ -684,10 +684,15 @@ class Model:
                               -np.ones(self.n_coef + N_CURRENT, dtype=np.int64))
 
     @property
-    def theta_true(self):
-        """The model's values of the chosen parameters (the file's coefficients, the given
-        current)."""
+    def theta_file(self):
+        """The model's own values of the chosen parameters (p,): the vehicle file's
+        coefficients and the current the model was given (the truth of a simulation, the
+        prior of an identification)."""
         return self._c_ext(None)[self.theta_idx]
+
+    # the former name, kept while branches that still read it are merged (analysis/,
+    # identification/selection.py); the file's values are no truth of a measured run
+    theta_true = theta_file
 
     def coefficients_with(self, theta):
         """The vehicle's coefficient values (n_coef,) with theta (p,) in place (a current in

@@ -19,7 +19,7 @@ from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STAT
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
-# Factor vector z (see model.py): index of each multiplier factor. 'U' is the speed in the
+# Factor vector z (see hydrodynamics.py): index of each multiplier factor. 'U' is the speed in the
 # horizontal plane sqrt(u^2 + v^2) (m/s; the total speed of a ship, whose prime system scales
 # by it), 'thrust' the measured propeller thrust input (N; see _term_scale for its scaling).
 FACTORS = ('u', 'v', 'w', 'p', 'q', 'r', '|u|', '|v|', '|w|', '|p|', '|q|', '|r|',
