@@ -201,4 +201,3 @@ def equation_error(model, t, Y, U, measured=None, T=None, window_s=DEFAULT_WINDO
     result.samples = n
     result.wall_s = time.perf_counter() - t0
     return result
-
