@@ -11,6 +11,7 @@ import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.model.state import Input
+from auv_ident.session.settings import ParameterError
 
 
 def _model(args, theta_names=()):
@@ -67,63 +68,37 @@ def _progress(label, total):
     return pr
 
 
-def _twelve(text, option):
-    """(12,) non-negative 1-sigmas, u v w p q r x y z phi theta psi, from 'a,b,...', or None."""
-    if not text:
-        return None
-    try:
-        vals = np.array([float(v) for v in text.split(',')])
-    except ValueError:
-        raise AuvIdentError(f'{option} {text!r}: not numbers') from None
-    if vals.shape != (12,) or not np.all(np.isfinite(vals)) or np.any(vals < 0):
-        raise AuvIdentError(f'{option} {text!r}: give 12 non-negative 1-sigmas, u v w p q r x '
-                            'y z phi theta psi in m/s, rad/s, m, rad')
-    return vals
+# what identify --simulate takes of the identifier settings (the rest are the replay's: --bag)
+SIMULATED_SETTINGS = ('vehicle', 'coefficients', 'noise_mode', 'initial_offset', 'tau',
+                      'mass_inverse', 'current', 'current_down', 'velocity_reference')
+
+
+def _settings(args):
+    """The IdentifierSettings of the options given (the rest: the defaults, or a bag's
+    metadata where it says them)."""
+    from auv_ident.session.settings import IdentifierSettings, settings_fields
+    return IdentifierSettings.from_values(**{f.name: getattr(args, f.name, None)
+                                             for f in settings_fields()})
+
+
+def _option(name):
+    return '--' + name.replace('_', '-')
 
 
 def cmd_identify(args):
-    from auv_ident.analysis import experiments as ex, results
-    from auv_ident.core.model.current import parse_current
-    from auv_ident.vehicles import load_vehicle
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
-    mode = 'fixed' if args.fixed_noise else args.noise_mode
+    settings = _settings(args)
     if args.bag and len(args.bag) > 1:
         from auv_ident.analysis.bag_identify import identify_bags
-        if mode != 'fixed':
-            raise AuvIdentError('several bags are identified with the fixed noise of their '
-                                'messages and the noise model from the data: --noise-mode '
-                                'applies to one bag')
-        doc, table = identify_bags(args.bag, vehicle=args.vehicle,
-                                   coefficients=args.coefficients,
-                                   initial_offset=args.initial_offset,
-                                   refine_pass=not args.no_refine,
-                                   noise_source=args.noise_source,
-                                   max_command_age=args.max_command_age,
-                                   velocity_reference=args.velocity_reference,
-                                   noise_std=_twelve(args.noise_std, '--noise-std'),
-                                   q_state=_twelve(args.q_state, '--q-state'),
-                                   # one current per run is not estimated: the default
-                                   # ('estimate') means still water with several bags
-                                   current=('none' if args.current == 'estimate'
-                                            else args.current),
-                                   current_down=args.current_down,
-                                   mass_inverse=args.mass_inverse)
+        doc, table = identify_bags(args.bag, settings, refine_pass=not args.no_refine)
         print(table)
-    elif args.noise_std or args.q_state:
+    elif {'noise_std', 'q_state'} & settings.given:
         raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
                             '--bag B ...)')
     elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
-        doc, table = identify_bag(args.bag[0], vehicle=args.vehicle,
-                                  coefficients=args.coefficients,
-                                  noise_mode=mode, initial_offset=args.initial_offset,
-                                  refine_pass=not args.no_refine,
-                                  noise_source=args.noise_source,
-                                  max_command_age=args.max_command_age, current=args.current,
-                                  current_down=args.current_down,
-                                  velocity_reference=args.velocity_reference,
-                                  mass_inverse=args.mass_inverse)
+        doc, table = identify_bag(args.bag[0], settings, refine_pass=not args.no_refine)
         print(table)
         if args.estimate_out:
             from auv_ident.session.estimate_file import estimate_document, write_estimate_json
@@ -133,58 +108,73 @@ def cmd_identify(args):
                 doc['covariance'], None, doc['steps']))
             print(f"wrote {args.estimate_out} (the identifier node's warm_start)")
     else:
-        if args.estimate_out:
-            raise AuvIdentError('--estimate-out needs --bag')
-        v = load_vehicle(args.vehicle or 'nps_auv2')
-        names = results.coefficient_list(v, args.coefficients)
-        cfg = results.make_config(names, noise_mode=mode, initial_offset=args.initial_offset,
-                             tau=args.tau)
-        pr = _progress('batch refinement', 40 * len(names))
-        opt = parse_current(args.current, args.current_down)
-        res, run, _ = ex.identify_simulated(
-            v.name, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
-            duration=args.duration, rpm=args.rpm, refine_pass=not args.no_refine,
-            mass_inverse=args.mass_inverse, progress=pr.update, current=opt,
-            sim_current=_sim_current(args.sim_current),
-            velocity_reference=args.velocity_reference or 'ground')
-        pr.close()
-        print(res.diagnosis['messages'][0])
-        print(f'{v.title}: identified {", ".join(names)} from a simulated '
-              f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
-              f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
-              + ' '.join(f'{s:g}' for s in run.noise_std))
-        print(f'initial guesses {100 * args.initial_offset:+.0f} % from truth; noise '
-              f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
-                                         if not args.no_refine else 'EKF pass only'))
-        print(f'water current: {opt.describe()}'
-              + ('' if run.current is None else '; simulated in '
-                 + ', '.join(f'{c:g}' for c in run.current) + ' m/s (N, E, D)'))
-        doc = results.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
-                                           'duration_s': float(run.t[-1]), 'noise_mode': mode},
-                                  current_truth=run.current if run.current is not None
-                                  else np.zeros(3))
-        print(results.doc_table(doc))
-        print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
-              f'wall {res.wall_s:.2f} s'
-              + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
+        doc = _identify_simulated(args, settings)
     if args.json:
+        from auv_ident.analysis import results
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
     return 0
 
 
+def _identify_simulated(args, settings):
+    """identify --simulate: prints the result, returns its JSON document."""
+    from auv_ident.analysis import experiments as ex, results
+    from auv_ident.vehicles import load_vehicle
+    if args.estimate_out:
+        raise AuvIdentError('--estimate-out needs --bag')
+    other = sorted(settings.given - set(SIMULATED_SETTINGS))
+    if other:
+        raise AuvIdentError(f'{", ".join(map(_option, other))}: the identifier\'s replay of a '
+                            'bag (--bag) takes it, a simulated run does not')
+    v = load_vehicle(settings.vehicle)
+    names = results.coefficient_list(v, settings.coefficients)
+    mode = settings.noise_mode
+    cfg = results.make_config(names, noise_mode=mode, initial_offset=settings.initial_offset,
+                              tau=settings.tau)
+    pr = _progress('batch refinement', 40 * len(names))
+    opt = settings.current_option
+    res, run, _ = ex.identify_simulated(
+        v.name, names, cfg, maneuver=args.simulate or ex.DEFAULT_MANEUVER, seed=args.seed,
+        duration=args.duration, rpm=args.rpm, refine_pass=not args.no_refine,
+        mass_inverse=settings.mass_inverse, progress=pr.update, current=opt,
+        sim_current=_sim_current(args.sim_current),
+        velocity_reference=settings.velocity_reference)
+    pr.close()
+    print(res.diagnosis['messages'][0])
+    print(f'{v.title}: identified {", ".join(names)} from a simulated '
+          f'{run.maneuver!r} run of {run.t[-1]:.0f} s at T = {run.T} s, seed {run.seed}, '
+          f'{run.u[0, Input.N_RPM]:.0f} rpm, sensor noise 1-sigma (u..psi) '
+          + ' '.join(f'{s:g}' for s in run.noise_std))
+    print(f'initial guesses {100 * settings.initial_offset:+.0f} % from truth; noise '
+          f'adaptation: {mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
+                                     if not args.no_refine else 'EKF pass only'))
+    print(f'water current: {opt.describe()}'
+          + ('' if run.current is None else '; simulated in '
+             + ', '.join(f'{c:g}' for c in run.current) + ' m/s (N, E, D)'))
+    doc = results.result_dict(v, res, {'maneuver': run.maneuver, 'seed': run.seed,
+                                       'duration_s': float(run.t[-1]), 'noise_mode': mode},
+                              current_truth=run.current if run.current is not None
+                              else np.zeros(3))
+    print(results.doc_table(doc))
+    print(f'{res.steps} EKF steps, mean NIS/dof {res.mean_nis_per_dof:.3f}, '
+          f'wall {res.wall_s:.2f} s'
+          + ''.join('\n- ' + m for m in res.diagnosis['messages'][1:]))
+    return doc
+
+
 def cmd_montecarlo(args):
     from auv_ident.analysis import experiments as ex, results
     from auv_ident.vehicles import load_vehicle
-    v = load_vehicle(args.vehicle)
-    names = results.coefficient_list(v, args.coefficients)
+    settings = _settings(args)
+    v = load_vehicle(settings.vehicle)
+    names = results.coefficient_list(v, settings.coefficients)
     offsets = [float(o) for o in args.offsets.split(',')]
     pr = _progress('monte carlo', args.seeds * len(offsets))
     st = ex.montecarlo(v.name, names, seeds=args.seeds, offsets=offsets,
-                       noise_mode='fixed' if args.fixed_noise else args.noise_mode,
+                       noise_mode=settings.noise_mode,
                        maneuver=args.maneuver, duration=args.duration, rpm=args.rpm,
                        refine_pass=not args.no_refine, jobs=args.jobs, progress=pr.update,
-                       tau=args.tau, scheduler=args.scheduler, noise_level=args.noise_level,
+                       tau=settings.tau, scheduler=args.scheduler, noise_level=args.noise_level,
                        noise_tau=args.noise_tau, perturb=args.perturb)
     pr.close()
     print(f'{v.title}: {args.seeds} seeds x offsets {offsets}, manoeuvre {args.maneuver!r}, '
@@ -275,18 +265,15 @@ def cmd_report(args):
     from auv_ident.analysis.results import doc_table
     if args.model:
         return cmd_model_report(args)
-    out = make_report(args.out, vehicle=args.vehicle, simulate_maneuver=args.simulate,
-                      bag=args.bag, seed=args.seed, duration=args.duration,
-                      coefficients=args.coefficients, noise_mode=args.noise_mode,
+    settings = _settings(args)
+    out = make_report(args.out, settings, simulate_maneuver=args.simulate, bag=args.bag,
+                      seed=args.seed, duration=args.duration,
                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
-                      current=args.current, current_down=args.current_down,
-                      sim_current=_sim_current(args.sim_current),
-                      velocity_reference=args.velocity_reference,
-                      validate_bag=args.validate, holdout=args.holdout,
-                      methods=_report_methods(args.methods), mass_inverse=args.mass_inverse)
+                      sim_current=_sim_current(args.sim_current), validate_bag=args.validate,
+                      holdout=args.holdout, methods=_report_methods(args.methods))
     doc = out['result']
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
-          f"{args.noise_mode}")
+          f"{settings.noise_mode}")
     print(doc_table(doc))
     val = doc['validation']
     mean = val['mean_fit_percent_nu']
@@ -317,13 +304,13 @@ def cmd_compare_methods(args):
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     methods = cm.parse_methods(args.methods)
+    settings = _settings(args)
     source, validation = cm.compare_sources(
-        vehicle=args.vehicle, simulate_maneuver=args.simulate, bag=args.bag, seed=args.seed,
-        duration=args.duration, coefficients=args.coefficients, validate=args.validate,
-        truth=args.truth)
+        settings, simulate_maneuver=args.simulate, bag=args.bag, seed=args.seed,
+        duration=args.duration, validate=args.validate, truth=args.truth)
     doc = cm.compare_methods(source, validation, methods=methods,
-                             initial_offset=args.initial_offset, holdout=args.holdout,
-                             mass_inverse=args.mass_inverse,
+                             initial_offset=settings.initial_offset, holdout=args.holdout,
+                             mass_inverse=settings.mass_inverse,
                              progress=lambda m: print(f'running {m} ...', file=sys.stderr))
     print(cm.methods_table(doc))
     if args.json:
@@ -440,6 +427,7 @@ def run_node(argv):
 
 
 def build_parser():
+    from auv_ident.analysis.report import REPORT_SETTINGS
     p = argparse.ArgumentParser(prog='python -m auv_ident', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
 
@@ -472,73 +460,61 @@ def build_parser():
     sp.add_argument('--out', help='write the run: FILE.csv, or a bag directory')
     sp.set_defaults(func=cmd_simulate)
 
+    def settings_args(sp, names=None):
+        """An option for each identifier setting (or those named), made from its field:
+        --name-with-dashes, help, choices, default (session/settings.py); lists are
+        comma-separated. Not given: None (the default, or what a bag's metadata says)."""
+        from auv_ident.session.settings import help_text, settings_fields
+        for f in settings_fields():
+            if names is not None and f.name not in names:
+                continue
+            kind, shown = f.metadata['kind'], f.default
+            if isinstance(shown, tuple):
+                shown = ','.join(map(str, shown)) or 'none'
+            kw = {'dest': f.name, 'default': None,
+                  'help': (help_text(f) + f' (default: {shown})').replace('%', '%%')}
+            if kind == 'bool':
+                kw.update(action='store_const', const=True)
+            elif f.metadata['choices']:
+                kw['choices'] = f.metadata['choices']
+            elif kind in ('strings', 'floats'):
+                kw['metavar'] = 'A,B,...'
+            elif kind == 'float':
+                kw['type'] = float
+            sp.add_argument(_option(f.name), **kw)
+
     def ident_args(sp):
-        sp.add_argument('--coefficients', default='',
-                        help="comma-separated names (default: the paper's set for the vehicle); "
-                             "with --bag also auto or auto,NAME,... (chosen from the data, "
-                             "NAME always included; docs/method.md)")
-        sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
-                        choices=('fixed', 'paper', 'paper_q', 'matching'),
-                        help='Q/R adaptation (docs/method.md); default fixed')
-        sp.add_argument('--fixed-noise', action='store_true', help='same as --noise-mode fixed')
-        sp.add_argument('--initial-offset', type=float, default=0.5,
-                        help='initial guesses = truth * (1 + offset); default 0.5')
+        sp.add_argument('--fixed-noise', dest='noise_mode', action='store_const', const='fixed',
+                        help='same as --noise-mode fixed')
         sp.add_argument('--no-refine', action='store_true',
                         help='EKF pass only (no batch refinement)')
         sp.add_argument('--json', help='write the result as JSON')
         sp.add_argument('--rpm', type=float, default=None)
-        sp.add_argument('--tau', type=float, default=10.0,
-                        help='s, time constant of the adaptation forgetting factor')
 
-    def current_args(sp):
-        sp.add_argument('--current', default='estimate', metavar='estimate|none|N,E[,D]',
-                        help='the water current: estimate it with the coefficients (default: '
-                             'every AUV runs in one, and 0.1 m/s left out biases the '
-                             'coefficients beyond their error bars), none (still water), or a '
-                             'known current in m/s NED; several bags: none (default) or known')
-        sp.add_argument('--current-down', dest='current_down', action='store_true',
-                        help='estimate the down component of the current too')
-        sp.add_argument('--velocity-reference', dest='velocity_reference', default=None,
-                        choices=('ground', 'water'),
-                        help='what twist.linear is: ground (DVL bottom lock, default) or water '
-                             '(water-track DVL)')
-
-    sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag')
-    vehicle_arg(sp)
-    sp.set_defaults(vehicle=None)
+    sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag',
+                        description='Every identifier setting is an option; with --bag they '
+                                    "apply to the identifier's replay of the bag (a setting "
+                                    "not given: what the bag's metadata says, else the "
+                                    'default), with --simulate the '
+                                    + ', '.join(map(_option, SIMULATED_SETTINGS))
+                                    + ' do. Several bags: noise mode fixed, current none '
+                                      'unless a known one is given.')
     sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
     sp.add_argument('--bag', action='append',
                     help='rosbag2 MCAP directory (or .mcap file); repeat it for one model from '
                          'several runs of the vehicle')
-    sp.add_argument('--noise-std', dest='noise_std', default='', metavar='U,V,...,PSI',
-                    help='several bags: 12 measurement 1-sigmas (u v w p q r x y z phi theta '
-                         "psi; m/s, rad/s, m, rad) to start from instead of the messages' "
-                         '(the noise model from the data still applies)')
-    sp.add_argument('--q-state', dest='q_state', default='', metavar='U,V,...,PSI',
-                    help='several bags: 12 per-step state process-noise 1-sigmas to start '
-                         "from instead of the default (an AUV's; model error far above it is "
-                         'matched from the data, docs/method.md)')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
-    sp.add_argument('--noise-source', dest='noise_source', default='message',
-                    choices=('message', 'parameter'),
-                    help='bags: measurement noise from the Odometry covariances where they are '
-                         'finite and positive (message, default) or the documented sensor '
-                         'noise (parameter)')
-    sp.add_argument('--max-command-age', dest='max_command_age', type=float, default=0.0,
-                    help='bags: s, odometry whose command in force is older is rejected as '
-                         "'stale command' (default 0: no limit, commands are held)")
     sp.add_argument('--estimate-out', dest='estimate_out', metavar='FILE',
                     help='bags: also write the coefficients as an estimate file, the identifier '
                          "node's warm_start (e.g. the set --coefficients auto chose)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
     ident_args(sp)
-    current_args(sp)
+    settings_args(sp)
     sp.set_defaults(func=cmd_identify)
 
     sp = sub.add_parser('montecarlo', help='accuracy and consistency over seeds and starts')
-    vehicle_arg(sp)
     sp.add_argument('--seeds', type=int, default=20)
     sp.add_argument('--offsets', default='0.5,-0.5', help='initial offsets, comma-separated')
     sp.add_argument('--maneuver', default='ident')
@@ -557,6 +533,7 @@ def build_parser():
                          'x U(1 - P, 1 + P) per seed (not told)')
     scheduler_arg(sp)
     ident_args(sp)
+    settings_args(sp, ('vehicle', 'coefficients', 'noise_mode', 'tau'))
     sp.set_defaults(func=cmd_montecarlo)
 
     sp = sub.add_parser('campaign', help='identify every bag of a folder on Dask: '
@@ -579,15 +556,11 @@ def build_parser():
 
     sp = sub.add_parser('report', help='identification + validation against held-out '
                                        'measurements: report.md, report.html, PNG, JSON')
-    vehicle_arg(sp)
-    sp.set_defaults(vehicle=None)
+    settings_args(sp, REPORT_SETTINGS)
     sp.add_argument('--simulate', metavar='MANEUVER')
     sp.add_argument('--bag')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0)
-    sp.add_argument('--coefficients', default='', help='names, or with --bag auto[,NAME,...]')
-    sp.add_argument('--noise-mode', dest='noise_mode', default='fixed',
-                    choices=('fixed', 'paper', 'paper_q', 'matching'))
     sp.add_argument('--out', required=True, help='report folder (created)')
     sp.add_argument('--validate', metavar='BAG',
                     help='another bag of the same vehicle to validate on (default: the final '
@@ -608,20 +581,16 @@ def build_parser():
                          "identified from (default: the model's identification bags)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
-    current_args(sp)
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('compare-methods',
                         help='the same data through EKF, UKF, filter-error, output-error and '
                              'equation-error identification (docs/methods.md)')
-    vehicle_arg(sp)
-    sp.set_defaults(vehicle=None)
+    settings_args(sp, ('vehicle', 'coefficients', 'initial_offset', 'mass_inverse'))
     sp.add_argument('--simulate', metavar='MANEUVER', help='ident, zigzag, prbs, ... or a CSV')
     sp.add_argument('--bag', help='rosbag2 MCAP directory (or .mcap file) to identify from')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0, help='s (simulated runs)')
-    sp.add_argument('--coefficients', default='',
-                    help="comma-separated names (default: the paper's set for the vehicle)")
     sp.add_argument('--methods', default='',
                     help='comma-separated subset of ekf,ukf,filter_error,output_error,'
                          'equation_error (default: all)')
@@ -634,8 +603,6 @@ def build_parser():
                          'written by our simulator')
     sp.add_argument('--holdout', type=float, default=0.2,
                     help='fraction of the record kept for validation without --validate')
-    sp.add_argument('--initial-offset', type=float, default=0.5,
-                    help='initial guesses = vehicle file value * (1 + offset); default 0.5')
     sp.add_argument('--json', help='write the comparison as JSON')
     sp.set_defaults(func=cmd_compare_methods)
 
@@ -691,6 +658,9 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
+    except ParameterError as err:      # an identifier setting: its option
+        print(f'error: {_option(err.name)}: {err.message}', file=sys.stderr)
+        return 2
     except (AuvIdentError, OSError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2

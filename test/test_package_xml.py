@@ -1,7 +1,7 @@
 """package.xml declares every run and test dependency: each third-party module the package
 imports maps to an exec_depend, each one only the tests import to a test_depend (or an
 exec_depend), and the tools the tests run (ruff, mypy, pytest-timeout, colcon) are test_depends;
-a rosdep key rosdistro lacks is defined in rosdep/auv_ident.yaml."""
+a rosdep key rosdistro lacks is defined in tools/rosdep.yaml."""
 import ast
 from pathlib import Path
 import sys
@@ -32,7 +32,8 @@ TEST_TOOLS = {'python3-ruff-pip', 'python3-mypy', 'python3-pytest-timeout',
 IN_ROSDISTRO = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-numba',
                 'python3-matplotlib', 'mcap-ros2-support', 'python3-rosbags-pip',
                 'python3-filterpy-pip', 'python3-pytest', 'python3-pytest-timeout',
-                'python3-ruff-pip', 'python3-mypy', 'python3-colcon-common-extensions'}
+                'python3-ruff-pip', 'python3-mypy', 'python3-colcon-common-extensions',
+                'python3-cryptography'}
 
 
 def _declared():
@@ -89,9 +90,9 @@ def test_the_tools_the_tests_run_are_test_depends():
 
 def test_keys_rosdistro_lacks_are_defined_here():
     declared = set().union(*_declared().values())
-    ours = yaml.safe_load((ROOT / 'rosdep' / 'auv_ident.yaml').read_text())
+    ours = yaml.safe_load((ROOT / 'tools' / 'rosdep.yaml').read_text())
     for key in declared - ROS_PACKAGES - IN_ROSDISTRO:
-        assert key in ours, f'{key}: neither in rosdistro nor in rosdep/auv_ident.yaml'
+        assert key in ours, f'{key}: neither in rosdistro nor in tools/rosdep.yaml'
         assert ours[key]['ubuntu']['pip']['packages'], key
 
 

@@ -112,7 +112,7 @@ def measured_cluster(bag_glob, bags, tmp, workers, repeat):
     campaign on the cluster (fresh output folder), back to back, so that both see the same
     load. Returns a dict of the figures."""
     t0 = time.perf_counter()
-    with engine.local_cluster(workers) as lc, Client(lc.scheduler_address) as client:
+    with engine.local_cluster(workers) as lc, Client(lc) as client:
         plugin = warm_up_plugin(engine.VehicleText.read(VEHICLE), '', True)
         client.register_plugin(plugin)
         start_s = time.perf_counter() - t0

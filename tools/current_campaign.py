@@ -69,6 +69,7 @@ def run_case(job):
     """Generate (or reuse) one bag, identify it with the current estimated (and with
     --current none if asked). Returns a row dict."""
     from auv_ident.analysis.bag_identify import identify_bag
+    from auv_ident.session.settings import IdentifierSettings
     vehicle, speed, direction, seed, dvl, duration, out, reuse, compare_none, sampling = job
     name = f'{vehicle}_{sampling}_{dvl}_s{speed:g}_d{direction:g}_seed{seed}'
     folder = Path(out) / name
@@ -83,8 +84,8 @@ def run_case(job):
             continue
         t0 = time.perf_counter()
         try:
-            doc, _ = identify_bag(folder / 'bag', vehicle=vehicle, current=cur,
-                                  velocity_reference=dvl)
+            doc, _ = identify_bag(folder / 'bag', IdentifierSettings.from_values(
+                vehicle=vehicle, current=cur, velocity_reference=dvl))
         except ArithmeticError as err:          # a diverged run counts as a failure
             row[label] = {'failed': str(err)}
             continue

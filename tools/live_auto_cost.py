@@ -32,6 +32,7 @@ from auv_ident.bags.reader import read_bag
 from auv_ident.offline.independent_data import ACTUATOR_TOPIC, DataConfig, generate, ODOM_TOPIC
 from auv_ident.session.auto_choice import run_in_thread, run_inline
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 
 
 def messages_of(bag):
@@ -57,7 +58,8 @@ def timed_inline(cpu):
 
 def one_window(messages, named, window):
     cpu = []
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window),
                      auto_runner=timed_inline(cpu))
     feed(s, messages)
     a = s.auto
@@ -72,8 +74,8 @@ def one_window(messages, named, window):
 def paced(messages, named, window):
     """Feed the window at once, then the rest at the log times' pace, the choice in a worker
     thread; per-message call times (s) while it ran and after."""
-    s = IdentSession(coefficients=['auto'] + named, auto_window=window,
-                     auto_runner=run_in_thread)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'] + named,
+                                                    auto_window=window), auto_runner=run_in_thread)
     t0_ns = messages[0][1]
     split = next(i for i, (_, t_ns, _) in enumerate(messages)
                  if (t_ns - t0_ns) * 1e-9 > window + 0.5)

@@ -26,6 +26,7 @@ sys.path.insert(0, str(REPO))
 
 from auv_ident.analysis.bag_identify import identify_bag  # noqa: E402
 from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 
 
 def _floats(text):
@@ -40,7 +41,8 @@ def _case(vehicle, level, tau, seed, out, reuse, coefficients):
                  bag_dir)
     truth = json.loads((bag_dir / 'truth.json').read_text())['coefficients']
     t0 = time.perf_counter()
-    doc, _ = identify_bag(str(bag_dir / 'bag'), vehicle=vehicle, coefficients=coefficients)
+    doc, _ = identify_bag(str(bag_dir / 'bag'), IdentifierSettings.from_values(
+        vehicle=vehicle, coefficients=coefficients))
     wall = time.perf_counter() - t0
     rows = {}
     for name, c in doc['coefficients'].items():

@@ -51,6 +51,7 @@ from auv_ident.session.messages import (  # noqa: E402
     stamp_to_ns,
 )
 from auv_ident.session.session import IdentSession  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 T = 0.05
@@ -94,6 +95,13 @@ def session_of(rev):
     return importlib.import_module(package + '.session').IdentSession
 
 
+def new_session(cls):
+    """A session of class `cls` at sample time T: one that takes the settings value (its module
+    has IdentifierSettings), or keywords (an older revision, --against)."""
+    settings = getattr(sys.modules[cls.__module__], 'IdentifierSettings', None)
+    return cls(settings.from_values(sample_time=T)) if settings else cls(sample_time=T)
+
+
 class Pass:
     """One pass of a session over the data; `odom` and `cmd` are the mean call times (us)."""
 
@@ -132,7 +140,7 @@ def array_calls(arrays):
 
 def pass_stream(arrays):
     """Mean us of StreamIdentifier.add_measurement over the data (the session's stream)."""
-    s = IdentSession(sample_time=T)
+    s = IdentSession(IdentifierSettings.from_values(sample_time=T))
     stream = s.stream
     clock = time.perf_counter
     times = []
@@ -151,7 +159,7 @@ def pass_stream(arrays):
 
 def pass_filter(run, n_samples):
     """Mean us of AugmentedEKF.predict + update over the same samples."""
-    ekf = IdentSession(sample_time=T).stream.ekf
+    ekf = IdentSession(IdentifierSettings.from_values(sample_time=T)).stream.ekf
     ekf.start(run.y[0], run.u[0][Input.N_RPM])
     clock = time.perf_counter
     times = []
@@ -171,7 +179,8 @@ def main(argv=None):
     ap.add_argument('--profile', action='store_true', help='cProfile one on_odom pass')
     args = ap.parse_args(argv)
     run, messages, arrays = build_inputs(args.samples)
-    IdentSession(sample_time=T).warm_up()       # numba load before timing
+    # numba load before timing
+    IdentSession(IdentifierSettings.from_values(sample_time=T)).warm_up()
     sessions = {'on_odom': (IdentSession, message_calls(messages)),
                 'add_odometry': (IdentSession, array_calls(arrays))}
     if args.against:
@@ -181,7 +190,7 @@ def main(argv=None):
 
     def measure(name):
         cls, calls = sessions[name]
-        p = Pass(cls(sample_time=T), calls)
+        p = Pass(new_session(cls), calls)
         last[name] = p
         best[name + ' cmd'] = min(best.get(name + ' cmd', np.inf), p.cmd)
         return 1.0 / p.odom                     # best_interleaved keeps the largest
@@ -218,7 +227,8 @@ def main(argv=None):
         print(f'  {label:46s} {"" if value is None else f"{value:7.1f}":>7s}   {note}')
     if args.profile:
         prof = cProfile.Profile()
-        prof.runcall(Pass, IdentSession(sample_time=T), message_calls(messages))
+        prof.runcall(Pass, IdentSession(IdentifierSettings.from_values(sample_time=T)),
+                     message_calls(messages))
         pstats.Stats(prof).sort_stats('tottime').print_stats(25)
     return 0
 

@@ -75,6 +75,7 @@ from auv_ident.analysis.validation import validate_on_run  # noqa: E402
 from auv_ident.core.model.state import NU_NAMES, STATE_NAMES  # noqa: E402
 from auv_ident.core.simulation.prediction import fit_percent  # noqa: E402
 from auv_ident.offline.independent_data import DataConfig, generate  # noqa: E402
+from auv_ident.session.settings import IdentifierSettings  # noqa: E402
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 PAPER = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
@@ -132,7 +133,8 @@ def true_model_validation(a_dir, b_dir, names, truth, prior_error, coefficients)
     """The true model flown through run B as validate_on_run flies the others (module
     docstring); returns B's run (bag_source) and the model's RunValidation (scores under
     'identified')."""
-    run = bag_source(str(b_dir / 'bag'), vehicle='nps_auv2', coefficients=coefficients)
+    run = bag_source(str(b_dir / 'bag'), IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                        coefficients=coefficients))
     if prior_error == 'all':        # the whole truth vehicle file, added mass and M^-1 too
         vehicle, names, values = load_vehicle(str(a_dir / 'truth_vehicle.yaml')), [], []
     else:                           # the file with the identified coefficients' truth values

@@ -7,26 +7,16 @@ from auv_ident.analysis import results as ex
 from auv_ident.analysis.identification import diagnosed, identify_records
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
+from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.batch import Result
 from auv_ident.core.identification.noise_fit import fit_noise_runs
-from auv_ident.core.identification.selection import identify_auto, parse_request
-from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.identification.selection import identify_auto
 from auv_ident.core.model.hydrodynamics import Model
-from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import N_CURRENT, N_STATE
-from auv_ident.offline.replay import bag_custom_data, replay_bag
+from auv_ident.core.model.state import N_CURRENT
+from auv_ident.offline.replay import bag_custom_data, bag_settings, replay_bag
 from auv_ident.session.record import exact_hold
+from auv_ident.session.settings import coefficient_request, IdentifierSettings
 from auv_ident.vehicles import load_vehicle
-
-
-def _meta_noise(meta):
-    """(12,) the sensor noise 1-sigma a bag's custom data (bag_custom_data) stores (bags our
-    simulator wrote), else the default sensor suite's."""
-    try:
-        vals = np.array([float(v) for v in meta.get('auv_ident.noise_std', '').split()])
-    except ValueError:
-        vals = np.zeros(0)
-    return vals if vals.shape == (N_STATE,) and np.all(vals > 0) else DEFAULT_NOISE_STD.copy()
 
 
 def _meta_truth(meta, model):
@@ -54,41 +44,31 @@ def _exact_hold(rr):
     return exact_hold(rr.t, rr.Y, rr.U, rr.t_cmd, rr.U_cmd)
 
 
-def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initial_offset=0.5,
-                 refine_pass=True, progress=None, noise_source='message', max_command_age=None,
-                 current=DEFAULT_CURRENT, current_down=False, velocity_reference=None,
-                 mass_inverse='default'):
+def identify_bag(path, settings=None, refine_pass=True, progress=None):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag, made again
     with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
     model, the batch refinement on the paired arrays at their stamps, identifiability and the
-    diagnosis; with coefficients 'auto[,NAME,...]' the set is chosen from the data
+    diagnosis; with coefficients ['auto', NAME, ...] the set is chosen from the data
     (core/identification/selection.py). Returns (JSON document, printable table).
 
-    noise_source, max_command_age : as IdentSession (the message covariances are the noise
-    where they are usable; a held command stays in force however old)
-    current, current_down : the water current (IdentSession's settings of the same names:
-    'estimate' by default, 'none', or a known 'N,E[,D]' in m/s)
-    velocity_reference : 'ground' or 'water' (None: what a bag of our simulator says, else
-    'ground')
-    mass_inverse : 'default' (the vehicle file's), 'exact' or 'mss_literal'
-    (core.model.hydrodynamics.Model;
-    with 'exact' the added-mass coefficients can be identified, and `auto` may choose them)"""
+    settings : IdentifierSettings (None: the defaults), the identifier node's: every one
+        applies to the replay (a setting not given comes from the bag's metadata where that
+        says it: offline/replay.py bag_settings); the noise model and the refinement that
+        follow take the coefficients, initial_offset, the current, velocity_reference and
+        mass_inverse from them (with mass_inverse 'exact' the added-mass coefficients can be
+        identified, and auto may choose them)"""
     t0 = time.perf_counter()
     meta = bag_custom_data(path)
-    auto, names = parse_request(load_vehicle(vehicle or meta.get('auv_ident.vehicle')
-                                             or 'nps_auv2'), coefficients)
-    meta_noise = _meta_noise(meta)
-    if velocity_reference is None:
-        velocity_reference = meta.get('auv_ident.velocity_reference', 'ground')
+    settings = (settings or IdentifierSettings()).over(bag_settings(path))
+    auto, names = coefficient_request(load_vehicle(settings.vehicle), settings.coefficients)
+    initial_offset = settings.initial_offset
 
     def replay(p, noise, q, source):
-        return replay_bag(p, vehicle=vehicle, coefficients=names, noise_mode=noise_mode,
-                          initial_offset=initial_offset,
-                          noise_std=meta_noise if noise is None else noise,
-                          noise_source=source or noise_source, q_state=q,
-                          max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=velocity_reference,
-                          mass_inverse=mass_inverse)
+        changes = {'coefficients': names}
+        for name, value in (('noise_std', noise), ('q_state', q), ('noise_source', source)):
+            if value is not None:
+                changes[name] = value
+        return replay_bag(p, settings.with_values(**changes))
 
     def cfg_of(model, noise):
         return ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
@@ -143,14 +123,16 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     start = ('automatic selection, initial guesses at the vehicle file' if auto else
              f'initial guesses {100 * initial_offset:+.0f} % from the vehicle file')
     head += (f'\n{start}; noise '
-             f'adaptation: {noise_mode}; ' + ('EKF pass + batch refinement (filter-error ML)'
-                                              if refine_pass else 'EKF pass only'))
-    over = ('ground (DVL bottom lock)' if velocity_reference == 'ground'
+             f'adaptation: {settings.noise_mode}; '
+             + ('EKF pass + batch refinement (filter-error ML)' if refine_pass
+                else 'EKF pass only'))
+    over = ('ground (DVL bottom lock)' if settings.velocity_reference == 'ground'
             else 'water (water-track DVL)')
-    head += (f'\nwater current: {parse_current(current, current_down).describe()}; velocity '
+    head += (f'\nwater current: {settings.current_option.describe()}; velocity '
              f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
-                                  'noise_mode': noise_mode, 'noise_source': noise_source,
+                                  'noise_mode': settings.noise_mode,
+                                  'noise_source': settings.noise_source,
                                   'mass_inverse': model.mass_inverse,
                                   'noise_std': [float(x) for x in noise],
                                   'time_origin_ns': rr.time_origin_ns,
@@ -169,28 +151,30 @@ def identify_bag(path, vehicle=None, coefficients='', noise_mode='fixed', initia
     return doc, table
 
 
-def bag_source(path, vehicle=None, coefficients='', velocity_reference=None, noise_std=None,
-               q_state=None, mass_inverse='default'):
+# what the replay that pairs a bag's arrays for the batch methods takes (bag_source)
+PAIRING_SETTINGS = frozenset({'vehicle', 'coefficients', 'noise_std', 'q_state',
+                              'velocity_reference', 'mass_inverse'})
+
+
+def bag_source(path, settings=None):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
-    pairs them estimates the current (so that its innovation gate judges samples with it); the
-    caller's model says what to do with the current. noise_std, q_state : (12,) the
-    measurement and per-step state process noise 1-sigma the replay's gate judges samples with
-    (None: the messages' and the default; a real run needs the noise its identification used,
-    docs/kvlcc2.md, or the gate rejects its samples). mass_inverse : the replay model's M^-1
-    ('default': the vehicle file's; core.model.hydrodynamics.Model), which the Source's vehicle
-    then says
-    (Vehicle.with_mass_inverse), so that every Model made of it forms M^-1 so."""
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
+    pairs them takes the PAIRING_SETTINGS of `settings` (IdentifierSettings; None: the
+    defaults, and the bag's metadata: offline/replay.py bag_settings), the identifier's
+    defaults for the rest: it estimates the current (so that its innovation gate judges samples
+    with it); the caller's model says what to do with the current. noise_std, q_state given:
+    the measurement and per-step state process noise 1-sigma the replay's gate judges samples
+    with (noise_source then 'parameter'; a real run needs the noise its identification used,
+    docs/kvlcc2.md, or the gate rejects its samples). mass_inverse: the replay model's M^-1,
+    which the Source's vehicle then says (Vehicle.with_mass_inverse), so that every Model made
+    of it forms M^-1 so."""
+    settings = settings or IdentifierSettings()
+    given = {n: getattr(settings, n) for n in settings.given & PAIRING_SETTINGS}
+    if 'noise_std' in given:
+        given['noise_source'] = 'parameter'
     meta = bag_custom_data(path)
-    vr = velocity_reference or meta.get('auv_ident.velocity_reference', 'ground')
-    given = {} if noise_std is None else {'noise_source': 'parameter'}
-    if q_state is not None:
-        given['q_state'] = np.asarray(q_state, dtype=float)
-    rr = replay_bag(path, vehicle=vehicle, coefficients=names,
-                    noise_std=(_meta_noise(meta) if noise_std is None
-                               else np.asarray(noise_std, dtype=float)),
-                    velocity_reference=vr, mass_inverse=mass_inverse, **given)
+    rr = replay_bag(path, IdentifierSettings.from_values(**given))
+    vr = rr.model.velocity_reference
     # the replay's vehicle (a YAML path stays that file), forming M^-1 as the replay did
     v = rr.model.vehicle.with_mass_inverse(rr.model.mass_inverse)
     names = coefficient_list(v, ','.join(rr.model.theta_names[:rr.model.p_coef]))
@@ -241,10 +225,7 @@ def _replays(paths, replay, cfg_of):
     return again, noise, note
 
 
-def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refine_pass=True,
-                  progress=None, noise_source='message', max_command_age=None,
-                  velocity_reference=None, noise_std=None, q_state=None, current='none',
-                  current_down=False, mass_inverse='default'):
+def identify_bags(paths, settings=None, refine_pass=True, progress=None):
     """`identify --bag A --bag B ...`: one coefficient set from several bags of one vehicle,
     by identify_bag's steps over all of them: each bag replayed as the identifier would have
     read it (its accepted measurements, its commands held, the noise of its messages; made
@@ -254,43 +235,49 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     identify_runs_with_noise_model), the sandwich covariance within each run,
     identifiability and the diagnosis (printed first, and in the JSON as identify_bag's).
 
-    noise_std, q_state : (12,) the measurement and per-step state process noise 1-sigma (the
+    settings : IdentifierSettings (None: the defaults), as identify_bag's, except:
+    noise_std, q_state given: the measurement and per-step state process noise 1-sigma (the
         states' units) to start from instead of the messages' (median over the bags) and the
         default; the noise model from the data still applies
-    current, current_down : 'none' (still water, default) or a known current 'N,E[,D]' in m/s
-        that all runs flew in; one current per run is not estimated
-    mass_inverse : as identify_bag
+    current : not given: 'none' (still water); else a known current 'N,E[,D]' in m/s that all
+        runs flew in (one current per run is not estimated)
+    noise_mode : 'fixed' (the noise model comes from the data)
     Returns (JSON document, printable table)."""
     t0 = time.perf_counter()
-    names = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    if str(current).strip().lower() == 'estimate':
+    settings = settings or IdentifierSettings()
+    if settings.noise_mode != 'fixed':
+        raise ConfigError('several bags are identified with the fixed noise of their messages '
+                          'and the noise model from the data: --noise-mode applies to one bag')
+    if 'current' not in settings.given:
+        settings = settings.with_values(current='none')
+    if settings.current_option.estimate:
         raise BagError('several bags: give the current as none or a known N,E[,D] (m/s); one '
                        'current per run is not estimated')
+    noise_given, q_given = ('noise_std' in settings.given), ('q_state' in settings.given)
+    names = list(settings.coefficients)
+    initial_offset = settings.initial_offset
     metas = {p: bag_custom_data(p) for p in paths}
-    vrefs = {velocity_reference or metas[p].get('auv_ident.velocity_reference', 'ground')
-             for p in paths}
+    vrefs = {settings.velocity_reference if 'velocity_reference' in settings.given
+             else bag_settings(p).get('velocity_reference', 'ground') for p in paths}
     if len(vrefs) > 1:
         raise BagError(f'the bags measure their velocity over {" and ".join(sorted(vrefs))}: '
                        'give --velocity-reference')
     vref = vrefs.pop()
 
     def replay(path, noise, q, source):
-        given = noise_std if noise is None else noise
-        return replay_bag(path, vehicle=vehicle, coefficients=names, noise_mode='fixed',
-                          initial_offset=initial_offset,
-                          noise_std=_meta_noise(metas[path]) if given is None else given,
-                          noise_source=source or (noise_source if noise_std is None
-                                                  else 'parameter'),
-                          q_state=q_state if q is None else q,
-                          max_command_age=max_command_age, current=current,
-                          current_down=current_down, velocity_reference=vref,
-                          mass_inverse=mass_inverse)
+        changes = {'coefficients': names, 'velocity_reference': vref,
+                   'noise_source': source or ('parameter' if noise_given
+                                              else settings.noise_source)}
+        for name, value in (('noise_std', noise), ('q_state', q)):
+            if value is not None:
+                changes[name] = value
+        return replay_bag(path, settings.over(bag_settings(path)).with_values(**changes))
 
     def cfg_of(model, noise):
         cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
                              noise_std=noise, initial_offset=initial_offset)
-        if q_state is not None:
-            cfg.q_state = np.asarray(q_state, dtype=float)
+        if q_given:
+            cfg.q_state = np.asarray(settings.q_state, dtype=float)
         return cfg
 
     rrs, noise, again = _replays(paths, replay, cfg_of)
@@ -314,7 +301,8 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     if again is not None:
         diagnosis['messages'].append(_replayed_note(again, rejected))
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
-                                  'noise_mode': 'fixed', 'noise_source': noise_source,
+                                  'noise_mode': 'fixed',
+                                  'noise_source': settings.noise_source,
                                   'mass_inverse': model.mass_inverse,
                                   'noise_std': [float(x) for x in noise],
                                   'q_state': [float(x) for x in cfg.q_state],
@@ -324,13 +312,13 @@ def identify_bags(paths, vehicle=None, coefficients='', initial_offset=0.5, refi
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {steps} samples, {rejected} rejected)'
             f'\ninitial guesses {100 * initial_offset:+.0f} % from the vehicle file; '
-            'configured noise ' + ("the messages' (median over the bags)" if noise_std is None
-                                   else 'as given')
-            + ('' if q_state is None else ', state process noise as given')
+            'configured noise ' + ('as given' if noise_given
+                                   else "the messages' (median over the bags)")
+            + (', state process noise as given' if q_given else '')
             + ', then the noise model from the data; '
             + ('EKF pass over the runs in turn + batch refinement on all of them'
                if refine_pass else 'EKF pass over the runs in turn')
-            + f'\nwater current: {parse_current(current, current_down).describe()}')
+            + f'\nwater current: {settings.current_option.describe()}')
     head = diagnosis['messages'][0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
              f'NIS/dof {res.mean_nis_per_dof:.3f} (the reported EKF pass; with the configured '

@@ -13,6 +13,7 @@ install for nothing measurable at that size.
 import csv
 import datetime
 import glob
+import io
 import os
 import tempfile
 import time
@@ -23,8 +24,10 @@ from auv_ident.analysis.campaign_plot import plot_trends
 from auv_ident.bags.info import bag_info
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.safe_files import write_atomic
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 CSV_NAME = 'campaign.csv'
@@ -78,8 +81,8 @@ def identify_bag_row(job):
             row['start_time'] = _iso_utc(info.start_ns)
             row['duration_s'] = round(info.duration_ns / 1e9, 3)
         vehicle = job['vehicle'].local_path() if job['vehicle'] is not None else None
-        doc, _ = identify_bag(job['bag'], vehicle=vehicle, coefficients=job['coefficients'],
-                              refine_pass=job['refine'])
+        doc, _ = identify_bag(job['bag'], IdentifierSettings.from_values(
+            vehicle=vehicle, coefficients=job['coefficients']), refine_pass=job['refine'])
     except Exception as err:  # noqa: BLE001 - any failure is this bag's row, not the end
         row.update(status='error', error=engine.one_line(err))
     else:
@@ -100,7 +103,8 @@ def warm_up_bag(vehicle, coefficients, refine):
     with tempfile.TemporaryDirectory(prefix='auv_ident_warm_') as tmp:
         run = simulate(Model(load_vehicle(path)), 'ident', duration=WARM_UP_DURATION_S, seed=0)
         bag = write_run_bag(run, os.path.join(tmp, 'bag'))
-        identify_bag(bag, vehicle=path, coefficients=coefficients, refine_pass=refine)
+        identify_bag(bag, IdentifierSettings.from_values(vehicle=path, coefficients=coefficients),
+                     refine_pass=refine)
 
 
 def warm_up_plugin(vehicle, coefficients, refine):
@@ -130,13 +134,12 @@ def write_table(path, rows):
                 coefs.append(k)
     columns = list(HEAD_COLUMNS) + [c for n in coefs for c in (n, n + '_std')] \
         + list(TAIL_COLUMNS)
-    tmp = path + '.tmp'
-    with open(tmp, 'w', newline='', encoding='utf-8') as fh:
-        w = csv.DictWriter(fh, columns, restval='')
-        w.writeheader()
-        for r in sorted(rows, key=lambda r: r['bag']):
-            w.writerow(r)
-    os.replace(tmp, path)
+    text = io.StringIO(newline='')
+    w = csv.DictWriter(text, columns, restval='')
+    w.writeheader()
+    for r in sorted(rows, key=lambda r: r['bag']):
+        w.writerow(r)
+    write_atomic(path, text.getvalue())
 
 
 def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, scheduler=None,

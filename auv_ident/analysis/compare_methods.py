@@ -45,6 +45,7 @@ from auv_ident.core.identification.ukf import run_ukf
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import State, STATE_NAMES
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
+from auv_ident.session.settings import IdentifierSettings
 
 METHODS = ('ekf', 'ukf', 'filter_error', 'output_error', 'equation_error')
 HOLDOUT_FRACTION = 0.2      # final part of the record kept for validation without --validate
@@ -244,19 +245,22 @@ def read_truth(path, names):
             from None
 
 
-def compare_sources(vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
-                    coefficients='', validate=None, truth=None):
+def compare_sources(settings=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
+                    validate=None, truth=None):
     """(source, validation or None) for the command line: --simulate M or --bag A, and
-    --validate B (a bag); truth: a JSON file with the true coefficients (read_truth), for bags
+    --validate B (a bag); settings: IdentifierSettings of which the vehicle and coefficients
+    apply (load_source); truth: a JSON file with the true coefficients (read_truth), for bags
     not written by our simulator."""
-    source = load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                         seed=seed, duration=duration, coefficients=coefficients)
+    settings = settings or IdentifierSettings()
+    source = load_source(IdentifierSettings.from_values(
+        **{n: getattr(settings, n) for n in settings.given & {'vehicle', 'coefficients'}}),
+        simulate_maneuver=simulate_maneuver, bag=bag, seed=seed, duration=duration)
     if truth:
         source = replace(source, truth=read_truth(truth, source.names))
     validation = None
     if validate:
-        validation = load_source(vehicle=source.vehicle.name, bag=validate,
-                                 coefficients=','.join(source.names))
+        validation = load_source(IdentifierSettings.from_values(
+            vehicle=source.vehicle.name, coefficients=source.names), bag=validate)
     return source, validation
 
 

@@ -15,6 +15,9 @@ What a worker needs travels with the task or with the cluster registration:
   identification on every worker (those that join later, e.g. a restarted one, too) before
   its first task, so that a worker compiles (or loads from its own numba cache) once, and no
   task's wall time carries the compilation;
+- a local cluster speaks TLS with throw-away credentials (:func:`local_cluster`): its
+  scheduler listens on loopback, where any local user could otherwise connect and run code in
+  the workers;
 - ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST in the environment of the workers it starts (the
   identification creates no ROS node, but nothing spawned here may leave loopback if it did);
 - AUV_IDENT_THREADS in the same environment: the usable CPUs shared out among the local
@@ -27,7 +30,6 @@ from dataclasses import dataclass
 import hashlib
 import logging
 import os
-import tempfile
 import time
 
 from distributed import as_completed, Client, get_worker, LocalCluster
@@ -35,6 +37,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.identification.batch import difference_threads
+from auv_ident.core.safe_files import private_dir, write_atomic
 from auv_ident.vehicles import resolve_vehicle_path
 
 WORKER_ENV = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -71,17 +74,18 @@ class VehicleText:
         return hashlib.sha256(self.text.encode()).hexdigest()[:16]
 
     def local_path(self):
-        """Path of this content on the machine that calls it (written once per content: the
-        folder is named after its digest, the file is renamed into place atomically)."""
-        folder = os.path.join(tempfile.gettempdir(), 'auv_ident_vehicles', self.digest)
-        path = os.path.join(folder, self.name + '.yaml')
-        if not os.path.isfile(path):
-            os.makedirs(folder, exist_ok=True)
-            tmp = f'{path}.{os.getpid()}.tmp'
-            with open(tmp, 'w', encoding='utf-8') as fh:
-                fh.write(self.text)
-            os.replace(tmp, path)
-        return path
+        """Path of this content on the machine that calls it: in the user's private cache
+        (core/safe_files.py: 0700, checked, never a guessable shared /tmp folder), in a folder
+        named after the digest; written atomically, and again whenever what is there is not
+        this content (a file changed behind our back is never used as is)."""
+        path = private_dir('vehicles', self.digest) / f'{self.name}.yaml'
+        try:
+            same = path.read_text(encoding='utf-8') == self.text
+        except (OSError, UnicodeDecodeError):
+            same = False
+        if not same:
+            write_atomic(path, self.text)
+        return str(path)
 
 
 class WarmUp(WorkerPlugin):
@@ -136,13 +140,21 @@ def difference_threads_env(workers):
     return {'AUV_IDENT_THREADS': str(max(1, difference_threads() // max(1, workers)))}
 
 
-def local_cluster(workers, silence_logs=logging.ERROR, env=None):
+def local_cluster(workers, silence_logs=logging.ERROR, env=None, secure=True):
     """A distributed.LocalCluster of `workers` single-threaded worker processes, everything on
     127.0.0.1, no dashboard. The scheduler still serves its small HTTP API (health, metrics):
     on a free loopback port, not on 8787, which another cluster may hold. env : more
-    environment variables for the workers (tools/campaign_bench.py: empty compile caches)."""
+    environment variables for the workers (tools/campaign_bench.py: empty compile caches).
+
+    Security: every connection is TLS with a key and self-signed certificate made for this
+    cluster and held in memory only (distributed's Security.temporary; needs `cryptography`).
+    Loopback keeps the network out but not the machine's other users: without this, anyone on
+    the machine could connect to the scheduler's port and run code in the workers. A client
+    connects with the cluster object (``Client(cluster)``), which carries the credentials.
+    secure=False: plain TCP, as an existing cluster reached by its address (`--scheduler`) may
+    be; the tests use it to stand in for one."""
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        host=LOOPBACK, dashboard_address=None,
+                        host=LOOPBACK, dashboard_address=None, security=True if secure else None,
                         env=dict(WORKER_ENV, **difference_threads_env(workers), **(env or {})),
                         silence_logs=silence_logs,
                         scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})

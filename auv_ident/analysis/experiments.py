@@ -17,6 +17,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD, perturbed_values
 from auv_ident.core.model.state import Input
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 DEFAULT_DURATION = 600.0     # s of the identification run
@@ -63,23 +64,22 @@ def identify_simulated(vehicle_name, names, cfg, maneuver=DEFAULT_MANEUVER, seed
     return res, run, m
 
 
-def load_source(vehicle=None, simulate_maneuver=None, bag=None, seed=0,
-                duration=DEFAULT_DURATION, coefficients='', rpm=None, process_std=None,
-                sim_current=None, velocity_reference=None, mass_inverse='default'):
+def load_source(settings=None, simulate_maneuver=None, bag=None, seed=0,
+                duration=DEFAULT_DURATION, rpm=None, process_std=None, sim_current=None):
     """A Source from --simulate MANEUVER (in memory, in the water current sim_current (3,) m/s
-    NED if given) or --bag PATH. velocity_reference: what the velocities are (None: 'ground',
-    or what a bag of our simulator says). mass_inverse: M^-1 of the model that simulates or
-    pairs the run ('default': the vehicle file's; core.model.hydrodynamics.Model); the Source's
-    vehicle
-    then says it (its `mass_inverse`), so that every Model made of it uses it."""
+    NED if given) or --bag PATH (bag_identify.bag_source). settings: IdentifierSettings (None:
+    the defaults) of which the vehicle, coefficients, velocity_reference (what the velocities
+    are; not given: what a bag of our simulator says, else 'ground') and mass_inverse (M^-1 of
+    the model that simulates or pairs the run; the Source's vehicle then says it, so that every
+    Model made of it uses it) apply."""
     if bool(simulate_maneuver) == bool(bag):
         raise ConfigError('give exactly one of --simulate MANEUVER or --bag PATH')
+    settings = settings or IdentifierSettings()
     if bag:
-        return bag_source(bag, vehicle=vehicle, coefficients=coefficients,
-                          velocity_reference=velocity_reference, mass_inverse=mass_inverse)
-    v = load_vehicle(vehicle or 'nps_auv2').with_mass_inverse(mass_inverse)
-    names = coefficient_list(v, coefficients)
-    vr = velocity_reference or 'ground'
+        return bag_source(bag, settings)
+    v = load_vehicle(settings.vehicle).with_mass_inverse(settings.mass_inverse)
+    names = coefficient_list(v, settings.coefficients)
+    vr = settings.velocity_reference
     run = simulate(Model(v), simulate_maneuver, duration=duration, seed=seed, rpm=rpm,
                    process_std=process_std, current=sim_current, velocity_reference=vr)
     m = Model(v, names)

@@ -49,6 +49,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input, N_STATE, State
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
 from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 DEG = 180.0 / np.pi
@@ -512,8 +513,9 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
         if not os.path.exists(b):
             raise ConfigError(f'identification bag {b} (from the model, or --ident-bags) does '
                               'not exist: give --ident-bags A,B')
-        s = bag_source(b, vehicle=v.path, coefficients=','.join(saved.names),
-                       noise_std=saved.noise_std, q_state=saved.q_state)
+        s = bag_source(b, IdentifierSettings.from_values(
+            vehicle=v.path, coefficients=saved.names, noise_std=saved.noise_std,
+            q_state=saved.q_state))
         mv.refuse_identification_run(s, src)
         ident_srcs.append(s)
         ident_runs.append(measured_run(s))

@@ -29,13 +29,13 @@ from auv_ident.analysis.report_noise import (
 )
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.identification.selection import AUTO, parse_request
-from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.identification.selection import AUTO
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
 from auv_ident.core.model.state import EULER, Input, N_STATE, State, STATE_NAMES
 from auv_ident.core.model.trim import initial_state
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.session.settings import coefficient_request, IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 HIST_POINTS = 1500       # history points kept for the time plots (enough to look continuous)
@@ -432,92 +432,52 @@ def _current_markdown(doc):
 
 # ------------------------------------------------------------------------------------ driver
 
-def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0, duration=600.0,
-                coefficients='', noise_mode='fixed', command='', validation_maneuver='steps',
-                validation_duration=200.0, progress=True, current=DEFAULT_CURRENT,
-                current_down=False, sim_current=None, velocity_reference=None,
-                validate_bag=None, holdout=mv.DEFAULT_HOLDOUT, methods=None,
-                mass_inverse='default'):
-    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
-    against the measurements of a held-out run (and, when the truth is known, against the true
-    model on a held-out manoeuvre), write the report: report.md, report.html (self-contained),
-    result.json and PNG figures.
+# what make_report takes of its settings (the command line's report options)
+REPORT_SETTINGS = ('vehicle', 'coefficients', 'noise_mode', 'current', 'current_down',
+                   'velocity_reference', 'mass_inverse')
 
-    Parameters
-    ----------
-    out_dir : str, created if missing
-    vehicle, simulate_maneuver, bag, seed, duration, coefficients : as experiments.load_source;
-        with a bag, coefficients may also be 'auto[,NAME,...]': the set is chosen from the
-        identification data (core/identification/selection.py) and validated, result.json gets
-        `selection`
-    noise_mode : Q/R adaptation mode ('fixed', 'paper', 'paper_q', 'matching')
-    command : the command line that produced the report (quoted in report.md)
-    validation_maneuver, validation_duration : held-out manoeuvre and its length (s) of the
-        true-model validation (known truth only); its seed is seed + 1000 (the bag's recorded
-        seed + 1000 when it has one) and its process noise is DEFAULT_PROCESS_STD
-    progress : show progress bars (only when stderr is a terminal)
-    current, current_down : the water current ('estimate', 'none' or 'N,E[,D]' m/s NED; and
-        whether its down component is estimated), core/model/current.py
-    sim_current : (3,) m/s NED, the current a simulated run flies in (None: still water)
-    velocity_reference : 'ground' or 'water', what the velocities are (None: 'ground', or what
-        a bag of our simulator says)
-    validate_bag : another bag of the vehicle to validate on (analysis/validation.py); None:
-        the final `holdout` fraction of the identification run is held out (identification
-        uses the rest)
-    holdout : fraction (0, 0.9] held out when no validate_bag is given
 
-    methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
-        same identification data and validate on the same held-out run: result.json gets
-        `methods` and report.md a section "Methods side by side" (None: not run)
-    mass_inverse : M^-1 of every model of the report, identified, prior and true ('default':
-        the vehicle file's; 'exact' lets the added-mass coefficients be identified and chosen
-        by auto; core.model.vehicle.Vehicle.with_mass_inverse)
-
-    Returns
-    -------
-    dict with 'report', 'html', 'json' and 'figures' (name -> path) paths and 'result' (the JSON
-    doc)
-    """
+def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, validate_bag,
+             holdout, validation_maneuver):
+    """(identification Source, validation Source, holdout or None, named or None) of
+    make_report: named is the list of coefficients ['auto', NAME, ...] always includes (a bag;
+    the source is then paired for the named, or the default, set, and the set to identify is
+    chosen from the identification data)."""
     from auv_ident.analysis.bag_identify import bag_source
-    from auv_ident.analysis.progress import Progress
-    mv.refuse_same_bag(bag, validate_bag)        # before anything is loaded or written
-    opt = parse_current(current, current_down)
-    # 'auto[,NAME,...]' (a bag): the source is paired for the named (or the default) set, the
-    # set to identify is chosen from the identification data below
-    tokens = [n.strip() for n in (coefficients or '').split(',') if n.strip()]
-    auto = bool(bag) and bool(tokens) and tokens[0].lower() == AUTO
-    full = ex.load_source(vehicle=vehicle, simulate_maneuver=simulate_maneuver, bag=bag,
-                          seed=seed, duration=duration,
-                          coefficients=','.join(tokens[1:]) if auto else coefficients,
-                          sim_current=sim_current, velocity_reference=velocity_reference,
-                          mass_inverse=mass_inverse)
-    named = parse_request(full.vehicle, coefficients)[1] if auto else None
+    coefficients = settings.coefficients
+    auto = bool(bag) and bool(coefficients) and coefficients[0].lower() == AUTO
+    paired = settings.with_values(coefficients=coefficients[1:]) if auto else settings
+    full = ex.load_source(paired, simulate_maneuver=simulate_maneuver, bag=bag, seed=seed,
+                          duration=duration, sim_current=sim_current)
+    named = coefficient_request(full.vehicle, coefficients)[1] if auto else None
     # fail before the long identification if the validation would not be held out
     if _same_maneuver(validation_maneuver, full.maneuver):
         raise ConfigError(f'validation manoeuvre {validation_maneuver!r} is the identification '
                           'manoeuvre: validation must use a held-out manoeuvre')
-    v = full.vehicle
-    if validate_bag:
-        run = bag_source(validate_bag, vehicle=v.path, coefficients=','.join(full.names),
-                         velocity_reference=velocity_reference or full.velocity_reference,
-                         mass_inverse=v.mass_inverse)
-        mv.refuse_identification_run(full, run)
-        src, holdout = full, None
-    else:
+    if not validate_bag:
         src, run = mv.split_held_out(full, holdout)
-    os.makedirs(out_dir, exist_ok=True)
-    cfg = results.make_config(src.names, noise_mode=noise_mode,
-                              noise_std=np.asarray(src.noise_std, dtype=float).copy())
-    # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
-    cfg.measured = np.any(np.isfinite(src.Y), axis=0)
-    hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
+        return src, run, holdout, named
+    v = full.vehicle
+    run = bag_source(validate_bag, IdentifierSettings.from_values(
+        vehicle=v.path, coefficients=full.names, mass_inverse=v.mass_inverse,
+        velocity_reference=(settings.velocity_reference if 'velocity_reference'
+                            in settings.given else full.velocity_reference)))
+    mv.refuse_identification_run(full, run)
+    return full, run, None, named
+
+
+def _identify(src, cfg, opt, named, hist_every, progress):
+    """(Result, the Source of the identified set, selection or None) of make_report: the set
+    chosen from the data when `named` is a list (coefficients ['auto', ...]), else src's."""
+    from auv_ident.analysis.progress import Progress
+    v = src.vehicle
     bar = Progress(40 * len(src.names), 'batch refinement') if progress else None
 
     def make_model(names):
         return Model(v, list(names) + opt.names, current=opt.fixed,
                      velocity_reference=src.velocity_reference)
     selection = None
-    if auto:
+    if named is not None:
         def truth_of(names):    # known for a simulated source (the vehicle file)
             return None if src.truth is None else Model(v, list(names)).theta_true[:len(names)]
         res, _, selection = identify_auto_with_diagnosis(
@@ -531,6 +491,64 @@ def make_report(out_dir, vehicle=None, simulate_maneuver=None, bag=None, seed=0,
                                       progress=bar.update if bar else None)
     if bar:
         bar.close()
+    return res, src, selection
+
+
+def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0,
+                duration=600.0, command='', validation_maneuver='steps',
+                validation_duration=200.0, progress=True, sim_current=None, validate_bag=None,
+                holdout=mv.DEFAULT_HOLDOUT, methods=None):
+    """Identify (noise model from the data, EKF + batch refinement, diagnosis), validate
+    against the measurements of a held-out run (and, when the truth is known, against the true
+    model on a held-out manoeuvre), write the report: report.md, report.html (self-contained),
+    result.json and PNG figures.
+
+    Parameters
+    ----------
+    out_dir : str, created if missing
+    settings : IdentifierSettings (None: the defaults), of which REPORT_SETTINGS apply: the
+        vehicle and coefficients (as experiments.load_source; with a bag, coefficients may also
+        be ['auto', NAME, ...]: the set is chosen from the identification data,
+        core/identification/selection.py, and validated, result.json gets `selection`), the
+        noise_mode (Q/R adaptation), the water current (current, current_down), the
+        velocity_reference (not given: 'ground', or what a bag of our simulator says) and
+        mass_inverse (M^-1 of every model of the report, identified, prior and true; 'exact'
+        lets the added-mass coefficients be identified and chosen by auto)
+    simulate_maneuver, bag, seed, duration : as experiments.load_source
+    command : the command line that produced the report (quoted in report.md)
+    validation_maneuver, validation_duration : held-out manoeuvre and its length (s) of the
+        true-model validation (known truth only); its seed is seed + 1000 (the bag's recorded
+        seed + 1000 when it has one) and its process noise is DEFAULT_PROCESS_STD
+    progress : show progress bars (only when stderr is a terminal)
+    sim_current : (3,) m/s NED, the current a simulated run flies in (None: still water)
+    validate_bag : another bag of the vehicle to validate on (analysis/validation.py); None:
+        the final `holdout` fraction of the identification run is held out (identification
+        uses the rest)
+    holdout : fraction (0, 0.9] held out when no validate_bag is given
+
+    methods : method names of analysis/compare_methods.py (e.g. ['ekf', 'ukf']) to run on the
+        same identification data and validate on the same held-out run: result.json gets
+        `methods` and report.md a section "Methods side by side" (None: not run)
+
+    Returns
+    -------
+    dict with 'report', 'html', 'json' and 'figures' (name -> path) paths and 'result' (the JSON
+    doc)
+    """
+    mv.refuse_same_bag(bag, validate_bag)        # before anything is loaded or written
+    settings = settings or IdentifierSettings()
+    opt = settings.current_option
+    src, run, holdout, named = _sources(settings, simulate_maneuver, bag, seed, duration,
+                                        sim_current, validate_bag, holdout, validation_maneuver)
+    v = src.vehicle
+    os.makedirs(out_dir, exist_ok=True)
+    noise_mode = settings.noise_mode
+    cfg = results.make_config(src.names, noise_mode=noise_mode,
+                              noise_std=np.asarray(src.noise_std, dtype=float).copy())
+    # a bag may lack whole channels (e.g. no position fixes): leave them out of the update
+    cfg.measured = np.any(np.isfinite(src.Y), axis=0)
+    hist_every = max(1, int(round(len(src.Y) / HIST_POINTS)))
+    res, src, selection = _identify(src, cfg, opt, named, hist_every, progress)
 
     run_val = mv.validate_on_run(
         v, src.names, res.estimate, None if res.current is None else res.current.estimate,

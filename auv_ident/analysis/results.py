@@ -8,12 +8,14 @@ import numpy as np
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.session.settings import names_of
 
 DEFAULT_NOISE_MODE = 'fixed'  # docs/method.md "Noise adaptation": fixed Q/R wins on accuracy
 
-def coefficient_list(vehicle, text):
-    """Names from 'A,B,C' (or the vehicle's paper default when empty), validated."""
-    names = [n.strip() for n in (text or '').split(',') if n.strip()]
+def coefficient_list(vehicle, coefficients):
+    """Names of the `coefficients` setting ('A,B,C' or a sequence, read by
+    session.settings.names_of; empty: the vehicle's paper default), validated."""
+    names = list(names_of('coefficients', coefficients or ()))
     if names and names[0].lower() == 'auto':
         raise ConfigError('--coefficients auto chooses from a recorded run: use it with '
                           'identify --bag or report --bag (a simulated run: simulate --out '

@@ -50,6 +50,7 @@ from auv_ident.core.simulation.prediction import (
     rmse,
     theil,
 )
+from auv_ident.session.settings import IdentifierSettings
 
 DEFAULT_HOLDOUT = 0.25          # fraction of the identification run held out (its final part)
 HORIZONS = (1, 10, 100)         # K of the K-step-ahead prediction (measurement samples)
@@ -400,9 +401,9 @@ def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=N
     far smaller noise; None: the messages' and the default); kwargs: validate_on_run's
     horizons, max_step, x0_window. Returns (RunValidation, Source)."""
     from auv_ident.analysis.bag_identify import bag_source
-    run = bag_source(bag, vehicle=vehicle.path, coefficients=','.join(names),
-                     velocity_reference=velocity_reference, noise_std=noise_std,
-                     q_state=q_state)
+    run = bag_source(bag, IdentifierSettings.from_values(
+        vehicle=vehicle.path, coefficients=names, velocity_reference=velocity_reference,
+        noise_std=noise_std, q_state=q_state))
     val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
                           source=run.description, velocity_reference=run.velocity_reference,
                           include_truth=run.truth is not None, truth_current=run.current_truth,

@@ -13,10 +13,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 import warnings
 
-import yaml
-
 from auv_ident.bags.mcap_scan import stamp_text
 from auv_ident.bags.reader import _bag_files, _McapFile
+from auv_ident.bags.schema import custom_data_of, read_metadata
 
 _LABEL_WIDTH = 19  # 'Topic information: ' as rosbag2 aligns its continuation lines
 
@@ -55,14 +54,9 @@ class BagInfo:
 
 def _metadata_yaml(path):
     """rosbag2_bagfile_information of a bag directory's metadata.yaml ({} if none)."""
-    meta = Path(path) / 'metadata.yaml'
-    if not meta.is_file():
+    if not Path(path).is_dir():
         return {}
-    try:
-        info = yaml.safe_load(meta.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
-        return {}  # _bag_files has already said what is wrong with it if it matters
-    return info if isinstance(info, dict) else {}
+    return read_metadata(path) or {}
 
 
 def bag_info(path):
@@ -107,7 +101,7 @@ def bag_info(path):
                                   f'unreadable: {mf.stop.describe()}')
         finally:
             mf.close()
-    custom = meta.get('custom_data') or {}
+    custom = custom_data_of(meta, f'{path}/metadata.yaml')
     return BagInfo(
         path=path, files=[f.name for f in files], size=size, storage_id='mcap',
         ros_distro=str(meta.get('ros_distro') or 'unknown'),
@@ -116,8 +110,7 @@ def bag_info(path):
         message_count=sum(t.count for t in topics.values()),
         topics=sorted(topics.values(), key=lambda t: t.name),
         compression=', '.join(sorted(c or 'none' for c in compressions)),
-        custom_data={str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict)
-        else {},
+        custom_data=custom,
         incomplete=incomplete)
 
 

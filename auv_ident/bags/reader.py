@@ -30,10 +30,15 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import breakup_chunk
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
-import yaml
 
 from auv_ident.bags.mcap_scan import McapScan, message_index_counts
-from auv_ident.bags.schema import _FOOTER_LEN, BagError, MCAP_MAGIC, normalize_msgtype
+from auv_ident.bags.schema import (
+    _FOOTER_LEN,
+    BagError,
+    MCAP_MAGIC,
+    normalize_msgtype,
+    read_metadata,
+)
 
 log = logging.getLogger('auv_ident.bags')
 
@@ -49,17 +54,13 @@ def _bag_files(path):
     if p.is_file():
         return [p]
     meta = p / 'metadata.yaml'
-    if meta.is_file():
-        try:
-            doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
-            info = doc['rosbag2_bagfile_information']
-            storage = info.get('storage_identifier')
-            names = list(info['relative_file_paths'])
-            compression_mode = info.get('compression_mode') or ''
-        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError,
-                AttributeError) as exc:
-            raise BagError(f'{meta}: not a readable rosbag2 metadata.yaml '
-                           f'({type(exc).__name__}: {exc})') from None
+    info = read_metadata(p)
+    if info is not None:
+        storage = info.get('storage_identifier')
+        names = info.get('relative_file_paths')
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise BagError(f'{meta}: relative_file_paths is not a list of file names')
+        compression_mode = info.get('compression_mode') or ''
         if storage != 'mcap':
             raise BagError(f'{p}: storage {storage!r} not supported, only mcap')
         if compression_mode:

@@ -33,12 +33,17 @@ import shutil
 from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer as McapWriter
-import yaml
 
 from auv_ident import __version__
 from auv_ident.bags.mcap_scan import first_chunk_compression, McapScan
 from auv_ident.bags.reader import _bag_files, _normalized, _summary_start
-from auv_ident.bags.schema import BagError, MCAP_MAGIC, qos_from_yaml
+from auv_ident.bags.schema import (
+    BagError,
+    custom_data_of,
+    MCAP_MAGIC,
+    qos_from_yaml,
+    read_metadata,
+)
 from auv_ident.bags.writer import _dump, bagfile_information, write_metadata_yaml
 
 REPAIR_CHUNK_SIZE = 768 * 1024
@@ -243,15 +248,11 @@ def _topic_entries(channel_maps):
 
 
 def _custom_data(bag_dir):
-    meta = bag_dir / 'metadata.yaml'
-    if not meta.is_file():
-        return None
     try:
-        info = yaml.safe_load(meta.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
-        data = info.get('custom_data') or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-        return None  # unreadable: it is being replaced anyway
-    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else None
+        info = read_metadata(bag_dir)
+        return None if info is None else custom_data_of(info)
+    except BagError:
+        return None  # unreadable, aliased or oversized: it is being replaced anyway
 
 
 def _replace_keeping_original(new, original):

@@ -232,13 +232,79 @@ _RMW_POLICY_NAMES = {
 }
 
 
+# metadata.yaml and the channels' QoS YAML come from whoever made the bag. A real rosbag2 file is
+# kilobytes and has no YAML anchors; aliases let 1 KB expand to gigabytes once the values are
+# turned into strings ("billion laughs"), so they are refused, and so is a file over this size.
+MAX_METADATA_BYTES = 4 * 1024 * 1024
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that refuses aliases (``*name``): rosbag2 never writes them."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.events.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f'YAML alias *{event.anchor} (rosbag2 writes none; aliases can '
+                'expand a small file without bound)', event.start_mark)
+        return super().compose_node(parent, index)
+
+
+def bounded_yaml(text, what, kind='YAML for a bag'):
+    """Parse untrusted YAML text (at most MAX_METADATA_BYTES, no aliases); otherwise BagError
+    '<what>: not a readable <kind> (<the problem and where>)'."""
+    if len(text) > MAX_METADATA_BYTES:
+        raise BagError(f'{what}: {len(text)} characters of YAML, more than a rosbag2 file '
+                       f'holds (limit {MAX_METADATA_BYTES})')
+    try:
+        return yaml.load(text, Loader=_NoAliasLoader)   # a SafeLoader that refuses aliases
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = '' if mark is None else f' at line {mark.line + 1}, column {mark.column + 1}'
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise BagError(f'{what}: not a readable {kind} ({problem}{where})') from exc
+
+
+def read_metadata(bag_dir):
+    """rosbag2_bagfile_information of ``bag_dir/metadata.yaml`` (dict), None when the bag has no
+    metadata.yaml; BagError naming the file when it is unreadable, too large, aliased or not a
+    rosbag2 metadata file."""
+    meta = Path(bag_dir) / 'metadata.yaml'
+    if not meta.is_file():
+        return None
+    try:
+        if meta.stat().st_size > MAX_METADATA_BYTES:
+            raise BagError(f'{meta}: {meta.stat().st_size} bytes, more than a rosbag2 '
+                           f'metadata.yaml holds (limit {MAX_METADATA_BYTES})')
+        text = meta.read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as exc:
+        raise BagError(f'{meta}: not a readable rosbag2 metadata.yaml '
+                       f'({type(exc).__name__}: {exc})') from exc
+    doc = bounded_yaml(text, str(meta), 'rosbag2 metadata.yaml')
+    info = doc.get('rosbag2_bagfile_information') if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise BagError(f'{meta}: not a rosbag2 metadata.yaml (no rosbag2_bagfile_information '
+                       'mapping)')
+    return info
+
+
+def custom_data_of(info, where='metadata.yaml'):
+    """custom_data of a rosbag2_bagfile_information dict as {str: str} (rosbag2 stores a map of
+    strings); BagError naming the key whose value is a list or a mapping."""
+    data = info.get('custom_data') or {}
+    if not isinstance(data, dict):
+        raise BagError(f'{where}: custom_data is a {type(data).__name__}, not a mapping')
+    bad = [str(k) for k, v in data.items() if isinstance(v, (dict, list))]
+    if bad:
+        raise BagError(f'{where}: custom_data value of {bad[0]!r} is not a string '
+                       '(rosbag2 custom_data maps strings to strings)')
+    return {str(k): '' if v is None else str(v) for k, v in data.items()}
+
+
 def qos_from_yaml(text):
     """Return the v9 QoS dicts of a rosbag2 ``offered_qos_profiles`` YAML (a channel's metadata
     or an older metadata.yaml's string): v9 names, or the integer policies of versions < 9."""
-    try:
-        profiles = yaml.safe_load(text) if text else []
-    except yaml.YAMLError as exc:
-        raise BagError(f'offered_qos_profiles is not YAML ({exc})') from None
+    profiles = bounded_yaml(text, 'offered_qos_profiles', 'QoS profile list') if text else []
     if profiles is None:
         return []
     if not isinstance(profiles, list) or not all(isinstance(p, dict) for p in profiles):

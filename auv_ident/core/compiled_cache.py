@@ -14,19 +14,17 @@ cached yet, and numba compiles the whole group afresh on first use. The setting 
 right after, so numba code of other packages in the process keeps numba's own cache places.
 
 The group folders live in NUMBA_CACHE_DIR if the user set it, else in a private folder of the
-user's (:func:`private_folder`: ``$XDG_CACHE_HOME/auv_ident/numba`` or
+user's (core/safe_files.py :func:`private_folder`: ``$XDG_CACHE_HOME/auv_ident/numba`` or
 ``~/.cache/auv_ident/numba``), never beside the package's files. A folder of the package's own
 that no process has used for PRUNE_DAYS days is deleted when a new one is made. If no folder
 is usable, the group is compiled without a cache (correct, only slower to start).
 """
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 import hashlib
 import inspect
 import os
 import re
 import shutil
-import stat
-import tempfile
 import time
 from typing import Any, TypeVar
 import warnings
@@ -34,6 +32,7 @@ import warnings
 import numba
 
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.safe_files import make_private, private_folder
 
 PRUNE_DAYS = 30
 _GROUP_NAME = re.compile(r'^auv_ident-[0-9a-f]{20}$')
@@ -66,53 +65,6 @@ def group_digest(folder: str, sources: Sequence[str]) -> str:
 def group_folder(base: str, folder: str, sources: Sequence[str]) -> str:
     """The cache folder, below `base`, of the group `sources` in `folder` as they are now."""
     return os.path.join(base, 'auv_ident-' + group_digest(folder, sources)[:20])
-
-
-def _unsafe(path: str) -> str | None:
-    """Why `path` is no private folder of this user's (None if it is one)."""
-    st = os.lstat(path)
-    if stat.S_ISLNK(st.st_mode):
-        return 'a symbolic link'
-    if not stat.S_ISDIR(st.st_mode):
-        return 'not a folder'
-    if st.st_uid != os.getuid():
-        return 'owned by another user'
-    if st.st_mode & 0o022:
-        return 'writable by other users'
-    return None
-
-
-def private_candidates(name: str) -> Iterator[str]:
-    """The places of the private folder `name`, best first: in the user's cache folder
-    ($XDG_CACHE_HOME or ~/.cache), then in the temp folder."""
-    xdg = os.environ.get('XDG_CACHE_HOME', '')
-    cache = xdg if os.path.isabs(xdg) else os.path.join(os.path.expanduser('~'), '.cache')
-    yield os.path.join(cache, 'auv_ident', name)
-    yield os.path.join(tempfile.gettempdir(), f'auv_ident-{os.getuid()}', name)
-
-
-def make_private(path: str, parent: bool = True) -> None:
-    """Create the folder `path` (and its parent, with `parent`) with mode 0700 where missing,
-    and check that it (and its parent) is a folder of this user's, no symbolic link, writable
-    by no one else; OSError if not."""
-    for p in (os.path.dirname(path), path) if parent else (path,):
-        os.makedirs(p, mode=0o700, exist_ok=True)
-        why = _unsafe(p)
-        if why is not None:
-            raise PermissionError(f'{p} is {why}')
-
-
-def private_folder(name: str, tried: list[str] | None = None) -> str | None:
-    """The first usable private folder `name` of :func:`private_candidates` (made if missing),
-    or None; the refused places, with why, are appended to `tried`."""
-    for path in private_candidates(name):
-        try:
-            make_private(path)
-            return path
-        except OSError as err:
-            if tried is not None:
-                tried.append(f'{path} ({err.strerror or err})')
-    return None
 
 
 def _prune(base: str, keep: str) -> None:

@@ -10,12 +10,14 @@ import logging
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from auv_ident.bags.reader import bag_topics, BagError, read_bag
+from auv_ident.bags.schema import custom_data_of, read_metadata
+from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
+from auv_ident.session.settings import IdentifierSettings
 
 log = logging.getLogger('auv_ident.replay')
 
@@ -80,15 +82,13 @@ class ReplayResult:
 
 def bag_custom_data(path):
     """metadata.yaml's custom_data of a bag directory ({} if absent or unreadable)."""
-    meta = Path(path) / 'metadata.yaml'
-    if not meta.is_file():
+    if not Path(path).is_dir():
         return {}
     try:
-        doc = yaml.safe_load(meta.read_text(encoding='utf-8'))
-        data = doc['rosbag2_bagfile_information'].get('custom_data') or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError):
-        return {}
-    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+        info = read_metadata(path)
+        return {} if info is None else custom_data_of(info)
+    except BagError:
+        return {}   # reading the bag's messages says what is wrong with it
 
 class ReplayWarnings:
     """Offline counterpart of WarningLimiter: logs (logger 'auv_ident.replay', WARNING) the
@@ -169,8 +169,29 @@ def session_result(session, updates, settings=None):
         time_origin_ns=int(session.time_origin_ns or 0),
         t_cmd=t_cmd, U_cmd=U_cmd, model=session.model)
 
-def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odom',
-               actuator_topic='/actuators', allow_truncated=False, warn=True, **settings):
+def bag_settings(path):
+    """Raw identifier settings a bag's metadata custom_data carries (bag_custom_data): the
+    vehicle and frame ('auv_ident.vehicle', 'auv_ident.frame'), the velocity reference and the
+    sensor noise 1-sigma of a bag our simulator wrote ('auv_ident.velocity_reference',
+    'auv_ident.noise_std': 12 positive numbers, else not taken). The defaults under what a
+    caller gives (IdentifierSettings.over)."""
+    meta = bag_custom_data(path)
+    raw = {name: meta[key] for name, key in (('vehicle', 'auv_ident.vehicle'),
+                                             ('frame', 'auv_ident.frame'),
+                                             ('velocity_reference',
+                                              'auv_ident.velocity_reference'))
+           if meta.get(key)}
+    try:
+        noise = np.array([float(v) for v in meta.get('auv_ident.noise_std', '').split()])
+    except ValueError:
+        noise = np.zeros(0)
+    if noise.shape == (N_STATE,) and np.all(noise > 0):
+        raw['noise_std'] = noise
+    return raw
+
+
+def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuators',
+               allow_truncated=False, warn=True):
     """Identify from a bag exactly as the identifier node would have live.
 
     Odometry and actuator messages are read in log-time order (as recorded) and fed to an
@@ -179,23 +200,18 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
     Parameters
     ----------
     path : bag directory or .mcap file
-    vehicle, frame : default from the bag's metadata custom_data ('auv_ident.vehicle',
-        'auv_ident.frame', written for simulated runs), else 'nps_auv2' and 'ned'
-    coefficients : names (empty: the vehicle's identify_default)
+    settings : IdentifierSettings (None: the defaults); a setting it was not given
+        (IdentifierSettings.given) comes from the bag's metadata where that says it
+        (:func:`bag_settings`: vehicle, frame, velocity_reference, noise_std)
     odom_topic, actuator_topic : topics to read
     allow_truncated : read the complete chunks of a bag whose writer died (bags.reader.read_bag);
         default: such a bag is a BagError naming the option
     warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
         then a count), or False
-    **settings : any other IdentSession keyword (initial, initial_offset, noise_mode, tau, lam,
-        noise_std, q_state, p0_rel, q_theta_rel, measured, sample_time, max_gap, mass_inverse,
-        warm_start, max_command_age, noise_source, current, current_down, velocity_reference,
-        current_sd0, current_walk); defaults are the node's parameter defaults (max_command_age:
-        none, noise_source: 'message', current: 'estimate', velocity_reference: 'ground')
 
-    Returns a ReplayResult. Raises BagError for an unreadable bag (empty, truncated, corrupted,
-    not an MCAP bag), a missing topic or a topic of another type, ParameterError for a bad
-    setting; nothing else for bad input.
+    Returns a ReplayResult (its `settings`: the settings used, as a dict). Raises BagError for
+    an unreadable bag (empty, truncated, corrupted, not an MCAP bag), a missing topic or a
+    topic of another type, ParameterError for a bad setting; nothing else for bad input.
     """
     present = bag_topics(path, allow_truncated=allow_truncated)
     for what, topic in (('odometry', odom_topic), ('actuator', actuator_topic)):
@@ -203,12 +219,8 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
             listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
             raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
                            f'{listing}')
-    meta = bag_custom_data(path)
-    vehicle = vehicle or meta.get('auv_ident.vehicle') or 'nps_auv2'
-    frame = frame or meta.get('auv_ident.frame') or 'ned'
-    settings.pop('keep_arrays', None)
-    session = IdentSession(vehicle=vehicle, coefficients=coefficients, frame=frame,
-                           keep_arrays=True, **settings)
+    settings = (settings or IdentifierSettings()).over(bag_settings(path))
+    session = IdentSession(settings, keep_arrays=True)
     msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
                            actuator_topic: 'sensor_msgs/msg/JointState'},
                     allow_truncated=allow_truncated)
@@ -220,5 +232,4 @@ def replay_bag(path, vehicle=None, coefficients=(), frame=None, odom_topic='/odo
     finally:
         if warner is not None:
             warner.summary()
-    return session_result(session, updates, dict(settings, vehicle=vehicle, frame=frame,
-                                                 coefficients=list(coefficients)))
+    return session_result(session, updates, settings.as_dict())

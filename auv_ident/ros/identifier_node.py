@@ -91,24 +91,12 @@ Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S 
 clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
 
-Parameters (``config/identifier.yaml`` documents each with units and default; read once at
-start-up, declared read-only)
-    ``vehicle`` ('nps_auv2'), ``coefficients`` (empty = the vehicle's identify_default, or the
-    warm-start file's list; [auto] or [auto, NAME, ...] = chosen from the data, below),
-    ``auto_window`` (120.0 s), ``initial`` (empty = file value * (1 + initial_offset); with
-    [auto] for the running set), ``initial_offset`` (0.5),
-    ``noise_mode`` ('fixed' | 'paper' | 'paper_q' | 'matching'), ``tau`` (10.0 s), ``lam``
-    (the paper's lambda, 2e-3; ``lambda`` would shadow a Python keyword in code),
-    ``noise_std`` (12, DEFAULT_NOISE_STD), ``q_state`` (12, DEFAULT_Q_STATE), ``p0_rel``
-    (1.0), ``q_theta_rel`` (1e-5), ``measured`` (channel names, default all 12), ``frame``
-    ('ned' | 'enu'), ``sample_time`` (0.05 s), ``max_gap`` (5.0 s), ``max_bridge``
-    (0.0 = 0.25 s; not yet in config/identifier.yaml), ``mass_inverse`` ('default'),
-    ``current`` ('estimate' | 'none' | 'N,E[,D]'), ``current_down`` (false),
-    ``velocity_reference`` ('ground' | 'water'), ``current_sd0`` (0.5 m/s), ``current_walk``
-    (0.0 m/s/sqrt(s); docs/current.md), ``max_command_age`` (0: none), ``noise_source``
-    ('message'), ``save_path`` (''), ``warm_start`` (''). An empty list means the default
-    (ROS turns ``[]`` into "not set"). Bad values (or types) print one line naming the
-    parameter and exit with status 2 (ros/toolkit.py).
+Parameters (read once at start-up, declared read-only): every field of
+:class:`auv_ident.session.settings.IdentifierSettings`, declared from the fields (name, default,
+type, description with unit and choices; config/identifier.yaml and the docs/ros.md table are
+made from the same fields), and ``save_path`` (''). An empty list means the default (ROS turns
+``[]`` into "not set"). Bad values (or types) print one line naming the parameter and exit with
+status 2 (ros/toolkit.py).
 
 Coefficients chosen from the data (``coefficients`` [auto] or [auto, NAME, ...], as offline
 ``identify --bag --coefficients auto[,NAME,...]``; auv_ident/session/auto_choice.py): the node
@@ -141,9 +129,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.core.filter.augmented import DEFAULT_Q_STATE
-from auv_ident.core.filter.ekf import MODES
-from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import CURRENT_NAMES, STATE_NAMES
 from auv_ident.ros.cdr import OdometryView, UndecodableMessage
 from auv_ident.ros.toolkit import (
@@ -156,10 +141,12 @@ from auv_ident.ros.toolkit import (
     spin,
     STREAM_QOS,
 )
-from auv_ident.session.auto_choice import AUTO_WINDOW_S, run_in_thread
+from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import DEFAULT_FRAME_IDS, NS_PER_S
 from auv_ident.session.session import Event, IdentSession
+from auv_ident.session.settings import help_text, IdentifierSettings, settings_fields
+from auv_ident.session.settings_text import SAVE_PATH
 from auv_ident.session.warning_limiter import WarningLimiter
 
 NODE_NAME = 'identifier'
@@ -172,69 +159,21 @@ LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR}
 
 
-def _names(name, value):
-    return list(value or [])
+def _parameter(f):
+    """The node parameter of a setting (session/settings.py): its name, default (the
+    Parameter.Type of an empty list: ROS cannot type one) and description."""
+    kind = f.metadata['kind']
+    if kind not in ('strings', 'floats'):
+        return Param(f.name, f.default, help_text(f))
+    return Param(f.name, list(f.default) if f.default else _LIST_TYPES[kind], help_text(f),
+                 optional_list)
 
 
-# IdentSession checks the values (ParameterError naming the parameter); here only the type and
-# "unset" (ROS turns [] into "not set") are settled.
-_PARAMETERS = (
-    Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path'),
-    Param('coefficients', Parameter.Type.STRING_ARRAY,
-          "coefficients to identify; empty = the vehicle file's identify_default; [auto] or "
-          '[auto, NAME, ...] = chosen from the first auto_window s of data, NAME always '
-          'included', _names),
-    Param('auto_window', AUTO_WINDOW_S, 'seconds of accepted odometry the coefficients [auto] '
-                                        'choice is made from [s]'),
-    Param('initial', Parameter.Type.DOUBLE_ARRAY,
-          "initial guesses, same order [vehicle file's units]; empty = truth * (1 + "
-          'initial_offset)', _names),
-    Param('initial_offset', 0.5, 'relative offset of the initial guesses from the file values '
-                                 'when initial is empty [-]'),
-    Param('noise_mode', 'fixed', 'noise adaptation: ' + ', '.join(MODES)),
-    Param('tau', 10.0, 'time constant of the forgetting factor of the adaptation [s]'),
-    Param('lam', 2e-3, "the paper's lambda of the adaptation [-]"),
-    Param('noise_std', [float(v) for v in DEFAULT_NOISE_STD],
-          'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi '
-          '[rad]', optional_list),
-    Param('q_state', [float(v) for v in DEFAULT_Q_STATE],
-          'per-step process noise 1-sigma of the 12 states (units as noise_std)',
-          optional_list),
-    Param('p0_rel', 1.0, 'initial 1-sigma of each coefficient, fraction of |initial guess| '
-                         '[-]'),
-    Param('q_theta_rel', 1e-5, 'per-step random-walk 1-sigma of each coefficient, fraction of '
-                               '|initial guess| [-]'),
-    Param('measured', list(STATE_NAMES), 'measured channels among ' + ' '.join(STATE_NAMES),
-          _names),
-    Param('frame', 'ned', "convention of the incoming Odometry: 'ned' or 'enu'"),
-    Param('sample_time', 0.05, 'nominal sample time and longest single prediction step [s]'),
-    Param('max_gap', 5.0, 'a longer gap between odometry stamps restarts the vehicle states '
-                          '(coefficients kept) [s]'),
-    Param('max_bridge', 0.0, 'longest gap between odometry stamps bridged by time updates; a '
-                             'longer one restarts the vehicle states (coefficients kept); 0 = '
-                             '0.25 s [s]'),
-    Param('mass_inverse', 'default', "M^-1: 'default' (vehicle file's choice), 'exact' or "
-                                     "'mss_literal'"),
-    Param('max_command_age', 0.0, "odometry whose command in force is older than this is "
-                                  "rejected as 'stale command'; 0 = no limit (a held command "
-                                  'stays in force: drivers publish on change) [s]'),
-    Param('noise_source', 'message', "measurement noise: 'message' (the Odometry covariance "
-                                     'diagonals where finite and positive, noise_std elsewhere) '
-                                     "or 'parameter' (noise_std)"),
-    Param('current', 'estimate', "the water current: 'estimate' (with the coefficients, "
-                                 "published as current_n, current_e), 'none' (still water) or "
-                                 "'N,E[,D]' (a known current, NED) [m/s]"),
-    Param('current_down', False, 'also estimate the down component of the current [-]'),
-    Param('velocity_reference', 'ground', "twist.linear is over 'ground' (DVL bottom lock) or "
-                                          "through the 'water' (water-track DVL)"),
-    Param('current_sd0', 0.5, 'initial 1-sigma of each estimated horizontal current component '
-                              '[m/s]'),
-    Param('current_walk', 0.0, 'random walk of the estimated current; 0 = constant '
-                               '[m/s/sqrt(s)]'),
-    Param('save_path', '', 'estimate JSON written on ~/save and on shutdown; empty = none'),
-    Param('warm_start', '', 'estimate JSON to start from (estimate and covariance); empty = '
-                            'none'),
-)
+_LIST_TYPES = {'strings': Parameter.Type.STRING_ARRAY, 'floats': Parameter.Type.DOUBLE_ARRAY}
+# every identifier setting, checked by IdentifierSettings (ParameterError naming the
+# parameter; here only the type and "unset" are settled: ROS turns [] into "not set"), and the
+# node's own save_path
+_PARAMETERS = tuple(_parameter(f) for f in settings_fields()) + (Param(*SAVE_PATH),)
 
 
 class IdentifierNode(Node):
@@ -242,11 +181,12 @@ class IdentifierNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        settings = declare_parameters(self, _PARAMETERS)
-        self.save_path = settings.pop('save_path')
+        values = declare_parameters(self, _PARAMETERS)
+        self.save_path = values.pop('save_path')
         # ParameterError names a bad parameter; an 'auto' choice runs in a worker thread, so
         # that the callbacks go on taking (and keeping) messages while it runs
-        self.session = IdentSession(**settings, auto_runner=run_in_thread)
+        self.session = IdentSession(IdentifierSettings.from_values(**values),
+                                    auto_runner=run_in_thread)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
@@ -285,7 +225,7 @@ class IdentifierNode(Node):
             clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'identifying {", ".join(self.names)} of {self.session.vehicle.name} '
-            f'(noise mode {settings["noise_mode"]}, frame {self.session.frame}, initial '
+            f'(noise mode {self.session.settings.noise_mode}, frame {self.session.frame}, initial '
             f'{np.array2string(self.session.theta0, precision=5)})'
             + ('' if self.session.auto is None else
                f'; coefficients [auto]: the set is chosen from the first '

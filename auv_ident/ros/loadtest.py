@@ -113,7 +113,8 @@ def compute_latency(run, n_samples):
     """Per-odometry compute time of IdentSession.on_odom (ms), without ROS."""
     from auv_ident.ros.sim_messages import sample_messages
     from auv_ident.session.session import IdentSession
-    s = IdentSession(sample_time=float(run.T))
+    from auv_ident.session.settings import IdentifierSettings
+    s = IdentSession(IdentifierSettings.from_values(sample_time=float(run.T)))
     s.warm_up()
     out = []
     for k in range(min(n_samples, len(run.t))):

@@ -20,9 +20,11 @@ selection block); warm_start reads only the keys above.
 import json
 import os
 from pathlib import Path
+import stat
 
 import numpy as np
 
+from auv_ident.core.safe_files import write_atomic
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
@@ -39,32 +41,51 @@ def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps):
             'steps': int(steps)}
 
 def write_estimate_json(path, doc):
-    """Write an estimate document atomically (temp file + rename); NaN/Inf refused."""
-    path = Path(path)
+    """Write an estimate document atomically (a fresh temporary file, then one rename:
+    core/safe_files.py; a symlink planted beside the target redirects nothing); NaN/Inf
+    refused."""
     text = json.dumps(doc, indent=1, allow_nan=False) + '\n'
-    # a plain open() (not mkstemp, which makes the file 0600) keeps the umask's permissions
-    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
-    try:
-        with open(tmp, 'w', encoding='utf-8') as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_atomic(Path(path), text)
+
+MAX_ESTIMATE_BYTES = 16 * 1024 * 1024   # an estimate of p coefficients is ~25 p^2 bytes
+
+
+def _has_bool(value):
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, list) and any(_has_bool(v) for v in value)
+
 
 def load_estimate_json(path):
     """Read an estimate file: (vehicle, names, estimate (p,), covariance (p, p)).
 
-    Raises ParameterError('warm_start', ...) naming what is wrong."""
+    Raises ParameterError('warm_start', ...) naming what is wrong: also for what is not a
+    regular file (a FIFO would block, /dev/zero never ends), a file over MAX_ESTIMATE_BYTES,
+    JSON nested beyond what a parser should follow, and true/false where numbers belong."""
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise ParameterError('warm_start', f'{path} is not a regular file (an estimate '
+                                               'file written by save_path or --estimate-out)')
+        if st.st_size > MAX_ESTIMATE_BYTES:
+            raise ParameterError('warm_start', f'{path}: {st.st_size} bytes, more than an '
+                                               f'estimate file holds ({MAX_ESTIMATE_BYTES})')
         with open(path, encoding='utf-8') as fh:
             doc = json.load(fh)
+    except ParameterError:
+        raise
     except (OSError, ValueError) as err:
-        raise ParameterError('warm_start', f'cannot read {path}: {err}') from None
+        raise ParameterError('warm_start', f'cannot read {path}: {err}') from err
+    except RecursionError as err:
+        raise ParameterError('warm_start', f'{path}: JSON nested too deeply to be an estimate '
+                                           'file') from err
+    if not isinstance(doc, dict):
+        raise ParameterError('warm_start', f'{path}: not an estimate file (a JSON '
+                                           f'{type(doc).__name__}, not an object)')
+    flags = [k for k in ('estimate', 'covariance') if _has_bool(doc.get(k))]
+    if flags:
+        raise ParameterError('warm_start', f'{path}: true/false in {flags[0]!r}, where numbers '
+                                           'belong')
     try:
         vehicle = str(doc['vehicle'])
         names = [str(n) for n in doc['coefficients']]

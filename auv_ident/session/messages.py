@@ -126,8 +126,13 @@ class ConversionError(AuvIdentError, ValueError):
 
 
 def stamp_to_ns(stamp):
-    """Return a builtin_interfaces/Time as integer nanoseconds (exact)."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+    """Return a builtin_interfaces/Time as integer nanoseconds (exact); ConversionError for a
+    nanosec outside [0, 10^9), which no valid Time has (it would alias another second)."""
+    nanosec = int(stamp.nanosec)
+    if not 0 <= nanosec < NS_PER_S:
+        raise ConversionError(f'header.stamp.nanosec {nanosec} is outside [0, 10^9): not a '
+                              'valid time')
+    return int(stamp.sec) * NS_PER_S + nanosec
 
 
 def stamp_to_sec(stamp):
@@ -146,9 +151,12 @@ def integer_stamp(stamp_ns):
 
 
 def header_stamp_ns(msg):
-    """A message's header.stamp in integer ns, or None if it cannot be read."""
+    """A message's header.stamp in integer ns, or None if the message has none that can be read;
+    ConversionError naming the field for a stamp that is there but invalid."""
     try:
         return stamp_to_ns(msg.header.stamp)
+    except ConversionError:
+        raise
     except (AttributeError, TypeError, ValueError):
         return None
 

@@ -32,14 +32,13 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError, ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter.augmented import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE, FilterConfig
+from auv_ident.core.filter.augmented import DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
-from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
+from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
-from auv_ident.session.auto_choice import AUTO_WINDOW_S, AutoChoice, ChoiceJob
+from auv_ident.session.auto_choice import AutoChoice, ChoiceJob
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.guard import (
     checked_coefficients,
@@ -78,19 +77,11 @@ from auv_ident.session.screening import (
     nonfinite_states,
 )
 from auv_ident.session.settings import (
-    choice,
     coefficient_list,
     coefficient_request,
-    FRAMES,
-    MASS_INVERSES,
-    max_command_age as command_age_limit,
+    IdentifierSettings,
     noise_model,
-    NOISE_MODES,
-    NOISE_SOURCES,
     ParameterError,
-    positive,
-    relative_offset,
-    timing,
     vehicle_named,
 )
 
@@ -106,52 +97,16 @@ class IdentSession:
     """Online identification from arrays or ROS messages, ROS-graph-free (the node's
     per-message logic; module docstring).
 
-    Every keyword is named like the identifier node's parameter it comes from, and a bad value
-    raises :class:`ParameterError` naming it.
-
     Parameters
     ----------
-    vehicle : str, vehicle name or YAML path
-    coefficients : sequence of str, coefficients to identify (empty: the vehicle's
-        identify_default, or the warm-start file's list), or ['auto', NAME, ...]: chosen from
-        the first auto_window s of data, NAME always included (session/auto_choice.py)
-    auto_window : s of accepted odometry the 'auto' choice is made from (> 0)
-    auto_runner : work -> concurrent.futures.Future that runs the choice (auto_choice.py:
-        run_inline, the default, or run_in_thread, the node's)
-    initial : sequence of float, initial guesses (empty: truth * (1 + initial_offset))
-    initial_offset : float, relative start offset when `initial` is empty
-    noise_mode : one of settings.NOISE_MODES ('fixed', 'paper', 'paper_q', 'matching')
-    tau : s, forgetting time constant; lam : the paper's lambda
-    noise_std : (12,) measurement 1-sigma (state units); q_state : (12,) per-step process 1-sigma
-    p0_rel, q_theta_rel : initial and per-step random-walk 1-sigma of theta, relative
-    measured : channel names (empty: all 12)
-    frame : one of settings.FRAMES ('ned', 'enu'), convention of the incoming Odometry
-    sample_time : s, nominal sample time and longest single prediction step
-    max_gap : s, a longer gap restarts the vehicle states (coefficients kept); also the
-        horizon of backward time jumps and stale commands (core/filter/stream.py)
-    max_bridge : s, longest gap between odometry stamps bridged by time updates; a longer one
-        restarts the vehicle states too (0 or None: settings.MAX_BRIDGE_S = 0.25 s, at least
-        one sample time, at most max_gap; see core/filter/stream.py for why)
-    mass_inverse : one of settings.MASS_INVERSES ('default', 'exact', 'mss_literal')
-    warm_start : '' or an estimate JSON path (start from its estimate and covariance; the
-        coefficients only: a previous run's current is not this run's)
+    settings : :class:`~auv_ident.session.settings.IdentifierSettings`, every identification
+        setting, checked (its fields say each one's meaning, unit and default; build one from
+        keywords with ``IdentifierSettings.from_values(vehicle='remus100', ...)``); None: the
+        defaults. What needs the vehicle file (coefficient names, the warm-start file, the
+        initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
-    max_command_age : s, a command in force older than this makes the odometry 'stale command'
-        (None or 0, the default: no limit, a held command stays in force: drivers that publish
-        only on change send nothing while a fin is held)
-    noise_source : 'message' (default): the Odometry covariance diagonals are the measurement
-        variances of each message where they are finite and positive, noise_std for the other
-        channels (one notice names them); 'parameter': noise_std always
-    current : 'estimate' (default), 'none', or 'N,E[,D]' (m/s NED, a known current): the water
-        current (core/model/current.py). Estimated by default because every AUV runs in one and 0.1
-        m/s left out biases the coefficients beyond their error bars, while estimating a zero
-        current costs nothing measurable;
-        'none' is still water, the filter of before (bit for bit)
-    current_down : bool, also estimate the down component (with current 'estimate')
-    velocity_reference : 'ground' (DVL in bottom lock, default) or 'water' (water-track DVL:
-        twist.linear is the velocity through the water)
-    current_sd0 : m/s, initial 1-sigma of each estimated current component
-    current_walk : m/s/sqrt(s), random walk of the estimated current (0: constant)
+    auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
+        choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
 
     The identified parameters (``names``) are the coefficients, then the estimated current
     components ('current_n', 'current_e'[, 'current_d']).
@@ -163,58 +118,42 @@ class IdentSession:
     'zero stamp' (an unset header.stamp).
     """
 
-    def __init__(self, vehicle='nps_auv2', coefficients=(), initial=(), initial_offset=0.5,
-                 noise_mode='fixed', tau=10.0, lam=2e-3, noise_std=None, q_state=None,
-                 p0_rel=1.0, q_theta_rel=1e-5, measured=(), frame='ned', sample_time=0.05,
-                 max_gap=5.0, mass_inverse='default', warm_start='', keep_arrays=False,
-                 max_bridge=None, max_command_age=None, noise_source='message',
-                 current=DEFAULT_CURRENT, current_down=False, velocity_reference='ground',
-                 current_sd0=DEFAULT_CURRENT_SD0, current_walk=0.0,
-                 auto_window=AUTO_WINDOW_S, auto_runner=None):
-        self.vehicle = vehicle_named(vehicle)
-        self.frame = choice('frame', frame, FRAMES)
-        choice('mass_inverse', mass_inverse, MASS_INVERSES)
-        choice('noise_mode', noise_mode, NOISE_MODES)
-        T, max_gap, self.max_bridge = timing(sample_time, max_gap, max_bridge)
-        self.max_command_age = command_age_limit(max_command_age, max_gap)
-        self.noise_source = choice('noise_source', noise_source, NOISE_SOURCES)
-        tau, lam, p0_rel = (positive(name, v) for name, v in
-                            (('tau', tau), ('lam', lam), ('p0_rel', p0_rel)))
-        q_theta_rel = positive('q_theta_rel', q_theta_rel, allow_zero=True)
-        initial_offset = relative_offset('initial_offset', initial_offset)
-        noise, qs, mask = noise_model(noise_std, q_state, measured, DEFAULT_NOISE_STD,
-                                      DEFAULT_Q_STATE)
+    def __init__(self, settings=None, keep_arrays=False, auto_runner=None):
+        settings = IdentifierSettings() if settings is None else settings
+        self.settings = settings
+        self.vehicle = vehicle_named(settings.vehicle)
+        self.frame = settings.frame
+        T, max_gap, self.max_bridge = settings.timing
+        self.max_command_age = settings.command_age_limit
+        self.noise_source = settings.noise_source
+        noise, qs, mask = noise_model(settings.noise_std, settings.q_state, settings.measured,
+                                      DEFAULT_NOISE_STD, DEFAULT_Q_STATE)
         # a planar vehicle's held states are not measurements (core/model/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
-        auto, coefficients = coefficient_request(self.vehicle, coefficients)
-        auto_window = positive('auto_window', auto_window)
+        auto, coefficients = coefficient_request(self.vehicle, settings.coefficients)
+        warm_start = settings.warm_start
         if auto and warm_start:
             raise ParameterError('warm_start', "coefficients ['auto', ...] chooses the set from "
                                  'the data; a warm-start file fixes it: give one or the other')
         warm = load_estimate_json(warm_start) if warm_start else None
-        canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients, initial,
-                                                      warm_start, warm)
-        try:
-            self.current_option = parse_current(current, bool(current_down))
-        except ConfigError as err:
-            raise ParameterError('current_down' if current_down and str(current).strip()
-                                 != 'estimate' else 'current', str(err)) from None
-        self.velocity_reference = choice('velocity_reference', velocity_reference,
-                                         VELOCITY_REFERENCES)
-        current_sd0 = positive('current_sd0', current_sd0)
-        current_walk = positive('current_walk', current_walk, allow_zero=True)
-        self._mass_inverse = mass_inverse
+        canon, init, self.warm_cov = coefficient_list(self.vehicle, coefficients,
+                                                      settings.initial, warm_start, warm)
+        self.current_option = settings.current_option
+        self.velocity_reference = settings.velocity_reference
+        self._mass_inverse = settings.mass_inverse
         try:
             self.model = self._model_of(canon)
         except ConfigError as err:
             raise ParameterError('mass_inverse', str(err)) from None
 
-        self.cfg = FilterConfig(coefficients=canon, initial=init, initial_offset=initial_offset,
-                                p0_rel=p0_rel, q_theta_rel=q_theta_rel, q_state=qs,
-                                noise_std=noise, measured=mask, mode=noise_mode, tau=tau,
-                                lam=lam, theta_cov0=self.warm_cov, current_sd0=current_sd0,
-                                current_walk=current_walk)
+        self.cfg = FilterConfig(coefficients=canon, initial=init,
+                                initial_offset=settings.initial_offset, p0_rel=settings.p0_rel,
+                                q_theta_rel=settings.q_theta_rel, q_state=qs, noise_std=noise,
+                                measured=mask, mode=settings.noise_mode, tau=settings.tau,
+                                lam=settings.lam, theta_cov0=self.warm_cov,
+                                current_sd0=settings.current_sd0,
+                                current_walk=settings.current_walk)
         self.T = T
         self.max_gap = max_gap
         self.names = list(self.model.theta_names)
@@ -231,7 +170,7 @@ class IdentSession:
         self._fallback_noted = set()
         self.noise_default = np.asarray(noise, dtype=float) ** 2    # R diagonal of noise_std
         self._R_now = self.noise_default.copy()
-        self.guard_on = noise_mode != 'paper'   # the divergence guard (session/guard.py)
+        self.guard_on = settings.noise_mode != 'paper'   # the divergence guard (session/guard.py)
         self.gate = innovation_gate() if self.guard_on else None
         try:
             self.stream = self._new_stream()
@@ -265,7 +204,8 @@ class IdentSession:
         self._reset_from_good = False   # the last reset started from last_good, none good since
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
-        self.auto = AutoChoice(coefficients, auto_window, auto_runner) if auto else None
+        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
+                     else None)
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -463,8 +403,9 @@ class IdentSession:
 
     def on_actuators(self, msg):
         """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
-        stamp_ns = header_stamp_ns(msg)
+        stamp_ns = None
         try:
+            stamp_ns = header_stamp_ns(msg)
             _, u6 = joint_state_to_actuators(msg)
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
@@ -472,8 +413,9 @@ class IdentSession:
 
     def on_odom(self, msg):
         """Fuse a nav_msgs/Odometry measurement (in the `frame` convention). Returns an Event."""
-        stamp_ns = header_stamp_ns(msg)
+        stamp_ns = None
         try:
+            stamp_ns = header_stamp_ns(msg)
             _, x12 = odometry_state(msg, self.frame)
         except ConversionError as err:
             return self._reject('odom', 'conversion', str(err), stamp_ns)

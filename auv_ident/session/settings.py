@@ -1,21 +1,38 @@
-"""Identifier settings checked once, in one style: a bad value raises :class:`ParameterError`
-naming the setting (= the identifier node's parameter and the keyword of IdentSession).
+"""Identifier settings: one frozen, validated value, :class:`IdentifierSettings`, built once
+where the settings enter (the identifier node's parameters, the command line, a bag's
+metadata, Python callers) and passed whole down the stack.
 
-The choice lists are defined once and imported from here by whoever needs them (IdentSession,
-the identifier node's parameter descriptions, the command line):
+Each setting is one dataclass field whose metadata holds its help text, unit, choices and
+kind (:func:`setting`); the node's parameter declarations, the command-line options,
+config/identifier.yaml and the docs/ros.md table are made from these fields
+(:func:`settings_fields`; tools/settings_docs.py writes the last two as
+session/settings_text.py says). A bad value raises :class:`ParameterError` naming the setting
+(= the node parameter, the keyword of :meth:`IdentifierSettings.from_values` and, with '-' for
+'_', the command-line option).
+
+Adding a setting: a field here, its use where it acts (IdentSession reads the value), then
+``python tools/settings_docs.py``; the node's parameter, the option of ``identify`` and the
+checks of test/ros/test_settings_agree.py follow from the field.
+
+The choice lists are defined once here:
 
 - :data:`NOISE_MODES`: the filter's noise adaptation modes (core.filter.ekf.MODES);
 - :data:`MASS_INVERSES`: how M^-1 is formed (core.model.hydrodynamics.Model's ``mass_inverse``);
 - :data:`FRAMES`: conventions of the incoming Odometry (session.messages, the frame algebra).
 """
+from dataclasses import dataclass, field, fields
 import math
 
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.filter.augmented import DEFAULT_CURRENT_SD0, DEFAULT_Q_STATE
 from auv_ident.core.filter.ekf import MODES
 from auv_ident.core.identification.selection import AUTO, parse_request
-from auv_ident.core.model.state import CURRENT_NAMES, N_STATE, STATE_NAMES
+from auv_ident.core.model.current import DEFAULT_CURRENT, parse_current
+from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+from auv_ident.core.model.state import CURRENT_NAMES, N_STATE, STATE_NAMES, VELOCITY_REFERENCES
+from auv_ident.session.auto_choice import AUTO_WINDOW_S
 from auv_ident.session.messages import FRAMES
 from auv_ident.vehicles import load_vehicle
 
@@ -27,10 +44,11 @@ MAX_SAMPLE_TIME = 1.0   # s: one RK4 step of the model over a longer one is not 
 MAX_SUBSTEPS = 20000    # max_gap / sample_time: the longest bridge of one gap
 MAX_BRIDGE_S = 0.25     # s, default max_bridge: longest gap bridged by time updates
 
-__all__ = ['choice', 'coefficient_list', 'coefficient_request', 'FRAMES', 'MASS_INVERSES',
-           'MAX_BRIDGE_S', 'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'max_command_age',
-           'measured_mask', 'noise_model', 'NOISE_MODES', 'NOISE_SOURCES', 'number',
-           'ParameterError', 'positive', 'relative_offset', 'sigmas', 'timing', 'vector',
+__all__ = ['choice', 'coefficient_list', 'coefficient_request', 'FRAMES', 'help_text',
+           'IdentifierSettings', 'MASS_INVERSES', 'MAX_BRIDGE_S', 'max_command_age',
+           'MAX_SAMPLE_TIME', 'MAX_SUBSTEPS', 'measured_mask', 'names_of', 'noise_model',
+           'NOISE_MODES', 'NOISE_SOURCES', 'number', 'ParameterError', 'positive',
+           'relative_offset', 'setting', 'settings_fields', 'sigmas', 'timing', 'vector',
            'vehicle_named']
 
 
@@ -39,6 +57,7 @@ class ParameterError(ConfigError):
 
     def __init__(self, name, message):
         self.name = name
+        self.message = message
         super().__init__(f'parameter {name!r}: {message}')
 
 
@@ -185,7 +204,7 @@ def coefficient_request(vehicle, coefficients):
     if not any(n.strip().lower() == AUTO for n in names):
         return False, names
     try:
-        return parse_request(vehicle, ','.join(names))
+        return parse_request(vehicle, names)
     except ConfigError as err:
         raise ParameterError('coefficients', str(err)) from None
 
@@ -245,3 +264,287 @@ def coefficient_list(vehicle, coefficients, initial, warm_start='', warm=None):
     if np.any(w_est == 0):
         raise ParameterError('warm_start', f'{warm_start}: an estimate of exactly 0')
     return canon, w_est, w_cov
+
+
+# --- the settings value ------------------------------------------------------------------------
+
+KINDS = ('str', 'float', 'bool', 'strings', 'floats')   # what a setting's value is
+
+
+def setting(default, text, unit='', choices=(), kind=None, check=None, note=''):
+    """A field of :class:`IdentifierSettings`: its default and, in the metadata, everything the
+    node, the command line and the docs say about it.
+
+    text : one line, the help (the node's parameter description, the option's help, the docs table)
+    unit : e.g. 's', 'm/s' ('' for none); choices : the allowed values of a text setting
+    kind : one of KINDS (default: from the default's type)
+    check : (name, value) -> normalised value, raising ParameterError (default: by kind)
+    note : more for config/identifier.yaml's comment (optional)"""
+    if kind is None:
+        kind = {str: 'str', float: 'float', bool: 'bool'}[type(default)]
+    if kind not in KINDS:
+        raise ValueError(f'unknown kind {kind!r}')
+    if check is None:
+        check = _choice(choices) if choices else _CHECKS[kind]
+    return field(default=default, metadata={'help': text, 'unit': unit,
+                                            'choices': tuple(choices), 'kind': kind,
+                                            'check': check, 'note': note})
+
+
+def _text(name, value):
+    if not isinstance(value, str) and not hasattr(value, '__fspath__'):
+        raise ParameterError(name, f'{value!r} is not text')
+    return str(value).strip()
+
+
+def _current(name, value):
+    return str(value).strip()     # parse_current names what is wrong with it
+
+
+def _flag(name, value):
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise ParameterError(name, f'{value!r}: give true or false')
+
+
+def names_of(name, value):
+    """Names from 'A,B,C' (the command line) or a sequence (a node parameter, Python): the one
+    parser of every list of names (coefficients, measured)."""
+    items = value.split(',') if isinstance(value, str) else list(value)
+    out = [str(n).strip() for n in items]
+    if isinstance(value, str):
+        out = [n for n in out if n]
+    elif not all(out):
+        raise ParameterError(name, f'empty entry in {items!r}')
+    return tuple(out)
+
+
+def _floats(name, value):
+    """Numbers from 'a,b,c' (the command line) or a sequence (a node parameter, Python)."""
+    items = ([v for v in value.split(',') if v.strip()] if isinstance(value, str)
+             else list(np.ravel(np.asarray(value, dtype=object))))
+    try:
+        return tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        raise ParameterError(name, f'expected {len(items)} numbers, got {value!r}') from None
+
+
+def _choice(choices):
+    return lambda name, value: choice(name, value, choices)
+
+
+def _sigmas(default):
+    return lambda name, value: tuple(float(v) for v in sigmas(name, _floats(name, value),
+                                                              default))
+
+
+def _measured(name, value):
+    if isinstance(value, np.ndarray) and value.dtype == bool:
+        mask = measured_mask(value)
+        return tuple(STATE_NAMES[i] for i in np.flatnonzero(mask))
+    names = names_of(name, value)
+    measured_mask(names)
+    return names
+
+
+def _positive(name, value):
+    return positive(name, value)
+
+
+def _non_negative(name, value):
+    return positive(name, value, allow_zero=True)
+
+
+def _age(name, value):
+    return 0.0 if value is None else number(name, value)
+
+
+_CHECKS = {'str': _text, 'float': number, 'bool': _flag, 'strings': names_of, 'floats': _floats}
+
+
+@dataclass(frozen=True)
+class IdentifierSettings:
+    """Every identification setting of the identifier, checked (module docstring).
+
+    Build one with :meth:`from_values` (raw values: text, numbers, lists, None for "unset";
+    what was given is remembered in ``given``) or the constructor (every other field its
+    default); either way each value is normalised (numbers to float, lists to tuples) and
+    checked, a bad one raising ParameterError naming it. ``given`` (the names given to
+    from_values, or set away from their default) says which settings a bag's metadata must
+    not override (:meth:`over`). Checks that need the vehicle file
+    (coefficient names, the warm-start file, the initial guesses' count) are made by
+    :class:`~auv_ident.session.session.IdentSession`, which loads the vehicle."""
+
+    vehicle: str = setting('nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
+                           note='Its file gives the model, the coefficient names and units, '
+                                'and the true values.')
+    coefficients: tuple = setting(
+        (), "coefficients to identify; empty = the vehicle file's identify_default (or the "
+            "warm-start file's list); [auto] or [auto, NAME, ...] = chosen from the first "
+            'auto_window s of data, NAME always included', kind='strings',
+        note='With [auto] the node identifies the NAMEs (none: identify_default) while it '
+             'keeps the first auto_window s of data, then chooses the set from them in a '
+             'worker thread and switches to it; ~/estimate and ~/covariance then change their '
+             'names and length, once (docs/ros.md, Coefficients chosen from the data). Not '
+             'with warm_start.')
+    auto_window: float = setting(AUTO_WINDOW_S, 'seconds of accepted odometry the coefficients '
+                                                '[auto] choice is made from', unit='s',
+                                 check=_positive,
+                                 note='The choice costs one filter run over the window per '
+                                      'candidate coefficient (docs/ros.md). Ignored without '
+                                      '[auto].')
+    initial: tuple = setting((), "initial guesses in the order of coefficients (vehicle file's "
+                                 'units); empty = file value * (1 + initial_offset)',
+                             kind='floats')
+    initial_offset: float = setting(0.5, 'relative offset of the initial guesses from the file '
+                                         'values when initial is empty', unit='-',
+                                    check=relative_offset)
+    noise_mode: str = setting('fixed', 'noise adaptation (docs/method.md)', choices=NOISE_MODES,
+                              note="fixed: Q, R as given; paper: the paper's Eqs. 16-19; "
+                                   'paper_q: Eq. 16 only; matching: innovation-based '
+                                   'covariance matching.')
+    tau: float = setting(10.0, 'time constant of the forgetting factor of the adaptation',
+                         unit='s', check=_positive)
+    lam: float = setting(2e-3, "the paper's lambda of the adaptation", unit='-',
+                         check=_positive)
+    noise_std: tuple = setting(
+        tuple(float(v) for v in DEFAULT_NOISE_STD),
+        'measurement noise 1-sigma of u v w [m/s], p q r [rad/s], x y z [m], phi theta psi '
+        '[rad]; > 0 on measured channels', kind='floats', check=_sigmas(DEFAULT_NOISE_STD))
+    q_state: tuple = setting(
+        tuple(float(v) for v in DEFAULT_Q_STATE),
+        'per-step process noise 1-sigma of the 12 states (units as noise_std)', kind='floats',
+        check=_sigmas(DEFAULT_Q_STATE),
+        note='Small on purpose: the coefficients are learnt from how well the model predicts '
+             'the motion; raise it for real vehicles with unmodelled forces.')
+    p0_rel: float = setting(1.0, 'initial 1-sigma of each coefficient, fraction of |initial '
+                                 'guess|', unit='-', check=_positive)
+    q_theta_rel: float = setting(1e-5, 'per-step random-walk 1-sigma of each coefficient, '
+                                       'fraction of |initial guess|', unit='-',
+                                 check=_non_negative)
+    measured: tuple = setting(tuple(STATE_NAMES), 'measured channels among '
+                                                  + ' '.join(STATE_NAMES),
+                              kind='strings', check=_measured,
+                              note='Others are ignored, even if present in the message. Quote '
+                                   'the names in YAML: a bare y is a boolean.')
+    frame: str = setting('ned', 'convention of the incoming Odometry (ned: NED/FRD, enu: '
+                                'REP-103 ENU/FLU)', choices=FRAMES)
+    sample_time: float = setting(0.05, 'nominal sample time and longest single prediction '
+                                       'step', unit='s')
+    max_gap: float = setting(5.0, 'a backward time jump larger than this is confirmed by 5 '
+                                  'messages before the time line restarts; also the longest '
+                                  'forward gap and command hold', unit='s')
+    max_bridge: float = setting(0.0, 'longest gap between odometry stamps bridged by time '
+                                     'updates; a longer one restarts the vehicle states '
+                                     f'(coefficients kept); 0 = {MAX_BRIDGE_S:g} s', unit='s',
+                                check=lambda name, v: 0.0 if v is None else number(name, v))
+    mass_inverse: str = setting('default', "M^-1: default (the vehicle file's choice), exact or "
+                                           "mss_literal (MSS's 4-digit literal inverse)",
+                                choices=MASS_INVERSES)
+    max_command_age: float = setting(0.0, 'odometry whose command in force is older than this is '
+                                          "rejected as 'stale command'; 0 = no limit (a held "
+                                          'command stays in force: drivers publish on change)',
+                                     unit='s', check=_age)
+    noise_source: str = setting('message', 'measurement noise: message (the Odometry covariance '
+                                           'diagonals where finite and positive, noise_std '
+                                           'elsewhere) or parameter (noise_std)',
+                                choices=NOISE_SOURCES)
+    current: str = setting(DEFAULT_CURRENT, 'the water current: estimate (with the coefficients, '
+                                            'as current_n, current_e), none (still water) or '
+                                            'N,E[,D] (a known current, NED, where the water '
+                                            'goes; docs/current.md)', unit='m/s',
+                           check=_current,
+                           note='Estimated by default: every AUV runs in one, and 0.1 m/s left '
+                                'out biases the coefficients beyond their error bars, while '
+                                'estimating a zero current costs nothing measurable; none is '
+                                'the still-water filter of before, bit for bit.')
+    current_down: bool = setting(False, 'also estimate the down component of the current '
+                                        '(with current estimate)')
+    velocity_reference: str = setting('ground', 'what twist.linear is: over ground (DVL bottom '
+                                                'lock) or through the water (water-track DVL)',
+                                      choices=VELOCITY_REFERENCES)
+    current_sd0: float = setting(DEFAULT_CURRENT_SD0, 'initial 1-sigma of each estimated '
+                                                      'current component', unit='m/s',
+                                 check=_positive)
+    current_walk: float = setting(0.0, 'random walk of the estimated current; 0 = constant',
+                                  unit='m/s/sqrt(s)', check=_non_negative)
+    warm_start: str = setting('', 'estimate JSON to start from (its estimate and covariance '
+                                  "replace initial and p0_rel; the coefficients only); '' = "
+                                  'none')
+    # the settings given: to from_values, or away from their default (not a setting itself)
+    given: frozenset = field(default=frozenset(), compare=False, repr=False)
+
+    def __post_init__(self):
+        for f in settings_fields():
+            object.__setattr__(self, f.name, f.metadata['check'](f.name, getattr(self, f.name)))
+        object.__setattr__(self, 'given', frozenset(self.given) | {
+            f.name for f in settings_fields() if getattr(self, f.name) != f.default})
+        # the checks between settings, in the order IdentSession made them
+        timing(self.sample_time, self.max_gap, self.max_bridge)
+        max_command_age(self.max_command_age, self.max_gap)
+        noise_model(self.noise_std, self.q_state, self.measured, DEFAULT_NOISE_STD,
+                    DEFAULT_Q_STATE)
+        self.current_option     # noqa: B018 - parsed for its check
+
+    @classmethod
+    def from_values(cls, **raw):
+        """The settings of these raw values (None: the default, as ROS reads an empty list);
+        raises ParameterError naming an unknown or bad one."""
+        known = {f.name: f for f in settings_fields()}
+        for name in raw:
+            if name not in known:
+                raise ParameterError(name, 'not an identifier setting (one of '
+                                           + ', '.join(known) + ')')
+        # None is "not set" (ROS turns an empty list into that; a Python caller's default)
+        given = {k: v for k, v in raw.items() if v is not None}
+        return cls(**given, given=frozenset(given))
+
+    def over(self, defaults):
+        """These settings, with `defaults` (raw values, e.g. a bag's metadata:
+        offline/replay.py bag_settings) for those not given to from_values."""
+        raw = dict(defaults)
+        raw.update({n: getattr(self, n) for n in self.given})
+        return self.from_values(**raw)
+
+    def with_values(self, **raw):
+        """A copy with these values changed (checked as from_values; they count as given)."""
+        out = self.from_values(**dict(self.as_dict(), **raw))
+        object.__setattr__(out, 'given', self.given | frozenset(raw))
+        return out
+
+    def as_dict(self):
+        """{name: value} of every setting (lists as lists: JSON-ready)."""
+        return {f.name: list(v) if isinstance(v := getattr(self, f.name), tuple) else v
+                for f in settings_fields()}
+
+    @property
+    def timing(self):
+        """(sample_time, max_gap, max_bridge) in s, max_bridge resolved (settings.timing)."""
+        return timing(self.sample_time, self.max_gap, self.max_bridge)
+
+    @property
+    def command_age_limit(self):
+        """The command staleness limit in s, or None (no limit)."""
+        return max_command_age(self.max_command_age, self.max_gap)
+
+    @property
+    def current_option(self):
+        """The water current option (core.model.current.parse_current)."""
+        try:
+            return parse_current(self.current, self.current_down)
+        except ConfigError as err:
+            raise ParameterError('current_down' if self.current_down and self.current
+                                 != 'estimate' else 'current', str(err)) from None
+
+
+def settings_fields():
+    """The fields of IdentifierSettings that are settings, in order (not `given`)."""
+    return tuple(f for f in fields(IdentifierSettings) if 'help' in f.metadata)
+
+
+def help_text(f):
+    """A setting's help with its choices and unit: the node's parameter description, the
+    option's help and the docs table say this."""
+    m = f.metadata
+    return (m['help'] + (f'; one of {", ".join(m["choices"])}' if m['choices'] else '')
+            + (f' [{m["unit"]}]' if m['unit'] else ''))

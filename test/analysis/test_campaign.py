@@ -25,6 +25,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import SIM_EPOCH_NS, write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 DAY_NS = 86_400 * 1_000_000_000
@@ -54,8 +55,27 @@ def archive(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def cluster():
-    with engine.local_cluster(2) as c:
+    # stands in for an existing cluster reached by its address (--scheduler): plain TCP, as a
+    # user's own cluster may be; the campaign's own local cluster is TLS (test below)
+    with engine.local_cluster(2, secure=False) as c:
         yield c
+
+
+def test_the_local_cluster_runs_no_code_for_another_local_process():
+    """A process on the machine that knows the scheduler's port cannot connect, with no
+    credentials or with self-made ones, so it cannot run code in the workers; the campaign's
+    client (the cluster object) can."""
+    from distributed.security import Security
+    with engine.local_cluster(1) as lc:
+        assert lc.scheduler_address.startswith('tls://127.0.0.1:')
+        with Client(lc) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
+        for address, security in ((lc.scheduler_address, None),
+                                  (lc.scheduler_address.replace('tls://', 'tcp://'), None),
+                                  (lc.scheduler_address, Security.temporary())):
+            with pytest.raises((OSError, TypeError, TimeoutError)):
+                outsider = Client(address, timeout=3, security=security)
+                outsider.run(lambda: 'ran')
 
 
 def _rows(out):
@@ -81,7 +101,8 @@ def test_good_and_corrupt_bags_give_their_rows(archive, cluster, tmp_path):
     assert sorted(rows) == sorted(good + bad)
     with Client(cluster.scheduler_address) as client:
         workers = set(client.scheduler_info()['workers'])
-    doc, _ = identify_bag(good[1], vehicle='nps_auv2')     # the same bag, in this process
+    # the same bag, in this process
+    doc, _ = identify_bag(good[1], IdentifierSettings.from_values(vehicle='nps_auv2'))
     for k, bag in enumerate(good):
         r = rows[bag]
         assert r['status'] == 'ok' and r['error'] == '' and r['worker'] in workers
@@ -137,7 +158,7 @@ def test_a_worker_killed_mid_campaign_loses_no_bag(archive, tmp_path):
     worker still alive (or the one the nanny restarts); every bag gets its 'ok' row."""
     root, good, _ = archive
     out = tmp_path / 'out'
-    with engine.local_cluster(2) as lc, Client(lc.scheduler_address) as client:
+    with engine.local_cluster(2, secure=False) as lc, Client(lc) as client:
         pids = client.run(os.getpid)
         result = {}
         campaign = threading.Thread(target=lambda: result.update(run_campaign(
@@ -185,6 +206,20 @@ def test_vehicle_text_becomes_a_file_of_the_same_content():
     with open(path, encoding='utf-8') as fh:
         assert fh.read() == vt.text
     assert load_vehicle(path).name == 'nps_auv2'
+
+
+def test_a_vehicle_file_changed_behind_the_workers_back_is_not_used(tmp_path, monkeypatch):
+    """The worker's copy lives in the user's private cache, and a copy whose content is not the
+    task's is written again before use (a planted or edited file changed campaign results)."""
+    monkeypatch.setenv('AUV_IDENT_CACHE', str(tmp_path / 'cache'))
+    vt = engine.VehicleText.read('nps_auv2')
+    path = vt.local_path()
+    assert path.startswith(str(tmp_path / 'cache' / 'vehicles'))
+    with open(path, 'a', encoding='utf-8') as fh:
+        fh.write('# planted\n')
+    assert vt.local_path() == path
+    with open(path, encoding='utf-8') as fh:
+        assert fh.read() == vt.text
 
 
 def test_an_unreachable_scheduler_is_one_clear_error(archive, tmp_path):

@@ -11,6 +11,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_STATE, State
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 NAMES = 'Y_v,N_r,Y_dr,N_dr'
@@ -32,7 +33,8 @@ def bags(tmp_path_factory):
 
 
 def test_two_simulated_bags_give_one_model_within_its_error_bars(bags):
-    doc, table = identify_bags(bags, coefficients=NAMES, initial_offset=0.2)
+    doc, table = identify_bags(bags, IdentifierSettings.from_values(coefficients=NAMES,
+                                                                    initial_offset=0.2))
     assert 'from 2 bags together' in table
     co = doc['coefficients']
     assert sorted(co) == sorted(NAMES.split(','))
@@ -46,7 +48,7 @@ def test_bags_of_two_vehicles_are_refused(bags, tmp_path):
     run = simulate(Model(load_vehicle('nps_auv2')), 'zigzag', duration=5.0, seed=1)
     other = write_run_bag(run, str(tmp_path / 'auv'))
     with pytest.raises(BagError, match='one model needs one vehicle'):
-        identify_bags([bags[0], other], coefficients='')
+        identify_bags([bags[0], other], IdentifierSettings.from_values(coefficients=''))
 
 
 def test_identify_command_takes_several_bags(bags, capsys):
@@ -64,7 +66,9 @@ def test_one_planar_bag_with_the_noise_model_and_the_diagnosis(bags):
     """identify --bag on a planar vehicle: the noise model from the data and the diagnosis see
     the held channels as unmeasured (no model for them, no verdict on them), the rest as usual."""
     from auv_ident.analysis.bag_identify import identify_bag
-    doc, table = identify_bag(bags[0], coefficients=NAMES, initial_offset=0.2, current='none')
+    doc, table = identify_bag(bags[0], IdentifierSettings.from_values(coefficients=NAMES,
+                                                                      initial_offset=0.2,
+                                                                      current='none'))
     assert table.startswith('consistent'), table
     for name, c in doc['coefficients'].items():
         assert abs(c['estimate'] - c['truth']) < 4.0 * c['std'], (name, c)
@@ -93,12 +97,14 @@ def test_a_vehicle_given_as_a_yaml_path_is_that_file(bags, tmp_path):
     raw['coefficients']['N_r'][0] = 2.0 * file_n_r
     path = tmp_path / 'my_ship.yaml'
     path.write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
-    doc, _ = identify_bag(bags[0], vehicle=str(path), coefficients='N_r', initial_offset=0.1,
-                          current='none', refine_pass=False)
+    doc, _ = identify_bag(bags[0], IdentifierSettings.from_values(
+        vehicle=str(path), coefficients='N_r', initial_offset=0.1, current='none'),
+        refine_pass=False)
     assert doc['vehicle'] == 'my_ship'
     assert doc['coefficients']['N_r']['initial'] == pytest.approx(2.2 * file_n_r)
-    doc, _ = identify_bags(bags, vehicle=str(path), coefficients='N_r', initial_offset=0.1,
-                           refine_pass=False)
+    doc, _ = identify_bags(bags, IdentifierSettings.from_values(
+        vehicle=str(path), coefficients='N_r', initial_offset=0.1), refine_pass=False)
     assert doc['vehicle'] == 'my_ship'
-    src = bag_source(bags[0], vehicle=str(path), coefficients='N_r')
+    src = bag_source(bags[0], IdentifierSettings.from_values(vehicle=str(path),
+                                                             coefficients='N_r'))
     assert src.vehicle.name == 'my_ship' and src.truth[0] == pytest.approx(2.0 * file_n_r)

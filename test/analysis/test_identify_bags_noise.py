@@ -14,6 +14,7 @@ from auv_ident.core.identification.uncertainty import sandwich_covariance
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 PAPER_SET = 'Z_ds,Z_q,Z_w,M_ds,K_v'
@@ -60,7 +61,8 @@ def ship_bags(tmp_path_factory):
 
 
 def test_two_simulated_bags_give_the_noise_model_and_a_consistent_diagnosis(ship_bags):
-    doc, table = identify_bags(ship_bags, coefficients='Y_v,N_r,N_dr')
+    doc, table = identify_bags(ship_bags,
+                               IdentifierSettings.from_values(coefficients='Y_v,N_r,N_dr'))
     assert table.splitlines()[0].startswith('consistent'), table
     assert doc['diagnosis']['consistent'] is True
     nm = doc['noise_model']
@@ -83,14 +85,15 @@ def test_a_known_current_is_taken_for_all_bags(tmp_path):
     current = np.array([0.1, 0.05, 0.0])
     bags = [write_run_bag(simulate(m, 'zigzag', duration=40.0, seed=s, current=current),
                           str(tmp_path / f'run{s}')) for s in (3, 4)]
-    doc, table = identify_bags(bags, coefficients='N_r,N_dr', current='0.1,0.05')
+    doc, table = identify_bags(bags, IdentifierSettings.from_values(coefficients='N_r,N_dr',
+                                                                    current='0.1,0.05'))
     assert 'water current: given: 0.1, 0.05, 0 m/s' in table, table
     assert doc['current']['truth'] is not None
     assert doc['diagnosis']['consistent'] is True, doc['diagnosis']['messages']
     for name, c in doc['coefficients'].items():
         assert abs(c['estimate'] - c['truth']) < 3.0 * c['std'], (name, c)
     with pytest.raises(BagError, match='one current per run is not estimated'):
-        identify_bags(bags, coefficients='N_r', current='estimate')
+        identify_bags(bags, IdentifierSettings.from_values(coefficients='N_r', current='estimate'))
 
 
 @pytest.mark.slow
@@ -106,7 +109,8 @@ def test_two_bags_with_coloured_noise_give_honest_error_bars(tmp_path):
                                    duration=120), tmp_path / f's{seed}')
         bags.append(str(data.bag))
         truth = json.loads(Path(data.truth_json).read_text())['coefficients']
-    doc, table = identify_bags(bags, vehicle='nps_auv2', coefficients=PAPER_SET)
+    doc, table = identify_bags(bags, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                    coefficients=PAPER_SET))
     assert doc['noise_model']['used'] is True
     assert doc['noise_model']['runs'] == 2
     assert any('noise model from the data' in m for m in doc['diagnosis']['messages'])
@@ -139,7 +143,7 @@ def test_the_imported_hsva_runs_need_no_hand_given_noise(tmp_path):
         out = str(tmp_path / run)
         assert main(['import', '--format', 'hsva', str(run_path(run)), '--out', out]) == 0
         bags.append(out)
-    doc, table = identify_bags(bags, vehicle='kvlcc2_hsva')
+    doc, table = identify_bags(bags, IdentifierSettings.from_values(vehicle='kvlcc2_hsva'))
     samples = doc['steps'] + doc['rejected']
     assert doc['rejected'] <= REPLAY_REJECT_LIMIT * samples, doc['rejection_reasons']
     assert doc['replayed_with_noise_model'] is not None     # the first replay rejected many

@@ -16,6 +16,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import STATE_NAMES
 from auv_ident.core.simulation import maneuvers
 from auv_ident.offline.independent_data import DataConfig, generate
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 FIGURES = ('convergence', 'measured_speeds', 'measured_pose', 'validation_positions',
@@ -29,8 +30,9 @@ SEED = 3
 @pytest.fixture(scope='module')
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp('report')
-    r = make_report(str(out), vehicle='nps_auv2', simulate_maneuver='ident', seed=SEED,
-                    duration=60.0, validation_duration=40.0, command='pytest', progress=False)
+    r = make_report(str(out), IdentifierSettings.from_values(vehicle='nps_auv2'),
+                    simulate_maneuver='ident', seed=SEED, duration=60.0, validation_duration=40.0,
+                    command='pytest', progress=False)
     with open(r['json'], encoding='utf-8') as fh:
         doc = json.load(fh)
     with open(r['report'], encoding='utf-8') as fh:
@@ -132,7 +134,7 @@ def test_validation_uses_a_held_out_manoeuvre_and_its_own_seed(report):
     vd = doc['validation_true_model']
     assert doc['maneuver'] == 'ident' and vd['maneuver'] == 'steps'
     assert vd['seed'] == SEED + 1000 and f'seed {SEED + 1000}' in md
-    src = load_source('nps_auv2', 'ident', seed=SEED, duration=40.0)
+    src = load_source(IdentifierSettings(), 'ident', seed=SEED, duration=40.0)
     held_out = maneuvers.commands('steps', src.t, rpm=src.U[0, 5], seed=SEED + 1000)
     assert not np.allclose(held_out[:, :5], src.U[:, :5])
 
@@ -162,8 +164,9 @@ def test_validating_on_the_identification_manoeuvre_is_refused(nps, tmp_path):
     with pytest.raises(ConfigError, match='held-out'):
         validate(v, names, truth, maneuver='ident', identification_maneuver='ident')
     with pytest.raises(ValueError, match='held-out'):     # before the identification runs
-        make_report(str(tmp_path), vehicle='nps_auv2', simulate_maneuver='zigzag',
-                    duration=10.0, validation_maneuver='zigzag', progress=False)
+        make_report(str(tmp_path), IdentifierSettings.from_values(vehicle='nps_auv2'),
+                    simulate_maneuver='zigzag', duration=10.0, validation_maneuver='zigzag',
+                    progress=False)
     assert not os.listdir(tmp_path)
 
 
@@ -206,9 +209,9 @@ def test_unknown_truth_validates_on_held_out_measurements_against_the_prior(tmp_
 def test_report_with_methods_side_by_side(tmp_path):
     """--methods: the standard methods on the same data and held-out run, in result.json and a
     report section before the figures."""
-    r = make_report(str(tmp_path), vehicle='nps_auv2', simulate_maneuver='ident', seed=SEED,
-                    duration=60.0, validation_duration=20.0, progress=False,
-                    methods=['ekf', 'equation_error'])
+    r = make_report(str(tmp_path), IdentifierSettings.from_values(vehicle='nps_auv2'),
+                    simulate_maneuver='ident', seed=SEED, duration=60.0, validation_duration=20.0,
+                    progress=False, methods=['ekf', 'equation_error'])
     doc = r['result']
     assert list(doc['methods']) == ['ekf', 'equation_error']
     for m in doc['methods'].values():
@@ -260,13 +263,14 @@ def test_report_mass_inverse_applies_to_every_model(tmp_path):
     """report --mass-inverse exact: an added-mass coefficient is identified, and the models
     flown in the validation form M^-1 the same way (result.json and report.md say it)."""
     data = generate(DataConfig(seed=5, duration=40.0, odom_rate=20.0), tmp_path / 'gen')
-    r = make_report(str(tmp_path / 'report'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
-                    mass_inverse='exact', progress=False)
+    r = make_report(str(tmp_path / 'report'), IdentifierSettings.from_values(
+        coefficients='Z_w,Z_wdot', mass_inverse='exact'), bag=str(data.bag), progress=False)
     doc = r['result']
     assert doc['mass_inverse'] == 'exact' and list(doc['coefficients']) == ['Z_w', 'Z_wdot']
     assert doc['validation']['mean_fit_percent_nu']['identified'] > 30
     assert '- mass inverse: exact (every model of this report)' in open(
         r['report'], encoding='utf-8').read()
     with pytest.raises(ConfigError, match='mass-inverse exact'):
-        make_report(str(tmp_path / 'literal'), bag=str(data.bag), coefficients='Z_w,Z_wdot',
+        make_report(str(tmp_path / 'literal'),
+                    IdentifierSettings.from_values(coefficients='Z_w,Z_wdot'), bag=str(data.bag),
                     progress=False)

@@ -27,6 +27,7 @@ from auv_ident.core.model.state import N_STATE, NU_NAMES, STATE_NAMES
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.independent_data import DataConfig, generate
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
@@ -82,8 +83,8 @@ def test_missing_position_channels_are_filled_from_trim_and_not_scored(perturbed
 
 
 def test_held_out_split_and_refusal_of_the_identification_run():
-    a = load_source('nps_auv2', 'ident', seed=1, duration=40.0)
-    b = load_source('nps_auv2', 'ident', seed=2, duration=40.0)
+    a = load_source(IdentifierSettings(), 'ident', seed=1, duration=40.0)
+    b = load_source(IdentifierSettings(), 'ident', seed=2, duration=40.0)
     ident, held = split_held_out(a, 0.25)
     assert ident.t[-1] < 30.0 <= held.t[0] and len(ident.t) + len(held.t) == len(a.t)
     assert held.description.startswith('final 25 % (held out)')
@@ -100,7 +101,7 @@ def test_held_out_split_and_refusal_of_the_identification_run():
 def test_a_bag_of_the_simulated_identification_run_is_refused(tmp_path):
     """--simulate M --validate BAG where BAG holds the same simulation: the bag's stamps have an
     epoch and its attitudes went through quaternions, yet it is the identification run."""
-    a = load_source('nps_auv2', 'ident', seed=0, duration=20.0)
+    a = load_source(IdentifierSettings(), 'ident', seed=0, duration=20.0)
     bag = write_run_bag(simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=20.0,
                                  seed=0), str(tmp_path / 'same'))
     same = bag_source(bag)

@@ -10,6 +10,7 @@ import pytest
 
 from auv_ident.cli import main
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -47,7 +48,7 @@ def test_auto_with_a_name_lists_every_coefficient_as_chosen_or_left_out(perturbe
         assert name in text
     warm = json.loads(est.read_text())
     assert warm['vehicle'] == 'nps_auv2' and warm['coefficients'] == sel['chosen']
-    session = IdentSession(vehicle='nps_auv2', warm_start=str(est))
+    session = IdentSession(IdentifierSettings.from_values(vehicle='nps_auv2', warm_start=str(est)))
     assert session.names[:len(sel['chosen'])] == sel['chosen']
 
 

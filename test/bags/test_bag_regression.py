@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
+from auv_ident.session.settings import IdentifierSettings
 
 pytestmark = pytest.mark.slow     # a 600 s identification (EKF pass + refinement)
 
@@ -18,7 +19,7 @@ EXPECTED = {'Z_ds': -0.0729665, 'Z_q': -0.139586, 'Z_w': -0.300093, 'M_ds': -0.0
 
 
 def test_shipped_bag_identifies_within_one_percent_and_matches_the_stored_result(tmp_path):
-    doc, table = identify_bag(BAG, current='none')
+    doc, table = identify_bag(BAG, IdentifierSettings.from_values(current='none'))
     assert doc['vehicle'] == 'nps_auv2' and doc['steps'] == 12001 and doc['rejected'] == 0
     for name, val in EXPECTED.items():
         c = doc['coefficients'][name]

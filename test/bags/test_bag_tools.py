@@ -145,7 +145,11 @@ def test_bag_info_cli_on_the_shipped_bag():
                       '/simulator/truth': ('nav_msgs/msg/Odometry', 12001)}
     lines = r.stdout.splitlines()
     assert 'Messages:          36003' in lines and 'ROS Distro:        jazzy' in lines
-    assert 'Duration:          600.000000000s' in lines and (first, last) == (0, 600 * 10**9)
+    # stamped on the documented simulated-bag epoch, 2024-01-01T00:00:00Z (docs/bags.md)
+    epoch = 1704067200 * 10**9
+    assert 'Duration:          600.000000000s' in lines
+    assert (first, last) == (epoch, epoch + 600 * 10**9)
+    assert 'Start:             Jan  1 2024 00:00:00.000000000 UTC (1704067200.000000000)' in lines
     assert ('Topic information: Topic: /actuators | Type: sensor_msgs/msg/JointState | '
             'Count: 12001 | Serialization Format: cdr') in lines
     assert 'Custom data:       auv_ident.vehicle: nps_auv2' in lines

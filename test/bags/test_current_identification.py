@@ -17,6 +17,7 @@ import pytest
 
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.offline.independent_data import DataConfig, generate
+from auv_ident.session.settings import IdentifierSettings
 
 GOAL_PCT = 2.0          # every coefficient within this of the truth (%)
 GOAL_CURRENT = 0.01     # m/s
@@ -60,7 +61,8 @@ def test_coefficients_and_current_from_an_independent_bag(tmp_path, vehicle, spe
                      commands='periodic', command_rate=20.0,
                      current_ned=_current(speed, towards), dvl=dvl)
     data = generate(cfg, tmp_path / 'run')
-    doc, table = identify_bag(data.bag, vehicle=vehicle, velocity_reference=dvl)
+    doc, table = identify_bag(data.bag, IdentifierSettings.from_values(vehicle=vehicle,
+                                                                       velocity_reference=dvl))
     _check(doc, data.truth)
     assert doc['current']['velocity_reference'] == dvl
     assert abs(doc['current']['speed'] - speed) < GOAL_CURRENT
@@ -76,7 +78,7 @@ def test_left_out_the_current_wrecks_the_coefficients_estimated_it_does_not(tmp_
     cfg = DataConfig(duration=600.0, seed=1, odom_rate=20.0, commands='periodic',
                      command_rate=20.0, current_ned=_current(0.1, 225.0))
     data = generate(cfg, tmp_path / 'run')
-    still, _ = identify_bag(data.bag, current='none')
+    still, _ = identify_bag(data.bag, IdentifierSettings.from_values(current='none'))
     worst = max(abs(c['estimate'] - data.truth['coefficients'][n])
                 / abs(data.truth['coefficients'][n]) for n, c in still['coefficients'].items())
     assert worst > 0.02 and still['current'] is None
@@ -91,7 +93,7 @@ def test_straight_run_warns_that_the_current_is_not_separable(tmp_path):
     cfg = DataConfig(duration=60.0, seed=5, odom_rate=10.0, commands='periodic',
                      command_rate=10.0, rudder_deg=0.0, current_ned=_current(0.2, 30.0))
     data = generate(cfg, tmp_path / 'run')
-    doc, table = identify_bag(data.bag, coefficients='Z_w,M_ds')
+    doc, table = identify_bag(data.bag, IdentifierSettings.from_values(coefficients='Z_w,M_ds'))
     ident = doc['current']['identifiability']
     assert not ident['separable'] and ident['heading_span_deg'] < 5.0
     assert any('straight run' in r for r in ident['reasons'])

@@ -41,6 +41,7 @@ from auv_ident.session.messages import (
     odometry_variances,
     RPM_TO_RAD_S,
 )
+from auv_ident.session.settings import IdentifierSettings
 
 REPO = Path(helpers.REPO)
 DATA = REPO.parent / 'shared' / 'realdata' / 'kvlcc2_hsva'
@@ -217,8 +218,10 @@ def test_replay_reads_every_message_without_a_rejection(s_run, s_bag):
     command screening, time line): every odometry and every command accepted. The model is
     NPS AUV II's with a wide noise and the file's measured channels, so that no innovation gate
     (a model question, not a reading one) can reject anything."""
-    res = replay_bag(s_bag, vehicle='nps_auv2', noise_source='parameter',
-                     noise_std=np.full(12, 10.0), measured=tuple(MEASURED))
+    res = replay_bag(s_bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                           noise_source='parameter',
+                                                           noise_std=np.full(12, 10.0),
+                                                           measured=tuple(MEASURED)))
     n = len(s_run.t_ns)
     assert (res.accepted, res.rejected, res.commands, res.errors) == (n, 0, n, 0)
     assert not res.reasons

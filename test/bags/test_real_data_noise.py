@@ -9,6 +9,7 @@ import pytest
 from auv_ident.analysis.bag_identify import identify_bag
 from auv_ident.core.identification.diagnosis import diagnose, XCORR_Z
 from auv_ident.offline.independent_data import DataConfig, generate
+from auv_ident.session.settings import IdentifierSettings
 
 PAPER_SET = 'Z_ds,Z_q,Z_w,M_ds,K_v'
 
@@ -33,7 +34,8 @@ def test_coloured_noise_of_unknown_level_gives_honest_error_bars(tmp_path):
         cfg = DataConfig(seed=seed, odom_rate=20.0, noise='ar1', noise_level=level,
                          noise_tau=tau)
         data = generate(cfg, tmp_path / f's{seed}')
-        doc, table = identify_bag(data.bag, vehicle='nps_auv2', coefficients=PAPER_SET)
+        doc, table = identify_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                           coefficients=PAPER_SET))
         assert 'noise_model' in doc and doc['diagnosis']['messages']
         z, _ = _z_and_err(doc, data.truth_json)
         zs.append(z)
@@ -51,12 +53,14 @@ def test_a_wrong_prior_is_diagnosed_on_the_first_line(tmp_path):
     the right prior is consistent."""
     wrong = generate(DataConfig(seed=1, odom_rate=20.0, commands='periodic', perturb=0.2,
                                 perturb_keep=tuple(PAPER_SET.split(','))), tmp_path / 'wrong')
-    doc, table = identify_bag(wrong.bag, vehicle='nps_auv2', coefficients=PAPER_SET)
+    doc, table = identify_bag(wrong.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                        coefficients=PAPER_SET))
     assert doc['diagnosis']['consistent'] is False
     assert table.splitlines()[0].startswith('NOT consistent: the model is inadequate')
     assert '--coefficients auto' in doc['diagnosis']['messages'][0]
     right = generate(DataConfig(seed=1, odom_rate=20.0, commands='periodic'), tmp_path / 'ok')
-    doc, table = identify_bag(right.bag, vehicle='nps_auv2', coefficients=PAPER_SET)
+    doc, table = identify_bag(right.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                        coefficients=PAPER_SET))
     assert doc['diagnosis']['consistent'] is True
     assert table.splitlines()[0].startswith('consistent')
     z, err = _z_and_err(doc, right.truth_json)
@@ -84,7 +88,7 @@ def test_the_other_vehicles_get_honest_bars_on_coloured_noise(tmp_path, vehicle,
     cfg = DataConfig(vehicle=vehicle, seed=seed, odom_rate=20.0, rpm=1500.0, noise='ar1',
                      noise_level=level, noise_tau=tau, rudder_deg=13.0)
     data = generate(cfg, tmp_path / vehicle)
-    doc, _ = identify_bag(data.bag, vehicle=vehicle)
+    doc, _ = identify_bag(data.bag, IdentifierSettings.from_values(vehicle=vehicle))
     assert doc['diagnosis']['consistent'] is True
     for which, std in (('estimate', 'std'), ('ekf_estimate', 'ekf_std')):
         z, err = _z_and_err(doc, data.truth_json, which, std)
@@ -99,7 +103,8 @@ def test_noise_far_above_the_configured_level_does_not_stop_the_identification(t
     cfg = DataConfig(seed=1, duration=10.0, odom_rate=20.0, commands='periodic',
                      command_rate=20.0, noise='ar1', noise_level=3.0, noise_tau=1.0)
     data = generate(cfg, tmp_path / 'loud')
-    doc, table = identify_bag(data.bag, vehicle='nps_auv2', coefficients=PAPER_SET)
+    doc, table = identify_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                       coefficients=PAPER_SET))
     notes = doc['noise_model']['notes']
     assert doc['noise_model']['used']
     assert notes[0].startswith('the EKF with the configured noise failed (EKF stopped at')

@@ -13,6 +13,7 @@ from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.independent_data import CHANNELS, DataConfig, generate
 from auv_ident.offline.replay import replay_bag
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 PAPER_SET = ('Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v')
@@ -40,7 +41,8 @@ def test_irregular_stamps_dropouts_and_commands_on_change(tmp_path):
         cfg = DataConfig(seed=seed, odom_rate=rate, odom_jitter=0.1, dropout=0.05,
                          commands='on_change')
         data = generate(cfg, tmp_path / f'r{rate:g}_{seed}')
-        doc, _ = identify_bag(data.bag, vehicle='nps_auv2', coefficients=','.join(PAPER_SET))
+        doc, _ = identify_bag(data.bag, IdentifierSettings.from_values(
+            vehicle='nps_auv2', coefficients=PAPER_SET))
         assert doc['rejected'] == 0, doc['rejection_reasons']
         assert doc['steps'] == len(data.odom_stamp_ns)
         e, z = _errors(doc, data.truth_json)
@@ -79,11 +81,13 @@ def test_message_covariances_are_the_noise_when_they_state_it(tmp_path):
     data = _short_bag(tmp_path, 'cov', covariance='true')
     truth = json.loads(Path(data.truth_json).read_text())
     sigma = np.array([truth['noise']['sigma'][c] for c in CHANNELS])
-    from_messages = replay_bag(data.bag, vehicle='nps_auv2', warn=False)
-    by_hand = replay_bag(data.bag, vehicle='nps_auv2', warn=False, noise_source='parameter',
-                         noise_std=sigma)
-    told_nothing = replay_bag(data.bag, vehicle='nps_auv2', warn=False,
-                              noise_source='parameter')
+    from_messages = replay_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2'),
+                               warn=False)
+    by_hand = replay_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                  noise_source='parameter',
+                                                                  noise_std=sigma), warn=False)
+    told_nothing = replay_bag(data.bag, IdentifierSettings.from_values(
+        vehicle='nps_auv2', noise_source='parameter'), warn=False)
     np.testing.assert_allclose(from_messages.noise_std, sigma, rtol=1e-12)
     np.testing.assert_allclose(from_messages.estimate, by_hand.estimate, rtol=1e-9)
     np.testing.assert_allclose(from_messages.cov, by_hand.cov, rtol=1e-9)
@@ -93,10 +97,11 @@ def test_message_covariances_are_the_noise_when_they_state_it(tmp_path):
 def test_zero_covariances_fall_back_to_noise_std_with_one_notice(tmp_path, caplog):
     data = _short_bag(tmp_path, 'zero', covariance='zero')
     with caplog.at_level('WARNING', logger='auv_ident.replay'):
-        res = replay_bag(data.bag, vehicle='nps_auv2')
+        res = replay_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2'))
     notes = [r.message for r in caplog.records if 'no usable covariance' in r.message]
     assert len(notes) == 1 and 'u, v, w, p, q, r, x, y, z, phi, theta, psi' in notes[0]
-    default = replay_bag(data.bag, vehicle='nps_auv2', warn=False, noise_source='parameter')
+    default = replay_bag(data.bag, IdentifierSettings.from_values(
+        vehicle='nps_auv2', noise_source='parameter'), warn=False)
     assert np.array_equal(res.estimate, default.estimate)
 
 
@@ -104,7 +109,8 @@ def test_a_held_command_is_in_force_however_old(tmp_path):
     """Commands only on change: a rudder held for 30 s sends nothing for 30 s. By default every
     odometry is used; with max_command_age the documented 'stale command' rule comes back."""
     data = _short_bag(tmp_path, 'held', commands='on_change', duration=120.0)
-    held = replay_bag(data.bag, vehicle='nps_auv2', warn=False)
+    held = replay_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2'), warn=False)
     assert held.rejected == 0 and held.accepted == len(data.odom_stamp_ns)
-    strict = replay_bag(data.bag, vehicle='nps_auv2', warn=False, max_command_age=1.0)
+    strict = replay_bag(data.bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                                 max_command_age=1.0), warn=False)
     assert strict.rejected > 0 and set(strict.reasons) == {'odom: stale command'}

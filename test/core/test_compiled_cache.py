@@ -14,7 +14,7 @@ import numba
 import pytest
 
 import auv_ident.core as core
-from auv_ident.core import compiled_cache
+from auv_ident.core import compiled_cache, safe_files
 
 REPO = pathlib.Path(core.__file__).parents[2]
 _TINY = ('from auv_ident.core.compiled_cache import cached_njit\n\n\n'
@@ -49,7 +49,7 @@ def test_without_a_usable_cache_folder_the_group_is_compiled_without_cache(tmp_p
     blocked = tmp_path / 'file'
     blocked.write_text('')
     monkeypatch.setattr(numba.config, 'CACHE_DIR', '')
-    monkeypatch.setattr(compiled_cache, 'private_candidates',
+    monkeypatch.setattr(safe_files, 'private_candidates',
                         lambda name: iter([str(blocked / name)]))
     pkg = tmp_path / 'nocache_pkg'
     pkg.mkdir()

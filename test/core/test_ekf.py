@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import auv_ident.core as core
-from auv_ident.core import compiled_cache
+from auv_ident.core import compiled_cache, safe_files
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DimensionError
 from auv_ident.core.filter import ekf
@@ -344,7 +344,8 @@ def _compiled_core_closure(core):
             if isinstance(n, ast.ImportFrom) and (n.module or '').startswith('auv_ident.core.'):
                 mod = n.module[len('auv_ident.core.'):].replace('.', '/')
                 imports[name] |= {f'{mod}.py'} | {f'{mod}/{a.name}.py' for a in n.names}
-    mechanism = {'__init__.py', 'compiled_cache.py'}      # the cache's, no compiled code
+    # the cache's and the files' mechanism, no compiled code
+    mechanism = {'__init__.py', 'compiled_cache.py', 'safe_files.py'}
     todo = list(compiled - mechanism)
     seen = set()
     while todo:
@@ -363,11 +364,11 @@ def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source(short_run):
     folder = pathlib.Path(core.__file__).parent
     assert _compiled_core_closure(folder) == set(core.COMPILED_SOURCES)
     for path in folder.rglob('*.py'):
-        if path.name != 'compiled_cache.py':
+        if path.name != 'compiled_cache.py' and '__pycache__' not in path.parts:
             for n in ast.walk(ast.parse(path.read_text())):
                 assert not (isinstance(n, ast.keyword) and n.arg == 'cache'), path
     group = compiled_cache.cache_folder_of(ekf.__file__)
-    base = os.environ.get('NUMBA_CACHE_DIR') or compiled_cache.private_folder('numba')
+    base = os.environ.get('NUMBA_CACHE_DIR') or safe_files.private_folder('numba')
     assert group == compiled_cache.group_folder(base, str(folder), core.COMPILED_SOURCES)
     assert not pathlib.Path(group).is_relative_to(folder.parent)
     for name in core.COMPILED_SOURCES:

@@ -13,6 +13,7 @@ import pytest
 from auv_ident.core.identification.batch import identify_runs
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 TOOL = Path(__file__).resolve().parents[2] / 'tools' / 'kvlcc2_identify.py'
@@ -91,8 +92,9 @@ def test_identify_from_the_imported_bags_equals_the_arrays(tmp_path):
     _, _, want, _, _ = identify_runs_with_noise_model(Model(v, v.identify_default), bag_cfg,
                                                       [(t, np.nan_to_num(Y), U)
                                                        for t, Y, U in runs])
-    doc, _ = identify_bags(bags, initial_offset=0.0, noise_std=cfg.noise_std,
-                           q_state=cfg.q_state)
+    doc, _ = identify_bags(bags, IdentifierSettings.from_values(initial_offset=0.0,
+                                                                noise_std=cfg.noise_std,
+                                                                q_state=cfg.q_state))
     assert doc['rejected'] == 0
     got = np.array([doc['coefficients'][n]['estimate'] for n in v.identify_default])
     np.testing.assert_allclose(got, want, rtol=1e-3)

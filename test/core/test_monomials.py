@@ -5,10 +5,10 @@ import os
 import numpy as np
 import pytest
 
-from auv_ident.core.compiled_cache import make_private
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model import monomials
 from auv_ident.core.model.monomials import kernel_source, monomial_kernel, NZ
+from auv_ident.core.safe_files import make_private
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 

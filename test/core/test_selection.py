@@ -15,18 +15,18 @@ from auv_ident.vehicles import load_vehicle
 
 def test_request_syntax_and_errors_name_the_culprit():
     v = load_vehicle('nps_auv2')
-    assert parse_request(v, 'auto') == (True, [])
-    assert parse_request(v, ' AUTO , z_ds,Y_v') == (True, ['Z_ds', 'Y_v'])
-    assert parse_request(v, 'Z_ds,K_v') == (False, ['Z_ds', 'K_v'])
-    assert parse_request(v, '') == (False, [])
+    assert parse_request(v, ['auto']) == (True, [])
+    assert parse_request(v, [' AUTO ', ' z_ds', 'Y_v']) == (True, ['Z_ds', 'Y_v'])
+    assert parse_request(v, ('Z_ds', 'K_v')) == (False, ['Z_ds', 'K_v'])
+    assert parse_request(v, []) == (False, [])
     with pytest.raises(ConfigError, match="unknown coefficient 'Q_xyz'"):
-        parse_request(v, 'auto,Q_xyz')
+        parse_request(v, ['auto', 'Q_xyz'])
     with pytest.raises(ConfigError, match='must come first'):
-        parse_request(v, 'Z_ds,auto')
+        parse_request(v, ['Z_ds', 'auto'])
     with pytest.raises(ConfigError, match='Z_ds is listed twice'):
-        parse_request(v, 'auto,Z_ds,z_ds')
+        parse_request(v, ['auto', 'Z_ds', 'z_ds'])
     with pytest.raises(ConfigError, match='water current'):
-        parse_request(v, 'auto,current_n')
+        parse_request(v, ['auto', 'current_n'])
 
 
 def test_stepwise_takes_what_reduces_the_residual_and_leaves_out_the_rest_with_reasons():

@@ -52,7 +52,7 @@ from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import euler_to_quat, RPM_TO_RAD_S
 from auv_ident.session.session import GUARD_SECONDS, IdentSession
-from auv_ident.session.settings import ParameterError
+from auv_ident.session.settings import IdentifierSettings, ParameterError
 from auv_ident.vehicles import load_vehicle
 
 DURATION = 30.0
@@ -456,7 +456,7 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
                   ).theta_true
 
     # 1. offline, no bag
-    session = IdentSession(**case.settings)
+    session = IdentSession(IdentifierSettings.from_values(**case.settings))
     logged = []
 
     class _Log:
@@ -505,7 +505,7 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
     if case.bag:
         bag = tmp_path / 'bag'
         _write_bag(bag, messages)
-        res = replay_bag(bag, warn=False, **case.settings)
+        res = replay_bag(bag, IdentifierSettings.from_values(**case.settings), warn=False)
         assert dict(res.reasons) == dict(session.reasons)
         assert np.array_equal(res.estimate, session.last_good.estimate)
 
@@ -827,10 +827,10 @@ BAD_PARAMETERS = [
                          ids=[f'{n}={v!r}'[:40] for n, v in BAD_PARAMETERS])
 def test_absurd_parameter_is_one_clear_error(name, value, good_bag):
     with pytest.raises(ParameterError) as info:
-        IdentSession(**{name: value})
+        IdentSession(IdentifierSettings(**{name: value}))
     assert f'parameter {name!r}' in str(info.value)
     with pytest.raises(ParameterError) as info:      # the offline replay: same check
-        replay_bag(good_bag, warn=False, **{name: value})
+        replay_bag(good_bag, IdentifierSettings(**{name: value}), warn=False)
     assert f'parameter {name!r}' in str(info.value)
 
 
@@ -838,14 +838,14 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
     bad = tmp_path / 'bad.json'
     bad.write_text('{"vehicle": "nps_auv2", "coefficients": ["Z_w"], "estimate": [1.0, 2.0]')
     with pytest.raises(ParameterError, match="parameter 'warm_start'"):
-        IdentSession(warm_start=str(bad))
+        IdentSession(IdentifierSettings.from_values(warm_start=str(bad)))
     s = IdentSession()
     _feed_session(s, _clean(run, range(100)))
     doc = s.document()
     doc['covariance'][0][0] = -1.0                  # not positive definite
     write_estimate_json(tmp_path / 'neg.json', doc)
     with pytest.raises(ParameterError, match='not positive definite'):
-        IdentSession(warm_start=str(tmp_path / 'neg.json'))
+        IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'neg.json')))
 
 
 # --- processes ----------------------------------------------------------------------------
@@ -951,7 +951,7 @@ def test_live_node_process_bad_input_sigterm_and_warm_start(ros_env, run, tmp_pa
     # saved on SIGTERM, a later run starts from it
     doc = json.loads(save.read_text())
     assert doc['steps'] == int(kv['accepted']) and np.all(np.isfinite(doc['covariance']))
-    warm = IdentSession(warm_start=str(save))
+    warm = IdentSession(IdentifierSettings.from_values(warm_start=str(save)))
     p = warm.model.p_coef        # a warm start takes the coefficients; the current starts afresh
     assert doc['coefficients'][p:] == ['current_n', 'current_e']
     assert np.array_equal(warm.theta0[:p], doc['estimate'][:p])
@@ -975,7 +975,8 @@ def test_legitimate_data_pass_untouched():
                                         ('nps_auv2', 0.005, 'ned', False, 'paper_q')]:
         r = simulate(Model(load_vehicle(vehicle)), 'zigzag', duration=20.0, T=T, seed=4,
                      process_std=DEFAULT_PROCESS_STD if pn else None)
-        s = IdentSession(vehicle=vehicle, sample_time=T, frame=frame, noise_mode=mode)
+        s = IdentSession(IdentifierSettings.from_values(vehicle=vehicle, sample_time=T,
+                                                        frame=frame, noise_mode=mode))
         good = 0
         for k in range(len(r.t)):
             for topic, _, m in sample_messages(r, k, frame, with_truth=False):

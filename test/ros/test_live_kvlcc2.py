@@ -17,6 +17,8 @@ from conftest import require_loopback_dds
 import numpy as np
 import pytest
 
+from auv_ident.session.settings import IdentifierSettings
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from kvlcc2_data import require_runs, run_path  # noqa: E402
 
@@ -52,8 +54,9 @@ def test_live_identifier_on_the_hsva_run_ends_near_the_offline_model(tmp_path, r
     from auv_ident.cli import main
     bag = str(tmp_path / RUN)
     assert main(['import', '--format', 'hsva', str(run_path(RUN)), '--out', bag]) == 0
-    doc, _ = identify_bags([bag], initial_offset=0.0, noise_std=np.array(NOISE_STD),
-                           q_state=np.array(Q_STATE))
+    doc, _ = identify_bags([bag], IdentifierSettings.from_values(initial_offset=0.0,
+                                                                 noise_std=np.array(NOISE_STD),
+                                                                 q_state=np.array(Q_STATE)))
     saved = tmp_path / 'live.json'
     ident = _spawn(_node_cmd('identifier', 'vehicle:=kvlcc2_hsva', 'initial_offset:=0.0',
                              'noise_source:=parameter', f'noise_std:={_array(NOISE_STD)}',

@@ -15,6 +15,7 @@ import pytest
 
 from auv_ident.ros.loadtest import format_loadtest, run_loadtest
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 
 pytestmark = pytest.mark.slow     # a real identifier process for ~40 s
 
@@ -47,6 +48,7 @@ def test_identifier_keeps_up_with_200hz_and_memory_stays_flat(ros_env, tmp_path)
     assert abs(rss['growth']) < MAX_RSS_GROWTH_MB and rss['max_growth'] < MAX_RSS_GROWTH_MB, \
         report
     # the estimate file written on shutdown starts a later run
-    warm = IdentSession(warm_start=str(tmp_path / 'estimate.json'), sample_time=1 / RATE_HZ)
+    warm = IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'estimate.json'),
+                                                       sample_time=1 / RATE_HZ))
     est, cov = warm.current()
     assert np.all(np.isfinite(est)) and np.all(np.linalg.eigvalsh(cov) > 0)

@@ -46,6 +46,7 @@ from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.ros.simulator_node import SimulatorNode
 from auv_ident.session.messages import stamp_to_ns
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 CONFIG = os.path.join(REPO, 'config')
@@ -479,7 +480,7 @@ def test_replay_bag_reads_metadata_and_names_a_missing_topic(run, tmp_path):
     assert res.frame == 'enu' and res.vehicle == 'nps_auv2'
     # the same run in NED, fed in the bag's order with the bag's stamps (the bag's epoch:
     # float-second stamps at 2024 carry ~1e-7 s rounding, which moves estimates by ~1e-4)
-    s = IdentSession(frame='ned')
+    s = IdentSession(IdentifierSettings.from_values(frame='ned'))
     ups = replay_messages([m for k in range(len(run.t)) for m in bag_sample_messages(run, k)], s)
     assert res.accepted == len(ups) == len(run.t) and res.rejected == 0
     assert np.allclose(res.estimate, ups[-1][1], rtol=1e-9, atol=0)

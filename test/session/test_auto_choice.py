@@ -18,7 +18,7 @@ from auv_ident.offline.replay import replay_bag
 from auv_ident.session import auto_choice
 from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.session import IdentSession
-from auv_ident.session.settings import ParameterError
+from auv_ident.session.settings import IdentifierSettings, ParameterError
 from auv_ident.vehicles import load_vehicle
 
 WINDOW_S = 30.0
@@ -51,7 +51,8 @@ def _feed(session, messages):
 def test_publishes_while_choosing_then_switches_without_losing_a_sample(record):
     data, messages = record
     n_odom = len(data.odom_stamp_ns)
-    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                    auto_window=WINDOW_S))
     assert s.names == ['Z_ds'] + CURRENT and s.auto.state == 'choosing'
     events, lines = [], []
     for topic, _, msg in messages:
@@ -111,10 +112,12 @@ def test_the_chosen_set_ends_where_an_offline_identify_of_it_ends(record):
     the same bag with the same coefficients given (EKF pass and refinement): within the live
     estimate's error bars (3 sigma)."""
     data, messages = record
-    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                    auto_window=WINDOW_S))
     _feed(s, messages)
     assert s.auto.state == 'chosen', s.auto.reason
-    doc, _ = identify_bag(data.bag, coefficients=','.join(s.coefficient_names))
+    doc, _ = identify_bag(data.bag,
+                          IdentifierSettings.from_values(coefficients=s.coefficient_names))
     assert list(doc['coefficients']) == s.coefficient_names
     offline = np.array([doc['coefficients'][n]['estimate'] for n in s.coefficient_names])
     live, cov = s.best()
@@ -128,8 +131,10 @@ def test_a_bag_replays_with_the_choice_as_the_node_makes_it(record):
     """replay_bag (identify --bag's EKF pass, the node's logic offline) takes the same
     coefficients [auto, NAME] and ends on the chosen set, as the session fed by hand."""
     data, messages = record
-    res = replay_bag(data.bag, coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
-    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    res = replay_bag(data.bag, IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                              auto_window=WINDOW_S))
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                    auto_window=WINDOW_S))
     _feed(s, messages)
     assert res.names == s.names and len(res.names) > 3
     assert res.accepted == len(data.odom_stamp_ns) and res.rejected == 0
@@ -137,13 +142,13 @@ def test_a_bag_replays_with_the_choice_as_the_node_makes_it(record):
 
 
 def test_auto_alone_identifies_the_default_set_while_choosing():
-    s = IdentSession(coefficients=['AUTO'])
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['AUTO']))
     v = load_vehicle('nps_auv2')
     assert s.auto.named == () and s.names == list(v.identify_default) + CURRENT
     assert s.auto.window_s == 120.0
     assert s.document()['selection'] == {'state': 'choosing', 'window_s': 120.0, 'named': [],
                                          'data_s': 0.0}
-    assert IdentSession(coefficients=['Z_ds']).auto is None
+    assert IdentSession(IdentifierSettings.from_values(coefficients=['Z_ds'])).auto is None
 
 
 def test_messages_arriving_while_a_worker_chooses_are_kept_and_fed(record, monkeypatch):
@@ -159,7 +164,8 @@ def test_messages_arriving_while_a_worker_chooses_are_kept_and_fed(record, monke
         return real_choice(*args, **kwargs)
 
     monkeypatch.setattr(auto_choice, 'choose_coefficients', held_choice)
-    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S,
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                    auto_window=WINDOW_S),
                      auto_runner=run_in_thread)
     odom = [i for i, (topic, _, _) in enumerate(messages) if topic == ODOM_TOPIC]
     split = odom[900]                # 15 s after the window filled
@@ -186,7 +192,8 @@ def test_a_failed_choice_keeps_the_running_set_and_says_why(record, monkeypatch)
                           'values (the model leaves its domain on this record)')
 
     monkeypatch.setattr(auto_choice, 'choose_coefficients', out_of_domain)
-    s = IdentSession(coefficients=['auto', 'Z_ds'], auto_window=WINDOW_S)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto', 'Z_ds'],
+                                                    auto_window=WINDOW_S))
     events = _feed(s, messages)
     auto = s.auto
     assert auto.state == 'failed' and 'leaves its domain' in auto.reason
@@ -206,7 +213,7 @@ def test_a_choice_of_no_coefficient_keeps_the_default_set_with_the_reasons(recor
     the current alone would say less than the default set); every coefficient's reason stays
     visible."""
     data, messages = record
-    s = IdentSession(coefficients=['auto'], auto_window=20.0)
+    s = IdentSession(IdentifierSettings.from_values(coefficients=['auto'], auto_window=20.0))
     _feed(s, messages)
     auto = s.auto
     assert auto.state == 'failed' and auto.reason.startswith('the data chose no coefficient')
@@ -233,7 +240,7 @@ BAD = [
 def test_bad_auto_settings_are_one_line_errors_naming_the_parameter(name, value, needle):
     kwargs = {'coefficients': ['auto'], name: value}
     with pytest.raises(ParameterError) as info:
-        IdentSession(**kwargs)
+        IdentSession(IdentifierSettings.from_values(**kwargs))
     text = str(info.value)
     assert info.value.name == name and needle in text and '\n' not in text
     assert text.startswith(f'parameter {name!r}: ')
@@ -243,4 +250,5 @@ def test_auto_and_a_warm_start_together_is_a_parameter_error(tmp_path):
     from auv_ident.session.estimate_file import write_estimate_json
     write_estimate_json(tmp_path / 'est.json', IdentSession().document())
     with pytest.raises(ParameterError, match="parameter 'warm_start': .*give one or the other"):
-        IdentSession(coefficients=['auto'], warm_start=str(tmp_path / 'est.json'))
+        IdentSession(IdentifierSettings.from_values(coefficients=['auto'],
+                                                    warm_start=str(tmp_path / 'est.json')))

@@ -32,7 +32,13 @@ from auv_ident.session.messages import (
     stamp_to_ns,
 )
 from auv_ident.session.session import IdentSession
-from auv_ident.session.settings import FRAMES, MASS_INVERSES, NOISE_MODES, ParameterError
+from auv_ident.session.settings import (
+    FRAMES,
+    IdentifierSettings,
+    MASS_INVERSES,
+    NOISE_MODES,
+    ParameterError,
+)
 from auv_ident.vehicles import load_vehicle
 
 T = 0.05
@@ -120,8 +126,8 @@ def test_array_api_takes_ned_arrays_whatever_the_frame_setting(run):
     """An 'enu' session reads ENU/FLU messages; its array API takes the NED/FRD state that
     odometry_to_state(msg, 'enu') returns, and gives the same events."""
     messages = _messages(run, 'enu')
-    a = _feed_messages(IdentSession(frame='enu'), messages)
-    b = _feed_arrays(IdentSession(frame='enu'), messages, 'enu')
+    a = _feed_messages(IdentSession(IdentifierSettings.from_values(frame='enu')), messages)
+    b = _feed_arrays(IdentSession(IdentifierSettings.from_values(frame='enu')), messages, 'enu')
     _assert_same_events(a, b)
     assert all(e.accepted for e in a)
 
@@ -315,13 +321,13 @@ def test_choice_lists_are_defined_once():
     """The session's choice lists are the core's, and every choice takes effect."""
     assert NOISE_MODES == tuple(MODES)
     for mode in NOISE_MODES:
-        assert IdentSession(noise_mode=mode).cfg.mode == mode
+        assert IdentSession(IdentifierSettings.from_values(noise_mode=mode)).cfg.mode == mode
     for frame in FRAMES:
-        assert IdentSession(frame=frame).frame == frame
+        assert IdentSession(IdentifierSettings.from_values(frame=frame)).frame == frame
     file_choice = load_vehicle('nps_auv2').mass_inverse     # what 'default' means for it
     assert file_choice in MASS_INVERSES and file_choice != 'default'
     for mi in MASS_INVERSES:
-        model = IdentSession(mass_inverse=mi).model
+        model = IdentSession(IdentifierSettings.from_values(mass_inverse=mi)).model
         assert model.mass_inverse == (file_choice if mi == 'default' else mi)
         assert model.mass_inverse == Model(load_vehicle('nps_auv2'), mass_inverse=mi).mass_inverse
 
@@ -361,26 +367,26 @@ BAD_SETTINGS = [
                          ids=[f'{n}={v!r}'[:40] for n, v, _ in BAD_SETTINGS])
 def test_bad_setting_is_a_parameter_error_naming_it(name, value, needle):
     with pytest.raises(ParameterError) as info:
-        IdentSession(**{name: value})
+        IdentSession(IdentifierSettings(**{name: value}))
     assert info.value.name == name
     assert str(info.value).startswith(f'parameter {name!r}: ') and needle in str(info.value)
 
 
 def test_current_down_without_estimating_the_current_is_a_parameter_error():
     with pytest.raises(ParameterError, match="parameter 'current_down': current-down needs"):
-        IdentSession(current='none', current_down=True)
+        IdentSession(IdentifierSettings.from_values(current='none', current_down=True))
 
 
 def test_current_settings_reach_the_model_and_the_names():
-    s = IdentSession(current='estimate', current_down=True, velocity_reference='water',
-                     current_walk=1e-3)
+    s = IdentSession(IdentifierSettings.from_values(current='estimate', current_down=True,
+                                                    velocity_reference='water', current_walk=1e-3))
     assert s.names[-3:] == ['current_n', 'current_e', 'current_d']
     assert s.model.velocity_reference == 'water' and s.model.p_coef == len(s.names) - 3
     assert s.stream.ekf.Q0[-1, -1] == pytest.approx(1e-6 * s.T)
-    given = IdentSession(current='0.1, -0.2')
+    given = IdentSession(IdentifierSettings.from_values(current='0.1, -0.2'))
     assert given.names == given.coefficient_names and list(given.model.current) == [0.1, -0.2,
                                                                                     0.0]
-    assert IdentSession(current='none').model.current_mode == 0
+    assert IdentSession(IdentifierSettings.from_values(current='none')).model.current_mode == 0
 
 
 def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
@@ -390,7 +396,7 @@ def test_warm_start_takes_the_coefficients_not_the_current(tmp_path):
     doc = s.document()
     doc['estimate'][-2:] = [0.3, -0.2]        # a current in the file
     write_estimate_json(tmp_path / 'est.json', doc)
-    warm = IdentSession(warm_start=str(tmp_path / 'est.json'))
+    warm = IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'est.json')))
     assert warm.names == s.names
     assert np.array_equal(warm.theta0[:-2], doc['estimate'][:-2])
     assert list(warm.theta0[-2:]) == [0.0, 0.0]
@@ -402,11 +408,14 @@ def test_warm_start_and_initial_together_is_a_parameter_error(tmp_path):
     doc = IdentSession().document()
     write_estimate_json(tmp_path / 'est.json', doc)
     with pytest.raises(ParameterError, match="parameter 'initial': give either"):
-        IdentSession(warm_start=str(tmp_path / 'est.json'), initial=[1.0] * 5)
+        IdentSession(IdentifierSettings.from_values(warm_start=str(tmp_path / 'est.json'),
+                                                    initial=[1.0] * 5))
     with pytest.raises(ParameterError, match="parameter 'warm_start': .* for vehicle"):
-        IdentSession(vehicle='remus100', warm_start=str(tmp_path / 'est.json'))
+        IdentSession(IdentifierSettings.from_values(vehicle='remus100',
+                                                    warm_start=str(tmp_path / 'est.json')))
     with pytest.raises(ParameterError, match="parameter 'warm_start': .* holds"):
-        IdentSession(coefficients=['Z_w'], warm_start=str(tmp_path / 'est.json'))
+        IdentSession(IdentifierSettings.from_values(coefficients=['Z_w'],
+                                                    warm_start=str(tmp_path / 'est.json')))
 
 
 def test_a_planar_vehicle_neither_reads_nor_screens_its_held_states():
@@ -414,7 +423,8 @@ def test_a_planar_vehicle_neither_reads_nor_screens_its_held_states():
     heave, a measured roll): the session reads u v r x y psi and leaves the rest held."""
     v = load_vehicle('kvlcc2_hsva')
     run = simulate(Model(v), 'zigzag', duration=10.0, T=0.1, seed=1)
-    s = IdentSession(vehicle='kvlcc2_hsva', coefficients=['N_r'], sample_time=0.1)
+    s = IdentSession(IdentifierSettings.from_values(vehicle='kvlcc2_hsva', coefficients=['N_r'],
+                                                    sample_time=0.1))
     assert list(np.flatnonzero(s.measured)) == [State.U, State.V, State.R, State.X, State.Y,
                                                 State.PSI]
     held = [State.W, State.P, State.Q, State.Z, State.PHI, State.THETA]

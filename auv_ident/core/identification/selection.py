@@ -76,14 +76,18 @@ SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitiviti
 PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
 
 
-def parse_request(vehicle, text):
-    """`--coefficients` text -> (auto, names).
+def parse_request(vehicle, names):
+    """The `coefficients` setting's names (a sequence: session.settings.names_of reads the
+    command line's 'A,B' text into one) -> (auto, names).
 
-    'auto' alone: choose from the data; 'auto,A,B': choose, always including A and B; 'A,B':
-    exactly these; '': the vehicle's default set (names empty). Names are matched as
+    ['auto']: choose from the data; ['auto', A, B]: choose, always including A and B; [A, B]:
+    exactly these; []: the vehicle's default set (names empty). Names are matched as
     Vehicle.index matches them and returned as the file spells them. Raises ConfigError naming
     an unknown coefficient, a name given twice, or 'auto' anywhere but first."""
-    tokens = [n.strip() for n in (text or '').split(',') if n.strip()]
+    if isinstance(names, str):
+        raise TypeError('parse_request takes a sequence of names, not text')
+    tokens = [str(n).strip() for n in names if str(n).strip()]
+    text = ','.join(tokens)
     auto = bool(tokens) and tokens[0].lower() == AUTO
     rest = tokens[1:] if auto else tokens
     if any(tok.lower() == AUTO for tok in rest):

@@ -31,8 +31,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 import numpy as np
 
-from auv_ident.core.compiled_cache import make_private, private_candidates
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.safe_files import make_private, private_candidates
 
 NZ = 21          # length of the factor vector z (vehicle.FACTORS); zz = [z, dz/dx, dU/dv]
 N_STATE_FACTORS = 12   # z[0:6] = u..r (dz/dx = 1), z[6:12] = |u|..|r| (dz/dx = sign)
@@ -134,7 +134,7 @@ def kernel_source(terms_i: np.ndarray, terms_s: np.ndarray) -> str:
 
 def _cache_dirs() -> Iterator[str]:
     """Where the generated kernels may go, best first: $AUV_IDENT_KERNEL_CACHE if set, then the
-    user's private cache folder (compiled_cache.private_candidates); never the package."""
+    user's private cache folder (core/safe_files.py private_candidates); never the package."""
     env = os.environ.get('AUV_IDENT_KERNEL_CACHE')
     if env:
         yield env
