@@ -49,6 +49,7 @@ Simulated runs of every vehicle and manoeuvre and the shipped bag are far inside
 The functions take plain lists of floats (``ndarray.tolist()``): a message has a dozen values,
 and Python arithmetic on them costs less than numpy's per-call overhead.
 """
+from collections.abc import Sequence
 from functools import lru_cache
 import math
 import re
@@ -76,7 +77,7 @@ _TOKEN_SPLIT = re.compile(r'[^a-z0-9]+')
 
 
 @lru_cache(maxsize=64)
-def named_conventions(frame_id, child_frame_id):
+def named_conventions(frame_id: str, child_frame_id: str) -> tuple[str, ...]:
     """The conventions ('ned', 'enu') the two frame ids name by their tokens, sorted.
 
     Cached: a stream repeats the same ids in every message (and the cache is bounded, so a
@@ -89,7 +90,8 @@ def named_conventions(frame_id, child_frame_id):
     return tuple(sorted(named))
 
 
-def frame_problem(frame_id, child_frame_id, frame, first_ids=None):
+def frame_problem(frame_id: str, child_frame_id: str, frame: str,
+                  first_ids: tuple[str, str] | None = None) -> tuple[str, str] | None:
     """(code, text) if odometry frame ids break the frame-id rule, else None.
 
     frame : the expected convention ('ned' or 'enu')
@@ -107,13 +109,13 @@ def frame_problem(frame_id, child_frame_id, frame, first_ids=None):
     return None
 
 
-def nonfinite_states(x12, channels):
+def nonfinite_states(x12: Sequence[float], channels: Sequence[int]) -> list[str]:
     """Names of the states among `channels` (State indices) whose value in x12 is NaN/Inf."""
     isfinite = math.isfinite
     return [STATE_NAMES[i] for i in channels if not isfinite(x12[i])]
 
 
-def implausible_states(x12, channels):
+def implausible_states(x12: Sequence[float], channels: Sequence[int]) -> str:
     """Text naming the states among `channels` beyond the plausibility bounds, or ''.
 
     x12 : (12,) finite on `channels` (checked before, see :func:`nonfinite_states`)."""
@@ -125,7 +127,8 @@ def implausible_states(x12, channels):
         f'{STATE_BOUNDS[i]:g})' for i in bad) + ' (wrong units or frame?)'
 
 
-def command_problem(u6, t, fin_limit, shaft_limit):
+def command_problem(u6: Sequence[float], t: float, fin_limit: float,
+                    shaft_limit: float) -> tuple[str, str] | None:
     """(code, text) if an actuator command breaks the rules, else None.
 
     u6 : list of 7 floats, fins (rad), shaft speed (rpm), thrust (N); t : its stamp (s), for
