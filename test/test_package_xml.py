@@ -19,7 +19,7 @@ ROSDEP_KEY = {
     'mcap': 'python3-mcap-pip', 'mcap_ros2': 'mcap-ros2-support',
     'rosbags': 'python3-rosbags-pip', 'filterpy': 'python3-filterpy-pip',
     'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip',
-    'pytest': 'python3-pytest',
+    'pytest': 'python3-pytest', 'mypy': 'python3-mypy',
 }
 ROS_PACKAGES = {'rclpy', 'std_msgs', 'std_srvs', 'nav_msgs', 'sensor_msgs', 'geometry_msgs',
                 'diagnostic_msgs', 'rosgraph_msgs', 'rcl_interfaces', 'builtin_interfaces',

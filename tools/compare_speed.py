@@ -66,7 +66,7 @@ def runners(package, run, n_steps):
     t, Y, U, X = run.t[:n_steps], run.y[:n_steps], run.u[:n_steps], run.x[:n_steps]
     step, new_ws = ekf.rk4_step_into, ekf.new_workspace
     n = 12 + len(NAMES)
-    xa = np.concatenate([X[0], m.theta_true])
+    xa = np.concatenate([X[0], m.theta_file])
     x1, Fa = np.empty(n), np.empty((n, n))
     if hasattr(m, 'compiled'):
         @njit

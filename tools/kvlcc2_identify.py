@@ -148,7 +148,7 @@ def main(argv=None):
     for i, n in enumerate(res.names):
         print(f'{n:12s} {res.initial[i]:11.4e} {res.estimate[i]:11.4e} {res.std[i]:9.2e} '
               f'{res.ekf_estimate[i]:11.4e}')
-    prior = validate(model, model.theta_true, {r: runs[r] for r in VALIDATE})
+    prior = validate(model, model.theta_file, {r: runs[r] for r in VALIDATE})
     fitted = validate(model, res.estimate, {r: runs[r] for r in VALIDATE})
     print(f'\n{"free run":10s} {"r fit %":>8s} {"U fit %":>8s} {"goal r/U":>9s} '
           f'{"prior r":>8s} {"prior U":>8s}')

@@ -4,11 +4,12 @@ The filter's compiled loop has its own (ekf.wrap, inlined into the measurement u
 reduces every angle it is given); test_ekf checks the two agree.
 """
 import math
+from typing import Any
 
 import numpy as np
 
 
-def wrap_angle(a):
+def wrap_angle(a: Any) -> Any:
     """Angle(s) a (rad, a number or an array) wrapped to (-pi, pi].
 
     Angles already in (-pi, pi] come back unchanged, bit for bit (a conversion round trip

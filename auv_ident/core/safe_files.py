@@ -25,7 +25,7 @@ from auv_ident.core.errors import ConfigError
 CACHE_ENV = 'AUV_IDENT_CACHE'      # the first place private folders are made
 
 
-def _umask():
+def _umask() -> int:
     """The process's umask, read without changing it (os.umask would, for every thread)."""
     try:
         with open('/proc/self/status', encoding='ascii') as fh:
@@ -37,7 +37,7 @@ def _umask():
     return 0o022
 
 
-def write_atomic(path, data, mode=None):
+def write_atomic(path: str | os.PathLike[str], data: str | bytes, mode: int | None = None) -> Path:
     """Write `data` (str: UTF-8 text, or bytes) to `path` through a fresh temporary file in the
     same folder and one rename. mode: the file's permissions (default 0o666 less the umask,
     what a plain open() gives). Returns the path. OSError as the system gives it."""

@@ -159,7 +159,7 @@ def session_result(session, updates, settings=None):
     return ReplayResult(
         names=list(session.names), vehicle=session.vehicle.name, frame=session.frame,
         updates=updates, estimate=est, std=np.sqrt(np.diag(cov)), cov=cov,
-        initial=session.theta0.copy(), truth=session.model.theta_true,
+        initial=session.theta0.copy(), truth=session.model.theta_file,
         accepted=counters.odom_accepted, rejected=counters.odom_rejected,
         commands=counters.cmd_accepted, errors=counters.errors, reasons=counters.reasons,
         t=t, Y=Y, U=U, mean_nis_per_dof=session.filter.mean_nis_per_dof(),

@@ -17,24 +17,29 @@ With coefficients ['auto', ...] the identifier adds "selection" (session/auto_ch
 AutoChoice.document(): the state of the live choice and, once made, the offline JSON's
 selection block); warm_start reads only the keys above.
 """
+from collections.abc import Sequence
 import json
 import os
 from pathlib import Path
 import stat
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.safe_files import write_atomic
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
 
-def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps, selection=None):
+def estimate_document(vehicle: str, names: Sequence[str], estimate: Sequence[float] | np.ndarray,
+                      cov: ArrayLike, stamp_ns: int | None, steps: int,
+                      selection: dict[str, Any] | None = None) -> dict[str, Any]:
     """The JSON-ready dict of an estimate (schema in the module docstring); selection : the
     live choice's block (AutoChoice.document()), or None for none."""
     est = [float(v) for v in estimate]
     cov = np.asarray(cov, dtype=float)
-    doc = {'vehicle': vehicle, 'coefficients': list(names), 'estimate': est,
+    doc: dict[str, Any] = {'vehicle': vehicle, 'coefficients': list(names), 'estimate': est,
            'std': [float(v) for v in np.sqrt(np.clip(np.diag(cov), 0.0, None))],
            'covariance': [[float(v) for v in row] for row in cov],
            'stamp': None if stamp_ns is None else stamp_ns / NS_PER_S,
@@ -44,7 +49,8 @@ def estimate_document(vehicle, names, estimate, cov, stamp_ns, steps, selection=
         doc['selection'] = selection
     return doc
 
-def write_estimate_json(path, doc):
+
+def write_estimate_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> Path:
     """Write an estimate document atomically (a fresh temporary file, then one rename:
     core/safe_files.py; a symlink planted beside the target redirects nothing); NaN/Inf
     refused."""
@@ -54,13 +60,16 @@ def write_estimate_json(path, doc):
 MAX_ESTIMATE_BYTES = 16 * 1024 * 1024   # an estimate of p coefficients is ~25 p^2 bytes
 
 
-def _has_bool(value):
+def _has_bool(value: object) -> bool:
     if isinstance(value, bool):
         return True
     return isinstance(value, list) and any(_has_bool(v) for v in value)
 
 
-def load_estimate_json(path):
+
+def load_estimate_json(
+        path: str | os.PathLike[str],
+) -> tuple[str, list[str], np.ndarray, np.ndarray]:
     """Read an estimate file: (vehicle, names, estimate (p,), covariance (p, p)).
 
     Raises ParameterError('warm_start', ...) naming what is wrong: also for what is not a

@@ -19,18 +19,22 @@ model). Live there is only the EKF: its innovations and its covariance. So the l
 The live verdict cannot see coloured noise that keeps the NIS in its band, nor a bias from
 wrong fixed coefficients: `identify --bag` on the recorded run can (docs/method.md).
 """
+from collections.abc import Sequence
 import math
+from typing import Any
 
 import numpy as np
 
 from auv_ident.core.identification.diagnosis import current_std_limits, weak_notes, with_advice
-from auv_ident.core.identification.uncertainty import verdicts_from_covariance
+from auv_ident.core.identification.uncertainty import Verdicts, verdicts_from_covariance
+from auv_ident.core.model.vehicle import Vehicle
 from auv_ident.session.guard import NIS_WINDOW
 
 NOT_INFORMED_RATIO = 0.9    # 1-sigma above this fraction of the prior's: the data told nothing
 
 
-def live_verdicts(vehicle, names, estimate, cov, prior_std):
+def live_verdicts(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np.ndarray,
+                  prior_std: np.ndarray) -> Verdicts:
     """Per identified parameter its verdict
     (core.identification.uncertainty.verdicts_from_covariance) from the
     filter covariance cov (p, p) and the prior 1-sigma prior_std (p,), with advice for the
@@ -41,7 +45,7 @@ def live_verdicts(vehicle, names, estimate, cov, prior_std):
         cov, estimate, names, informed=informed, absolute_std=current_std_limits(names)))
 
 
-def live_diagnosis(health, verdicts):
+def live_diagnosis(health: Any, verdicts: Verdicts) -> dict[str, Any]:
     """{'consistent': True | False | None (not judged yet), 'messages': [first line, ...]}
     from the filter's Health (session/guard.py judge_health) and live_verdicts()."""
     m, (lo, hi), n = health.mean_nis_per_dof, health.band, health.window

@@ -60,10 +60,13 @@ both writers (ros/conversions.py, offline/sim_bag.py) take the layout from.
 Non-finite values pass through unchanged: the caller decides (see :func:`is_finite_state`).
 Bad input raises :class:`ConversionError` naming the field.
 """
+from collections.abc import Sequence
 import math
 import operator
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import AuvIdentError
@@ -112,12 +115,12 @@ _VEC_PERM_T, _VEC_SIGN_T = (0, 1, 2), (1.0, -1.0, -1.0)
 _GIMBAL_COS = 1e-8
 
 
-def _signed_perm(v, perm, sign):
+def _signed_perm(v: np.ndarray, perm: np.ndarray, sign: np.ndarray) -> np.ndarray:
     """Return T v for the signed permutation T with rows sign[i] * e_perm[i]."""
     return v[perm] * sign
 
 
-def _signed_perm_cov(c, perm, sign):
+def _signed_perm_cov(c: np.ndarray, perm: np.ndarray, sign: np.ndarray) -> np.ndarray:
     """Return T C T^T for the signed permutation T of :func:`_signed_perm`."""
     return c[np.ix_(perm, perm)] * np.outer(sign, sign)
 
@@ -130,7 +133,7 @@ class ConversionError(AuvIdentError, ValueError):
 # time
 
 
-def stamp_to_ns(stamp):
+def stamp_to_ns(stamp: Any) -> int:
     """Return a builtin_interfaces/Time as integer nanoseconds (exact); ConversionError for a
     nanosec outside [0, 10^9), which no valid Time has (it would alias another second)."""
     nanosec = int(stamp.nanosec)
@@ -140,13 +143,13 @@ def stamp_to_ns(stamp):
     return int(stamp.sec) * NS_PER_S + nanosec
 
 
-def stamp_to_sec(stamp):
+def stamp_to_sec(stamp: Any) -> float:
     """Return a builtin_interfaces/Time as float seconds (correctly rounded)."""
     # int / int true division is correctly rounded; sec + nanosec * 1e-9 is not.
     return stamp_to_ns(stamp) / NS_PER_S
 
 
-def integer_stamp(stamp_ns):
+def integer_stamp(stamp_ns: Any) -> int:
     """stamp_ns as an int (any integer type); ConversionError if it is not an integer."""
     try:
         return operator.index(stamp_ns)
@@ -155,7 +158,7 @@ def integer_stamp(stamp_ns):
                               f'{stamp_ns!r}') from None
 
 
-def header_stamp_ns(msg):
+def header_stamp_ns(msg: Any) -> int | None:
     """A message's header.stamp in integer ns, or None if the message has none that can be read;
     ConversionError naming the field for a stamp that is there but invalid."""
     try:
@@ -166,7 +169,7 @@ def header_stamp_ns(msg):
         return None
 
 
-def sec_to_ns(t_sec):
+def sec_to_ns(t_sec: float) -> int:
     """Return float seconds as the nearest integer nanoseconds.
 
     Splitting off the integer part first keeps ns resolution at epoch-scale times, where
@@ -180,13 +183,11 @@ def sec_to_ns(t_sec):
     return int(whole) * NS_PER_S + int(frac_ns)
 
 
-
-
 # ---------------------------------------------------------------------------------------------
 # rotations
 
 
-def euler_to_quat(phi, theta, psi):
+def euler_to_quat(phi: float, theta: float, psi: float) -> tuple[float, float, float, float]:
     """Return the quaternion (x, y, z, w) of ZYX Euler angles (rad): Rz(psi) Ry(theta) Rx(phi)."""
     cr, sr = math.cos(0.5 * phi), math.sin(0.5 * phi)
     cp, sp = math.cos(0.5 * theta), math.sin(0.5 * theta)
@@ -197,7 +198,8 @@ def euler_to_quat(phi, theta, psi):
             cr * cp * cy + sr * sp * sy)
 
 
-def _unit_quat(x, y, z, w, name='quaternion'):
+def _unit_quat(x: float, y: float, z: float, w: float,
+               name: str = 'quaternion') -> tuple[float, float, float, float]:
     x, y, z, w = float(x), float(y), float(z), float(w)
     isfinite = math.isfinite
     if not (isfinite(x) and isfinite(y) and isfinite(z) and isfinite(w)):
@@ -208,7 +210,7 @@ def _unit_quat(x, y, z, w, name='quaternion'):
     return x / n, y / n, z / n, w / n
 
 
-def quat_to_euler(x, y, z, w):
+def quat_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
     """Return ZYX Euler angles (phi, theta, psi) (rad) of a quaternion (x, y, z, w).
 
     The quaternion is normalised first; a zero-norm or non-finite one raises ConversionError.
@@ -236,7 +238,7 @@ def quat_to_euler(x, y, z, w):
     return wrap_angle(phi), theta, wrap_angle(psi)
 
 
-def quat_multiply(a, b):
+def quat_multiply(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
     """Return the Hamilton product a * b of quaternions given as (x, y, z, w)."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
@@ -246,7 +248,7 @@ def quat_multiply(a, b):
             aw * bw - ax * bx - ay * by - az * bz)
 
 
-def euler_to_rotation_matrix(phi, theta, psi):
+def euler_to_rotation_matrix(phi: float, theta: float, psi: float) -> np.ndarray:
     """Return the 3x3 rotation body FRD -> world NED, Rz(psi) Ry(theta) Rx(phi)."""
     cr, sr = math.cos(phi), math.sin(phi)
     cp, sp = math.cos(theta), math.sin(theta)
@@ -261,17 +263,17 @@ def euler_to_rotation_matrix(phi, theta, psi):
 # Odometry
 
 
-def is_finite_state(x12):
+def is_finite_state(x12: ArrayLike) -> bool:
     """Return True if every entry of the state vector is finite."""
     return bool(np.all(np.isfinite(np.asarray(x12, dtype=float))))
 
 
-def _check_frame(frame):
+def _check_frame(frame: str) -> None:
     if frame not in FRAMES:
         raise ConversionError(f'frame must be one of {FRAMES}, got {frame!r}')
 
 
-def _as_vector(values, n, name):
+def _as_vector(values: Any, n: int, name: str) -> Any:
     if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (n,):
         return values               # the common case, without asarray's overhead
     try:
@@ -283,7 +285,7 @@ def _as_vector(values, n, name):
     return arr
 
 
-def _as_cov6(values, name):
+def _as_cov6(values: ArrayLike | None, name: str) -> np.ndarray:
     """Return a 6x6 float array from None (zeros), a 6x6 or a flat 36 array."""
     if values is None:
         return np.zeros((6, 6))
@@ -300,7 +302,9 @@ def _as_cov6(values, name):
     return arr
 
 
-def _swap_state(pos, lin, ang, quat):
+def _swap_state(
+        pos: Sequence[float], lin: Sequence[float], ang: Sequence[float], quat: Sequence[float],
+) -> tuple[list[float], list[float], list[float], tuple[float, float, float, float]]:
     """NED/FRD <-> ENU/FLU for position, linear and angular velocity (sequences of 3 floats,
     returned as lists) and the orientation quaternion (x, y, z, w). An involution."""
     return ([pos[i] * s for i, s in zip(_POS_PERM_T, _POS_SIGN_T)],
@@ -309,7 +313,8 @@ def _swap_state(pos, lin, ang, quat):
             quat_multiply(quat_multiply(_Q_NED_ENU, quat), _Q_FRD_FLU))
 
 
-def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
+def _swap_ned_enu(pos: np.ndarray, lin: np.ndarray, ang: np.ndarray, quat: Sequence[float],
+                  pcov: np.ndarray, tcov: np.ndarray) -> tuple[Any, ...]:
     """NED/FRD <-> ENU/FLU for position, linear and angular velocity, orientation and the two
     6x6 covariances. Every transform is an involution, so the same call maps either way."""
     return (_signed_perm(pos, _POS_PERM, _POS_SIGN), _signed_perm(lin, _VEC_PERM, _VEC_SIGN),
@@ -319,8 +324,9 @@ def _swap_ned_enu(pos, lin, ang, quat, pcov, tcov):
             _signed_perm_cov(tcov, _TWIST_PERM, _TWIST_SIGN))
 
 
-def odometry_fields(x12, frame='ned', pose_cov=None, twist_cov=None, frame_id=None,
-                    child_frame_id=None):
+def odometry_fields(x12: ArrayLike, frame: str = 'ned', pose_cov: ArrayLike | None = None,
+                    twist_cov: ArrayLike | None = None, frame_id: str | None = None,
+                    child_frame_id: str | None = None) -> tuple[Any, ...]:
     """What a nav_msgs/Odometry of a NED/FRD state holds in convention ``frame``: the one
     computation behind both message builders (rclpy: ros/conversions.py, rosbags:
     offline/sim_bag.py).
@@ -343,7 +349,7 @@ def odometry_fields(x12, frame='ned', pose_cov=None, twist_cov=None, frame_id=No
             default_body if child_frame_id is None else child_frame_id)
 
 
-def _field(msg, path):
+def _field(msg: Any, path: str) -> Any:
     """Return a nested attribute of an Odometry, naming a missing one in a ConversionError."""
     obj = msg
     for part in path.split('.'):
@@ -356,11 +362,11 @@ def _field(msg, path):
     return obj
 
 
-def _xyz(msg, path):
+def _xyz(msg: Any, path: str) -> list[float]:
     return [float(_field(msg, f'{path}.{axis}')) for axis in 'xyz']
 
 
-def _odometry_fields_named(msg):
+def _odometry_fields_named(msg: Any) -> tuple[Any, ...]:
     """The fields of an Odometry, path by path, naming a missing one in a ConversionError:
     (t_sec, pos, quat, lin, ang, pose_cov, twist_cov), as in the message."""
     t_sec = stamp_to_sec(_field(msg, 'header.stamp'))
@@ -373,7 +379,7 @@ def _odometry_fields_named(msg):
     return t_sec, pos, quat, lin, ang, pcov, tcov
 
 
-def _odometry_fields(msg):
+def _odometry_fields(msg: Any) -> tuple[Any, ...]:
     """:func:`_odometry_fields_named` without the per-field bookkeeping (the per-message cost
     of the live identifier). Reads and converts in the same order, so the first failure is
     the same one; a missing field (AttributeError) is left to the named version."""
@@ -396,7 +402,8 @@ def _odometry_fields(msg):
     return t_sec, pos, quat, lin, ang, pcov, tcov
 
 
-def _state(pos, quat, lin, ang):
+def _state(pos: Sequence[float], quat: Sequence[float], lin: Sequence[float],
+           ang: Sequence[float]) -> np.ndarray:
     """x12 (NED/FRD) from the fields of an NED/FRD Odometry."""
     if all(map(math.isfinite, quat)):
         try:
@@ -408,7 +415,8 @@ def _state(pos, quat, lin, ang):
     return np.array([*lin, *ang, *pos, *eul])     # core.model.state.State order
 
 
-def odometry_to_state(msg, frame='ned'):
+def odometry_to_state(msg: Any,
+                      frame: str = 'ned') -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """Return ``(t_sec, x12, pose_cov, twist_cov)`` in NED/FRD from an Odometry in ``frame``.
 
     Accepts rclpy messages and rosbags-decoded ones alike (attribute access only). A non-finite
@@ -433,7 +441,7 @@ def odometry_to_state(msg, frame='ned'):
     return t_sec, _state(pos, quat, lin, ang), pcov, tcov
 
 
-def odometry_state(msg, frame='ned'):
+def odometry_state(msg: Any, frame: str = 'ned') -> tuple[float, np.ndarray]:
     """Return ``(t_sec, x12)`` of :func:`odometry_to_state`, without transforming the
     covariances (they are checked all the same: a message that odometry_to_state refuses is
     refused here too). What the identifier reads per message."""
@@ -447,7 +455,7 @@ def odometry_state(msg, frame='ned'):
 _POSE_DIAG = (0, 7, 14, 21, 28, 35)   # row-major 6x6 diagonal
 
 
-def odometry_variances(msg, frame='ned'):
+def odometry_variances(msg: Any, frame: str = 'ned') -> np.ndarray:
     """The 12 variances an Odometry states for ``[u v w p q r x y z phi theta psi]``.
 
     The diagonals of twist.covariance (u v w p q r) and pose.covariance (x y z, and the
@@ -475,13 +483,14 @@ def odometry_variances(msg, frame='ned'):
 # The water current
 
 
-def current_indices(names):
+def current_indices(names: Sequence[str]) -> list[int]:
     """[i_north, i_east, i_down]: where each water-current component (core.model.state
     CURRENT_NAMES) is among the identified parameters' names, -1 for one not identified."""
     return [names.index(n) if n in names else -1 for n in CURRENT_NAMES]
 
 
-def current_twist_fields(estimate, cov, indices, frame='ned'):
+def current_twist_fields(estimate: np.ndarray, cov: np.ndarray, indices: Sequence[int],
+                         frame: str = 'ned') -> tuple[np.ndarray, np.ndarray]:
     """What a geometry_msgs/TwistWithCovariance of the estimated water current holds in
     convention ``frame``: ``(linear (3,), covariance (36,))``.
 
@@ -516,7 +525,7 @@ def current_twist_fields(estimate, cov, indices, frame='ned'):
 
 
 
-def joint_state_to_actuators(msg):
+def joint_state_to_actuators(msg: Any) -> tuple[float, np.ndarray]:
     """Return ``(t_sec, u7)`` from a JointState in the layout of :data:`JOINT_NAMES`.
 
     Joints are matched by name in any order; other joints are ignored. Raises ConversionError
@@ -559,7 +568,7 @@ def joint_state_to_actuators(msg):
     return stamp_to_sec(stamp), u7
 
 
-def actuator_joint_fields(u7):
+def actuator_joint_fields(u7: ArrayLike) -> tuple[list[float], list[float], list[float]]:
     """(position, velocity, effort) lists of floats of the actuator JointState of u7 (7,)
     (module docstring: fins in position, shaft speed in rad/s in velocity, thrust in effort).
     Raises ConversionError for a vector of another length."""

@@ -9,15 +9,20 @@ changes between samples as rows without a measurement, so that a batch filter fo
 zero-order hold as the streaming one (core.filter.timing.with_command_changes).
 """
 import bisect
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.filter.timing import with_command_changes
 from auv_ident.core.identification.results import Record
 from auv_ident.core.model.state import N_INPUT, N_STATE
 
 
-def paired(commands, measurements):
+def paired(
+        commands: Sequence[tuple[float, np.ndarray]],
+        measurements: Sequence[tuple[float, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, Y, U, t_cmd, U_cmd) of accepted messages.
 
     commands : [(t, u (7,)), ...] in arrival order; measurements : [(t, y (12,)), ...]
@@ -43,7 +48,8 @@ def paired(commands, measurements):
     return t, Y, U, np.array(stamps, dtype=float), U_cmd
 
 
-def exact_hold(t, Y, U, t_cmd, U_cmd):
+def exact_hold(t: np.ndarray, Y: np.ndarray, U: np.ndarray, t_cmd: np.ndarray,
+               U_cmd: np.ndarray) -> Record:
     """The Record (core.identification.results) the batch methods take: the samples with a
     command, and the command changes between them as samples without a measurement (the exact
     zero-order hold the streaming filter followed)."""
@@ -52,7 +58,7 @@ def exact_hold(t, Y, U, t_cmd, U_cmd):
     return Record(t2, Y2, U2)
 
 
-def median_noise_std(variances, default_variances):
+def median_noise_std(variances: Sequence[np.ndarray], default_variances: ArrayLike) -> np.ndarray:
     """(12,) the measurement 1-sigma the filter used over a record, per channel: the square
     root of the median of the R diagonals of its accepted updates (the messages' covariances
     with noise_source 'message'), or of default_variances (noise_std squared) if there were

@@ -52,6 +52,7 @@ Simulated runs of every vehicle and manoeuvre and the shipped bag are far inside
 The functions take plain lists of floats (``ndarray.tolist()``): a message has a dozen values,
 and Python arithmetic on them costs less than numpy's per-call overhead.
 """
+from collections.abc import Sequence
 from functools import lru_cache
 import math
 import re
@@ -79,7 +80,7 @@ _TOKEN_SPLIT = re.compile(r'[^a-z0-9]+')
 
 
 @lru_cache(maxsize=64)
-def named_conventions(frame_id, child_frame_id):
+def named_conventions(frame_id: str, child_frame_id: str) -> tuple[str, ...]:
     """The conventions ('ned', 'enu') the two frame ids name by their tokens, sorted.
 
     Cached: a stream repeats the same ids in every message (and the cache is bounded, so a
@@ -92,7 +93,7 @@ def named_conventions(frame_id, child_frame_id):
     return tuple(sorted(named))
 
 
-def frame_of_ids(frame_id, child_frame_id):
+def frame_of_ids(frame_id: str, child_frame_id: str) -> str:
     """The convention ('ned' or 'enu') an odometry's frame ids say, for the frame setting
     'auto': a ``ned``/``frd`` token NED, an ``enu``/``flu`` token ENU (both named: NED, and the
     frame-id rule then rejects the messages, naming both); ids without a token name REP-103
@@ -104,7 +105,8 @@ def frame_of_ids(frame_id, child_frame_id):
     return 'enu' if (frame_id or child_frame_id) else 'ned'
 
 
-def frame_problem(frame_id, child_frame_id, frame, first_ids=None):
+def frame_problem(frame_id: str, child_frame_id: str, frame: str,
+                  first_ids: tuple[str, str] | None = None) -> tuple[str, str] | None:
     """(code, text) if odometry frame ids break the frame-id rule, else None.
 
     frame : the expected convention ('ned' or 'enu')
@@ -122,13 +124,13 @@ def frame_problem(frame_id, child_frame_id, frame, first_ids=None):
     return None
 
 
-def nonfinite_states(x12, channels):
+def nonfinite_states(x12: Sequence[float], channels: Sequence[int]) -> list[str]:
     """Names of the states among `channels` (State indices) whose value in x12 is NaN/Inf."""
     isfinite = math.isfinite
     return [STATE_NAMES[i] for i in channels if not isfinite(x12[i])]
 
 
-def implausible_states(x12, channels):
+def implausible_states(x12: Sequence[float], channels: Sequence[int]) -> str:
     """Text naming the states among `channels` beyond the plausibility bounds, or ''.
 
     x12 : (12,) finite on `channels` (checked before, see :func:`nonfinite_states`)."""
@@ -140,7 +142,9 @@ def implausible_states(x12, channels):
         f'{STATE_BOUNDS[i]:g})' for i in bad) + ' (wrong units or frame?)'
 
 
-def odometry_problem(x12, t, frame_id, child_frame_id, frame, first_ids, channels):
+def odometry_problem(x12: Sequence[float], t: float, frame_id: str, child_frame_id: str,
+                     frame: str, first_ids: tuple[str, str] | None,
+                     channels: Sequence[int]) -> tuple[str, str] | None:
     """(code, text) if odometry breaks a rule, else None: the frame-id rule
     (:func:`frame_problem`), then non-finite and implausible values (:func:`nonfinite_states`,
     :func:`implausible_states`).
@@ -161,7 +165,8 @@ def odometry_problem(x12, t, frame_id, child_frame_id, frame, first_ids, channel
     return None
 
 
-def command_problem(u7, t, fin_limit, shaft_limit):
+def command_problem(u7: Sequence[float], t: float, fin_limit: float,
+                    shaft_limit: float) -> tuple[str, str] | None:
     """(code, text) if an actuator command breaks the rules, else None.
 
     u7 : list of 7 floats, fins (rad), shaft speed (rpm), thrust (N); t : its stamp (s), for

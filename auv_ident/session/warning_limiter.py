@@ -1,5 +1,6 @@
 """Rate limit for the warnings of rejected messages (the live identifier node's log)."""
 from collections import Counter
+from collections.abc import Callable, Hashable
 
 
 class WarningLimiter:
@@ -8,13 +9,13 @@ class WarningLimiter:
     were suppressed since the previous one. The identifier node uses it with the steady clock,
     so every distinct problem is named within `period` even while another one floods."""
 
-    def __init__(self, period, clock):
+    def __init__(self, period: float, clock: Callable[[], float]) -> None:
         self.period = float(period)
         self.clock = clock
-        self._last = {}
-        self.suppressed = Counter()
+        self._last: dict[Hashable, float] = {}
+        self.suppressed: Counter[Hashable] = Counter()
 
-    def __call__(self, key, text):
+    def __call__(self, key: Hashable, text: str) -> str | None:
         """The line to log now for this occurrence, or None if it is suppressed."""
         now = self.clock()
         last = self._last.get(key)
@@ -23,6 +24,6 @@ class WarningLimiter:
             return None
         self._last[key] = now
         n = self.suppressed.pop(key, 0)
-        if n:
+        if n and last is not None:          # suppressed ones follow a logged one
             text += f' ({n} more like it in the last {now - last:.1f} s)'
         return text

@@ -27,7 +27,7 @@ def record():
 def test_forward_differences_on_threads_equal_one_thread(record):
     v, run, cfg = record
     model = Model(v, NAMES)
-    theta = model.theta_true * 1.05
+    theta = model.theta_file * 1.05
     steps = 1e-4 * np.abs(theta)
     fer = FilterErrorResiduals(model, cfg, [Record(run.t, run.y, run.u)], T=run.T)
     r1, J1, failed1 = fer.forward_differences(theta, steps, threads=1)
@@ -42,7 +42,7 @@ def test_forward_differences_on_threads_equal_one_thread(record):
 def test_refinement_on_threads_equals_one_thread(record, monkeypatch):
     v, run, cfg = record
     model = Model(v, NAMES)
-    start = model.theta_true * 1.1
+    start = model.theta_file * 1.1
     out = {}
     for threads in ('1', '2'):
         monkeypatch.setenv('AUV_IDENT_THREADS', threads)
@@ -71,7 +71,7 @@ def test_refinement_without_scipy_workers_gives_the_same(record, monkeypatch):
     the Jacobian's columns one after the other, the same numbers."""
     v, run, cfg = record
     model = Model(v, NAMES)
-    start = model.theta_true * 1.1
+    start = model.theta_file * 1.1
     threaded = refine(model, cfg, [Record(run.t, run.y, run.u)], start, T=run.T, max_nfev=5)
     monkeypatch.setattr(batch, 'LEAST_SQUARES_WORKERS', False)
     serial = refine(model, cfg, [Record(run.t, run.y, run.u)], start, T=run.T, max_nfev=5)

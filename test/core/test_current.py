@@ -43,7 +43,7 @@ def test_jacobians_with_a_current_match_finite_differences(name, ref):
     assert m.current_mode == (CURRENT_GROUND if ref == 'ground' else CURRENT_WATER)
     rng = np.random.default_rng(11)
     for x, ui, vc in _states(rng, 4):
-        th = m.theta_true
+        th = m.theta_file
         th[m.p_coef:] = vc
         _, A, Bt = m.jacobians(x, ui, th)
         for j in range(12):
@@ -99,7 +99,7 @@ def test_still_water_costs_nothing_and_a_zero_current_changes_no_bit():
     with_current = Model(v, list(v.identify_default) + ['current_n', 'current_e'])
     rng = np.random.default_rng(2)
     for x, ui, _ in _states(rng, 3):
-        th = with_current.theta_true          # current components at 0
+        th = with_current.theta_file          # current components at 0
         a = still.jacobians(x, ui)
         b = with_current.jacobians(x, ui, th)
         np.testing.assert_array_equal(a[0], b[0])

@@ -14,7 +14,7 @@ import auv_ident.core as core
 from auv_ident.core import compiled_cache, safe_files
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DimensionError
-from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter import ekf
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
 from auv_ident.core.identification.batch import identify, run_ekf
@@ -53,9 +53,9 @@ def test_update_equals_closed_form_kalman_update_with_missing_channels(full_R):
     measured[7] = False                # a channel the suite does not have
     out_x, out_P = np.empty(n), np.empty((n, n))
     innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
-    st, nis, m = K.update(xa, P, y, measured, R, out_x, out_P, innov, S_diag, white,
-                          K.new_workspace(len(xa), 1))
-    assert st == K.OK and m == 10
+    st, nis, m = ekf.update(xa, P, y, measured, R, out_x, out_P, innov, S_diag, white,
+                          ekf.new_workspace(len(xa), 1))
+    assert st == ekf.OK and m == 10
     idx = [j for j in range(12) if j not in (4, 7)]
     H = np.zeros((len(idx), n))
     H[np.arange(len(idx)), idx] = 1.0
@@ -83,9 +83,9 @@ def test_angle_innovation_is_wrapped():
     y[11] = -np.pi + 0.01              # 0.02 rad away across the +-pi cut
     out_x, out_P = np.empty(n), np.empty((n, n))
     innov, S_diag, white = np.empty(12), np.empty(12), np.empty(12)
-    st, _, _ = K.update(xa, P, y, np.ones(12, bool), R, out_x, out_P, innov, S_diag, white,
-                        K.new_workspace(len(xa), 1))
-    assert st == K.OK and innov[11] == pytest.approx(0.02)
+    st, _, _ = ekf.update(xa, P, y, np.ones(12, bool), R, out_x, out_P, innov, S_diag, white,
+                        ekf.new_workspace(len(xa), 1))
+    assert st == ekf.OK and innov[11] == pytest.approx(0.02)
     assert abs(abs(out_x[11]) - np.pi) < 0.02
 
 
@@ -98,18 +98,18 @@ def test_rk4_transition_jacobian_matches_finite_differences(name):
     m = Model(v, list(v.identify_default))
     rng = np.random.default_rng(3)
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
-                         m.theta_true * 1.2])
+                         m.theta_file * 1.2])
     ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0, 30.0])
     n = len(xa)
     x1, Fa = np.empty(n), np.empty((n, n))
-    assert K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == K.OK
+    assert ekf.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == ekf.OK
     for j in range(n):
         h = 1e-6 * max(1.0, abs(xa[j])) if j < 12 else 1e-4 * abs(xa[j])
         e = np.zeros(n)
         e[j] = h
         a, b = np.empty(n), np.empty(n)
-        K.rk4_jacobian_step(xa + e, ui, m.compiled, 0.05, False, a, Fa.copy())
-        K.rk4_jacobian_step(xa - e, ui, m.compiled, 0.05, False, b, Fa.copy())
+        ekf.rk4_jacobian_step(xa + e, ui, m.compiled, 0.05, False, a, Fa.copy())
+        ekf.rk4_jacobian_step(xa - e, ui, m.compiled, 0.05, False, b, Fa.copy())
         fd = (a - b) / (2 * h)
         assert np.allclose(Fa[:, j], fd, rtol=1e-6, atol=1e-9 * max(1, np.abs(fd).max())), j
     spread = np.array([0.1] * 3 + [0.02] * 3 + [50.0] * 3 + [0.1] * 3)
@@ -133,7 +133,7 @@ def test_the_compiled_angle_wrap_agrees_with_core_angles():
     assert np.array_equal(w, [wrap_angle(float(v)) for v in a])      # arrays as numbers
     inside = (a > -np.pi) & (a <= np.pi)
     assert np.array_equal(w[inside], a[inside])
-    c = np.array([K.wrap(float(v)) for v in a])
+    c = np.array([ekf.wrap(float(v)) for v in a])
     assert np.array_equal(c[~inside], w[~inside])
     assert np.all(np.abs(c[inside] - a[inside]) <= np.spacing(np.pi))
 
@@ -142,14 +142,15 @@ def test_predict_is_F_P_Ft_plus_Q():
     m = Model(NPS, NAMES)
     rng = np.random.default_rng(4)
     n = 17
-    xa = np.concatenate([[1.0, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0], m.theta_true])
+    xa = np.concatenate([[1.0, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0], m.theta_file])
     P = _spd(n, rng) * 1e-4
     Q = np.diag(rng.uniform(1e-8, 1e-6, n))
     ui = np.array([0.1, 0.1, 0, 0, 0, 500.0, 0.0])
     x1, Fa = np.empty(n), np.empty((n, n))
-    K.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa)
+    ekf.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa)
     xo, Po = np.empty(n), np.empty((n, n))
-    assert K.predict(xa, P, ui, Q, m.compiled, 0.05, xo, Po, K.new_workspace(n, len(m.c))) == K.OK
+    ws = ekf.new_workspace(n, len(m.c))
+    assert ekf.predict(xa, P, ui, Q, m.compiled, 0.05, xo, Po, ws) == ekf.OK
     assert np.allclose(xo, x1) and np.allclose(Po, Fa @ P @ Fa.T + Q, rtol=1e-12, atol=1e-18)
 
 
@@ -165,7 +166,7 @@ def test_paper_adaptation_formulas_by_hand():
     innov[0], innov[3] = 0.2, -0.1
     gamma, lam, T = 0.1, 2e-3, 0.05
     Qp, Rp = Q.copy(), R.copy()
-    K.adapt(K.MODE_PAPER, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov, np.ones(12),
+    ekf.adapt(ekf.MODE_PAPER, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov, np.ones(12),
             np.eye(n), Qp, Rp, Q0, R0)
     w = (xa_post[12:] - theta_prev) / T                        # Eq. 18
     Qth = (1 - gamma) * Q[12:, 12:] + gamma * lam ** 2 * np.outer(w, w)   # Eq. 16
@@ -179,7 +180,7 @@ def test_paper_adaptation_formulas_by_hand():
     # matching: R_jj moves towards nu^2 - (H P H^T)_jj and is clipped to [R0/4, 4 R0]
     Qm, Rm = Q.copy(), R.copy()
     P_prior = np.eye(n) * 1e-3
-    K.adapt(K.MODE_MATCHING, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov,
+    ekf.adapt(ekf.MODE_MATCHING, gamma, lam, T, 4.0, 1e-4, theta_prev, xa_post, innov,
             np.ones(12), P_prior, Qm, Rm, Q0, R0)
     assert Rm[0, 0] == pytest.approx((1 - gamma) * 0.01 + gamma * (0.04 - 1e-3))
     assert Rm[3, 3] == pytest.approx((1 - gamma) * 0.01 + gamma * (0.01 - 1e-3))
@@ -204,7 +205,7 @@ def test_short_run_converges_within_a_few_percent(short_run):
     for offset in (0.5, -0.5):
         cfg = FilterConfig(coefficients=NAMES, initial_offset=offset)
         res = identify(m, [Record(short_run.t, short_run.y, short_run.u)], cfg,
-                       refine_pass=False, truth=m.theta_true)
+                       refine_pass=False, truth=m.theta_file)
         err = np.abs(res.error_pct())
         assert err.max() < 5.0, dict(zip(NAMES, err))
 
@@ -215,7 +216,7 @@ def test_refinement_is_consistent_and_independent_of_the_start(short_run):
     for offset in (0.5, -0.5):
         res = identify(m, [Record(short_run.t, short_run.y, short_run.u)],
                        FilterConfig(coefficients=NAMES, initial_offset=offset),
-                       truth=m.theta_true)
+                       truth=m.theta_file)
         assert np.all(np.abs(res.estimate - res.truth) < 4 * res.std)
         ests.append(res.estimate)
     assert np.allclose(ests[0], ests[1], rtol=1e-4)
@@ -229,7 +230,7 @@ def test_subset_of_channels_and_missing_samples_still_identify(short_run):
     measured[6:8] = False                      # no USBL x, y
     cfg = FilterConfig(coefficients=NAMES, measured=measured)
     res = identify(m, [Record(short_run.t, y, short_run.u)], cfg, refine_pass=False,
-                   truth=m.theta_true)
+                   truth=m.theta_file)
     assert np.abs(res.error_pct()).max() < 5.0
 
 
@@ -293,7 +294,7 @@ def test_initial_coefficient_covariance_is_the_prior_of_start_and_of_the_compile
     of P0 in both paths; set_prior replaces estimate and covariance for the next start."""
     m = Model(NPS, NAMES)
     rng = np.random.default_rng(8)
-    th0 = m.theta_true * 1.1
+    th0 = m.theta_file * 1.1
     C = _spd(5, rng) * np.outer(th0, th0) * 1e-3
     cfg = FilterConfig(coefficients=NAMES, initial=th0, theta_cov0=C)
     f = AugmentedEKF(m, cfg, short_run.T)
@@ -368,7 +369,7 @@ def test_numba_cache_of_the_core_is_keyed_on_every_compiled_source(short_run):
         if path.name != 'compiled_cache.py' and '__pycache__' not in path.parts:
             for n in ast.walk(ast.parse(path.read_text())):
                 assert not (isinstance(n, ast.keyword) and n.arg == 'cache'), path
-    group = compiled_cache.cache_folder_of(K.__file__)
+    group = compiled_cache.cache_folder_of(ekf.__file__)
     base = os.environ.get('NUMBA_CACHE_DIR') or safe_files.private_folder('numba')
     assert group == compiled_cache.group_folder(base, str(folder), core.COMPILED_SOURCES)
     assert not pathlib.Path(group).is_relative_to(folder.parent)

@@ -16,7 +16,7 @@ def test_equation_error_on_a_noise_light_run():
     estimates toward 0, docs/methods.md); every refused list empty."""
     model, run = light_run()
     r = equation_error(model, run.t, run.y, run.u, T=run.T)
-    err = dict(zip(r.names, relative_error(r.estimate, model.theta_true)))
+    err = dict(zip(r.names, relative_error(r.estimate, model.theta_file)))
     assert not r.refused
     assert err['M_ds'] < 0.015 and err['K_v'] < 0.015
     assert max(err['Z_ds'], err['Z_q'], err['Z_w']) < 0.12

@@ -56,7 +56,7 @@ def test_identified_from_both_starboard_runs_predicts_the_port_runs():
     for run, (goal_r, goal_u) in tool.GOALS.items():
         assert fits[run][0] >= goal_r and fits[run][1] >= goal_u, (run, fits[run])
     # and far better than the prior from the captive tests
-    prior = tool.validate(model, model.theta_true, {'Z_20_10_P': runs['Z_20_10_P']})
+    prior = tool.validate(model, model.theta_file, {'Z_20_10_P': runs['Z_20_10_P']})
     assert fits['Z_20_10_P'][0] > prior['Z_20_10_P'][0] + 20.0
     assert np.all(np.isfinite(res.std)) and np.all(res.std > 0)
 

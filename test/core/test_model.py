@@ -98,7 +98,7 @@ def test_jacobians_match_finite_differences(name):
     m = Model(v, v.names, mass_inverse='exact')
     rng = np.random.default_rng(7)
     for x, ui in _random_states(rng, 5):
-        th = m.theta_true
+        th = m.theta_file
         _, A, Bt = m.jacobians(x, ui, th)
         for j in range(12):
             h = 1e-6 * max(1.0, abs(x[j]))
@@ -189,7 +189,7 @@ def test_added_mass_identification_needs_exact_inverse():
         Model(v, ['Z_wdot'])
     m = Model(v, ['Z_wdot'], mass_inverse='exact')
     assert m.theta_names == ['Z_wdot'] and m.mass_inverse == 'exact'
-    assert m.theta_true.tolist() == [v.coefficients[v.index('Z_wdot')].value] == [-0.24]
+    assert m.theta_file.tolist() == [v.coefficients[v.index('Z_wdot')].value] == [-0.24]
 
 
 def test_a_vehicle_with_another_mass_inverse_is_a_copy_every_model_follows():

@@ -15,7 +15,7 @@ def test_output_error_recovers_the_truth_on_a_noise_light_run():
     0.06-0.37 %) and 3 of its 1-sigma; the residual level it estimates is the simulated noise
     (within 10 %)."""
     model, run = light_run()
-    truth = model.theta_true
+    truth = model.theta_file
     r = output_error(model, run.t, run.y, run.u, 1.5 * truth, LIGHT_NOISE_STD, T=run.T)
     assert relative_error(r.theta, truth).max() < 0.01
     assert np.all(np.abs(r.theta - truth) < 3.0 * r.theta_std)
@@ -39,4 +39,4 @@ def test_output_error_without_a_measured_start_says_so():
     Y = run.y[:50].copy()
     Y[:, State.Q] = np.nan
     with pytest.raises(DataError, match='q'):
-        output_error(model, run.t[:50], Y, run.u[:50], model.theta_true, LIGHT_NOISE_STD)
+        output_error(model, run.t[:50], Y, run.u[:50], model.theta_file, LIGHT_NOISE_STD)

@@ -144,8 +144,8 @@ def test_one_model_from_two_simulated_planar_runs_recovers_the_truth():
     measured[FREE] = True
     cfg = FilterConfig(coefficients=NAMES, initial_offset=0.2, p0_rel=0.5, noise_std=noise,
                        measured=measured)
-    both = identify(m, runs, cfg, truth=m.theta_true)
-    z = (both.estimate - m.theta_true) / both.std
+    both = identify(m, runs, cfg, truth=m.theta_file)
+    z = (both.estimate - m.theta_file) / both.std
     assert np.all(np.abs(z) < 4.0), dict(zip(NAMES, z))
     assert np.all(np.abs(both.error_pct()) < 5.0), dict(zip(NAMES, both.error_pct()))
     # the error bars use both runs: narrower than from either run alone

@@ -94,7 +94,7 @@ def test_irregular_stamps_identify_as_well_as_a_uniform_grid_with_honest_sigmas(
     cfg = FilterConfig(coefficients=NAMES)
     res = {}
     for name, (t, Y, U, _) in records.items():
-        res[name] = r = identify(m, [Record(t, Y, U)], cfg, T=T, truth=m.theta_true)
+        res[name] = r = identify(m, [Record(t, Y, U)], cfg, T=T, truth=m.theta_file)
         assert np.all(np.abs(r.estimate - r.truth) < 3.0 * r.std), (name, r.error_pct())
     # as precise as the uniform grid (7 % fewer samples, a gap), as accurate in absolute terms
     assert np.all(res['irregular'].std < 1.5 * res['uniform'].std)
@@ -102,7 +102,7 @@ def test_irregular_stamps_identify_as_well_as_a_uniform_grid_with_honest_sigmas(
         worst = {k: np.abs(r.error_pct(which)).max() for k, r in res.items()}
         assert max(worst.values()) < 3.0, (which, worst)
     t, Y, U, _ = records['irregular']
-    naive = identify(m, [Record(np.arange(len(t)) * T, Y, U)], cfg, T=T, truth=m.theta_true)
+    naive = identify(m, [Record(np.arange(len(t)) * T, Y, U)], cfg, T=T, truth=m.theta_file)
     assert np.abs(naive.error_pct()).max() > 20.0 * np.abs(res['irregular'].error_pct()).max()
 
 
@@ -183,9 +183,9 @@ def test_refine_uses_the_stamps(records):
     t, Y, U, _ = records['irregular']
     m = Model(NPS, NAMES)
     cfg = FilterConfig(coefficients=NAMES)
-    start = m.theta_true * 1.05
+    start = m.theta_file * 1.05
     ref = refine(m, cfg, [Record(t, Y, U)], start, T=T)
-    assert np.all(np.abs(ref.estimate - m.theta_true) < 3.0 * np.sqrt(np.diag(ref.cov)))
+    assert np.all(np.abs(ref.estimate - m.theta_file) < 3.0 * np.sqrt(np.diag(ref.cov)))
     assert ref.cost < 1.5
     naive = refine(m, cfg, [Record(np.arange(len(t)) * T, Y, U)], start, T=T, max_nfev=5)
     assert naive.cost > 3.0 * ref.cost

@@ -26,7 +26,7 @@ def test_ukf_recovers_the_truth_on_a_noise_light_run(ukf_and_ekf):
     """90 s, a fifth of the documented noise, every coefficient started 50 % off: within 1 %
     (measured 0.03-0.56 %) and within 3 of its own 1-sigma."""
     model, ukf, _ = ukf_and_ekf
-    truth = model.theta_true
+    truth = model.theta_file
     assert relative_error(ukf.theta, truth).max() < 0.01
     assert np.all(np.abs(ukf.theta - truth) < 3.0 * ukf.theta_std)
     assert 0.7 < ukf.mean_nis_per_dof < 1.3
@@ -69,4 +69,4 @@ def test_ukf_on_irregular_stamps_with_dropouts():
     keep = np.array([k % 7 != 3 and k % 11 != 5 for k in range(len(run.t))])
     cfg = make_config(model.theta_names, noise_std=LIGHT_NOISE_STD.copy())
     ukf = run_ukf(model, cfg, run.t[keep], run.y[keep], run.u[keep], T=run.T)
-    assert relative_error(ukf.theta, model.theta_true).max() < 0.015
+    assert relative_error(ukf.theta, model.theta_file).max() < 0.015

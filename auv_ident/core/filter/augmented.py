@@ -8,14 +8,17 @@ Augmented state x* = [x (12 vehicle states, :mod:`state`), theta (p parameters: 
 coefficients, then any water-current components the model identifies,
 core/model/hydrodynamics.py)].
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.errors import ConfigError, DimensionError, DivergenceError, DomainError
-from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter import ekf
 from auv_ident.core.model.current import ned_current
-from auv_ident.core.model.hydrodynamics import STATUS_TEXT
+from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import (
     COEFFICIENTS,
@@ -84,7 +87,7 @@ class FilterConfig:
     """
 
     coefficients: list = field(default_factory=list)
-    initial: object = None
+    initial: ArrayLike | None = None
     initial_offset: float = 0.5
     p0_rel: float = 1.0
     q_theta_rel: float = 1e-5
@@ -96,18 +99,18 @@ class FilterConfig:
     lam: float = 2e-3
     r_bound: float = 4.0
     q_floor: float = 1e-4
-    theta_cov0: object = None
-    current_initial: object = None
+    theta_cov0: ArrayLike | None = None
+    current_initial: ArrayLike | None = None
     current_sd0: float = DEFAULT_CURRENT_SD0
     current_down_sd0: float = DEFAULT_CURRENT_DOWN_SD0
     current_walk: float = 0.0
 
-    def validate(self, p):
+    def validate(self, p: int) -> None:
         """ConfigError / DimensionError naming the first bad field, for a filter of p
         coefficients."""
-        if self.mode not in K.MODES:
+        if self.mode not in ekf.MODES:
             raise ConfigError(f'noise adaptation mode {self.mode!r}; use one of '
-                              + ', '.join(K.MODES))
+                              + ', '.join(ekf.MODES))
         self._validate_state_noise()
         _positive(self, ('p0_rel', 'tau', 'lam', 'r_bound'), '')
         if not np.isfinite(self.q_theta_rel) or self.q_theta_rel < 0:
@@ -119,7 +122,7 @@ class FilterConfig:
             check_theta_cov(self.theta_cov0, p)
         self._validate_current()
 
-    def _validate_state_noise(self):
+    def _validate_state_noise(self) -> None:
         """The vehicle states' process and measurement noise and the measured channels."""
         for name, arr, shape in (('q_state', self.q_state, (N_STATE,)),
                                  ('noise_std', self.noise_std, (N_STATE,)),
@@ -135,7 +138,7 @@ class FilterConfig:
         if np.any(np.asarray(self.noise_std)[m] <= 0):
             raise ConfigError('noise_std must be positive on every measured channel')
 
-    def _validate_current(self):
+    def _validate_current(self) -> None:
         """The water current's prior and random walk."""
         _positive(self, ('current_sd0', 'current_down_sd0'), ' m/s')
         if not np.isfinite(self.current_walk) or self.current_walk < 0:
@@ -147,7 +150,7 @@ class FilterConfig:
                                   f'm/s), got {self.current_initial!r}')
 
 
-def _positive(config, names, unit):
+def _positive(config: FilterConfig, names: Sequence[str], unit: str) -> None:
     """ConfigError unless each field `names` of `config` is a positive finite number."""
     for name in names:
         v = getattr(config, name)
@@ -155,29 +158,29 @@ def _positive(config, names, unit):
             raise ConfigError(f'{name} = {v!r}{unit} must be a positive number')
 
 
-def check_theta_cov(C, p):
+def check_theta_cov(C: ArrayLike, p: int) -> np.ndarray:
     """C as a (p, p) coefficient covariance (float array, symmetrised), or ConfigError /
     DimensionError naming what is wrong (shape, non-finite, asymmetric, not positive definite)."""
-    C = np.asarray(C, dtype=float)
-    if C.shape != (p, p):
-        raise DimensionError(f'theta_cov0 must have shape ({p}, {p}), got {C.shape}')
-    if not np.all(np.isfinite(C)):
-        raise ConfigError(f'theta_cov0 has non-finite entries: {C.tolist()}')
-    if not np.allclose(C, C.T, rtol=0.0, atol=1e-12 * np.abs(C).max()):
-        raise ConfigError(f'theta_cov0 is not symmetric: {C.tolist()}')
-    C = 0.5 * (C + C.T)
-    if not is_positive_definite(C):
-        raise ConfigError(f'theta_cov0 is not positive definite: {C.tolist()}')
-    return C
+    given = np.asarray(C, dtype=float)
+    if given.shape != (p, p):
+        raise DimensionError(f'theta_cov0 must have shape ({p}, {p}), got {given.shape}')
+    if not np.all(np.isfinite(given)):
+        raise ConfigError(f'theta_cov0 has non-finite entries: {given.tolist()}')
+    if not np.allclose(given, given.T, rtol=0.0, atol=1e-12 * np.abs(given).max()):
+        raise ConfigError(f'theta_cov0 is not symmetric: {given.tolist()}')
+    sym: np.ndarray = 0.5 * (given + given.T)
+    if not is_positive_definite(sym):
+        raise ConfigError(f'theta_cov0 is not positive definite: {sym.tolist()}')
+    return sym
 
 
-def default_theta_cov(theta0, p0_rel):
+def default_theta_cov(theta0: ArrayLike, p0_rel: float) -> np.ndarray:
     """diag((p0_rel |theta0|)^2) (p, p): the coefficients' initial covariance when none is given
     (FilterConfig.p0_rel)."""
     return np.diag((p0_rel * np.abs(np.asarray(theta0, dtype=float))) ** 2)
 
 
-def initial_covariance(sd0, theta_cov):
+def initial_covariance(sd0: ArrayLike, theta_cov: ArrayLike) -> np.ndarray:
     """P0 of the augmented state ((12 + p) x (12 + p)): diag(sd0^2) for the vehicle states
     (sd0 (12,), their 1-sigma in the states' units), theta_cov (p, p) for the coefficients, no
     correlation between the two blocks. The one place P0 is assembled."""
@@ -200,7 +203,7 @@ class AugmentedEKF:
     T : float, sample time (s)
     """
 
-    def __init__(self, model, cfg, T):
+    def __init__(self, model: Model, cfg: FilterConfig, T: float) -> None:
         if not np.isfinite(T) or T <= 0:
             raise ConfigError(f'sample time T = {T!r} s must be positive')
         self.model = model
@@ -209,7 +212,7 @@ class AugmentedEKF:
         pc = model.p_coef
         cfg.validate(pc)
         self.names = list(model.theta_names)
-        th0 = (model.theta_true[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
+        th0 = (model.theta_file[:pc] * (1.0 + cfg.initial_offset) if cfg.initial is None
                else np.asarray(cfg.initial, dtype=float).copy())
         if not np.all(np.isfinite(th0)):
             raise ConfigError(f'initial guesses must be finite, got {th0}')
@@ -238,7 +241,7 @@ class AugmentedEKF:
         p = model.p
         n = N_STATE + p
         self.n = n
-        self.ws = K.new_workspace(n, model.n_coef)   # scratch reused by every step
+        self.ws = ekf.new_workspace(n, model.n_coef)   # scratch reused by every step
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
@@ -251,14 +254,18 @@ class AugmentedEKF:
                             np.full(len(cur), cfg.current_walk * np.sqrt(self.T))])
         self.Q0 = np.diag(q ** 2)
         self.measured = np.asarray(cfg.measured, dtype=bool) & free
-        self.mode = K.MODES[cfg.mode]
+        self.mode = ekf.MODES[cfg.mode]
         self.gamma = 1.0 - np.exp(-self.T / cfg.tau)
         # Innovation gate (None: off): gate[m] is the largest NIS accepted from an update with
         # m channels; a larger one is not fused (self.gated), see update().
-        self.gate = None
+        self.gate: np.ndarray | None = None
         self.reset()
 
-    def reset(self):
+    # the augmented state (n,) and its covariance (n, n); None until start()
+    xa: Any
+    P: Any
+
+    def reset(self) -> None:
         self.gated = False
         self.Q = self.Q0.copy()
         self.R = self.R0.copy()
@@ -271,7 +278,7 @@ class AugmentedEKF:
         self.S_diag = np.full(N_STATE, np.nan)
         self.white = np.full(N_STATE, np.nan)
 
-    def initial_state(self, y0, rpm):
+    def initial_state(self, y0: np.ndarray, rpm: float) -> tuple[np.ndarray, np.ndarray]:
         """x0 from the first measurement; unmeasured channels from a straight, level trim. A
         held state starts at 0 with the 1-sigma of an unmeasured one (positive, as the filter
         requires of every variance; it never changes, core/model/planar.py)."""
@@ -285,17 +292,17 @@ class AugmentedEKF:
         sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
 
-    def use_measurement_variances(self, r):
+    def use_measurement_variances(self, r: ArrayLike) -> None:
         """Make r (12,) the measurement variances (state units squared): R itself in the
         'fixed' mode, R0 in the adaptive ones (the reference the adaptation starts from and is
         bounded by), and the start-up covariance's (noise_std). For a caller whose noise
         changes per message (the session's message covariances)."""
-        if self.mode == K.MODES['fixed']:
+        if self.mode == ekf.MODES['fixed']:
             np.fill_diagonal(self.R, r)
         np.fill_diagonal(self.R0, r)
         self.noise_std = np.sqrt(r)
 
-    def reference_std(self):
+    def reference_std(self) -> np.ndarray:
         """(n,) 1-sigma scale of each augmented state: noise_std on measured channels, the
         start-up 1-sigma of unmeasured ones, the parameters' prior scale (p0_rel |theta0| for
         the coefficients, current_sd0 for the current). The unit in
@@ -306,7 +313,7 @@ class AugmentedEKF:
         th = self.prior_scale
         return np.concatenate([sd, np.where(th > 0, th, 1.0)])
 
-    def set_prior(self, theta0, theta_cov0):
+    def set_prior(self, theta0: ArrayLike, theta_cov0: ArrayLike) -> None:
         """Start the coefficients (at the next start()) from theta0 (p,) with covariance
         theta_cov0 (p, p), e.g. a previous estimate; Q_theta keeps its scale."""
         th0 = np.asarray(theta0, dtype=float)
@@ -317,7 +324,7 @@ class AugmentedEKF:
         self.theta0 = th0.copy()
         self.guess_current = False
 
-    def initial_estimate(self, y0, rpm):
+    def initial_estimate(self, y0: np.ndarray, rpm: float) -> tuple[np.ndarray, np.ndarray]:
         """(xa0 (n,), P0 (n, n)): the augmented state and covariance before the first
         measurement y0 (12,) at shaft speed rpm; coefficients from the prior (theta0,
         theta_cov0)."""
@@ -336,7 +343,7 @@ class AugmentedEKF:
                 cov0[pc:, pc:] = np.diag(var)
         return np.concatenate([x0, theta0]), initial_covariance(sd0, cov0)
 
-    def start_current(self, y0, rpm):
+    def start_current(self, y0: np.ndarray, rpm: float) -> np.ndarray | None:
         """The identified current components' start guess (m/s) from the first measurement y0
         over ground at shaft speed rpm, or None (keep the prior theta0).
 
@@ -369,37 +376,37 @@ class AugmentedEKF:
             return None
         return guess
 
-    def start(self, y0, rpm):
+    def start(self, y0: np.ndarray, rpm: float) -> None:
         """Start the filter from the measurement y0 (12,) at shaft speed rpm (fused)."""
         self.xa, self.P = self.initial_estimate(y0, rpm)
         self._update(y0)
 
-    def restart(self, y0, rpm):
+    def restart(self, y0: np.ndarray, rpm: float) -> None:
         """Restart the vehicle states from the measurement y0 (12,) at shaft speed rpm (fused),
         as start() does, keeping the coefficients' estimate and covariance (after a gap, see
         timing.py)."""
         x0, sd0 = self.initial_state(y0, rpm)
         xa, P = self.xa.copy(), self.P.copy()
-        K.restart_states(xa, P, x0, sd0)
+        ekf.restart_states(xa, P, x0, sd0)
         self.xa, self.P = xa, P
         self._update(y0)
 
-    def _check(self, st, what):
-        if st == K.OK:
+    def _check(self, st: int, what: str) -> None:
+        if st == ekf.OK:
             return
         if st in STATUS_TEXT:
             raise DomainError(f'{what}: {STATUS_TEXT[st]} (estimate {self.xa})')
         raise DivergenceError(f'{what}: covariance lost positive definiteness or the estimate '
                               f'became non-finite at step {self.steps}')
 
-    def _update(self, y):
+    def _update(self, y: np.ndarray) -> None:
         y = np.ascontiguousarray(y, dtype=float)
         if y.shape != (N_STATE,):
             raise DimensionError(f'measurement must have {N_STATE} entries, got {y.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
         theta_prev = self.xa[COEFFICIENTS].copy()
-        st, nis, m = K.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
+        st, nis, m = ekf.update(self.xa, self.P, y, self.measured, self.R, xa_b, P_b,
                               self.innov, self.S_diag, self.white, self.ws)
         self._check(st, 'measurement update')
         self.gated = False
@@ -407,14 +414,14 @@ class AugmentedEKF:
             # an outlier: keep the prior (as for a missing sample), adapt nothing
             self.nis, self.dof, self.gated = nis, m, True
             return
-        K.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
+        ekf.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
                 theta_prev, xa_b, self.innov, self.S_diag, self.P, self.Q, self.R, self.Q0,
                 self.R0)
         self.xa, self.P = xa_b, P_b
         self.nis, self.dof = nis, m
         self.steps += 1
 
-    def predict(self, u_prev, T=None):
+    def predict(self, u_prev: np.ndarray, T: float | None = None) -> None:
         """Time update over T (s; default the configured T) with the inputs u_prev held."""
         m = self.model
         T = self.T if T is None else float(T)
@@ -423,11 +430,11 @@ class AugmentedEKF:
             raise DimensionError(f'inputs must have {N_INPUT} entries, got {u_prev.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
-        st = K.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
+        st = ekf.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
         self.xa, self.P = xa_b, P_b
 
-    def update(self, y):
+    def update(self, y: np.ndarray) -> None:
         """Measurement update with y (12,), NaN for channels missing in this sample.
 
         With an innovation gate set (``self.gate``) and an NIS above ``gate[m]``, nothing is
@@ -435,27 +442,27 @@ class AugmentedEKF:
         ``self.gated`` is True and ``self.nis``/``self.dof`` hold the rejected update's."""
         self._update(y)
 
-    def step(self, u_prev, y, T=None):
+    def step(self, u_prev: np.ndarray, y: np.ndarray, T: float | None = None) -> None:
         """Predict over T with the inputs u_prev held, then update with y."""
         self.predict(u_prev, T)
         self._update(y)
 
-    def settings(self):
+    def settings(self) -> Any:
         """The FilterSettings of this filter (its initial Q and R, adaptation, sample time)."""
         c = self.cfg
-        return K.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
+        return ekf.FilterSettings(self.measured, self.Q0, self.R0, self.mode, self.gamma, c.lam,
                                 self.T, c.r_bound, c.q_floor)
 
     @property
-    def theta(self):
+    def theta(self) -> np.ndarray:
         return self.xa[COEFFICIENTS].copy()
 
     @property
-    def theta_cov(self):
+    def theta_cov(self) -> np.ndarray:
         return self.P[COEFFICIENTS, COEFFICIENTS].copy()
 
     @property
-    def theta_std(self):
+    def theta_std(self) -> np.ndarray:
         return np.sqrt(np.diag(self.P)[COEFFICIENTS])
 
 
@@ -463,7 +470,8 @@ class AugmentedEKF:
 COV_REPAIR_FLOOR = 1e-10
 
 
-def repair_covariance(P, ref_std, floor=COV_REPAIR_FLOOR):
+def repair_covariance(P: np.ndarray, ref_std: np.ndarray,
+                      floor: float = COV_REPAIR_FLOOR) -> tuple[np.ndarray, float]:
     """Nearest usable covariance to P: symmetrise, then floor the eigenvalues.
 
     The eigenvalues are those of C = D^-1 sym(P) D^-1 with D = diag(ref_std) (the states'
@@ -492,7 +500,7 @@ def repair_covariance(P, ref_std, floor=COV_REPAIR_FLOOR):
     return fixed, float(lam[0])
 
 
-def is_positive_definite(P):
+def is_positive_definite(P: np.ndarray) -> bool:
     """True if P is finite, symmetric to rounding and has a Cholesky factor."""
     if not np.all(np.isfinite(P)):
         return False

@@ -32,6 +32,7 @@ Noise adaptation (`mode`), gamma = 1 - exp(-T/tau) (Eq. 20, "t" read as the samp
 """
 from collections import namedtuple
 import math
+from typing import Any
 
 from numba import uint64
 import numpy as np
@@ -81,7 +82,7 @@ FilterOutputs = namedtuple('FilterOutputs', 'hist_every theta std nis rq want_wh
                                             'xa P Q R stats')
 
 
-def new_outputs(n, N, hist_every=0, want_white=False):
+def new_outputs(n: int, N: int, hist_every: int = 0, want_white: bool = False) -> Any:
     """FilterOutputs for an augmented state of size n over N samples (histories every
     hist_every samples, 0: none; the whitened innovations if want_white)."""
     p = n - N_STATE

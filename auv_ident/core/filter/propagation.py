@@ -8,7 +8,7 @@ Kept apart from those modules so that the numba cache's group of compiled source
 import numpy as np
 
 from auv_ident.core.compiled_cache import cached_njit
-from auv_ident.core.filter import ekf as K
+from auv_ident.core.filter import ekf
 from auv_ident.core.model.hydrodynamics import OK
 from auv_ident.core.model.state import N_STATE
 
@@ -19,7 +19,7 @@ def propagate_sigma_points(X, ui, cm, h, X_out, ws):
     states) with the inputs ui held; cm the model's CompiledModel, ws its ekf.Workspace.
     Returns OK or the first failing point's status code."""
     for i in range(X.shape[0]):
-        st = K.rk4_step_into(X[i], ui, cm, h, False, X_out[i], ws.Fa, ws)
+        st = ekf.rk4_step_into(X[i], ui, cm, h, False, X_out[i], ws.Fa, ws)
         if st != OK:
             return st
     return OK
@@ -35,7 +35,7 @@ def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
     left the model's domain."""
     p = theta.shape[0]
     n = N_STATE + p
-    ws = K.new_workspace(n, cm.c0.shape[0])
+    ws = ekf.new_workspace(n, cm.c0.shape[0])
     xa = np.empty(n)
     xb = np.empty(n)
     for j in range(p):
@@ -52,7 +52,7 @@ def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
             active = current >= 0
         elif active:
             for s in range(n_sub[k]):
-                st = K.rk4_step_into(xa, U[k - 1], cm, h[k], False, xb, ws.Fa, ws)
+                st = ekf.rk4_step_into(xa, U[k - 1], cm, h[k], False, xb, ws.Fa, ws)
                 if st != OK:
                     active = False
                     failed += 1

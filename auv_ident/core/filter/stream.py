@@ -66,8 +66,14 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import ConfigError, DivergenceError
-from auv_ident.core.filter.augmented import AugmentedEKF, is_positive_definite, repair_covariance
+from auv_ident.core.filter.augmented import (
+    AugmentedEKF,
+    FilterConfig,
+    is_positive_definite,
+    repair_covariance,
+)
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, interval, time_step
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input
 
 JUMP_CONFIRM = 5          # messages in a row that confirm a backward time jump
@@ -103,8 +109,9 @@ class StreamIdentifier:
         is older than this is rejected as 'stale command'
     """
 
-    def __init__(self, model, cfg, T, max_gap=5.0, gate=None, max_bridge=None,
-                 max_command_age=None):
+    def __init__(self, model: Model, cfg: FilterConfig, T: float, max_gap: float = 5.0,
+                 gate: np.ndarray | None = None, max_bridge: float | None = None,
+                 max_command_age: float | None = None) -> None:
         self.ekf = AugmentedEKF(model, cfg, T)
         self.ekf.gate = gate
         self.T = float(T)
@@ -114,22 +121,23 @@ class StreamIdentifier:
         if max_command_age is not None and not float(max_command_age) >= 0.0:
             raise ConfigError(f'max_command_age = {max_command_age!r} s must be >= 0 or None')
         self.max_command_age = None if max_command_age is None else float(max_command_age)
-        self.cmd_t = []
-        self.cmd_u = []
-        self.cmd_latest = None      # largest command stamp seen
-        self.cmd_jump = deque(maxlen=CMD_BUFFER_MAX)   # (t, u7) held for a backward jump
-        self.cmd_bad = []           # sorted stamps of recently rejected commands
-        self.t_prev = None
+        self.cmd_t: list[float] = []
+        self.cmd_u: list[np.ndarray] = []
+        self.cmd_latest: float | None = None      # largest command stamp seen
+        # (t, u7) held for a backward jump
+        self.cmd_jump: deque[tuple[float, np.ndarray]] = deque(maxlen=CMD_BUFFER_MAX)
+        self.cmd_bad: list[float] = []           # sorted stamps of recently rejected commands
+        self.t_prev: float | None = None
         self.accepted = 0
         self.rejected = 0
         self.repairs = 0
         self.outliers = 0
         self.jumps = 0
-        self._jump = []             # stamps of the messages of a pending backward jump
+        self._jump: list[float] = []   # stamps of the messages of a pending backward jump
 
     # -- commands --
 
-    def add_command(self, t, u7):
+    def add_command(self, t: float, u7: np.ndarray) -> Outcome:
         """Buffer an actuator command u7 (7,: fins rad, shaft rpm, thrust N) stamped t.
         Returns an Outcome."""
         u7 = np.asarray(u7, dtype=float)
@@ -159,7 +167,7 @@ class StreamIdentifier:
             del self.cmd_u[:k]
         return Outcome(True)
 
-    def command_rejected(self, t):
+    def command_rejected(self, t: float) -> None:
         """Note that the caller rejected a command stamped t (see the module docstring)."""
         if t is None or not np.isfinite(t):
             return
@@ -170,12 +178,12 @@ class StreamIdentifier:
         if len(self.cmd_bad) > CMD_BUFFER_MAX:
             del self.cmd_bad[:len(self.cmd_bad) - CMD_BUFFER_MAX]
 
-    def command_at(self, t):
+    def command_at(self, t: float) -> np.ndarray | None:
         """The command in force at t (latest stamp <= t), or None."""
         i = bisect.bisect_right(self.cmd_t, t)
         return self.cmd_u[i - 1] if i > 0 else None
 
-    def copy_commands_from(self, other):
+    def copy_commands_from(self, other: 'StreamIdentifier') -> None:
         """Take over another stream's buffered commands (after a filter restart)."""
         self.cmd_t = list(other.cmd_t)
         self.cmd_u = list(other.cmd_u)
@@ -185,11 +193,11 @@ class StreamIdentifier:
 
     # -- measurements --
 
-    def _reject(self, reason, code):
+    def _reject(self, reason: str, code: str) -> Outcome:
         self.rejected += 1
         return Outcome(False, reason, code)
 
-    def add_measurement(self, t, y12):
+    def add_measurement(self, t: float, y12: np.ndarray) -> Outcome:
         """Fuse a measurement stamped t (NaN entries: channel missing). Returns an Outcome."""
         f = self.ekf
         if self.t_prev is None or f.xa is None:
@@ -259,7 +267,7 @@ class StreamIdentifier:
                 f.predict(u, h)
         return self._fuse(t, y12)
 
-    def _cross(self, a, b, u):
+    def _cross(self, a: float, b: float, u: np.ndarray) -> None:
         """Time update from a to b (s) with the command u held, in steps of at most T."""
         dt = interval(a, b)
         if dt > 0.0:
@@ -267,7 +275,8 @@ class StreamIdentifier:
             for _ in range(n):
                 self.ekf.predict(u, h)
 
-    def _backward_jump(self, t, y12):
+    def _backward_jump(self, t: float, y12: np.ndarray) -> Outcome:
+        assert self.t_prev is not None       # a jump is back from a previous measurement
         gap = self.t_prev - t
         if self._jump and 0.0 < t - self._jump[-1] <= self.max_gap:
             self._jump.append(t)
@@ -303,7 +312,7 @@ class StreamIdentifier:
         return Outcome(True, f'{what}: confirmed by {n} messages, vehicle states restarted',
                        'time jump')
 
-    def _fuse(self, t, y12):
+    def _fuse(self, t: float, y12: np.ndarray) -> Outcome:
         """Measurement update after the time update to t, with the repair rule (docstring)."""
         f = self.ekf
         note = ''
@@ -318,7 +327,7 @@ class StreamIdentifier:
             note = (f'covariance not positive definite before the update (smallest scaled '
                     f'eigenvalue {lam:.3g}): repaired')
         self.t_prev = t
-        if f.gated:
+        if f.gated and f.gate is not None:      # only a gate gates
             self.outliers += 1
             return self._reject(f'outlier: NIS {f.nis:.4g} over {f.dof} channel(s) above the '
                                 f'gate {f.gate[f.dof]:.4g}', 'outlier')

@@ -21,6 +21,7 @@ same stamps give the same filter either way:
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import DataError
@@ -57,7 +58,7 @@ def time_steps(t, max_step, max_bridge):
     return n, h
 
 
-def check_times(t, N=None):
+def check_times(t: ArrayLike, N: int | None = None) -> np.ndarray:
     """t as a float array (N,) of strictly increasing, finite sample times (s), or DataError
     naming the first bad entry (N: the expected length, e.g. the measurements' rows)."""
     t = np.ascontiguousarray(t, dtype=float)
@@ -76,7 +77,7 @@ def check_times(t, N=None):
     return t
 
 
-def nominal_sample_time(t):
+def nominal_sample_time(t: ArrayLike) -> float:
     """The median interval of the stamps t (N >= 2) (s, at 1 ns resolution): the sample time
     of a record with jitter and dropouts."""
     t = check_times(t)
@@ -85,7 +86,7 @@ def nominal_sample_time(t):
     return float(np.median(np.rint(np.diff(t) * NS) / NS))
 
 
-def commands_at(t_cmd, U_cmd, t):
+def commands_at(t_cmd: np.ndarray, U_cmd: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The command in force at each time t (N,): the latest command (row of U_cmd (M, 7))
     stamped at or before it (t_cmd (M,), increasing), NaN where none is (zero-order hold, the
     streaming identifier's rule). A command published only when it changes is thus held."""
@@ -101,7 +102,10 @@ def commands_at(t_cmd, U_cmd, t):
     return U
 
 
-def with_command_changes(t, Y, U, t_cmd, U_cmd, max_bridge=DEFAULT_MAX_BRIDGE):
+def with_command_changes(
+        t: np.ndarray, Y: np.ndarray, U: np.ndarray, t_cmd: np.ndarray, U_cmd: np.ndarray,
+        max_bridge: float = DEFAULT_MAX_BRIDGE,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Insert the command changes between samples as samples without a measurement.
 
     The batch filter holds U[k-1] over [t_{k-1}, t_k]; a command stamped inside that interval

@@ -19,8 +19,10 @@ Checks, in the order a user needs them:
 4. Identifiability: per coefficient the relative 1-sigma the run supports, correlations, and a
    verdict with the excitation that would help.
 """
+from collections.abc import Sequence
 from dataclasses import replace
 import math
+from typing import Any
 
 import numpy as np
 
@@ -35,11 +37,12 @@ from auv_ident.core.identification.uncertainty import (
     input_correlation,
     LJUNG_BOX_LAGS,
     split_rows,
+    Verdicts,
     with_gaps,
 )
 from auv_ident.core.model.current import MAX_CURRENT_STD
 from auv_ident.core.model.state import INPUT_NAMES, State, STATE_NAMES
-from auv_ident.core.model.vehicle import EQUATIONS
+from auv_ident.core.model.vehicle import EQUATIONS, Vehicle
 
 XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
 XCORR_SECONDS = 2.0     # lags of the cross-correlation (s)
@@ -62,7 +65,7 @@ CURRENT_EXCITATION = ('turns: the current is separable from the coefficients onl
                       'heading changes')
 
 
-def excitation_advice(vehicle, name):
+def excitation_advice(vehicle: Vehicle, name: str) -> str:
     """The manoeuvre that would excite coefficient `name` of `vehicle` (or a water-current
     component, 'current_*'), in words."""
     if name.startswith('current_'):
@@ -74,7 +77,7 @@ def excitation_advice(vehicle, name):
                                                   'multiplies')
 
 
-def current_std_limits(names):
+def current_std_limits(names: Sequence[str]) -> np.ndarray:
     """(p,) per parameter the 1-sigma (m/s) to judge it by instead of the relative one: a
     water-current component may be ~0, so it is judged in m/s (MAX_CURRENT_STD); NaN for a
     coefficient (judged relative to its value)."""
@@ -82,7 +85,7 @@ def current_std_limits(names):
                      for n in names])
 
 
-def with_advice(vehicle, verdicts):
+def with_advice(vehicle: Vehicle, verdicts: Verdicts) -> Verdicts:
     """The verdicts (core/identification/uncertainty.py) with the excitation advice for the weak
     ones."""
     for name, d in verdicts.items():
@@ -91,7 +94,7 @@ def with_advice(vehicle, verdicts):
     return verdicts
 
 
-def weak_notes(verdicts):
+def weak_notes(verdicts: Verdicts) -> list[str]:
     """One line per parameter that is not identifiable: its verdict, its 1-sigma (m/s for a
     current component, else % of its value), a correlation above 0.9, and the advice."""
     notes = []
@@ -106,14 +109,16 @@ def weak_notes(verdicts):
     return notes
 
 
-def coefficient_verdicts(vehicle, names, estimate, J, cov):
+def coefficient_verdicts(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray,
+                         J: np.ndarray, cov: np.ndarray | None) -> Verdicts:
     """identifiability() of the run with the excitation advice for the weak ones."""
     return with_advice(vehicle, identifiability(J, estimate, names, cov=cov,
                                                 absolute_std=current_std_limits(names)))
 
 
-def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=None,
-             refined=True):
+def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = None,
+             dt: float | None = None, mean_nis_per_dof: float = math.nan,
+             verdicts: Verdicts | None = None, refined: bool = True) -> dict[str, Any]:
     """The diagnosis of one identification.
 
     Parameters
@@ -130,7 +135,9 @@ def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=
     dict {'consistent': bool, 'messages': [str, ...] (the first says whether the result can be
     trusted and why), 'checks': {...} (the figures behind them)}
     """
-    problems, notes, checks = [], [], {}
+    problems: list[str] = []
+    notes: list[str] = []
+    checks: dict[str, Any] = {}
     if xcorr:
         z, channel, inp, lag = xcorr[0]
         checks['residual_input_correlation'] = {'z': float(z), 'channel': channel,
@@ -171,8 +178,9 @@ def diagnose(fit=None, xcorr=None, dt=None, mean_nis_per_dof=math.nan, verdicts=
             'checks': checks}
 
 
-def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
-           refined=True, depth=None):
+def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np.ndarray,
+           fit: Any, U: np.ndarray, dt: float, mean_nis_per_dof: float = math.nan,
+           refined: bool = True, depth: np.ndarray | None = None) -> Diagnosis:
     """Identifiability and diagnosis of an identification made with
     core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
     residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
@@ -203,7 +211,9 @@ def assess(vehicle, names, estimate, cov, fit, U, dt, mean_nis_per_dof=math.nan,
     return judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth)
 
 
-def judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth=None):
+def judge_plausibility(diagnosis: Diagnosis, vehicle: Vehicle, names: Sequence[str],
+                       estimate: np.ndarray, cov: np.ndarray,
+                       depth: np.ndarray | None = None) -> Diagnosis:
     """The diagnosis with the plausibility of the estimates for the vehicle file
     (core/identification/plausibility.py): coefficients of a forbidden sign or far outside the
     file's prior, and a depth that puts a submerged vehicle above the water, each named on the

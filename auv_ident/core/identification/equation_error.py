@@ -1,11 +1,11 @@
 """Equation-error least squares (Jategaonkar 2015, ch. 6; Klein & Morelli 2006, regression
 methods): the force equations regressed on the coefficients that enter them linearly.
 
-The model is M nu_dot = F(nu, eta, delta, c) (model.py) and every hydrodynamic or control
-coefficient c_j has one monomial term in one equation e_j: c_j s_j z_a z_b ... (s_j = (rho/2)
-L^k for prime values, vehicle.py), linear in c_j. With the measured velocities smoothed and
-differentiated (Savitzky-Golay, a local cubic over window_s seconds: nu_s, nu_dot_s), each
-sample gives per equation e
+The model is M nu_dot = F(nu, eta, delta, c) (model/hydrodynamics.py) and every hydrodynamic or
+control coefficient c_j has one monomial term in one equation e_j: c_j s_j z_a z_b ... (s_j =
+(rho/2) L^k for prime values, model/vehicle.py), linear in c_j. With the measured velocities
+smoothed and differentiated (Savitzky-Golay, a local cubic over window_s seconds: nu_s,
+nu_dot_s), each sample gives per equation e
 
     y_e = [M (nu_dot_s - f_0(nu_s, eta_s, delta))]_e = sum_{j in e} c_j x_j,
     x_j = dF_e / dc_j = s_j z_a z_b ...
@@ -30,13 +30,16 @@ estimates toward 0: the smoothing window trades that against the lag it adds.
 """
 from dataclasses import dataclass, field
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.signal import savgol_filter
 
 from auv_ident.core.errors import ConfigError, DataError
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
 from auv_ident.core.identification.uncertainty import sandwich_covariance
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_NU, N_STATE, State, STATE_NAMES
 from auv_ident.core.model.vehicle import EQUATIONS
 
@@ -61,7 +64,7 @@ class EquationErrorResult:
     wall_s: float = 0.0
 
 
-def refusals(model, measured):
+def refusals(model: Model, measured: np.ndarray) -> dict[str, str]:
     """{name: reason} of the model's parameters the equation error cannot estimate."""
     v = model.vehicle
     out = {}
@@ -83,7 +86,7 @@ def refusals(model, measured):
     return out
 
 
-def _runs(t, ok, max_bridge):
+def _runs(t: np.ndarray, ok: np.ndarray, max_bridge: float) -> list[np.ndarray]:
     """Index arrays of the maximal runs of samples with ok set and no interval longer than
     max_bridge (s) inside."""
     idx = np.flatnonzero(ok)
@@ -93,7 +96,7 @@ def _runs(t, ok, max_bridge):
     return np.split(idx, cut)
 
 
-def smoothing_window(window_s, T):
+def smoothing_window(window_s: float, T: float) -> int:
     """The Savitzky-Golay window in samples (odd) for window_s seconds at step T (s)."""
     win = int(round(window_s / T)) | 1
     if win <= POLYORDER + 1:
@@ -102,7 +105,8 @@ def smoothing_window(window_s, T):
     return win
 
 
-def smoothed_runs(t, Y, U, T, win, max_bridge):
+def smoothed_runs(t: np.ndarray, Y: np.ndarray, U: np.ndarray, T: float, win: int,
+                  max_bridge: float) -> list[tuple[Any, ...]]:
     """Per run of measured samples, on a uniform grid (step T) over it: the smoothed states
     (n, 12: u..r, phi, theta filled, the rest 0), their smoothed rates nu_dot (n, 6) and the
     inputs held at the grid times (n, 6); runs shorter than two windows are left out."""
@@ -125,8 +129,10 @@ def smoothed_runs(t, Y, U, T, win, max_bridge):
     return out
 
 
-def equation_error(model, t, Y, U, measured=None, T=None, window_s=DEFAULT_WINDOW_S,
-                   max_bridge=DEFAULT_MAX_BRIDGE):
+def equation_error(model: Model, t: ArrayLike, Y: np.ndarray, U: np.ndarray,
+                   measured: np.ndarray | None = None, T: float | None = None,
+                   window_s: float = DEFAULT_WINDOW_S,
+                   max_bridge: float = DEFAULT_MAX_BRIDGE) -> EquationErrorResult:
     """Equation-error estimate of model.theta_names (module docstring).
 
     Parameters
@@ -201,4 +207,3 @@ def equation_error(model, t, Y, U, measured=None, T=None, window_s=DEFAULT_WINDO
     result.samples = n
     result.wall_s = time.perf_counter() - t0
     return result
-

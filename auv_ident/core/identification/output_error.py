@@ -31,10 +31,13 @@ on NPS AUV II) keep the output-error character: each residual is a free-run pred
 Time is what the stamps say (timing.py): RK4 steps of at most max_step with the command held;
 after an interval longer than max_bridge a new segment starts from the next measured state.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
@@ -43,6 +46,7 @@ from auv_ident.core.errors import ConfigError, DataError, DivergenceError
 from auv_ident.core.filter.propagation import simulate_segments
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time, time_steps
 from auv_ident.core.identification.batch import _record, parameter_scale
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_STATE, State, STATE_NAMES
 
 # outputs fitted by default: the velocities, roll and pitch (bounded by the dynamics)
@@ -76,11 +80,12 @@ class OutputErrorResult:
     wall_s: float
 
     @property
-    def theta_std(self):
+    def theta_std(self) -> np.ndarray:
         return np.sqrt(np.diag(self.cov))
 
 
-def segment_starts(t, Y, n_sub, segment_s):
+def segment_starts(t: np.ndarray, Y: np.ndarray, n_sub: np.ndarray,
+                   segment_s: float) -> np.ndarray:
     """(N,) bool: the samples a segment starts from: the first sample whose START_CHANNELS are
     all measured, then the first such sample segment_s (s) or more after the last start, and
     the first such sample after a gap (n_sub == 0)."""
@@ -98,7 +103,7 @@ def segment_starts(t, Y, n_sub, segment_s):
     return start
 
 
-def segment_index(start, n_sub):
+def segment_index(start: np.ndarray, n_sub: np.ndarray) -> np.ndarray:
     """(N,) int: the segment each sample belongs to (0, 1, ... in order of the starts), -1
     before the first start and after a gap (n_sub == 0) until the next start."""
     seg = np.full(len(start), -1, dtype=np.int64)
@@ -115,9 +120,11 @@ def segment_index(start, n_sub):
     return seg
 
 
-def output_error(model, t, Y, U, theta0, noise_std, T=None, segment_s=DEFAULT_SEGMENT_S,
-                 channels=FIT_CHANNELS, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE,
-                 max_nfev=50):
+def output_error(model: Model, t: np.ndarray, Y: np.ndarray, U: np.ndarray, theta0: ArrayLike,
+                 noise_std: ArrayLike, T: float | None = None,
+                 segment_s: float = DEFAULT_SEGMENT_S, channels: Sequence[int] = FIT_CHANNELS,
+                 max_step: float | None = None, max_bridge: float = DEFAULT_MAX_BRIDGE,
+                 max_nfev: int = 50) -> OutputErrorResult:
     """Output-error estimate of model.theta_names (module docstring).
 
     Parameters
@@ -169,7 +176,7 @@ def output_error(model, t, Y, U, theta0, noise_std, T=None, segment_s=DEFAULT_SE
     ic_scale = noise_std[ic]
     weights = 1.0 / noise_std[channels]
 
-    def errors(z):
+    def errors(z: np.ndarray) -> np.ndarray:
         X0 = X0_measured.copy()
         X0[:, ic] += z[p:].reshape(n_seg, len(ic)) * ic_scale
         simulate_segments(z[:p] * scale, X0, U, seg, n_sub, h, cm, X)
@@ -177,7 +184,7 @@ def output_error(model, t, Y, U, theta0, noise_std, T=None, segment_s=DEFAULT_SE
         e[:, angle] = wrap_angle(np.where(np.isfinite(e[:, angle]), e[:, angle], 0.0))
         return e
 
-    def residuals(z, w):
+    def residuals(z: np.ndarray, w: np.ndarray) -> np.ndarray:
         r = (errors(z) * w)[use]
         # a segment that left the model's domain counts as a large miss (the search backs off)
         return np.where(np.isfinite(r), r, 1e3)
@@ -223,7 +230,7 @@ def output_error(model, t, Y, U, theta0, noise_std, T=None, segment_s=DEFAULT_SE
                              nfev=nfev, wall_s=time.perf_counter() - t0)
 
 
-def jacobian_sparsity(seg, use, p, n_seg, n_ic):
+def jacobian_sparsity(seg: np.ndarray, use: np.ndarray, p: int, n_seg: int, n_ic: int) -> Any:
     """Sparsity (M, p + n_seg n_ic) of the residuals' Jacobian: every residual depends on theta,
     and on the initial-state corrections of its own segment only (what lets the finite
     differences perturb the starts of all segments at once)."""

@@ -9,25 +9,38 @@ the data, the EKF pass, the batch refinement with error bars the residuals suppo
 model, identifiability and a diagnosis whose first message says whether the error bars can be
 trusted.
 """
+from collections.abc import Callable
 import math
 import time
+from typing import Any
 
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
+from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.filter.timing import nominal_sample_time
 from auv_ident.core.identification.diagnosis import assess
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
-from auv_ident.core.identification.results import Identification
+from auv_ident.core.identification.results import (
+    Identification,
+    PassEstimate,
+    Record,
+    SelectionRequest,
+)
 from auv_ident.core.identification.selection import identify_auto
+from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import State
 
 JUDGE_NIS = ('configured', 'reported', None)
 
 
-def identify_with_diagnosis(model, cfg, runs, T=None, refine_pass=True, progress=None,
-                            hist_every=0, ekf_pass=None, auto=None, judge_nis='configured',
-                            truth=None):
+def identify_with_diagnosis(model: Model | None, cfg: FilterConfig, runs: list[Record],
+                            T: float | None = None, refine_pass: bool = True,
+                            progress: Callable[..., Any] | None = None, hist_every: int = 0,
+                            ekf_pass: PassEstimate | None = None,
+                            auto: SelectionRequest | None = None,
+                            judge_nis: str | None = 'configured',
+                            truth: np.ndarray | None = None) -> Identification:
     """Identify with the noise model from the data, judge, split the current off.
 
     model : the Model identified (None with `auto`)

@@ -33,14 +33,17 @@ against what the vehicle file says:
 
 The water current's components are not vehicle coefficients and are not judged here.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import CURRENT_NAMES
-from auv_ident.core.model.vehicle import EQUATIONS, FACTOR_INDEX
+from auv_ident.core.model.vehicle import Coefficient, EQUATIONS, FACTOR_INDEX, Vehicle
 
 DEFAULT_RELATIVE_SD = 1.0   # prior 1-sigma of a file value, relative to its magnitude
 DEFAULT_Z = 3.0             # how many combined sigma make an estimate implausible
@@ -57,11 +60,11 @@ class Implausible:
     reason: str
 
 
-def _speed_factors():
+def _speed_factors() -> set[int]:
     return {FACTOR_INDEX['u'], FACTOR_INDEX['|u|'], FACTOR_INDEX['U']}
 
 
-def is_self_damping(coefficient):
+def is_self_damping(coefficient: Coefficient) -> bool:
     """True if the coefficient (core.model.vehicle.Coefficient) is a self-damping or diagonal
     added-mass term (module docstring): its value must not be positive."""
     e = coefficient.equation
@@ -81,24 +84,26 @@ def is_self_damping(coefficient):
 FIN_FACTORS = frozenset(FACTOR_INDEX[f] for f in ('dr', 'ds', 'db', 'dbp', 'dbs', 'db2'))
 
 
-def is_control_derivative(coefficient):
+def is_control_derivative(coefficient: Coefficient) -> bool:
     """True for a term with a fin angle in its multiplier (its sign is the file's)."""
     return (not coefficient.is_added_mass
             and any(f in FIN_FACTORS for f in coefficient.factors))
 
 
-def prior_sd(vehicle, name):
+def prior_sd(vehicle: Vehicle, name: str) -> float:
     """1-sigma of the vehicle file's value of `name` as a prior, in the file's units (NaN when
     the file value is 0 and no absolute sd is given: no prior check)."""
-    block = vehicle.raw.get('prior') or {}
+    block: dict[str, Any] = vehicle.raw.get('prior') or {}
     if not isinstance(block, dict):
         raise ConfigError(f'vehicle {vehicle.name!r}: prior must be a mapping, got {block!r}')
-    per = (block.get('coefficients') or {}).get(name) or {}
+    per: dict[str, Any] = (block.get('coefficients') or {}).get(name) or {}
     value = vehicle.values[vehicle.index(name)]
     if 'sd' in per:
         sd = float(per['sd'])
     else:
-        rel = float(per.get('relative_sd', block.get('relative_sd', DEFAULT_RELATIVE_SD)))
+        rel_given = (per['relative_sd'] if 'relative_sd' in per
+                     else block.get('relative_sd', DEFAULT_RELATIVE_SD))
+        rel = float(rel_given)
         sd = rel * abs(value) if value != 0.0 else math.nan
     if not (math.isnan(sd) or (math.isfinite(sd) and sd > 0.0)):
         raise ConfigError(f'vehicle {vehicle.name!r}: prior of {name} gives 1-sigma {sd!r}; '
@@ -106,7 +111,10 @@ def prior_sd(vehicle, name):
     return sd
 
 
-def implausible_coefficients(vehicle, names, estimate, std, z=DEFAULT_Z):
+def implausible_coefficients(vehicle: Vehicle, names: Sequence[str],
+                             estimate: Sequence[float] | np.ndarray,
+                             std: Sequence[float] | np.ndarray,
+                             z: float = DEFAULT_Z) -> list[Implausible]:
     """The identified coefficients that are not plausible for `vehicle` (module docstring):
     a list of :class:`Implausible`, empty when every one is. names, estimate, std: the
     identified parameters (current components are skipped) with their 1-sigma."""
@@ -143,11 +151,11 @@ def implausible_coefficients(vehicle, names, estimate, std, z=DEFAULT_Z):
     return out
 
 
-def _kind(c):
+def _kind(c: Coefficient) -> str:
     return 'diagonal added mass' if c.is_added_mass else 'self-damping term'
 
 
-def what_to_check(findings, frame_hint=''):
+def what_to_check(findings: Sequence[Implausible], frame_hint: str = '') -> str:
     """One sentence for the user: what to check when findings are not plausible."""
     if not findings:
         return ''
@@ -161,15 +169,15 @@ def what_to_check(findings, frame_hint=''):
 ABOVE_SURFACE_M = 1.0   # m: a submerged run's median depth this far above the surface is no depth
 
 
-def depth_contradicts_down(z, heave_free=True):
+def depth_contradicts_down(z: ArrayLike, heave_free: bool = True) -> str:
     """A sentence when the run's NED depths z (m, down positive; NaN: not measured) put a
     submerged vehicle above the water (median z < -ABOVE_SURFACE_M): the data's 'down' is up,
     e.g. an ENU (REP-103) run read as NED; '' otherwise, or for a vehicle without heave."""
-    z = np.asarray(z, dtype=float)
-    z = z[np.isfinite(z)]
-    if not heave_free or z.size == 0:
+    depths = np.asarray(z, dtype=float)
+    depths = depths[np.isfinite(depths)]
+    if not heave_free or depths.size == 0:
         return ''
-    median = float(np.median(z))
+    median = float(np.median(depths))
     if median >= -ABOVE_SURFACE_M:
         return ''
     return (f'the depth z (NED, down positive) has a median of {median:.3g} m: the vehicle '

@@ -21,6 +21,7 @@ import math
 from typing import Any, Callable, Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.model.current import current_estimate, CurrentEstimate
 from auv_ident.core.model.hydrodynamics import Model
@@ -175,12 +176,12 @@ class NoiseFit:
             'refined_cost_per_residual': _finite(self.refine_cost)}
 
 
-def _finite(x):
+def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def _floats(a):
-    return None if a is None else [float(v) for v in a]
+def _floats(a: ArrayLike | None) -> list[float] | None:
+    return None if a is None else [float(v) for v in np.asarray(a, dtype=float)]
 
 
 @dataclass

@@ -18,7 +18,9 @@ runs : each a measured run (``t``, ``x`` (N, 12), ``inputs['thrust']`` (N,) N) o
 ``(x (N, 12), thrust (N,))``. The model is a callable: ``thrust(x)`` with x (12,) or (N, 12)
 gives N.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -57,11 +59,11 @@ class ThrustModel:
     loro_rms: list = field(default_factory=list)
     n_samples: int = 0
 
-    def __call__(self, x):
+    def __call__(self, x: np.ndarray) -> Any:
         x = np.asarray(x, dtype=float)
         return regressors(x, self.terms) @ self.coefficients
 
-    def formula(self):
+    def formula(self) -> str:
         """The model as text, e.g. 'T = 56.0 - 4.47 u - 4.95 u^2 [N]'."""
         sym = {'1': '', 'u': ' u', 'uu': ' u^2', 'v': ' v', 'r': ' r', 'vv': ' v^2',
                'rr': ' r^2', 'vr': ' v r'}
@@ -72,13 +74,13 @@ class ThrustModel:
                          (' - ' if c < 0 else ' + ') + s)
         return 'T = ' + ''.join(parts) + ' [N] (u, v m/s, r rad/s)'
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         return {'terms': list(self.terms), 'coefficients': [float(c) for c in self.coefficients],
                 'rms_N': self.rms, 'loro_rms_N': list(self.loro_rms),
                 'n_samples': self.n_samples, 'formula': self.formula()}
 
 
-def regressors(x, terms):
+def regressors(x: np.ndarray, terms: Sequence[str]) -> np.ndarray:
     """(N, len(terms)) (or (len(terms),) for one state) regressor matrix of the states x."""
     x = np.asarray(x, dtype=float)
     if x.shape[-1] != N_STATE:
@@ -87,7 +89,7 @@ def regressors(x, terms):
     return np.stack([TERMS[k](u, v, r) for k in terms], axis=-1)
 
 
-def _run_data(run):
+def _run_data(run: Any) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(run, tuple) and len(run) == 2:
         x, thrust = (np.asarray(a, dtype=float) for a in run)
     else:
@@ -103,7 +105,7 @@ def _run_data(run):
     return x[ok], thrust[ok]
 
 
-def _lstsq(A, y):
+def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     coef, _, rank, _ = np.linalg.lstsq(A, y, rcond=None)
     if rank < A.shape[1]:
         raise DataError(f'the thrust data cannot separate the terms (regressor rank {rank} of '
@@ -111,7 +113,7 @@ def _lstsq(A, y):
     return coef
 
 
-def fit_thrust_model(runs, terms=DEFAULT_TERMS):
+def fit_thrust_model(runs: Sequence[Any], terms: Sequence[str] = DEFAULT_TERMS) -> ThrustModel:
     """Least-squares thrust model (module docstring) over the runs' samples.
 
     Parameters

@@ -38,17 +38,18 @@ EKF's own compiled update (ekf.update) is used.
 from dataclasses import dataclass
 import math
 import time
+from typing import Any
 
 import numpy as np
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DivergenceError, DomainError
-from auv_ident.core.filter import ekf as K
-from auv_ident.core.filter.augmented import AugmentedEKF
+from auv_ident.core.filter import ekf
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.propagation import propagate_sigma_points
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
 from auv_ident.core.identification.batch import _record, _timeline
-from auv_ident.core.model.hydrodynamics import OK, STATUS_TEXT
+from auv_ident.core.model.hydrodynamics import Model, OK, STATUS_TEXT
 from auv_ident.core.model.state import EULER, Input, N_STATE
 
 
@@ -62,7 +63,7 @@ class UnscentedSettings:
     beta: float = 2.0
     kappa: float = 0.0
 
-    def weights(self, n):
+    def weights(self, n: int) -> tuple[float, np.ndarray, np.ndarray]:
         """(lambda, W^m (2n+1,), W^c (2n+1,)) for a state of size n."""
         a, b, k = float(self.alpha), float(self.beta), float(self.kappa)
         lam = a * a * (n + k) - n
@@ -91,11 +92,11 @@ class UkfResult:
     wall_s: float
 
     @property
-    def theta_std(self):
+    def theta_std(self) -> np.ndarray:
         return np.sqrt(np.diag(self.theta_cov))
 
 
-def sigma_points(xa, P, gamma):
+def sigma_points(xa: np.ndarray, P: np.ndarray, gamma: float) -> np.ndarray:
     """(2n+1, n) sigma points x*, x* +- gamma S[:, i] with S the lower Cholesky factor of P.
     Raises DivergenceError when P is not positive definite."""
     try:
@@ -106,7 +107,8 @@ def sigma_points(xa, P, gamma):
     return np.vstack([xa[None, :], xa[None, :] + D, xa[None, :] - D])
 
 
-def unscented_mean_cov(X, Wm, Wc):
+def unscented_mean_cov(X: np.ndarray, Wm: np.ndarray,
+                       Wc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean (n,) and covariance (n, n) of sigma points X (2n+1, n), the Euler angles
     averaged and differenced on the circle (module docstring)."""
     ref = X[0, EULER]
@@ -124,7 +126,7 @@ class MeasurementUpdate:
     innovations wrapped, channels fused one at a time for a diagonal R, which for a linear
     measurement is the batch update, Joseph form), with its scratch allocated once."""
 
-    def __init__(self, n, ws):
+    def __init__(self, n: int, ws: Any) -> None:
         self.ws = ws
         self.xa = np.empty(n)
         self.P = np.empty((n, n))
@@ -132,18 +134,21 @@ class MeasurementUpdate:
         self.S_diag = np.empty(N_STATE)
         self.white = np.empty(N_STATE)
 
-    def __call__(self, xa, P, y, measured, R):
+    def __call__(self, xa: np.ndarray, P: np.ndarray, y: np.ndarray, measured: np.ndarray,
+                 R: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
         """(xa+, P+, NIS, channels used) after fusing the finite measured channels of y (12,).
         Raises DivergenceError when the posterior is not a covariance."""
-        st, nis, m = K.update(xa, P, np.ascontiguousarray(y, dtype=float), measured, R,
+        st, nis, m = ekf.update(xa, P, np.ascontiguousarray(y, dtype=float), measured, R,
                               self.xa, self.P, self.innov, self.S_diag, self.white, self.ws)
         if st != OK:
             raise DivergenceError('UKF: the measurement update lost positive definiteness')
         return self.xa.copy(), self.P.copy(), float(nis), int(m)
 
 
-def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE,
-            unscented=None):
+def run_ukf(model: Model, cfg: FilterConfig, t: np.ndarray, Y: np.ndarray, U: np.ndarray,
+            T: float | None = None, max_step: float | None = None,
+            max_bridge: float = DEFAULT_MAX_BRIDGE,
+            unscented: 'UnscentedSettings | None' = None) -> UkfResult:
     """Run the augmented UKF over a record, started from Y[0] as the EKF pass is.
 
     Parameters
@@ -176,7 +181,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
     lam, Wm, Wc = (unscented or UnscentedSettings()).weights(n)
     gamma = math.sqrt(n + lam)
     Q, R, measured = settings.Q0, settings.R0, np.asarray(settings.measured, dtype=bool)
-    ws = K.new_workspace(n, model.compiled.c0.shape[0])
+    ws = ekf.new_workspace(n, model.compiled.c0.shape[0])
     X_out = np.empty((2 * n + 1, n))
     kalman_update = MeasurementUpdate(n, ws)
     cm = model.compiled
@@ -188,7 +193,7 @@ def run_ukf(model, cfg, t, Y, U, T=None, max_step=None, max_bridge=DEFAULT_MAX_B
             if k > 0:
                 if timeline.n_sub[k] == 0:       # a gap: restart the vehicle states
                     xa, P = xa.copy(), P.copy()
-                    K.restart_states(xa, P, timeline.x0[r], timeline.sd0[r])
+                    ekf.restart_states(xa, P, timeline.x0[r], timeline.sd0[r])
                     r += 1
                 for _ in range(timeline.n_sub[k]):
                     X = sigma_points(xa, P, gamma)

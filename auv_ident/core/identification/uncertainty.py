@@ -24,7 +24,9 @@ Real sensors are coloured and their level is not what the file says, so:
 Everything here is plain numpy/scipy on arrays (no filter state), so the refinement, the
 methods comparison and the report share it.
 """
+from collections.abc import Sequence
 import math
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -37,15 +39,18 @@ LJUNG_BOX_LAGS = 20             # lags of the whiteness test
 WHITENESS_P = 1e-3              # p-value below which a channel's residuals are not white
 MAX_BANDWIDTH_FRACTION = 0.1    # the sandwich's lag window is at most this fraction of N
 
+# per coefficient name, its verdict (identifiability(): the 1-sigma, correlations, ...)
+Verdicts = dict[str, dict[str, Any]]
 
-def _finite_channels(r):
+
+def _finite_channels(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N, m) residuals with NaN where missing -> same array with NaN set to 0, and mask."""
     r = np.asarray(r, dtype=float)
     ok = np.isfinite(r)
     return np.where(ok, r, 0.0), ok
 
 
-def _lagged_products(a, b, max_lag):
+def _lagged_products(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     """sum_k a[k + l] b[k] for l = 0..max_lag (FFT, zero-padded: no wrap-around)."""
     n = a.shape[0]
     nfft = 1 << int(2 * n - 1).bit_length()
@@ -53,7 +58,7 @@ def _lagged_products(a, b, max_lag):
     return np.fft.irfft(spec, nfft)[:max_lag + 1]
 
 
-def autocorrelation(x, max_lag):
+def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
     """Sample autocorrelation of one channel for lags 0..max_lag (NaN samples skipped).
 
     Parameters
@@ -85,7 +90,7 @@ def autocorrelation(x, max_lag):
     return out
 
 
-def ljung_box(rho, n):
+def ljung_box(rho: np.ndarray, n: int) -> tuple[float, float]:
     """Ljung-Box statistic and p-value of autocorrelations rho[1..h] from n samples."""
     h = len(rho) - 1
     lags = np.arange(1, h + 1)
@@ -94,7 +99,8 @@ def ljung_box(rho, n):
     return q, float(chi2.sf(q, h))
 
 
-def noise_model(white, dt, names=None):
+def noise_model(white: np.ndarray, dt: float,
+                names: Sequence[str] | None = None) -> dict[str, dict[str, Any]]:
     """What the whitened innovations say about the noise model, per channel.
 
     Parameters
@@ -137,7 +143,7 @@ def noise_model(white, dt, names=None):
     return out
 
 
-def bandwidth(white, max_lag=None):
+def bandwidth(white: np.ndarray, max_lag: int | None = None) -> int:
     """Lag window (samples) for :func:`sandwich_covariance`, from the residuals' correlation.
 
     Andrews (1991)'s plug-in rule for the Bartlett kernel with an AR(1) fit per channel:
@@ -159,7 +165,7 @@ def bandwidth(white, max_lag=None):
     return int(min(cap, max(1, math.ceil(best))))
 
 
-def long_run_variance(g, lags):
+def long_run_variance(g: np.ndarray, lags: int) -> float:
     """Long-run variance of one series of scores g (N,) (NaN-free), the Newey-West estimate
     with Bartlett weights: sum_k g_k^2 + 2 sum_{l=1..L} (1 - l/(L+1)) sum_k g_k g_{k-l}
     (:func:`sandwich_covariance`'s B for one parameter; lags L in samples)."""
@@ -170,7 +176,7 @@ def long_run_variance(g, lags):
     return float(ac[0] + 2.0 * np.sum(w[1:] * ac[1:]))
 
 
-def with_gaps(parts, gap):
+def with_gaps(parts: Sequence[np.ndarray], gap: int) -> np.ndarray:
     """The arrays of several runs (each (N_i, ...)) stacked with `gap` rows of NaN between
     consecutive runs: autocorrelations and cross-correlations over at most `gap` lags
     (autocorrelation(), input_correlation(), which skip NaN samples) then never pair samples
@@ -185,12 +191,13 @@ def with_gaps(parts, gap):
     return np.concatenate(out)
 
 
-def split_rows(a, bounds):
+def split_rows(a: np.ndarray, bounds: Sequence[int]) -> list[np.ndarray]:
     """The list of a[bounds[i]:bounds[i + 1]]: stacked runs back into one array per run."""
     return [a[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
 
 
-def sandwich_covariance(J, white, lags=None, bounds=None):
+def sandwich_covariance(J: np.ndarray, white: np.ndarray, lags: int | None = None,
+                        bounds: Sequence[int] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """Coefficient covariance of the least-squares fit, valid under correlated residuals.
 
     Parameters
@@ -242,7 +249,9 @@ def sandwich_covariance(J, white, lags=None, bounds=None):
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
 
 
-def identifiability(J, estimate, names, cov=None, absolute_std=None):
+def identifiability(J: np.ndarray, estimate: np.ndarray, names: Sequence[str],
+                    cov: np.ndarray | None = None,
+                    absolute_std: np.ndarray | None = None) -> Verdicts:
     """Per coefficient: how well the run determines it, from its sensitivities.
 
     Parameters
@@ -275,7 +284,9 @@ def identifiability(J, estimate, names, cov=None, absolute_std=None):
                                     absolute_std=absolute_std)
 
 
-def verdicts_from_covariance(cov, estimate, names, informed=None, absolute_std=None):
+def verdicts_from_covariance(cov: np.ndarray, estimate: np.ndarray, names: Sequence[str],
+                             informed: np.ndarray | None = None,
+                             absolute_std: np.ndarray | None = None) -> Verdicts:
     """The verdicts of :func:`identifiability` from a coefficient covariance alone (the batch
     refinement's, or the live EKF's P).
 
@@ -321,7 +332,10 @@ def verdicts_from_covariance(cov, estimate, names, informed=None, absolute_std=N
     return out
 
 
-def input_correlation(white, U, max_lag, names=None, input_names=None):
+def input_correlation(white: np.ndarray, U: np.ndarray, max_lag: int,
+                      names: Sequence[str] | None = None,
+                      input_names: Sequence[str] | None = None,
+                      ) -> list[tuple[float, str, str, int]]:
     """Cross-correlation of the residuals with the inputs: does the model leave out something
     the inputs drive? (the residual test of system identification, e.g. MATLAB's `resid`).
 
@@ -346,7 +360,7 @@ def input_correlation(white, U, max_lag, names=None, input_names=None):
     names = list(names) if names is not None else [f'c{j}' for j in range(m)]
     input_names = (list(input_names) if input_names is not None
                    else [f'u{i}' for i in range(U.shape[1])])
-    out = []
+    out: list[tuple[float, str, str, int]] = []
     acf_lags = max(max_lag, LJUNG_BOX_LAGS) * 4
     acf_u = {}
     for i in range(U.shape[1]):

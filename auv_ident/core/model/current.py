@@ -15,13 +15,19 @@ while the coefficients stay, and that is what tells the two apart. A run that ke
 heading therefore leaves the current (and the coefficients it correlates with) weakly
 determined: :func:`current_identifiability` says so, and what to fly instead.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import CURRENT_NAMES, N_CURRENT
+
+if TYPE_CHECKING:
+    from auv_ident.core.model.hydrodynamics import Model
 
 CURRENT_OPTIONS = ('estimate', 'none')     # or 'N,E[,D]': a known current (m/s)
 DEFAULT_CURRENT = 'estimate'
@@ -52,13 +58,13 @@ class CurrentOption:
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(N_CURRENT))
 
     @property
-    def names(self):
+    def names(self) -> list[str]:
         """The identified components' parameter names (core.model.state.CURRENT_NAMES)."""
         if not self.estimate:
             return []
         return list(CURRENT_NAMES[:3 if self.estimate_down else 2])
 
-    def describe(self):
+    def describe(self) -> str:
         if self.estimate:
             return ('estimated (north, east' + (', down' if self.estimate_down else '; down 0')
                     + ')')
@@ -67,7 +73,8 @@ class CurrentOption:
         return 'none (still water)'
 
 
-def parse_current(text, estimate_down=False, what='current'):
+def parse_current(text: 'str | CurrentOption', estimate_down: bool = False,
+                  what: str = 'current') -> CurrentOption:
     """A :class:`CurrentOption` from the option's text: 'estimate', 'none' or 'N,E[,D]' (m/s,
     NED, where the water goes). Raises ConfigError naming `what` for anything else."""
     if isinstance(text, CurrentOption):
@@ -92,7 +99,8 @@ def parse_current(text, estimate_down=False, what='current'):
     return CurrentOption(False, False, fixed)
 
 
-def body_current(current, phi, theta, psi):
+def body_current(current: Sequence[float] | np.ndarray, phi: ArrayLike, theta: ArrayLike,
+                 psi: ArrayLike) -> np.ndarray:
     """R(Theta)^T v_c: the current (3,) m/s NED in the body frame, shape (..., 3) for angles of
     shape (...,) rad (Fossen 2021 eq. 2.18, ZYX)."""
     cf, sf = np.cos(phi), np.sin(phi)
@@ -105,7 +113,7 @@ def body_current(current, phi, theta, psi):
                      -sf * b + cf * (st * a + ct * d)], axis=-1)
 
 
-def ned_current(v_body, phi, theta, psi):
+def ned_current(v_body: ArrayLike, phi: float, theta: float, psi: float) -> np.ndarray:
     """R(Theta) v_b: a body-frame velocity (3,) in NED (the inverse of body_current)."""
     cf, sf = math.cos(phi), math.sin(phi)
     ct, st = math.cos(theta), math.sin(theta)
@@ -116,7 +124,7 @@ def ned_current(v_body, phi, theta, psi):
     return R @ np.asarray(v_body, dtype=float)
 
 
-def heading_span_deg(psi):
+def heading_span_deg(psi: ArrayLike) -> float:
     """The arc of headings a run covers (deg, 0..360): 360 minus the largest gap between the
     sorted headings on the circle. psi (N,) rad, NaN skipped."""
     a = np.asarray(psi, dtype=float)
@@ -150,17 +158,18 @@ class CurrentEstimate:
     identifiability: dict = field(default_factory=dict)
 
     @property
-    def speed(self):
+    def speed(self) -> float:
         """Horizontal speed of the current (m/s)."""
         return float(math.hypot(self.estimate[0], self.estimate[1]))
 
     @property
-    def direction_deg(self):
+    def direction_deg(self) -> float:
         """Where the water goes, deg clockwise from north (0..360)."""
         return float(np.degrees(math.atan2(self.estimate[1], self.estimate[0])) % 360.0)
 
 
-def current_identifiability(psi, names, cov, std, coefficient_names=()):
+def current_identifiability(psi: ArrayLike, names: Sequence[str], cov: ArrayLike, std: ArrayLike,
+                            coefficient_names: Sequence[str] = ()) -> dict[str, Any]:
     """Whether the run separates the identified current from the coefficients.
 
     Parameters
@@ -205,7 +214,9 @@ def current_identifiability(psi, names, cov, std, coefficient_names=()):
             'correlated_with': partner}
 
 
-def current_estimate(model, estimate, cov, ekf_estimate, ekf_cov, psi):
+def current_estimate(model: 'Model', estimate: ArrayLike, cov: ArrayLike,
+                     ekf_estimate: ArrayLike, ekf_cov: ArrayLike,
+                     psi: ArrayLike) -> CurrentEstimate | None:
     """The water current of a parameter vector of `model` (coefficients, then current
     components), as a :class:`CurrentEstimate` (None if the model identifies no current and
     has none given). estimate, cov, ekf_estimate, ekf_cov : the final and the EKF pass's

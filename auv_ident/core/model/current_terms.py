@@ -1,8 +1,8 @@
-"""The water current's terms of the compiled model (core/model/hydrodynamics.py has the equations):
-the
+"""The water current's terms of the compiled model (model/hydrodynamics.py has the equations): the
 current in the body frame with its derivatives, and what a current adds to f and its Jacobians
-when the state's velocities are over ground. Kept apart from model.py, which calls them, so
-that each module stays readable; nothing here allocates (the kernels of model.py's kind).
+when the state's velocities are over ground. Kept apart from hydrodynamics.py, which calls
+them, so that each module stays readable; nothing here allocates (the kernels of
+hydrodynamics.py's kind).
 """
 import math
 
@@ -10,7 +10,7 @@ from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.model.monomials import ZZ_DU_DV
 from auv_ident.core.model.state import N_CURRENT, N_NU, N_STATE, State
 
-kernel = cached_njit(_nrt=False)     # as model.kernel (no reference counting)
+kernel = cached_njit(_nrt=False)     # as hydrodynamics.kernel (no reference counting)
 
 _U, _V, _W, _P, _Q, _R = (int(s) for s in (State.U, State.V, State.W, State.P, State.Q, State.R))
 _PHI = int(State.PHI)

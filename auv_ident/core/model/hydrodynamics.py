@@ -39,9 +39,12 @@ Still water with no current identified (cm.current == CURRENT_NONE) runs none of
 Domain: the kernels return a status code instead of NaN (see STATUS_TEXT).
 """
 from collections import namedtuple
+from collections.abc import Sequence
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import DimensionError, DomainError
@@ -94,6 +97,7 @@ from auv_ident.core.model.vehicle import (
     P_YG,
     P_ZB,
     P_ZG,
+    Vehicle,
 )
 
 # State and input indices, and the places in the factor vector z (vehicle.FACTORS), as plain
@@ -104,7 +108,6 @@ _THRUST = int(Input.THRUST)
 _Z_ABS = FACTOR_INDEX['|u|']        # |u| .. |r|
 _Z_FINS = FACTOR_INDEX['dr']        # dr ds db dbp dbs
 _Z_DBP, _Z_DBS, _Z_DB2 = FACTOR_INDEX['dbp'], FACTOR_INDEX['dbs'], FACTOR_INDEX['db2']
-
 
 
 # The hot kernels are compiled without numba's reference counting (its `_nrt` option; numba is
@@ -596,8 +599,9 @@ class Model:
         default) or through the water (water-track DVL).
     """
 
-    def __init__(self, vehicle, theta_names=(), mass_inverse='default', coefficient_values=None,
-                 current=None, velocity_reference='ground'):
+    def __init__(self, vehicle: Vehicle, theta_names: Sequence[str] = (),
+                 mass_inverse: str = 'default', coefficient_values: ArrayLike | None = None,
+                 current: ArrayLike | None = None, velocity_reference: str = 'ground') -> None:
         from auv_ident.core.errors import ConfigError
         self.vehicle = vehicle
         names = list(theta_names)
@@ -649,7 +653,8 @@ class Model:
                               '--mass-inverse exact')
         self.mass_inverse = mi
         self.recompute_minv = bool(am_theta)
-        self.Minv = (vehicle.Minv_literal.copy() if mi == 'mss_literal'
+        literal = vehicle.Minv_literal      # the file's 6x6 with mss_literal (vehicle.py)
+        self.Minv = (literal.copy() if mi == 'mss_literal' and literal is not None
                      else np.linalg.inv(vehicle.mass_matrix(self.c)))
         # the vehicle's compiled monomial kernel, and per identified parameter its
         # [equation, index in c] (equation -1: added mass or current, which have no monomial)
@@ -662,20 +667,21 @@ class Model:
         self.compiled = self._compiled(self._c_ext(None), self.theta_idx, self.theta_terms,
                                        self.theta_pos)
 
-    def _compiled(self, c0, theta_idx, theta_terms, theta_pos):
+    def _compiled(self, c0: np.ndarray, theta_idx: np.ndarray, theta_terms: np.ndarray,
+                  theta_pos: np.ndarray) -> CompiledModel:
         v = self.vehicle
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
                              self.Minv, self.recompute_minv, v.M_RB, theta_pos,
                              self.current_mode, self.n_coef, self.held)
 
-    def _c_ext(self, theta):
+    def _c_ext(self, theta: ArrayLike | None) -> np.ndarray:
         """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""
         c = np.concatenate([self.c, self.current])
         if theta is not None and self.p:
             c[self.theta_idx] = theta
         return c
 
-    def compiled_fixed(self, theta):
+    def compiled_fixed(self, theta: ArrayLike) -> CompiledModel:
         """CompiledModel of a filter over the 12 vehicle states only, with this model's
         parameters theta fixed at the given values (p,) (the batch refinement's candidates).
         M^-1 is recomputed at every step when theta holds added-mass coefficients."""
@@ -684,26 +690,32 @@ class Model:
                               -np.ones(self.n_coef + N_CURRENT, dtype=np.int64))
 
     @property
-    def theta_true(self):
-        """The model's values of the chosen parameters (the file's coefficients, the given
-        current)."""
+    def theta_file(self) -> np.ndarray:
+        """The model's own values of the chosen parameters (p,): the vehicle file's
+        coefficients and the current the model was given (the truth of a simulation, the
+        prior of an identification)."""
         return self._c_ext(None)[self.theta_idx]
 
-    def coefficients_with(self, theta):
+    # the former name, kept while branches that still read it are merged (analysis/,
+    # identification/selection.py); the file's values are no truth of a measured run
+    theta_true = theta_file
+
+    def coefficients_with(self, theta: ArrayLike) -> np.ndarray:
         """The vehicle's coefficient values (n_coef,) with theta (p,) in place (a current in
         theta is left out)."""
         return self._c_ext(theta)[:self.n_coef].copy()
 
-    def current_with(self, theta):
+    def current_with(self, theta: ArrayLike) -> np.ndarray:
         """The water current (3,), m/s NED, with theta (p,) in place."""
         return self._c_ext(theta)[self.n_coef:].copy()
 
-    def check(self, status, x, ui):
+    def check(self, status: int, x: np.ndarray, ui: np.ndarray) -> None:
         if status != OK:
             raise DomainError(f'{STATUS_TEXT[status]} (x = {np.array2string(np.asarray(x))}, '
                               f'inputs = {np.array2string(np.asarray(ui))})')
 
-    def _evaluate(self, x, ui, theta, want_jac):
+    def _evaluate(self, x: ArrayLike, ui: ArrayLike, theta: ArrayLike | None,
+                  want_jac: bool) -> tuple[int, np.ndarray, np.ndarray, Any, Any, Any]:
         x = np.ascontiguousarray(x, dtype=float)
         ui = np.ascontiguousarray(ui, dtype=float)
         if ui.shape != (N_INPUT,):     # the kernel reads N_INPUT entries unchecked
@@ -724,18 +736,19 @@ class Model:
                               np.empty(ZZ_LEN), np.empty(len(c)))
         return st, x, ui, xdot, A, Bt
 
-    def f(self, x, ui, theta=None):
+    def f(self, x: ArrayLike, ui: ArrayLike, theta: ArrayLike | None = None) -> np.ndarray:
         """x_dot (12,) at state x (12,), inputs ui (7,) (saturated inside), parameters theta."""
         st, x, ui, xdot, _, _ = self._evaluate(x, ui, theta, False)
         self.check(st, x, ui)
         return xdot
 
-    def jacobians(self, x, ui, theta=None):
+    def jacobians(self, x: ArrayLike, ui: ArrayLike,
+                  theta: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x_dot, df/dx (12x12), df/dtheta (12xp))."""
         st, x, ui, xdot, A, Bt = self._evaluate(x, ui, theta, True)
         self.check(st, x, ui)
         return xdot, A, Bt
 
-    def status(self, x, ui):
+    def status(self, x: ArrayLike, ui: ArrayLike) -> int:
         """Status code of f at (x, ui): OK or one of ERR_* (STATUS_TEXT explains)."""
         return self._evaluate(x, ui, None, False)[0]

@@ -18,14 +18,17 @@ has one term, vehicle.py), and the caller gathers df/dtheta from those of theta
 (Model.theta_terms).
 """
 from collections import defaultdict
+from collections.abc import Iterator
 import hashlib
 import importlib.util
 import os
 import sys
+from typing import Any
 
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
+import numpy as np
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.safe_files import ensure_content, make_private, private_candidates
@@ -47,7 +50,8 @@ SIG = types.void(types.float64[::1], types.float64[::1], types.boolean, types.fl
 
 MONO_TYPE = types.FunctionType(SIG)
 
-_loaded = {}    # key -> cfunc; kept for the life of the process (its address is handed out)
+# key -> cfunc; kept for the life of the process (its address is handed out)
+_loaded: dict[str, Any] = {}
 
 
 @intrinsic
@@ -69,7 +73,7 @@ def kernel_at(typingctx, address):
     return MONO_TYPE(address), codegen
 
 
-def _factor_derivatives(f):
+def _factor_derivatives(f: int) -> list[tuple[int, str]]:
     """[(state column, source of the factor ' * dz_f/dx_column')] of factor f: '' where the
     derivative is 1 (u..r: a product by 1.0 is exact, so leaving it out changes no bit); none
     for the inputs (fins, their sum, the thrust)."""
@@ -82,7 +86,7 @@ def _factor_derivatives(f):
     return []
 
 
-def kernel_source(terms_i, terms_s):
+def kernel_source(terms_i: np.ndarray, terms_s: np.ndarray) -> str:
     """Python source of the monomial kernel for a term table (see the module docstring)."""
     rows = []
     seen = set()
@@ -127,7 +131,7 @@ def kernel_source(terms_i, terms_s):
     return '\n'.join(L) + '\n'
 
 
-def _cache_dirs():
+def _cache_dirs() -> Iterator[str]:
     """Where the generated kernels may go, best first: $AUV_IDENT_KERNEL_CACHE if set, then the
     user's private cache folder (core/safe_files.py private_candidates); never the package."""
     env = os.environ.get('AUV_IDENT_KERNEL_CACHE')
@@ -136,7 +140,7 @@ def _cache_dirs():
     yield from private_candidates('kernels')
 
 
-def _write_source(name, text):
+def _write_source(name: str, text: str) -> str:
     """Write the kernel's module to the first usable cache folder (created 0700, checked to be
     the user's own and no symbolic link: its files are imported), through a temporary file of
     that folder renamed into place (several processes may compile the same vehicle at once).
@@ -154,7 +158,7 @@ def _write_source(name, text):
                       'AUV_IDENT_KERNEL_CACHE (tried: ' + ', '.join(tried) + ')')
 
 
-def monomial_kernel(terms_i, terms_s):
+def monomial_kernel(terms_i: np.ndarray, terms_s: np.ndarray) -> Any:
     """The compiled kernel (a numba cfunc of signature SIG) for this term table."""
     body = kernel_source(terms_i, terms_s)
     key = hashlib.sha256((str(SIG) + body).encode()).hexdigest()[:20]
@@ -168,6 +172,7 @@ def monomial_kernel(terms_i, terms_s):
             '@cfunc(SIG, cache=True)\n' + body)
     path = _write_source(name, text)
     spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None     # a .py file path always has both
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)

@@ -28,7 +28,7 @@ from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.model.monomials import NZ, Z_SPEED, ZZ_DU_DV
 from auv_ident.core.model.state import N_STATE
 
-kernel = cached_njit(_nrt=False)     # as model.kernel (no reference counting)
+kernel = cached_njit(_nrt=False)     # as hydrodynamics.kernel (no reference counting)
 
 
 @kernel

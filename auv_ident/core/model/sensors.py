@@ -17,7 +17,14 @@ psi      AHRS/compass heading         0.005 rad   ~0.3 deg
 Process noise (off by default) adds white accelerations to nu_dot, sigma per DOF in m/s^2 and
 rad/s^2, to stand for unmodelled forces (waves, tether, currents).
 """
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from auv_ident.core.model.vehicle import Vehicle
 
 DEFAULT_NOISE_STD = np.array([0.01, 0.01, 0.01, 0.001, 0.001, 0.001,
                               0.5, 0.5, 0.05, 0.002, 0.002, 0.005])
@@ -25,7 +32,8 @@ DEFAULT_PROCESS_STD = np.array([1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4])
 DEFAULT_T = 0.05        # s, sample time (the paper's T)
 
 
-def ar1_noise(rng, n, std, tau, T):
+def ar1_noise(rng: np.random.Generator, n: int, std: ArrayLike, tau: float,
+              T: float) -> np.ndarray:
     """Coloured (first-order, AR(1)) measurement noise: (n, len(std)) samples at interval T (s)
     with per-channel stationary 1-sigma std and correlation time tau (s; 0 gives white noise):
     e_k = a e_(k-1) + sqrt(1 - a^2) w_k, a = exp(-T / tau), started stationary. What a
@@ -44,7 +52,8 @@ def ar1_noise(rng, n, std, tau, T):
     return e * std
 
 
-def perturbed_values(vehicle, factor, rng, keep=()):
+def perturbed_values(vehicle: 'Vehicle', factor: float, rng: np.random.Generator,
+                     keep: Iterable[str] = ()) -> np.ndarray:
     """The vehicle's coefficient values with every one not in `keep` (names) and not an
     added-mass term scaled by U(1 - factor, 1 + factor): a truth vehicle that differs from the
     file, as a real one differs from its prior (empirical formulas are 10-50 % off). Added

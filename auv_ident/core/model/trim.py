@@ -1,21 +1,26 @@
 """Trim: the steady straight run of a vehicle at a shaft speed (the start of every run)."""
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.optimize import brentq
 
 from auv_ident.core.errors import DomainError
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, State
 
+if TYPE_CHECKING:
+    from auv_ident.core.model.hydrodynamics import Model
+
 DEFAULT_DEPTH = 10.0    # m, initial depth (a vehicle that holds heave, a ship, starts at 0)
 
 
-def trim_speed(model, rpm, thrust=None):
+def trim_speed(model: 'Model', rpm: float, thrust: float | None = None) -> float:
     """Steady surge speed (m/s) with fins at zero, shaft speed rpm and the thrust input thrust
     (N; None: the vehicle's cruise_thrust, used by measured_thrust propulsion only): X(u) = 0."""
     ui = np.zeros(N_INPUT)
     ui[Input.N_RPM] = rpm
     ui[Input.THRUST] = model.vehicle.cruise_thrust if thrust is None else thrust
 
-    def surge(u):
+    def surge(u: float) -> float:
         x = np.zeros(N_STATE)
         x[State.U] = u
         return model.f(x, ui)[State.U]
@@ -26,7 +31,7 @@ def trim_speed(model, rpm, thrust=None):
     return brentq(surge, lo, hi, xtol=1e-12)
 
 
-def initial_state(model, rpm, depth=DEFAULT_DEPTH):
+def initial_state(model: 'Model', rpm: float, depth: float = DEFAULT_DEPTH) -> np.ndarray:
     x0 = np.zeros(N_STATE)
     x0[State.U] = trim_speed(model, rpm)
     x0[State.Z] = depth if model.vehicle.free_states[State.Z] else 0.0

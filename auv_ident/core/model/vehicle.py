@@ -8,6 +8,7 @@ ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients
 
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import os
 
@@ -19,7 +20,7 @@ from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STAT
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
-# Factor vector z (see model.py): index of each multiplier factor. 'U' is the speed in the
+# Factor vector z (see hydrodynamics.py): index of each multiplier factor. 'U' is the speed in the
 # horizontal plane sqrt(u^2 + v^2) (m/s; the total speed of a ship, whose prime system scales
 # by it), 'thrust' the measured propeller thrust input (N; see _term_scale for its scaling).
 FACTORS = ('u', 'v', 'w', 'p', 'q', 'r', '|u|', '|v|', '|w|', '|p|', '|q|', '|r|',
@@ -41,8 +42,6 @@ U_MIN = 1e-6          # m/s: |u| below this is outside the Healey-Lienard propel
 COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular (theta ~ +-90 deg)
 
 
-
-
 @dataclass
 class Coefficient:
     """One hydrodynamic/control coefficient of the vehicle file."""
@@ -56,7 +55,7 @@ class Coefficient:
     added_mass_col: int = -1   # 0..5 when this is an added-mass coefficient
 
     @property
-    def is_added_mass(self):
+    def is_added_mass(self) -> bool:
         return self.added_mass_col >= 0
 
 
@@ -75,7 +74,7 @@ class Vehicle:
     am_i: np.ndarray             # int (na, 3): equation, column, coef index
     am_s: np.ndarray             # float (na,): scale of each added-mass coefficient
     M_RB: np.ndarray             # (6, 6) rigid-body mass matrix
-    Minv_literal: np.ndarray     # (6, 6) or None: MSS hard-coded inverse
+    Minv_literal: np.ndarray | None   # (6, 6) or None: MSS hard-coded inverse
     mass_inverse: str
     identify_default: list
     paper: dict = field(default_factory=dict)
@@ -86,19 +85,19 @@ class Vehicle:
     free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
 
     @property
-    def held(self):
+    def held(self) -> np.ndarray:
         """Indices (int64) of the held states (empty for a 6-DOF vehicle)."""
         return np.flatnonzero(~self.free_states).astype(np.int64)
 
     @property
-    def names(self):
+    def names(self) -> list[str]:
         return [c.name for c in self.coefficients]
 
     @property
-    def values(self):
+    def values(self) -> np.ndarray:
         return np.array([c.value for c in self.coefficients], dtype=float)
 
-    def index(self, name):
+    def index(self, name: str) -> int:
         """Index of a coefficient by name (exact, or ignoring '_' and case as a fallback)."""
         for i, c in enumerate(self.coefficients):
             if c.name == name:
@@ -111,7 +110,7 @@ class Vehicle:
         raise ConfigError(f'unknown coefficient {name!r} for vehicle {self.name!r}; '
                           f'known: {", ".join(self.names)}')
 
-    def with_mass_inverse(self, mass_inverse):
+    def with_mass_inverse(self, mass_inverse: str) -> 'Vehicle':
         """This vehicle with M^-1 formed as `mass_inverse`: 'default' (as its file says: this
         vehicle), 'exact' (inv(M_RB + M_A), which the added-mass coefficients change) or
         'mss_literal' (MSS's hard-coded inverse); a copy, so that every Model made of it (one
@@ -125,7 +124,7 @@ class Vehicle:
             raise ConfigError(f'vehicle {self.name!r} has no MSS literal inverse')
         return replace(self, mass_inverse=mass_inverse)
 
-    def mass_matrix(self, c=None):
+    def mass_matrix(self, c: np.ndarray | None = None) -> np.ndarray:
         """M = M_RB + M_A for coefficient values c (file values by default), (6, 6)."""
         c = self.values if c is None else c
         M = self.M_RB.copy()
@@ -133,14 +132,14 @@ class Vehicle:
             M[eq, col] -= s * c[ci]
         return M
 
-    def nondimensional_scale(self, name):
+    def nondimensional_scale(self, name: str) -> float:
         """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
         value is scale * prime value."""
         c = self.coefficients[self.index(name)]
         return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
 
 
-def _term_scale(rho, L, k, factors, scaling):
+def _term_scale(rho: float, L: float, k: int, factors: tuple, scaling: str) -> float:
     """Scale of a coefficient's term: (rho/2) L^k in the prime system (SNAME 1950), 1 for a
     dimensional file. The thrust factor is a measured force; a force is (rho/2) times lengths
     and speeds in the prime system, so the thrust counts as T / (rho/2) there and its term's
@@ -154,7 +153,7 @@ def _term_scale(rho, L, k, factors, scaling):
     return scale
 
 
-def _dofs(raw, where):
+def _dofs(raw: dict, where: str) -> np.ndarray:
     """(12,) bool of the states a vehicle's `dofs:` list moves (all six when absent)."""
     dofs = raw.get('dofs', list(DOF_STATES))
     if (not isinstance(dofs, list) or not dofs
@@ -168,7 +167,7 @@ def _dofs(raw, where):
     return free
 
 
-def _num(d, key, where, positive=False):
+def _num(d: dict, key: str, where: str, positive: bool = False) -> float:
     if key not in d:
         raise ConfigError(f'{where}: missing key {key!r}')
     try:
@@ -181,7 +180,7 @@ def _num(d, key, where, positive=False):
     return v
 
 
-def _vec3(d, key, where):
+def _vec3(d: dict, key: str, where: str) -> np.ndarray:
     v = d.get(key, [0.0, 0.0, 0.0])
     try:
         a = np.array(v, dtype=float)
@@ -192,7 +191,7 @@ def _vec3(d, key, where):
     return a
 
 
-def _parse_multiplier(text, where):
+def _parse_multiplier(text: object, where: str) -> tuple:
     text = str(text).strip()
     if text.endswith('dot') and text[:-3] in NU_NAMES:
         return ('dot', NU_NAMES.index(text[:-3]))
@@ -208,7 +207,8 @@ def _parse_multiplier(text, where):
     return tuple(facs)
 
 
-def rigid_body_terms(mass, r_G, I):
+def rigid_body_terms(mass: float, r_G: np.ndarray,
+                     I: Sequence[float]) -> list[tuple[int, float, tuple[int, int]]]:
     """Rigid-body Coriolis/centripetal forces as monomials in nu (Fossen; vehicles.md 1.4).
 
     Returns a list of (equation, constant, factor tuple); every entry contributes
@@ -247,7 +247,7 @@ def rigid_body_terms(mass, r_G, I):
     return [e for e in t if e[1] != 0.0]
 
 
-def rigid_body_mass_matrix(mass, r_G, I):
+def rigid_body_mass_matrix(mass: float, r_G: np.ndarray, I: Sequence[float]) -> np.ndarray:
     """M_RB = [[m I3, -m S(r_G)], [m S(r_G), I_g]] (Fossen 2021, eq. 3.44), (6, 6)."""
     Ix, Iy, Iz, Ixy, Iyz, Ixz = I
     xg, yg, zg = r_G
@@ -261,7 +261,7 @@ def rigid_body_mass_matrix(mass, r_G, I):
     return M
 
 
-def vehicle_from_file(path):
+def vehicle_from_file(path: str) -> Vehicle:
     """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
     parsed once, never in a hot path). Looking a vehicle up by name is
     :func:`auv_ident.vehicles.load_vehicle`."""
@@ -280,10 +280,10 @@ def vehicle_from_file(path):
     return _CACHE[key]
 
 
-_CACHE = {}
+_CACHE: dict[tuple[str, float], Vehicle] = {}
 
 
-def _build(raw, path):
+def _build(raw: object, path: str) -> Vehicle:
     """The Vehicle of a parsed vehicle file `raw` (read from `path`), or ConfigError naming the
     file and the first bad entry."""
     where = os.path.basename(path)
@@ -345,7 +345,7 @@ def _build(raw, path):
     return v
 
 
-def _propulsion(prop, where, par):
+def _propulsion(prop: dict, where: str, par: np.ndarray) -> None:
     """The file's `propulsion:` block into par (P_PROP and its three constants)."""
     pm = prop.get('model', 'none')
     if pm not in PROPULSION_MODELS:
@@ -362,7 +362,7 @@ def _propulsion(prop, where, par):
         par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
 
 
-def _crossflow(cf, where, par):
+def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
     """The file's `crossflow:` block into par (P_CF and the strip model's constants)."""
     cm = cf.get('model', 'none')
     if cm not in CROSSFLOW_MODELS:
@@ -375,7 +375,8 @@ def _crossflow(cf, where, par):
         par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
 
 
-def _coefficients(raw, where, rho, L, scaling, free):
+def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
+                  free: np.ndarray) -> list[Coefficient]:
     """The file's `coefficients:` mapping as Coefficients, in the file's order."""
     craw = raw['coefficients']
     if not isinstance(craw, dict) or not craw:
@@ -385,7 +386,8 @@ def _coefficients(raw, where, rho, L, scaling, free):
             for name, entry in craw.items()]
 
 
-def _coefficient(name, entry, cw, rho, L, scaling, free, dofs):
+def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scaling: str,
+                 free: np.ndarray, dofs: object) -> Coefficient:
     """One `name: [value, equation, k, multiplier]` entry (cw: where, for the messages)."""
     if not isinstance(entry, list) or len(entry) != 4:
         raise ConfigError(f'{cw}: expected [value, equation, k, multiplier], got {entry!r}')
@@ -410,7 +412,9 @@ def _coefficient(name, entry, cw, rho, L, scaling, free, dofs):
                        am_col)
 
 
-def _term_tables(coefs, rigid_terms):
+def _term_tables(
+        coefs: list[Coefficient],
+        rigid_terms: list[tuple[int, float, tuple[int, int]]]) -> tuple[list, list, list, list]:
     """(terms_i, terms_s, am_i, am_s) as lists: the monomial term table (the coefficients' terms
     in the file's order, then the rigid-body terms `rigid_terms`) and the added-mass table."""
     terms_i, terms_s, am_i, am_s = [], [], [], []
@@ -429,7 +433,8 @@ def _term_tables(coefs, rigid_terms):
     return terms_i, terms_s, am_i, am_s
 
 
-def _held_rigid_body_mass(mass, r_G, I, free):
+def _held_rigid_body_mass(mass: float, r_G: np.ndarray, I: Sequence[float],
+                          free: np.ndarray) -> np.ndarray:
     """M_RB (6, 6) with identity rows and columns for the held degrees of freedom."""
     M_RB = rigid_body_mass_matrix(mass, r_G, I)
     # A held degree of freedom: its acceleration is zero and the constraint takes whatever
@@ -443,7 +448,7 @@ def _held_rigid_body_mass(mass, r_G, I, free):
     return M_RB
 
 
-def _mass_inverse(raw, where, free):
+def _mass_inverse(raw: dict, where: str, free: np.ndarray) -> tuple[str, np.ndarray | None]:
     """(mass_inverse, Minv_literal): the file's choice of M^-1 ('exact', or 'mss_literal' with
     its 6x6 `mss_inverse`; None for exact)."""
     mass_inverse = raw.get('mass_inverse', 'exact')

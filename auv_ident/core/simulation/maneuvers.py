@@ -34,14 +34,14 @@ MANEUVERS = ('ident', 'zigzag', 'steps', 'prbs', 'roll')
 FIN_RATE = 10.0 * DEG   # rad/s: rate limit of the fin actuators for prbs
 
 
-def _square(t, period, amplitudes):
+def _square(t: np.ndarray, period: float, amplitudes: np.ndarray) -> np.ndarray:
     """Square wave whose k-th half-period has amplitude amplitudes[k % len] (sign alternates)."""
     k = np.floor(t / (period / 2.0)).astype(int)
     amp = np.asarray(amplitudes)[k % len(amplitudes)]
     return np.where(k % 2 == 0, amp, -amp)
 
 
-def _rate_limit(sig, dt, rate):
+def _rate_limit(sig: np.ndarray, dt: float, rate: float) -> np.ndarray:
     out = np.empty_like(sig)
     out[0] = sig[0]
     step = rate * dt
@@ -50,7 +50,8 @@ def _rate_limit(sig, dt, rate):
     return out
 
 
-def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG, thrust=0.0):
+def commands(name: str, t: np.ndarray, rpm: float = 500.0, seed: int = 0,
+             fin_limit: float = 20.0 * DEG, thrust: float = 0.0) -> np.ndarray:
     """Commanded inputs on the time grid t (s): array (len(t), 7); the thrust input (N) is
     constant (a measured_thrust vehicle's cruise_thrust, 0 for the others)."""
     t = np.asarray(t, dtype=float)
@@ -76,8 +77,8 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG, thrust=0.0):
         rud = np.empty(0)
         sign = 1.0
         while len(rud) < n_total:
-            hold = int(round(rng.uniform(20.0, 40.0) / dt))
-            rud = np.concatenate([rud, np.full(hold, sign * 20.0 * DEG)])
+            n_held = int(round(rng.uniform(20.0, 40.0) / dt))
+            rud = np.concatenate([rud, np.full(n_held, sign * 20.0 * DEG)])
             sign = -sign
         u[:, Input.DELTA_R] = _rate_limit(rud[:n_total], dt, FIN_RATE)
         levels = np.array([-20.0, -15.0, -10.0, 10.0, 15.0, 20.0]) * DEG
@@ -103,16 +104,16 @@ def commands(name, t, rpm=500.0, seed=0, fin_limit=20.0 * DEG, thrust=0.0):
     return u
 
 
-def from_file(path, t):
+def from_file(path: str, t: np.ndarray) -> np.ndarray:
     """Zero-order-hold a manoeuvre table (CSV with a header) onto the grid t. The thrust
     column (N) is optional: 0 when absent."""
-    cols = ('t', 'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
+    cols: tuple[str, ...] = ('t', 'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
     with open(path, newline='', encoding='utf-8') as fh:
         rd = csv.DictReader(fh)
         missing = [c for c in cols if c not in (rd.fieldnames or [])]
         if missing:
             raise ConfigError(f'{path}: manoeuvre file lacks column(s) {", ".join(missing)}')
-        if 'thrust' in rd.fieldnames:
+        if 'thrust' in (rd.fieldnames or []):
             cols = cols + ('thrust',)
         rows = []
         for i, row in enumerate(rd, start=2):

@@ -17,7 +17,9 @@ solution of the linear ODE), least squares over all samples of all runs.
 Reference: K. Nomoto, T. Taguchi, K. Honda, S. Hirano (1957), On the steering qualities of
 ships, International Shipbuilding Progress 4; Fossen (2021), sec. 7.1.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -36,14 +38,14 @@ class NomotoModel:
     rms_r: float = float('nan')
     rudder_index: int = Input.DELTA_R
 
-    def f(self, x, u):
+    def f(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """x_dot (12,) of the state x (12,) and input u: only r and psi change."""
         xd = np.zeros(N_STATE)
         xd[State.R] = (self.K * (u[self.rudder_index] + self.delta_0) - x[State.R]) / self.T
         xd[State.PSI] = x[State.R]
         return xd
 
-    def yaw_rate(self, t, delta, r0):
+    def yaw_rate(self, t: np.ndarray, delta: np.ndarray, r0: float) -> np.ndarray:
         """(N,) rad/s: r on the stamps t (s) from r0 with delta (rad) held between samples."""
         r = np.empty(len(t))
         r[0] = r0
@@ -54,7 +56,7 @@ class NomotoModel:
         return r
 
 
-def fit_nomoto(runs):
+def fit_nomoto(runs: Sequence[Any]) -> NomotoModel:
     """NomotoModel fitted (module docstring) to runs: measured runs (t, x, inputs['rudder'])
     or (t (N,) s, r (N,) rad/s, delta (N,) rad) tuples."""
     data = []
@@ -70,7 +72,7 @@ def fit_nomoto(runs):
     if not data:
         raise DataError('fit_nomoto needs at least one run')
 
-    def residuals(p):
+    def residuals(p: np.ndarray) -> np.ndarray:
         m = NomotoModel(K=p[0], T=p[1], delta_0=p[2])
         return np.concatenate([m.yaw_rate(t, d, r[0]) - r for t, r, d in data])
 

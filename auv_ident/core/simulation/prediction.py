@@ -21,7 +21,10 @@ heading change it made, not on the wrap.
 The integration holds each input over [t_k, t_k+1) (zero-order hold) with classical RK4 steps
 no longer than ``max_step`` (s): stamps need not be uniform.
 """
+from collections.abc import Callable
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DomainError
@@ -31,7 +34,7 @@ from auv_ident.core.model.state import ANGLE_STATES, EULER, N_STATE
 DEFAULT_MAX_STEP = 0.05      # s, the longest RK4 step of a prediction
 
 
-def _pair(y, y_hat):
+def _pair(y: ArrayLike, y_hat: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     y = np.asarray(y, dtype=float)
     y_hat = np.asarray(y_hat, dtype=float)
     if y.shape != y_hat.shape or y.ndim != 1:
@@ -41,7 +44,7 @@ def _pair(y, y_hat):
     return y[ok], y_hat[ok]
 
 
-def fit_percent(y, y_hat):
+def fit_percent(y: ArrayLike, y_hat: ArrayLike) -> float:
     """Normalised-RMSE fit (%) of a prediction y_hat to the measured y (MATLAB ``compare``).
 
     NaN when y is constant (the measure is undefined: nothing to explain) or has no finite
@@ -55,13 +58,13 @@ def fit_percent(y, y_hat):
     return float(100.0 * (1.0 - np.linalg.norm(y - y_hat) / spread))
 
 
-def rmse(y, y_hat):
+def rmse(y: ArrayLike, y_hat: ArrayLike) -> float:
     """Root-mean-square error, in the unit of the channel."""
     y, y_hat = _pair(y, y_hat)
     return float(np.sqrt(np.mean((y - y_hat) ** 2))) if len(y) else float('nan')
 
 
-def theil(y, y_hat):
+def theil(y: ArrayLike, y_hat: ArrayLike) -> float:
     """Theil's inequality coefficient in [0, 1] (0 perfect); NaN if both are identically 0."""
     y, y_hat = _pair(y, y_hat)
     if not len(y):
@@ -70,7 +73,7 @@ def theil(y, y_hat):
     return float(np.sqrt(np.mean((y - y_hat) ** 2)) / den) if den > 0.0 else float('nan')
 
 
-def angle_channels(Y, Y_hat):
+def angle_channels(Y: np.ndarray, Y_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The measured and predicted (N, 12) states with the Euler-angle columns made comparable:
     the measurement unwrapped, the prediction moved by whole turns onto it."""
     Y = np.array(Y, dtype=float)
@@ -85,7 +88,8 @@ def angle_channels(Y, Y_hat):
     return Y, Y_hat
 
 
-def free_run(f, t, U, x0, max_step=DEFAULT_MAX_STEP):
+def free_run(f: Callable[[np.ndarray, np.ndarray], np.ndarray], t: ArrayLike, U: np.ndarray,
+             x0: ArrayLike, max_step: float = DEFAULT_MAX_STEP) -> np.ndarray:
     """Integrate x_dot = f(x, u) from x0 at t[0] through the stamps t with U held (ZOH).
 
     Parameters
@@ -127,7 +131,9 @@ def free_run(f, t, U, x0, max_step=DEFAULT_MAX_STEP):
     return X
 
 
-def k_step_prediction(f, t, U, Y, K, max_step=DEFAULT_MAX_STEP):
+def k_step_prediction(f: Callable[[np.ndarray, np.ndarray], np.ndarray], t: ArrayLike,
+                      U: np.ndarray, Y: np.ndarray, K: int,
+                      max_step: float = DEFAULT_MAX_STEP) -> np.ndarray:
     """K-step-ahead prediction: restart the free run from the measured state Y[j] at every
     j = 0, K, 2K, ... and predict the next K samples from there.
 

@@ -6,8 +6,10 @@ the velocity over ground, and the velocity sensor measures it over ground (DVL i
 through the water (``velocity_reference='water'``: u v w minus R^T v_c).
 """
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
@@ -47,10 +49,10 @@ class Run:
     u: np.ndarray
     noise_std: np.ndarray
     process_std: np.ndarray
-    current: np.ndarray = None         # (3,) m/s NED, the water current (None: still water)
+    current: np.ndarray | None = None  # (3,) m/s NED, the water current (None: still water)
     velocity_reference: str = 'ground'  # what y's u v w are
 
-    def summary(self):
+    def summary(self) -> dict[str, Any]:
         x = self.x
         U = np.linalg.norm(x[:, LINEAR], axis=1)
         return {
@@ -65,9 +67,10 @@ class Run:
         }
 
 
-def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=None,
-             noise_std=None, process_std=None, x0=None, substeps=1, current=None,
-             velocity_reference='ground'):
+def simulate(model: Model, maneuver: str = 'zigzag', duration: float = 200.0, T: float = DEFAULT_T,
+             seed: int = 0, rpm: float | None = None, noise_std: ArrayLike | None = None,
+             process_std: ArrayLike | None = None, x0: ArrayLike | None = None, substeps: int = 1,
+             current: ArrayLike | None = None, velocity_reference: str = 'ground') -> Run:
     """Integrate the model with RK4 (step T/substeps) and sample every T.
 
     Parameters
@@ -141,7 +144,7 @@ def simulate(model, maneuver='zigzag', duration=200.0, T=DEFAULT_T, seed=0, rpm=
                None if vc is None else vc.copy(), velocity_reference)
 
 
-def save_run_csv(run, path):
+def save_run_csv(run: Run, path: str) -> None:
     """Write a run as CSV: t, true states, measured states (y_*), inputs (documented in README)."""
     header = (['t'] + list(STATE_NAMES) + ['y_' + s for s in STATE_NAMES] + list(INPUT_NAMES))
     data = np.column_stack([run.t, run.x, run.y, run.u])

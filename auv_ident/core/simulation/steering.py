@@ -30,7 +30,9 @@ The first execute of a run has no check time (the order time is not recorded), s
 out of the fit; a simulation of a measured run orders it at the measured onset minus the mean
 ``onset_delay`` (:meth:`GearIdentification.execute_order_time`).
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -44,6 +46,7 @@ from auv_ident.core.simulation.zigzag import (
     rudder_rate,
     rudder_tolerance,
     zigzag_measures,
+    ZigzagMeasures,
 )
 
 DEG = np.pi / 180.0
@@ -67,7 +70,7 @@ class SteeringGear:
     time_constant: float = 0.0
     limit: float = DEFAULT_LIMIT_DEG * DEG
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ('delay', 'time_constant'):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0.0):
@@ -79,15 +82,15 @@ class SteeringGear:
             raise ConfigError(f'steering gear limit must be finite and > 0 rad, got {self.limit}')
 
     @classmethod
-    def ideal(cls, rate_deg_s, limit_deg=DEFAULT_LIMIT_DEG):
+    def ideal(cls, rate_deg_s: float, limit_deg: float = DEFAULT_LIMIT_DEG) -> 'SteeringGear':
         """The ideal helm: no dead time, no lag, the nominal rate (deg/s; inf: instant)."""
         return cls(delay=0.0, rate=rate_deg_s * DEG, time_constant=0.0, limit=limit_deg * DEG)
 
     @property
-    def rate_deg_s(self):
+    def rate_deg_s(self) -> float:
         return self.rate * RAD2DEG
 
-    def response(self, s, start, target):
+    def response(self, s: Any, start: float, target: float) -> Any:
         """Rudder angle(s) (rad) s seconds after the servo started (s < 0: before) from the
         angle ``start`` towards ``target`` (rad, already clipped to the limit)."""
         s = np.asarray(s, dtype=float)
@@ -111,7 +114,7 @@ class SteeringGear:
         out[go] = start + sign * moved
         return out if out.ndim else float(out)
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, float]:
         return {'delay_s': self.delay, 'rate_deg_s': self.rate_deg_s,
                 'time_constant_s': self.time_constant, 'limit_deg': self.limit * RAD2DEG}
 
@@ -134,14 +137,14 @@ class GearIdentification:
     summary: dict = field(default_factory=dict)
     onset_delay: float = 0.0
 
-    def execute_order_time(self, measures):
+    def execute_order_time(self, measures: ZigzagMeasures) -> float:
         """s: the estimated order time of a measured run's first execute (its rudder onset,
         ``measures.execute_time`` when detected from the rudder, minus the mean onset
         delay)."""
         return measures.execute_time - self.onset_delay
 
 
-def run_series(run):
+def run_series(run: Any) -> list[np.ndarray]:
     """(t, psi, delta) of a run (module docstring): s, rad, rad."""
     if isinstance(run, tuple) and len(run) == 3:
         return check_series(*run)
@@ -152,13 +155,13 @@ def run_series(run):
                         'with t, x and inputs["rudder"]') from err
 
 
-def _held_level(t, d, i0, i1):
+def _held_level(t: np.ndarray, d: np.ndarray, i0: int, i1: int) -> float | None:
     """deg: the median of the held samples of d in [i0, i1) (None if none is held)."""
     held = rudder_rate(t, d)[i0:i1] < HOLD_RATE_DEG_S
     return float(np.median(d[i0:i1][held])) if held.any() else None
 
 
-def reversal_windows(t, psi, delta):
+def reversal_windows(t: np.ndarray, psi: np.ndarray, delta: np.ndarray) -> list[dict[str, Any]]:
     """The reversals of one run: dicts with the sample window of the move (from the check time
     to SETTLE_S after the rudder reached its new angle, or the next order), the check time,
     the held angles before and after (deg), the onset and arrival times (s)."""
@@ -190,14 +193,15 @@ def reversal_windows(t, psi, delta):
     return out
 
 
-def _residuals(p, pieces):
+def _residuals(p: np.ndarray, pieces: Sequence[Any]) -> np.ndarray:
     gear = SteeringGear(delay=p[0], rate=p[1] * DEG, time_constant=p[2])
     return np.concatenate([
         gear.response(tw - (tc + p[0]), a * DEG, b * DEG) * RAD2DEG - dw
         for tw, dw, tc, a, b in pieces])
 
 
-def _fit(pieces, x0=(0.2, 15.0, 0.2)):
+def _fit(pieces: Sequence[Any],
+         x0: tuple[float, float, float] = (0.2, 15.0, 0.2)) -> tuple[np.ndarray, float]:
     """(delay s, rate deg/s, T_s s), rms deg: least squares over the pieces from x0."""
     x0 = np.clip(np.asarray(x0, dtype=float), [0.0, 0.5, 0.0], [3.0, 200.0, 3.0])
     res = least_squares(_residuals, x0, args=(pieces,),
@@ -206,7 +210,8 @@ def _fit(pieces, x0=(0.2, 15.0, 0.2)):
     return res.x, rms
 
 
-def identify_steering_gear(runs, limit_deg=DEFAULT_LIMIT_DEG):
+def identify_steering_gear(runs: Sequence[Any],
+                           limit_deg: float = DEFAULT_LIMIT_DEG) -> GearIdentification:
     """Fit the steering gear (module docstring) to the rudder reversals of measured zig-zag
     runs.
 

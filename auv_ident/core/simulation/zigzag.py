@@ -46,9 +46,12 @@ References: IMO Resolution MSC.137(76) (2002), Standards for ship manoeuvrabilit
 MSC/Circ.1053 (2002), Explanatory notes to the standards for ship manoeuvrability; ITTC
 Recommended Procedure 7.5-04-02-01, Full Scale Manoeuvring Trials.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.errors import DataError
 
@@ -95,19 +98,19 @@ class ZigzagMeasures:
     period: float = float('nan')
 
     @property
-    def label(self):
+    def label(self) -> str:
         """The run's name in the usual form 'rudder/switch', e.g. '10/10'."""
         return f'{self.nominal[0]:g}/{self.nominal[1]:g}'
 
     @property
-    def first_overshoot_deg(self):
+    def first_overshoot_deg(self) -> float:
         return self.overshoots_deg[0] if self.overshoots_deg else float('nan')
 
     @property
-    def second_overshoot_deg(self):
+    def second_overshoot_deg(self) -> float:
         return self.overshoots_deg[1] if len(self.overshoots_deg) > 1 else float('nan')
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         """Plain numbers and lists (JSON-ready)."""
         out = {k: getattr(self, k) for k in self.__dataclass_fields__}
         out['nominal'] = list(self.nominal)
@@ -115,7 +118,8 @@ class ZigzagMeasures:
         return out
 
 
-def check_series(t, *signals, names=('psi', 'delta')):
+def check_series(t: ArrayLike, *signals: ArrayLike,
+                 names: Sequence[str] = ('psi', 'delta')) -> list[np.ndarray]:
     """(N,) float arrays of t and the signals; DataError naming the culprit if the stamps do
     not increase, lengths differ or a value is not finite."""
     t = np.asarray(t, dtype=float)
@@ -136,7 +140,7 @@ def check_series(t, *signals, names=('psi', 'delta')):
     return out
 
 
-def rudder_rate(t, delta_deg):
+def rudder_rate(t: np.ndarray, delta_deg: np.ndarray) -> np.ndarray:
     """(N,) deg/s, |d(delta)/dt| as the central difference over RATE_SPAN_S (one-sided at
     the ends)."""
     lo = np.searchsorted(t, t - 0.5 * RATE_SPAN_S)
@@ -148,7 +152,7 @@ def rudder_rate(t, delta_deg):
     return out
 
 
-def rudder_tolerance(t, delta_deg):
+def rudder_tolerance(t: np.ndarray, delta_deg: np.ndarray) -> float:
     """deg: the least rudder motion that counts as a move: 4 sigmas of the white noise on the
     held samples (1.4826 MAD of their second differences / sqrt 6), at least RUDDER_TOL_DEG."""
     rate = rudder_rate(t, delta_deg)
@@ -160,14 +164,15 @@ def rudder_tolerance(t, delta_deg):
     return float(max(RUDDER_TOL_DEG, 4.0 * sigma))
 
 
-def rudder_onset(t, delta_deg, start, tol_deg):
+def rudder_onset(t: np.ndarray, delta_deg: np.ndarray, start: int, tol_deg: float) -> int | None:
     """Index of the first sample at or after ``start`` where the rudder differs from its
     value at ``start`` by more than tol_deg (None if it never does)."""
     moved = np.flatnonzero(np.abs(delta_deg[start:] - delta_deg[start]) > tol_deg)
     return int(start + moved[0]) if len(moved) else None
 
 
-def _crossing_time(t, y, level, i0, i1):
+def _crossing_time(t: np.ndarray, y: np.ndarray, level: float, i0: int,
+                   i1: int) -> tuple[float, int] | None:
     """(time, index) of the first rise of y through level between samples i0 and i1: the
     first j in (i0, i1] with y[j - 1] < level <= y[j], the time interpolated linearly; None
     if there is none. The first crossing, not a smoothed one: the helm reverses when the
@@ -182,7 +187,7 @@ def _crossing_time(t, y, level, i0, i1):
     return float(t[j - 1] + a * (t[j] - t[j - 1])), j
 
 
-def _peak(t, y, i):
+def _peak(t: np.ndarray, y: np.ndarray, i: int) -> tuple[float, float]:
     """Time and value of the parabola through samples i-1, i, i+1 (the sampled extreme
     refined between the samples; the sample itself at the ends)."""
     if i == 0 or i == len(y) - 1:
@@ -201,7 +206,7 @@ def _peak(t, y, i):
     return tv, float(max(yv, y1))
 
 
-def held_amplitude(t, delta_deg):
+def held_amplitude(t: np.ndarray, delta_deg: np.ndarray) -> float:
     """deg: median |delta| over the samples held (rate below HOLD_RATE_DEG_S) beyond half the
     largest deflection; DataError if the rudder never holds a deflection."""
     rate = rudder_rate(t, delta_deg)
@@ -213,7 +218,8 @@ def held_amplitude(t, delta_deg):
     return float(np.median(np.abs(delta_deg[held])))
 
 
-def reversal_onsets(t, delta_deg, start, tol_deg, amp_deg):
+def reversal_onsets(t: np.ndarray, delta_deg: np.ndarray, start: int, tol_deg: float,
+                    amp_deg: float) -> list[int]:
     """Indices of the last sample at the held angle before each reversal of the rudder after
     sample ``start`` (the first execute). A reversal: the rudder passes from beyond half the
     amplitude amp_deg on one side to beyond it on the other (so noise about zero is none); the
@@ -239,8 +245,10 @@ def reversal_onsets(t, delta_deg, start, tol_deg, amp_deg):
     return out
 
 
-def zigzag_measures(t, psi, delta, execute_time=None, rudder_deg=None, switch_deg=None,
-                    rudder_tol_deg=None, return_deg=RETURN_DEG):
+def zigzag_measures(t: ArrayLike, psi: ArrayLike, delta: ArrayLike,
+                    execute_time: float | None = None, rudder_deg: float | None = None,
+                    switch_deg: float | None = None, rudder_tol_deg: float | None = None,
+                    return_deg: float = RETURN_DEG) -> ZigzagMeasures:
     """The IMO zig-zag measures of a run (module docstring).
 
     Parameters

@@ -31,15 +31,19 @@ Returns :class:`ZigzagSimulation`: ``t`` (N,) s, ``x`` (N, 12) (Euler angles wra
 model), the orders as (time, angle) pairs and the measures of
 :mod:`auv_ident.core.simulation.zigzag` computed with the ordered angles and the execute time.
 """
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import brentq
 
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError, DataError, DomainError
 from auv_ident.core.model.state import EULER, Input, N_INPUT, N_STATE, State
-from auv_ident.core.simulation.zigzag import zigzag_measures
+from auv_ident.core.simulation.steering import SteeringGear
+from auv_ident.core.simulation.zigzag import zigzag_measures, ZigzagMeasures
 
 DEG = np.pi / 180.0
 DEFAULT_STEP = 0.05    # s
@@ -65,12 +69,13 @@ class ZigzagSimulation:
 class _Helm:
     """The ordered angles and the rudder angle they give through the gear (closed form)."""
 
-    def __init__(self, gear, delta0):
+    def __init__(self, gear: SteeringGear, delta0: float) -> None:
         self.gear = gear
-        self.orders = []                    # (order time, ordered angle)
-        self.segments = [(-np.inf, delta0, delta0)]   # (servo start, start angle, target)
+        self.orders: list[tuple[float, float]] = []     # (order time, ordered angle)
+        # (servo start, start angle, target)
+        self.segments: list[tuple[float, float, float]] = [(-np.inf, delta0, delta0)]
 
-    def order(self, t_order, angle):
+    def order(self, t_order: float, angle: float) -> None:
         angle = float(np.clip(angle, -self.gear.limit, self.gear.limit))
         self.orders.append((t_order, angle))
         t_srv = t_order + self.gear.delay
@@ -78,11 +83,11 @@ class _Helm:
         # after t_srv, since orders come in time order and the dead time is fixed
         self.segments.append((t_srv, self.rudder(t_srv), angle))
 
-    def forget_after(self, n_orders):
+    def forget_after(self, n_orders: int) -> None:
         del self.orders[n_orders:]
         del self.segments[n_orders + 1:]
 
-    def rudder(self, t, left=False):
+    def rudder(self, t: float, left: bool = False) -> float:
         """The rudder angle at t (rad); left: its limit from the left, which differs at a
         servo start only for an instant rudder."""
         for t_srv, a, b in reversed(self.segments):
@@ -90,14 +95,14 @@ class _Helm:
                 return self.gear.response(t - t_srv, a, b) if np.isfinite(t_srv) else a
         return self.segments[0][1]
 
-    def ordered(self, t):
+    def ordered(self, t: float) -> float:
         angle = self.segments[0][1]
         for t_o, a in self.orders:
             if t >= t_o:
                 angle = a
         return angle
 
-    def breaks(self, t0, t1):
+    def breaks(self, t0: float, t1: float) -> list[float]:
         """The instants in (t0, t1) where the rudder's motion is not smooth."""
         g = self.gear
         out = []
@@ -113,7 +118,7 @@ class _Helm:
         return sorted(out)
 
 
-def _input_source(inputs, n_inputs):
+def _input_source(inputs: Any, n_inputs: int) -> Callable[[np.ndarray], np.ndarray]:
     if inputs is None:
         base = np.zeros(n_inputs)
         return lambda x: base.copy()
@@ -125,9 +130,12 @@ def _input_source(inputs, n_inputs):
     return lambda x: base.copy()
 
 
-def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, inputs=None,
-                    rudder_index=Input.DELTA_R, thrust_index=None, n_inputs=N_INPUT,
-                    first='starboard', execute_time=0.0, step=DEFAULT_STEP, delta0=0.0):
+def simulate_zigzag(f: Callable[[np.ndarray, np.ndarray], Any], x0: ArrayLike, rudder_deg: float,
+                    switch_deg: float, duration: float, gear: SteeringGear,
+                    thrust: Callable[[np.ndarray], float] | None = None, inputs: Any = None,
+                    rudder_index: int = Input.DELTA_R, thrust_index: int | None = None,
+                    n_inputs: int = N_INPUT, first: str = 'starboard', execute_time: float = 0.0,
+                    step: float = DEFAULT_STEP, delta0: float = 0.0) -> ZigzagSimulation:
     """Closed-loop zig-zag (module docstring).
 
     Parameters
@@ -159,17 +167,17 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
     helm.order(float(execute_time), -side * rudder_deg * DEG)
     switch = switch_deg * DEG
 
-    def u_of(t, x, left=False):
+    def u_of(t: float, x: np.ndarray, left: bool = False) -> np.ndarray:
         u = base(x)
         u[rudder_index] = helm.rudder(t, left)
         if thrust is not None:
             u[thrust_index] = float(thrust(x))
         return u
 
-    def rhs(t, x, left=False):
+    def rhs(t: float, x: np.ndarray, left: bool = False) -> np.ndarray:
         return np.asarray(f(x, u_of(t, x, left)), dtype=float)
 
-    def advance(t0, t1, x):
+    def advance(t0: float, t1: float, x: np.ndarray) -> np.ndarray:
         cuts = [t0] + helm.breaks(t0, t1) + [t1]
         for a, b in zip(cuts[:-1], cuts[1:]):
             h = b - a
@@ -227,7 +235,8 @@ def simulate_zigzag(f, x0, rudder_deg, switch_deg, duration, gear, thrust=None, 
                             stopped=stopped or why_none)
 
 
-def _check_orders(first, rudder_deg, switch_deg, duration, execute_time, step):
+def _check_orders(first: str, rudder_deg: float, switch_deg: float, duration: float,
+                  execute_time: float, step: float) -> None:
     """ConfigError unless the helm's orders and the run's grid make sense (simulate_zigzag)."""
     if first not in ('starboard', 'port'):
         raise ConfigError(f"first must be 'starboard' or 'port', got {first!r}")
@@ -239,7 +248,8 @@ def _check_orders(first, rudder_deg, switch_deg, duration, execute_time, step):
                           f'got step {step}, duration {duration}, execute_time {execute_time}')
 
 
-def _measures(t, X, rudder, execute_time, rudder_deg, switch_deg):
+def _measures(t: np.ndarray, X: np.ndarray, rudder: np.ndarray, execute_time: float,
+              rudder_deg: float, switch_deg: float) -> tuple[ZigzagMeasures | None, str | None]:
     """(the zig-zag measures of the simulated run or None, why None or None)."""
     if len(t) < 3 or not np.any(rudder != rudder[0]):
         return None, None
@@ -252,14 +262,14 @@ def _measures(t, X, rudder, execute_time, rudder_deg, switch_deg):
         return None, f'no zig-zag measures: {exc}'
 
 
-def _hermite_root(t0, t1, y0, y1, d0, d1):
+def _hermite_root(t0: float, t1: float, y0: float, y1: float, d0: float, d1: float) -> float:
     """The root in (t0, t1] of the cubic Hermite interpolant of y (values y0 < 0 <= y1,
     derivatives d0, d1 at the ends)."""
     h = t1 - t0
     if y1 == 0.0:
         return t1
 
-    def y(s):
+    def y(s: float) -> float:
         s2, s3 = s * s, s * s * s
         return ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * h * d0
                 + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * h * d1)
