@@ -38,13 +38,15 @@ from auv_ident import __version__
 from auv_ident.bags.mcap_scan import first_chunk_compression, McapScan
 from auv_ident.bags.reader import _bag_files, _normalized, _summary_start
 from auv_ident.bags.schema import (
+    _dump,
     BagError,
+    bagfile_information,
     custom_data_of,
     MCAP_MAGIC,
     qos_from_yaml,
     read_metadata,
+    write_metadata_yaml,
 )
-from auv_ident.bags.writer import _dump, bagfile_information, write_metadata_yaml
 
 REPAIR_CHUNK_SIZE = 768 * 1024
 """Uncompressed bytes per chunk of a rewritten file: rosbag2's own default (a repaired file is
@@ -163,7 +165,7 @@ def _indexed_channels(fh):
     return channels, span, stats.message_count
 
 
-def _rewrite(src, dst, why):
+def rewrite_complete(src, dst, why):
     """Rewrite src (an MCAP file) as a complete, indexed file dst. Returns a FileRepair."""
     size = src.stat().st_size
     result = FileRepair(name=dst.name, rewritten=True, why=why)
@@ -221,7 +223,7 @@ def _rewrite(src, dst, why):
             result.chunks = scan.chunks
             result.lost = scan.stop
             info = bagfile_information([(dst.name, span, result.messages)],
-                                       _topic_entries([result.channels]))
+                                       topic_entries([result.channels]))
             writer.add_metadata('rosbag2', {'serialized_metadata': _dump(info)})
             writer.finish()
             fout.flush()
@@ -229,7 +231,7 @@ def _rewrite(src, dst, why):
     return result
 
 
-def _topic_entries(channel_maps):
+def topic_entries(channel_maps):
     """metadata.yaml topic entries of the channels of all files (merged by topic name)."""
     topics = {}
     for channels in channel_maps:
@@ -285,7 +287,7 @@ def _repair_file(f, dest, out):
                           channels=channels)
     target = dest / f.name if out is not None else f.with_name(f.name + '.repairing')
     try:
-        result = _rewrite(f, target, why)
+        result = rewrite_complete(f, target, why)
     except BaseException:
         if target.exists() and out is None:
             target.unlink()
@@ -340,12 +342,12 @@ def repair_bag(path, out=None):
         write_meta = (out is not None or any(r.rewritten for r in results)
                       or not (dest / 'metadata.yaml').is_file())
     counts = {}
-    for entry in _topic_entries([r.channels for r in results]):
+    for entry in topic_entries([r.channels for r in results]):
         counts[entry['name']] = entry['count']
     if write_meta:
         custom = _custom_data(src) if not bare else None
         info = bagfile_information([(r.name, r.span, r.messages) for r in results],
-                                   _topic_entries([r.channels for r in results]), custom)
+                                   topic_entries([r.channels for r in results]), custom)
         try:
             write_metadata_yaml(dest, info)
         except OSError as exc:

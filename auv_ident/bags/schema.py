@@ -326,3 +326,57 @@ def qos_yaml(profiles):
     return yaml.safe_dump(list(profiles), sort_keys=False, default_flow_style=False).rstrip('\n')
 
 
+_dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
+
+
+def bagfile_information(files, topics, custom_data=None):
+    """Return rosbag2's v9 ``rosbag2_bagfile_information`` dict.
+
+    Parameters
+    ----------
+    files : list of (name, span, message_count)
+        One entry per data file in bag order; span = (first, last) log time (ns), or None for
+        a file without messages.
+    topics : list of dict
+        Keys name, type ('pkg/msg/Type'), qos (list of v9 QoS dicts), hash (RIHS01_... or '')
+        and count.
+    custom_data : dict of str, optional
+    """
+    spans = [span for _, span, _ in files if span is not None]
+    start = min(s[0] for s in spans) if spans else 0
+    duration = (max(s[1] for s in spans) - start) if spans else 0
+    total = sum(n for _, _, n in files)
+    return {
+        'version': METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'duration': {'nanoseconds': duration},
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'message_count': total,
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': t['name'],
+                                'type': t['type'],
+                                'serialization_format': 'cdr',
+                                'offered_qos_profiles': t['qos'],
+                                'type_description_hash': t['hash']},
+             'message_count': t['count']}
+            for t in topics],
+        # Chunk compression is storage-internal: rosbag2 leaves these empty for it too.
+        'compression_format': '',
+        'compression_mode': '',
+        'relative_file_paths': [name for name, _, _ in files],
+        'files': [{'path': name,
+                   'starting_time': {'nanoseconds_since_epoch': span[0] if span else 0},
+                   'duration': {'nanoseconds': (span[1] - span[0]) if span else 0},
+                   'message_count': n}
+                  for name, span, n in files],
+        'custom_data': dict(custom_data or {}) or None,
+        'ros_distro': ROS_DISTRO,
+    }
+
+
+def write_metadata_yaml(bag_dir, info):
+    """Write ``bag_dir/metadata.yaml`` of a bagfile_information dict, atomically."""
+    meta = Path(bag_dir) / 'metadata.yaml'
+    tmp = Path(bag_dir) / 'metadata.yaml.tmp'
+    tmp.write_text(_dump({'rosbag2_bagfile_information': info}), encoding='utf-8')
+    os.replace(tmp, meta)  # a reader never sees a half-written metadata.yaml

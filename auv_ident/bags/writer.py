@@ -5,6 +5,7 @@ expects (metadata.yaml version 9, schemas, channels with their QoS and type hash
 'rosbag2' metadata record, statistics): :mod:`auv_ident.bags.schema` describes it.
 """
 import atexit
+import contextlib
 import functools
 import numbers
 import os
@@ -17,76 +18,21 @@ import weakref
 # memory; mcap's Writer takes our rosbag2-exact schema text and channel metadata verbatim, a
 # chunk size of our choosing, and has a public flush() that closes the chunk in progress.
 from mcap.writer import CompressionType, Writer as McapWriter
-import yaml
 
 from auv_ident import __version__
+from auv_ident.bags.repair import rewrite_complete, topic_entries
 from auv_ident.bags.schema import (
+    _dump,
     _qos_list,
     BagError,
+    bagfile_information,
     DEFAULT_CHUNK_SIZE,
     message_definition,
-    METADATA_VERSION,
     normalize_msgtype,
     qos_yaml,
-    ROS_DISTRO,
     type_hash,
+    write_metadata_yaml,
 )
-
-_dump = functools.partial(yaml.safe_dump, sort_keys=False, default_flow_style=False)
-
-
-def bagfile_information(files, topics, custom_data=None):
-    """Return rosbag2's v9 ``rosbag2_bagfile_information`` dict.
-
-    Parameters
-    ----------
-    files : list of (name, span, message_count)
-        One entry per data file in bag order; span = (first, last) log time (ns), or None for
-        a file without messages.
-    topics : list of dict
-        Keys name, type ('pkg/msg/Type'), qos (list of v9 QoS dicts), hash (RIHS01_... or '')
-        and count.
-    custom_data : dict of str, optional
-    """
-    spans = [span for _, span, _ in files if span is not None]
-    start = min(s[0] for s in spans) if spans else 0
-    duration = (max(s[1] for s in spans) - start) if spans else 0
-    total = sum(n for _, _, n in files)
-    return {
-        'version': METADATA_VERSION,
-        'storage_identifier': 'mcap',
-        'duration': {'nanoseconds': duration},
-        'starting_time': {'nanoseconds_since_epoch': start},
-        'message_count': total,
-        'topics_with_message_count': [
-            {'topic_metadata': {'name': t['name'],
-                                'type': t['type'],
-                                'serialization_format': 'cdr',
-                                'offered_qos_profiles': t['qos'],
-                                'type_description_hash': t['hash']},
-             'message_count': t['count']}
-            for t in topics],
-        # Chunk compression is storage-internal: rosbag2 leaves these empty for it too.
-        'compression_format': '',
-        'compression_mode': '',
-        'relative_file_paths': [name for name, _, _ in files],
-        'files': [{'path': name,
-                   'starting_time': {'nanoseconds_since_epoch': span[0] if span else 0},
-                   'duration': {'nanoseconds': (span[1] - span[0]) if span else 0},
-                   'message_count': n}
-                  for name, span, n in files],
-        'custom_data': dict(custom_data or {}) or None,
-        'ros_distro': ROS_DISTRO,
-    }
-
-
-def write_metadata_yaml(bag_dir, info):
-    """Write ``bag_dir/metadata.yaml`` of a bagfile_information dict, atomically."""
-    meta = Path(bag_dir) / 'metadata.yaml'
-    tmp = Path(bag_dir) / 'metadata.yaml.tmp'
-    tmp.write_text(_dump({'rosbag2_bagfile_information': info}), encoding='utf-8')
-    os.replace(tmp, meta)  # a reader never sees a half-written metadata.yaml
-
 
 # ---------------------------------------------------------------------------------------------
 # writer
@@ -148,6 +94,7 @@ class BagWriter:
         self._t_min = None
         self._t_max = None
         self._count = 0
+        self._torn = False
         try:
             self.path.mkdir(parents=True)
             self.mcap_path = self.path / f'{self.path.absolute().name}_0.mcap'
@@ -251,12 +198,16 @@ class BagWriter:
         t_ns = int(t_ns)
         with self._lock:
             self._check_open()
+            if self._torn:
+                raise BagError(f'{self.path}: an earlier write was interrupted; close() the '
+                               'bag (it keeps the complete chunks)')
             info = self._topics.get(topic)
             if info is None:
                 raise BagError(f'{self.path}: topic {topic} was not added; added topics: '
                                f'{sorted(self._topics)}')
-            self._writer.add_message(channel_id=info.channel_id, log_time=t_ns,
-                                     publish_time=t_ns, sequence=info.count, data=data)
+            with self._tearing():
+                self._writer.add_message(channel_id=info.channel_id, log_time=t_ns,
+                                         publish_time=t_ns, sequence=info.count, data=data)
             info.count += 1
             self._count += 1
             self._t_min = t_ns if self._t_min is None else min(self._t_min, t_ns)
@@ -272,7 +223,24 @@ class BagWriter:
         """
         with self._lock:
             if not self._closed:
-                self._writer.flush()
+                with self._tearing():
+                    self._writer.flush()
+
+    @contextlib.contextmanager
+    def _tearing(self):
+        """Mark the writer torn when what runs inside leaves by an exception.
+
+        KeyboardInterrupt (SIGINT, and SIGTERM as rclpy raises it) can arrive between any two
+        bytecodes of mcap's Writer, e.g. after it counted a chunk and before the chunk's bytes
+        reached the file: its in-memory index then no longer describes the file, and a summary
+        written from it makes a bag whose readers stop at a short read. close() of a torn
+        writer therefore does not trust that state (see :meth:`close`).
+        """
+        try:
+            yield
+        except BaseException:
+            self._torn = True
+            raise
 
     def _metadata(self):
         span = None if self._t_min is None else (self._t_min, self._t_max)
@@ -288,6 +256,9 @@ class BagWriter:
                 return
             self._closed = True
             atexit.unregister(self._atexit)
+            if self._torn:
+                self._close_torn()
+                return
             info = self._metadata()
             try:
                 self._writer.add_metadata('rosbag2', {'serialized_metadata': _dump(info)})
@@ -300,4 +271,33 @@ class BagWriter:
                 if not self._fh.closed:
                     self._fh.close()
 
+    def _close_torn(self):
+        """Finish a bag whose writer was interrupted inside a write: as a killed recorder's.
 
+        The file is closed without a summary, then rewritten from its complete chunks
+        (:func:`auv_ident.bags.repair.rewrite_complete`, the ``bag repair`` path), so at most
+        the chunk in progress is lost, and metadata.yaml counts what the file holds.
+        """
+        try:
+            self._fh.close()
+        except OSError:
+            pass  # what did not reach the file is the chunk the rewrite drops anyway
+        rewritten = self.mcap_path.with_name(self.mcap_path.name + '.rewriting')
+        try:
+            result = rewrite_complete(self.mcap_path, rewritten,
+                                      'a write was interrupted')
+            os.replace(rewritten, self.mcap_path)
+            topics = {t['name']: t for t in topic_entries([result.channels])}
+            for name, known in self._topics.items():  # topics without a surviving message
+                topics.setdefault(name, {'name': name, 'type': known.msgtype,
+                                         'qos': known.qos, 'hash': known.hash, 'count': 0})
+            info = bagfile_information([(self.mcap_path.name, result.span, result.messages)],
+                                       list(topics.values()), self._custom_data)
+            write_metadata_yaml(self.path, info)
+        except OSError as exc:
+            raise BagError(f'{self.path}: cannot finish the interrupted bag: {exc}; '
+                           f'`python -m auv_ident bag repair {self.path}` recovers its '
+                           'complete chunks') from None
+        finally:
+            if rewritten.exists():
+                rewritten.unlink()

@@ -391,6 +391,53 @@ def test_exception_in_with_block_still_finalises(tmp_path):
     assert [ns for _, ns, _ in read_bag(tmp_path / 'x')] == [5]
 
 
+class _InterruptOnce:
+    """A file whose n-th write raises KeyboardInterrupt after writing half its bytes: SIGINT
+    arriving while mcap's Writer hands a chunk to the file."""
+
+    def __init__(self, fh, at):
+        self._fh, self._at, self.writes = fh, at, 0
+
+    def write(self, data):
+        self.writes += 1
+        if self.writes == self._at:
+            self._fh.write(bytes(data)[:len(data) // 2])
+            raise KeyboardInterrupt
+        return self._fh.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self._fh, name)
+
+
+@pytest.mark.parametrize('at', [4, 5, 6, 7, 8, 9])
+def test_interrupted_write_still_closes_a_readable_bag(tmp_path, at):
+    """An exception inside a write leaves mcap's Writer torn; close() keeps the complete
+    chunks (as bag repair would), never a summary that points past the file's end."""
+    payload = serialize_message(Clock())
+    path = tmp_path / 'torn'
+    writer = BagWriter(path, chunk_size=256)
+    writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+    writer.set_custom_data('vehicle', 'nps_auv2')
+    stream = _InterruptOnce(writer._fh, at)
+    writer._writer._Writer__stream = stream  # mcap's Writer writes through this
+    written = 0
+    with pytest.raises(KeyboardInterrupt):
+        with writer:
+            for i in range(10000):
+                writer.write('/clock', i, payload)
+                written += 1
+    assert stream.writes >= at
+    times = [ns for _, ns, _ in read_bag(path)]
+    # the message being written when interrupted may have made it into a complete chunk
+    assert 0 < len(times) <= written + 1 and times == list(range(len(times)))
+    info = schema.read_metadata(path)
+    assert info['message_count'] == len(times)
+    assert schema.custom_data_of(info) == {'vehicle': 'nps_auv2'}
+    assert not list(path.glob('*.rewriting'))
+    with pytest.raises(BagError, match='closed'):
+        writer.write('/clock', 10**6, payload)
+
+
 _CHILD = textwrap.dedent("""
     import signal, sys, time
     # a process started in the background of a non-interactive shell inherits SIGINT ignored
