@@ -52,6 +52,8 @@ from auv_ident.session.guard import (
     RESET_COV_INFLATION,
 )
 from auv_ident.session.guarded_filter import FILTER_FAULTS, GuardedFilter
+from auv_ident.session.input_map import InputMapError, load_input_map
+from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (
     _as_vector,
@@ -129,6 +131,15 @@ class IdentSession:
         # a planar vehicle's held states are not measurements (core/model/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
+        # the input map (session/input_map.py): the topics, and the odometry's channels used
+        self.input_map = load_input_map(settings.input_map)
+        self.input_map.check_vehicle(self.vehicle)
+        odom = self.input_map.odometry
+        mask = mask & np.isin(STATE_NAMES, odom.fields)
+        self.frame = self._map_frame(odom.frame)
+        self.holder = CommandHolder.of(self.input_map, self.vehicle)
+        self._inputs = {e.name: e for e in self.input_map.inputs}
+        self._multi_command = len(self.input_map.commands) > 1
         auto, coefficients = coefficient_request(self.vehicle, settings.coefficients)
         warm_start = settings.warm_start
         if auto and warm_start:
@@ -182,6 +193,16 @@ class IdentSession:
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
                      else None)
+
+    def _map_frame(self, map_frame):
+        """The odometry convention: the `frame` setting, or the map's where that is 'auto';
+        InputMapError when both name one and they differ."""
+        if map_frame == 'auto' or map_frame == self.frame:
+            return self.frame
+        if self.frame == 'auto':
+            return map_frame
+        raise InputMapError(f'{self.input_map.where}: the odometry input says frame '
+                            f'{map_frame}, the frame setting {self.frame}: give one of them')
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -422,8 +443,60 @@ class IdentSession:
         self.frame = frame
         self.notices.append(f'frame auto -> {frame} ({why})')
 
+    def on_input(self, name, msg, receive_ns=None):
+        """A message of the input map's input `name` (session/input_map.py). Returns an
+        Event.
+
+        receive_ns : the receive time (int ns: the node's clock live, the log time of a bag),
+            the stamp of a message without a header (Float64, Float64MultiArray)
+        Commands update the held actuators (session/inputs.py CommandHolder); once every fed
+        actuator has been heard the whole input vector is buffered at the message's stamp.
+        """
+        entry = self._inputs[name]
+        if entry.role == 'odometry':
+            if self._multi_command and self.max_command_age is not None:
+                stale = self._stale_commands(msg)
+                if stale is not None:
+                    return stale
+            return self.on_odom(msg)
+        stamp_ns = None
+        try:
+            stamp_ns = header_stamp_ns(msg) if entry.stamped else integer_stamp(receive_ns)
+            if stamp_ns is None:
+                raise ConversionError(f'{entry.type} without a readable header.stamp')
+            u7 = self.holder.update(entry, msg, stamp_ns)
+        except ConversionError as err:
+            return self._reject(name, 'conversion', str(err), stamp_ns)
+        if u7 is None:
+            return Event('command', f'{name}: holding: no value yet for '
+                                    + ', '.join(self.holder.missing()), stamp_ns,
+                         code='holding')
+        return self._command(stamp_ns, u7, name)
+
+    def input_map_entry(self, name):
+        """The input map's InputEntry called name."""
+        return self._inputs[name]
+
+    def _stale_commands(self, msg):
+        """With commands on several topics: the 'stale command' rejection of an odometry
+        message at whose stamp some actuator's last value is older than max_command_age (each
+        topic is held on its own), else None."""
+        try:
+            stamp_ns = header_stamp_ns(msg)
+        except ConversionError:
+            return None     # on_odom says what is wrong with it
+        if stamp_ns is None:
+            return None
+        stale = self.holder.stale(stamp_ns, self.max_command_age)
+        if not stale:
+            return None
+        return self._reject('odom', 'stale command', 'the last command of '
+                            + ', '.join(stale) + f' is older than max_command_age '
+                            f'({self.max_command_age:g} s)', stamp_ns)
+
     def on_actuators(self, msg):
-        """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
+        """Buffer a sensor_msgs/JointState actuator command in the default layout
+        (session/messages.py JOINT_NAMES). Returns an Event."""
         stamp_ns = None
         try:
             stamp_ns = header_stamp_ns(msg)
@@ -488,20 +561,21 @@ class IdentSession:
                                 'them (noise_source message)')
         return np.where(ok, variances, self.noise_default)
 
-    def _command(self, stamp_ns, u7):
-        """add_command after reading: stamp_ns int, u7 a (7,) float array of our own."""
+    def _command(self, stamp_ns, u7, what='actuators'):
+        """add_command after reading: stamp_ns int, u7 a (7,) float array of our own; what:
+        the input it came from (the rejections' topic)."""
         if self.auto is not None and self.auto.running:
             self.poll_choice()
-        zero = self._zero_stamp('actuators', stamp_ns)
+        zero = self._zero_stamp(what, stamp_ns)
         if zero is not None:
             return zero
         t = self._time(stamp_ns)
         problem = command_problem(u7.tolist(), t, self.fin_limit, self.shaft_limit)
         if problem is not None:
-            return self._reject('actuators', problem[0], problem[1], stamp_ns)
+            return self._reject(what, problem[0], problem[1], stamp_ns)
         out = self.stream.add_command(t, u7)
         if not out.accepted:
-            return self._reject('actuators', out.code, out.reason, stamp_ns)
+            return self._reject(what, out.code, out.reason, stamp_ns)
         if self.keep_arrays:
             self.commands.append((t, u7))
         if self.auto is not None:
