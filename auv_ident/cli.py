@@ -383,6 +383,12 @@ def cmd_import(args):
         run = read_csv_run(args.file, args.columns)
     write_imported_bag(run, args.out, vehicle=args.vehicle, start=args.start,
                        command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+    _print_import(run, args)
+    return 0
+
+
+def _print_import(run, args):
+    from auv_ident.offline.import_bag import DEFAULT_VEHICLE, unmapped_inputs
     t = run.t
     std = ', '.join(f'{n} {s:.3g}' for n, s in zip(run.measured_names,
                                                    run.noise_std[run.measured]))
@@ -390,9 +396,19 @@ def cmd_import(args):
           f'{run.sample_time:g} s')
     print(f"measured: {' '.join(run.measured_names)}; inputs: "
           f"{' '.join(sorted(run.inputs)) or 'none'}")
+    counts = run.samples
+    if len(set(counts.values())) > 1:   # a multi-rate log
+        print('samples per channel: ' + ', '.join(f'{n} {c}' for n, c in counts.items()))
+    if run.skipped:
+        lines = ', '.join(map(str, run.skipped[:10])) + (', ...' if len(run.skipped) > 10
+                                                          else '')
+        print(f'skipped {len(run.skipped)} rows with NaN or Inf (lines {lines})')
+    missing = unmapped_inputs(run, args.vehicle or DEFAULT_VEHICLE[run.fmt])
+    if missing:
+        print(f"note: the vehicle's model uses {', '.join(missing)}, which the file does not "
+              'log: written as 0')
     print(f'noise 1-sigma estimates (SI): {std}')
     print(f'wrote {args.out}')
-    return 0
 
 
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',

@@ -24,7 +24,16 @@ Quantities (:data:`QUANTITIES`) and their units (:data:`UNITS`, every entry must
 - ``rudder`` (rad, deg): the rudder angle in our sign, delta_r: positive = trailing edge to
   port, which turns the vehicle to port (negative yaw rate) as N_dr < 0 says in the vehicle
   files; a log with the opposite convention maps it with ``sign: -1``.
+- ``stern_planes``, ``bow_planes``, ``bow_plane_port``, ``bow_plane_starboard`` (rad, deg):
+  the other fins of the input vector (core/model/state.py ``Input``: delta_s, delta_b,
+  delta_bp, delta_bs), in the vehicle files' signs.
 - ``thrust`` (N, kN): the measured propeller thrust; ``shaft`` (rpm, rps, rad/s): shaft speed.
+
+Multi-rate logs (every sensor at its own rate, one row per time any of them sampled): a blank
+cell is "no sample of this quantity at this row". A state channel is then not measured at that
+row; an input holds its last value (commands are logged on change). A row with a NaN or Inf
+in a mapped cell is skipped and counted (importers.py). A decimal comma (``0,5``) is refused
+with a message that says so: a ';'-separated log writes its numbers with a decimal point.
 
 Entry fields: ``column`` (the header name, required), ``unit`` (required: a wrong guess between
 deg and rad is silent garbage otherwise), ``sign`` (1 or -1, default 1: multiplies the value in
@@ -44,6 +53,7 @@ Every check raises :class:`ColumnMapError` naming the map (file) and the entry.
 """
 from decimal import Decimal, InvalidOperation, ROUND_HALF_EVEN
 import math
+import re
 
 import numpy as np
 import yaml
@@ -65,6 +75,8 @@ QUANTITIES = {
     'xdot': ('speed', 'earth', None), 'ydot': ('speed', 'earth', None),
     'zdot': ('speed', 'earth', None),
     'rudder': ('angle', None, None),
+    'stern_planes': ('angle', None, None), 'bow_planes': ('angle', None, None),
+    'bow_plane_port': ('angle', None, None), 'bow_plane_starboard': ('angle', None, None),
     'thrust': ('force', None, None),
     'shaft': ('shaft', None, None),
 }
@@ -81,7 +93,10 @@ UNITS = {
 SETTINGS = {'world': ('ned', 'enu'), 'delimiter': None}
 FIELDS = ('column', 'unit', 'sign', 'frame', 'base')
 TIME_BASES = ('run', 'unix')
-INPUTS = ('rudder', 'thrust', 'shaft')
+# the inputs, and the actuator of core/model/state.py Input each one is
+INPUTS = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port', 'bow_plane_starboard',
+          'shaft', 'thrust')
+INPUT_OF = dict(zip(INPUTS, range(7)))
 
 # world ENU/FLU -> NED/FRD: quantity -> (quantity it becomes, sign, offset)
 _ENU_TO_NED = {
@@ -227,6 +242,7 @@ class ColumnMap:
         factor = UNITS['time'][ent['unit']] * ent['sign']
         out = np.empty(len(cells), dtype=np.int64)
         for i, cell in enumerate(cells):
+            refuse_decimal_comma(cell, where_cell(i))
             try:
                 d = Decimal(cell.strip())
                 if not d.is_finite():
@@ -240,10 +256,12 @@ class ColumnMap:
     def to_ned(self, values):
         """Convert the mapped quantities into our frames and units.
 
-        values : dict quantity -> (N,) float array as read (file units and signs), time
-            excluded
+        values : dict quantity -> (N,) float array as read (file units and signs; NaN: no
+            sample at that row), time excluded
         Returns ``(x (N, 12) NED/FRD SI, measured (12,) bool, inputs)``: unmeasured states are
-        0; inputs is a dict of the inputs present, 'rudder' (rad), 'thrust' (N), 'shaft' (rpm).
+        0, a measured one NaN at the rows without its sample (or without a sample of what it
+        is computed from: the heading of an earth-fixed velocity); inputs is a dict of the
+        inputs present (fins rad, 'thrust' N, 'shaft' rpm), NaN where not logged.
         """
         n = len(next(iter(values.values())))
         si = {}
@@ -282,6 +300,18 @@ class ColumnMap:
         x[:, State.PSI] = _wrap(x[:, State.PSI])
         inputs = {name: si[name] for name in INPUTS if name in si}
         return x, measured, inputs
+
+
+_DECIMAL_COMMA = re.compile(r'[+-]?\d*,\d+([eE][+-]?\d+)?')
+
+
+def refuse_decimal_comma(cell, where, error=ColumnMapError):
+    """`error` naming the cell if it is a number written with a decimal comma."""
+    text = cell.strip()
+    if ',' in text and _DECIMAL_COMMA.fullmatch(text):
+        raise error(f'{where}: {text!r} has a decimal comma; write numbers with a '
+                             f'decimal point ({text.replace(",", ".")}) and separate the '
+                             "fields with another character (delimiter: ';')")
 
 
 def _wrap(a):

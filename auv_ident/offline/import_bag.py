@@ -17,10 +17,19 @@ writing path this uses), one message of each per sample, the actuators first:
   or 0 (not stated: the reader falls back to its noise parameter) where there is none.
   Roll rate p is not derived from phi: a differentiated angle is not a measurement, and its
   error would be correlated with phi's.
-- ``/actuators`` sensor_msgs/JointState, the six joints of JOINT_NAMES: 'rudder' position =
-  delta_r (rad, our sign), other fins 0; 'propeller' velocity = shaft speed (rad/s) and
-  effort = the measured thrust (N); all other entries 0. Inputs the file lacks are 0
-  (``auv_ident.measured_inputs`` lists the present ones).
+- ``/actuators`` sensor_msgs/JointState, the six joints of JOINT_NAMES: the fins' positions
+  (rad, our signs: 'rudder', 'stern_planes', 'bow_planes', 'bow_plane_port',
+  'bow_plane_starboard'); 'propeller' velocity = shaft speed (rad/s) and effort = the
+  measured thrust (N); all other entries 0. Inputs the file lacks are 0
+  (``auv_ident.measured_inputs`` lists the present ones; ``import`` names those the
+  vehicle's model uses).
+
+A multi-rate CSV log (blank cells: a sensor without a sample at that row): the odometry of a
+row carries the channels sampled there, the others 0 with :data:`UNMEASURED_VARIANCE` (as an
+unmeasured channel, not used); a row without any state sample writes no odometry. The inputs
+hold their last value; the actuators are written from the first row where every mapped input
+has had a value (odometry before it is rejected as 'no command' by the identifier). Rows with
+a NaN or Inf were skipped (``auv_ident.skipped_rows`` counts them).
 
 Stamps (header and log time alike): for files with run-relative time (HSVA, CSV ``base:
 run``), ``start + t`` with ``start`` given (``--start``, ISO 8601 with a UTC offset) or
@@ -32,7 +41,8 @@ which. Files with ``base: unix`` times are stamped with them.
 metadata.yaml custom_data: ``auv_ident.vehicle``, ``frame`` (ned), ``simulated`` (false),
 ``format``, ``source`` (file name), ``source_sha256``, ``column_map`` (the map used, as one
 line of JSON), ``measured`` and ``measured_inputs`` (names), ``noise_std_estimate`` (12
-1-sigmas, NaN unmeasured), ``sample_time``, ``samples``, ``stamp_epoch_ns``, ``stamp_epoch``,
+1-sigmas, NaN unmeasured), ``channel_samples`` (``name:count`` of each measured channel),
+``skipped_rows``, ``sample_time``, ``samples``, ``stamp_epoch_ns``, ``stamp_epoch``,
 ``stamp_epoch_nominal``, ``command``.
 """
 from datetime import datetime, timezone
@@ -40,8 +50,8 @@ import json
 
 import numpy as np
 
-from auv_ident.core.model.state import Input, N_INPUT
-from auv_ident.offline.column_map import ColumnMapError
+from auv_ident.core.model.state import INPUT_NAMES, N_INPUT
+from auv_ident.offline.column_map import ColumnMapError, INPUT_OF
 from auv_ident.offline.sim_bag import (
     ACTUATOR_TOPIC,
     joint_state_msg,
@@ -50,7 +60,9 @@ from auv_ident.offline.sim_bag import (
     SIM_EPOCH,
     write_message_bag,
 )
+from auv_ident.session.input_map import vehicle_actuators
 from auv_ident.session.messages import NS_PER_S
+from auv_ident.vehicles import load_vehicle
 
 HSVA_EPOCH = '2006-01-01T00:00:00Z'
 UNMEASURED_VARIANCE = 1e6
@@ -90,36 +102,53 @@ def _epoch(run, start):
     return parse_epoch(start), str(start), False
 
 
-def covariances(run):
+def covariances(run, present=None):
     """(pose_cov, twist_cov) 6x6 of the run's odometry: variance of the noise estimate where
-    measured (0: no estimate), :data:`UNMEASURED_VARIANCE` elsewhere."""
-    var = np.where(run.measured, np.nan_to_num(run.noise_std) ** 2, UNMEASURED_VARIANCE)
+    measured (0: no estimate), :data:`UNMEASURED_VARIANCE` elsewhere; present (12,) bool: the
+    channels sampled at this row of a multi-rate log (default: every measured one)."""
+    sampled = run.measured if present is None else present
+    var = np.where(sampled, np.nan_to_num(run.noise_std) ** 2, UNMEASURED_VARIANCE)
     return np.diag(var[6:12]), np.diag(var[0:6])
 
 
 def input_arrays(run):
     """u (N, 7) [delta_r .. n_rpm thrust] (rad, rpm, N), core.model.state.Input order: the thrust
-    is
-    an input, written to the propeller joint's effort by joint_state_msg."""
-    n = len(run.t_ns)
-    u = np.zeros((n, N_INPUT))
-    if 'rudder' in run.inputs:
-        u[:, Input.DELTA_R] = run.inputs['rudder']
-    if 'shaft' in run.inputs:
-        u[:, Input.N_RPM] = run.inputs['shaft']
-    if 'thrust' in run.inputs:
-        u[:, Input.THRUST] = run.inputs['thrust']
+    is an input, written to the propeller joint's effort by joint_state_msg. Inputs the file
+    does not map are 0; a mapped one is NaN before its first value in the log."""
+    u = np.zeros((len(run.t_ns), N_INPUT))
+    for name, values in run.inputs.items():
+        u[:, INPUT_OF[name]] = values
     return u
 
 
 def imported_messages(run, epoch_ns):
-    """(topic, t_ns, rosbags message) of every sample, the actuators first at each stamp."""
-    pose_cov, twist_cov = covariances(run)
+    """(topic, t_ns, rosbags message) of every row, the actuators first at each stamp: the
+    actuators once every mapped input has had a value (then held), the odometry at the rows
+    where some measured channel has a sample (the others written as 0 with
+    UNMEASURED_VARIANCE: not used)."""
     u = input_arrays(run)
+    present = run.present
+    full = bool(present[:, run.measured].all())
+    pose_cov, twist_cov = covariances(run)
+    known = np.isfinite(u).all(axis=1)
     for k, tk in enumerate(run.t_ns):
         t_ns = int(epoch_ns) + int(tk)
-        yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u[k])
-        yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], 'ned', pose_cov, twist_cov)
+        if known[k]:
+            yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u[k])
+        if full:
+            yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], 'ned', pose_cov, twist_cov)
+        elif present[k].any():
+            pc, tc = covariances(run, present[k])
+            yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, np.where(present[k], run.x[k], 0.0),
+                                                 'ned', pc, tc)
+
+
+def unmapped_inputs(run, vehicle):
+    """Names (core/model/state.py INPUT_NAMES) of the actuators the vehicle's model uses that
+    the run does not log (written as 0)."""
+    v = load_vehicle(vehicle)
+    logged = {INPUT_OF[name] for name in run.inputs}
+    return [INPUT_NAMES[i] for i in vehicle_actuators(v) if i not in logged]
 
 
 def import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command=''):
@@ -132,6 +161,8 @@ def import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command=''):
         'auv_ident.measured': ' '.join(run.measured_names),
         'auv_ident.measured_inputs': ' '.join(sorted(run.inputs)),
         'auv_ident.noise_std_estimate': ' '.join(repr(float(v)) for v in run.noise_std),
+        'auv_ident.channel_samples': ' '.join(f'{n}:{c}' for n, c in run.samples.items()),
+        'auv_ident.skipped_rows': str(len(run.skipped)),
         'auv_ident.sample_time': repr(run.sample_time),
         'auv_ident.samples': str(len(run.t_ns)),
         'auv_ident.stamp_epoch_ns': str(int(epoch_ns)), 'auv_ident.stamp_epoch': epoch_text,
