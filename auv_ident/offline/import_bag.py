@@ -61,11 +61,11 @@ from auv_ident.offline.sim_bag import (
     write_message_bag,
 )
 from auv_ident.session.input_map import vehicle_actuators
-from auv_ident.session.messages import NS_PER_S
+from auv_ident.session.messages import NOT_MEASURED_VARIANCE, NS_PER_S
 from auv_ident.vehicles import load_vehicle
 
 HSVA_EPOCH = '2006-01-01T00:00:00Z'
-UNMEASURED_VARIANCE = 1e6
+UNMEASURED_VARIANCE = NOT_MEASURED_VARIANCE    # session/messages.py: the channel is skipped
 TOPIC_TYPES = {ODOM_TOPIC: 'nav_msgs/msg/Odometry',
                ACTUATOR_TOPIC: 'sensor_msgs/msg/JointState'}
 DEFAULT_VEHICLE = {'hsva': 'kvlcc2_hsva'}

@@ -61,6 +61,7 @@ from auv_ident.session.messages import (
     header_stamp_ns,
     integer_stamp,
     joint_state_to_actuators,
+    NOT_MEASURED_VARIANCE,
     NS_PER_S,
     odometry_state,
     odometry_variances,
@@ -596,7 +597,12 @@ class IdentSession:
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
         y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
-        r = None if variances is None else self._measurement_variances(variances)
+        r = None
+        if variances is not None:
+            r = self._measurement_variances(variances)
+            unmeasured = variances >= NOT_MEASURED_VARIANCE
+            if unmeasured.any():    # the message says it does not measure these: skipped
+                y = np.where(unmeasured, np.nan, y)
         filt = self.filter
         before = filt.last_good
         try:
@@ -626,6 +632,8 @@ class IdentSession:
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
             self.measurements.append((t, y))
-            self.variances.append(self.noise_default if r is None else r)
+            # a channel the message did not measure (NaN in y) is no sample of its noise
+            self.variances.append(self.noise_default if r is None
+                                  else np.where(np.isnan(y) & self.measured, np.nan, r))
         if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
             self._start_choice(before)

@@ -625,3 +625,46 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     assert cli_main(argv[:4] + argv[6:]) == 2
     assert 'needs --columns' in capsys.readouterr().err
     assert not (tmp_path / 'o').exists()
+
+
+def test_the_ardusub_style_example_log_imports_with_the_documented_map(tmp_path, capsys):
+    """docs/your_data.md's ArduSub-style log (tools/ardusub_style_log.py: IMU 25 Hz, baro
+    20 Hz, DVL 5 Hz with dropouts, RCOU PWM 10 Hz) through docs/examples/ardusub_columns.yaml:
+    the PWM outputs become the fin angles and shaft speed, every row is fused."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('ardusub_style_log',
+                                                  REPO / 'tools' / 'ardusub_style_log.py')
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    log = tmp_path / 'log.csv'
+    assert tool.main(['--out', str(log), '--duration', '20']) == 0
+    columns = REPO / 'docs' / 'examples' / 'ardusub_columns.yaml'
+    run = read_csv_run(log, columns)
+    counts = run.samples
+    assert counts['phi'] == 501 and counts['z'] == 401 and 90 <= counts['u'] <= 101
+    assert 'x' not in counts and run.skipped == ()
+    rudder = run.inputs['rudder']
+    assert np.nanmax(np.abs(rudder)) == pytest.approx(math.radians(20.0))
+    bag = write_imported_bag(run, tmp_path / 'bag', vehicle='nps_auv2')
+    res = replay_bag(bag, warn=False)
+    assert res.accepted == len(run.t_ns) and res.rejected == 0
+    # the DVL rows carry u, the others do not (skipped, not fused as 0)
+    assert np.isnan(res.Y[:, State.U]).sum() == len(run.t_ns) - counts['u']
+
+
+def test_pwm_inputs_of_a_column_map():
+    doc = {'time': {'column': 't', 'unit': 'us'}, 'psi': {'column': 'y', 'unit': 'deg'},
+           'shaft': {'column': 'esc', 'unit': 'us',
+                     'pwm': {'neutral': 1000, 'half_range': 500, 'full_scale': 25, 'unit': 'rps'}}}
+    cmap = ColumnMap(doc)
+    _, _, inputs = cmap.to_ned({'psi': np.zeros(2), 'shaft': np.array([1000.0, 1250.0])})
+    np.testing.assert_allclose(inputs['shaft'], [0.0, 750.0])     # half of 25 rps, in rpm
+    for bad, message in (
+            ({'unit': 'us'}, r'shaft: unit us \(a PWM pulse width\) needs pwm'),
+            ({'unit': 'rpm', 'pwm': {}}, 'pwm applies to unit us only'),
+            ({'unit': 'us', 'pwm': {'full_scale': 1, 'unit': 'deg'}}, "pwm unit 'deg'"),
+            ({'unit': 'us', 'pwm': {'full_scale': 0, 'unit': 'rpm'}}, 'full_scale = 0')):
+        with pytest.raises(ColumnMapError, match=message):
+            ColumnMap(dict(doc, shaft={'column': 'esc', **bad}))
+    with pytest.raises(ColumnMapError, match=r"psi: unknown unit 'us'"):
+        ColumnMap(dict(doc, psi={'column': 'y', 'unit': 'us'}))

@@ -262,3 +262,23 @@ def test_the_session_holds_commands_and_rejects_stale_ones(tmp_path):
     ev = s.on_input('delta_s', SimpleNamespace(data='x'), t0)
     assert ev.kind == 'rejected' and ev.reason.startswith('delta_s: ') and ev.code == 'conversion'
     assert s.counters.reasons['delta_s: conversion'] == 1
+
+
+def test_the_documented_example_maps():
+    """docs/examples/*.yaml: every input map parses; those of what the filter fuses today fit
+    nps_auv2, the raw-sensor one is refused naming its first raw input."""
+    from pathlib import Path
+    examples = Path(__file__).resolve().parents[2] / 'docs' / 'examples'
+    nps = load_vehicle('nps_auv2')
+    maps = {p.stem: load_input_map(str(p)) for p in sorted(examples.glob('*.yaml'))
+            if 'inputs' in yaml.safe_load(p.read_text())}
+    assert set(maps) == {'joint_names', 'per_fin_topics', 'raw_sensors', 'stonefish_setpoints'}
+    for name, m in maps.items():
+        if name == 'raw_sensors':
+            with pytest.raises(InputMapError, match="input 'imu' .*does not fuse"):
+                m.check_vehicle(nps)
+            assert {e.type for e in m.sensors} == {
+                'sensor_msgs/msg/Imu', 'geometry_msgs/msg/TwistWithCovarianceStamped',
+                'sensor_msgs/msg/FluidPressure'}
+        else:
+            m.check_vehicle(nps)
