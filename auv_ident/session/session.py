@@ -10,10 +10,15 @@ array API takes what a message says as plain arrays and stamps:
   :func:`auv_ident.session.messages.odometry_to_state` returns it) with the message's frame
   ids;
 
-and :meth:`IdentSession.on_actuators` / :meth:`IdentSession.on_odom` are thin adapters that
-read sensor_msgs/JointState and nav_msgs/Odometry objects (rclpy or rosbags, duck-typed, with
+and :meth:`IdentSession.on_input` takes a message of an input of the input map (the
+``input_map`` setting, session/input_map.py: by default the nav_msgs/Odometry ``odom`` and the
+sensor_msgs/JointState ``actuators``; commands of any form through session/inputs.py, held on
+change), :meth:`IdentSession.on_actuators` / :meth:`IdentSession.on_odom` the default layout's
+two messages. They read the messages (rclpy or rosbags, duck-typed, with
 :mod:`auv_ident.session.messages`) and call the same code, a message that cannot be read being
 rejected as ``conversion``. Each call returns an :class:`~auv_ident.session.guard.Event`.
+With noise_source 'message', a channel whose stated variance is at least
+NOT_MEASURED_VARIANCE (1e6) is not measured by that message and is skipped.
 
 Per message the session screens (rejection policy, frame-id and plausibility rules:
 session/screening.py), then hands the odometry to its running filter,
