@@ -90,6 +90,10 @@ from auv_ident.session.status import Counters
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
 
+class InputMapSettingError(ParameterError, InputMapError):
+    """The input_map setting names a map that is wrong or does not fit the vehicle."""
+
+
 # stamps from this on (~11.6 days after 1970) are wall-clock times: the session then counts
 # time from the whole second of the first stamp (IdentSession docstring)
 TIME_ORIGIN_MIN_NS = 10 ** 15
@@ -138,11 +142,14 @@ class IdentSession:
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
         # the input map (session/input_map.py): the topics, and the odometry's channels used
-        self.input_map = load_input_map(settings.input_map)
-        self.input_map.check_vehicle(self.vehicle)
-        odom = self.input_map.odometry
+        try:
+            self.input_map = load_input_map(settings.input_map)
+            self.input_map.check_vehicle(self.vehicle)
+            odom = self.input_map.odometry
+            self.frame = self._map_frame(odom.frame)
+        except InputMapError as err:
+            raise InputMapSettingError('input_map', str(err)) from None
         mask = mask & np.isin(STATE_NAMES, odom.fields)
-        self.frame = self._map_frame(odom.frame)
         self.holder = CommandHolder.of(self.input_map, self.vehicle)
         self._inputs = {e.name: e for e in self.input_map.inputs}
         self._multi_command = len(self.input_map.commands) > 1
