@@ -59,16 +59,25 @@ Every check raises one :class:`InputMapError` naming the map and the entry; the 
 need the vehicle (every actuator the vehicle's model uses is fed, none that it does not have)
 are :meth:`InputMap.check_vehicle`, those that need the bag :meth:`InputMap.check_topics`.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 import os
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import Input, INPUT_NAMES, N_FINS, STATE_NAMES
-from auv_ident.core.model.vehicle import FACTOR_INDEX, P_FIN, P_NMAX, P_PROP, PROPULSION_MODELS
+from auv_ident.core.model.vehicle import (
+    FACTOR_INDEX,
+    P_FIN,
+    P_NMAX,
+    P_PROP,
+    PROPULSION_MODELS,
+    Vehicle,
+)
 from auv_ident.session.messages import euler_to_rotation_matrix, RPM_TO_RAD_S
 
 VERSION = 1
@@ -107,9 +116,10 @@ VELOCITY_REFERENCES = ('ground', 'water')
 POSE_MEASURES = ('depth', 'position')
 
 # actuator kind -> unit -> multiplier into the input vector's unit (rad, rpm, N); 'normalized'
-# and 'us' scale by the vehicle's limit (Command.full_scale)
-_ANGLE_UNITS = {'rad': 1.0, 'deg': math.pi / 180.0, 'normalized': None, 'us': None}
-UNITS = {
+# and 'us' (None here) scale by the vehicle's limit (Channel.factor)
+_ANGLE_UNITS: dict[str, float | None] = {'rad': 1.0, 'deg': math.pi / 180.0,
+                                         'normalized': None, 'us': None}
+UNITS: dict[str, dict[str, float | None]] = {
     'fin': _ANGLE_UNITS,
     'shaft': {'rpm': 1.0, 'rad/s': 1.0 / RPM_TO_RAD_S, 'rps': 60.0, 'normalized': None,
               'us': None},
@@ -137,7 +147,7 @@ class InputMapError(ConfigError):
     """An input map is wrong, or does not fit the vehicle or the bag: names the map and entry."""
 
 
-def actuator_kind(index):
+def actuator_kind(index: int) -> str:
     """'fin', 'shaft' or 'force' of an input-vector index."""
     if index < N_FINS:
         return 'fin'
@@ -167,10 +177,10 @@ class Channel:
     index: int = -1
 
     @property
-    def name(self):
+    def name(self) -> str:
         return ACTUATORS[self.actuator]
 
-    def factor(self, fin_limit, shaft_limit):
+    def factor(self, fin_limit: float, shaft_limit: float) -> float:
         """Multiplier of (raw * scale + offset) into the input unit; for 'us' applied after
         (x - neutral) / half_range. fin_limit rad, shaft_limit rpm: the vehicle's."""
         f = UNITS[actuator_kind(self.actuator)][self.unit]
@@ -188,7 +198,7 @@ class Mounting:
     rotation: tuple = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
     @property
-    def matrix(self):
+    def matrix(self) -> np.ndarray:
         return np.array(self.rotation, dtype=float)
 
 
@@ -216,16 +226,16 @@ class InputEntry:
     options: tuple = ()
 
     @property
-    def bag_topic(self):
+    def bag_topic(self) -> str:
         """The topic as a bag records it: relative names at the root."""
         return self.topic if self.topic.startswith('/') else '/' + self.topic
 
     @property
-    def stamped(self):
+    def stamped(self) -> bool:
         """True if the messages carry a header stamp (else: receive time)."""
         return self.type not in HEADERLESS
 
-    def option(self, key):
+    def option(self, key: str) -> Any:
         return dict(self.options)[key]
 
 
@@ -239,32 +249,32 @@ class InputMap:
     body_frame: str = 'flu'
 
     @property
-    def odometry(self):
+    def odometry(self) -> 'InputEntry | None':
         """The Odometry input, or None."""
         return next((e for e in self.inputs if e.role == 'odometry'), None)
 
     @property
-    def commands(self):
+    def commands(self) -> tuple['InputEntry', ...]:
         return tuple(e for e in self.inputs if e.role == 'command')
 
     @property
-    def sensors(self):
+    def sensors(self) -> tuple['InputEntry', ...]:
         return tuple(e for e in self.inputs if e.role == 'sensor')
 
     @property
-    def topic_types(self):
+    def topic_types(self) -> dict[str, str]:
         """{bag topic: type} of every input (what a recorder records, a bag must hold)."""
         return {e.bag_topic: e.type for e in self.inputs}
 
-    def fed(self):
+    def fed(self) -> dict[int, list[str]]:
         """{actuator index: [input names feeding it]}."""
-        out = {}
+        out: dict[int, list[str]] = {}
         for e in self.commands:
             for c in e.channels:
                 out.setdefault(c.actuator, []).append(e.name)
         return out
 
-    def check_vehicle(self, vehicle):
+    def check_vehicle(self, vehicle: Vehicle) -> None:
         """InputMapError unless every actuator the vehicle's model uses is fed by a command
         input (the others are held at 0), and the filter fuses every input."""
         for e in self.inputs:
@@ -285,7 +295,7 @@ class InputMap:
             raise InputMapError(f'{self.where}: no nav_msgs/msg/Odometry input: the filter '
                                 'fuses the nav solution (raw sensors: docs/your_data.md)')
 
-    def check_topics(self, present, source):
+    def check_topics(self, present: dict[str, str], source: object) -> None:
         """InputMapError naming the first input whose topic the bag lacks or records with
         another type. present : {topic: type} of the bag; source : the bag, for messages."""
         for e in self.inputs:
@@ -303,7 +313,7 @@ class InputMap:
 _ROLE_TEXT = {'odometry': 'odometry', 'command': 'actuator', 'sensor': 'sensor'}
 
 
-def vehicle_actuators(vehicle):
+def vehicle_actuators(vehicle: Vehicle) -> list[int]:
     """Sorted input-vector indices the vehicle's model uses: the fins its terms multiply
     (db2 = the port and starboard bow planes), the shaft speed of its propeller model (or of a
     propeller-epsilon term) and the measured thrust (a thrust term or measured_thrust)."""
@@ -321,12 +331,12 @@ def vehicle_actuators(vehicle):
     return sorted(int(i) for i in used)
 
 
-def command_limits(vehicle):
+def command_limits(vehicle: Vehicle) -> tuple[float, float]:
     """(fin limit rad, shaft limit rpm) of a vehicle: the full scale of 'normalized' units."""
     return float(vehicle.par[P_FIN]), float(vehicle.par[P_NMAX])
 
 
-def normalize_type(text):
+def normalize_type(text: object) -> str:
     """'pkg/msg/Type' of 'pkg/Type' or 'pkg/msg/Type' (other text unchanged)."""
     parts = str(text).strip().split('/')
     if len(parts) == 2:
@@ -338,19 +348,20 @@ def normalize_type(text):
 
 
 class _Parser:
-    def __init__(self, where):
+    def __init__(self, where: str) -> None:
         self.where = where
 
-    def fail(self, text):
+    def fail(self, text: str) -> NoReturn:
         raise InputMapError(f'{self.where}: {text}')
 
-    def keys(self, d, allowed, what):
+    def keys(self, d: dict, allowed: Sequence[str], what: str) -> None:
         extra = [k for k in d if k not in allowed]
         if extra:
             self.fail(f'{what}: unknown key(s) {", ".join(map(str, extra))}; known: '
                       f'{", ".join(allowed)}')
 
-    def number(self, d, key, what, default, positive=False):
+    def number(self, d: dict, key: str, what: str, default: float,
+               positive: bool = False) -> float:
         v = d.get(key, default)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                 or (positive and v <= 0):
@@ -358,13 +369,14 @@ class _Parser:
                       ' number')
         return float(v)
 
-    def choice(self, d, key, what, choices, default=None):
+    def choice(self, d: dict, key: str, what: str, choices: Sequence[str],
+               default: str | None = None) -> str:
         v = d.get(key, default)
         if v not in choices:
             self.fail(f'{what}: {key} = {v!r}; use one of {", ".join(choices)}')
-        return v
+        return str(v)
 
-    def entry(self, name, d, body_frame):
+    def entry(self, name: object, d: object, body_frame: str) -> InputEntry:
         what = f'input {name!r}'
         if not isinstance(d, dict):
             self.fail(f'{what}: must be a mapping with topic and type, got {d!r}')
@@ -378,7 +390,8 @@ class _Parser:
             self.fail(f'{what}: type {d["type"]!r} is not read; known: {", ".join(TYPES)}')
         role = TYPES[typ]
         self.keys(d, _KEYS['odometry' if role == 'odometry' else typ], what)
-        out = {'name': str(name), 'topic': topic.strip(), 'type': typ, 'role': role}
+        out: dict[str, Any] = {'name': str(name), 'topic': topic.strip(), 'type': typ,
+                               'role': role}
         if role == 'odometry':
             out['frame'] = self.choice(d, 'frame', what, FRAMES, 'auto')
             out['fields'] = self.names(d, 'fields', what, STATE_NAMES)
@@ -390,7 +403,7 @@ class _Parser:
             out['fields'], out['options'] = self.sensor(typ, d, what)
         return InputEntry(**out)
 
-    def names(self, d, key, what, known):
+    def names(self, d: dict, key: str, what: str, known: Sequence[str]) -> tuple[str, ...]:
         if key not in d:
             return tuple(known)
         v = d[key]
@@ -400,7 +413,7 @@ class _Parser:
                       f'{" ".join(known)}')
         return tuple(v)
 
-    def channels(self, typ, d, what):
+    def channels(self, typ: str, d: dict, what: str) -> tuple[Channel, ...]:
         if typ == FLOAT64:
             return (self.channel(typ, d, what, {}),)
         chans = d.get('channels')
@@ -426,7 +439,7 @@ class _Parser:
             self.fail(f'{what}: actuator {dup[0]} is fed by two channels')
         return tuple(out)
 
-    def selector(self, typ, c, cw):
+    def selector(self, typ: str, c: dict, cw: str) -> dict[str, Any]:
         if typ == JOINT_STATE:
             joint = c.get('joint')
             if not isinstance(joint, str) or not joint:
@@ -441,7 +454,7 @@ class _Parser:
             return {'index': i}
         return {'field': self.choice(c, 'field', cw, WRENCH_FIELDS)}
 
-    def channel(self, typ, c, cw, sel):
+    def channel(self, typ: str, c: dict, cw: str, sel: dict[str, Any]) -> Channel:
         name = c.get('actuator')
         if name not in ACTUATORS:
             self.fail(f'{cw}: the vehicles have no actuator {name!r}; their actuators: '
@@ -472,11 +485,11 @@ class _Parser:
         scale = self.number(c, 'scale', cw, 1.0)
         if scale == 0.0:
             self.fail(f'{cw}: scale 0 would hold {name} at the offset')
-        return Channel(actuator=index, unit=unit, scale=scale,
+        return Channel(actuator=index, unit=str(unit), scale=scale,
                        offset=self.number(c, 'offset', cw, 0.0), pwm=pwm, default=default,
                        **sel)
 
-    def mounting(self, m, what, body_frame):
+    def mounting(self, m: object, what: str, body_frame: str) -> Mounting:
         if not isinstance(m, dict):
             self.fail(f'{what}: mounting must be {{lever_arm: [x, y, z], rotation: [roll, '
                       f'pitch, yaw], unit: deg}}, got {m!r}')
@@ -494,7 +507,7 @@ class _Parser:
         return Mounting(tuple(float(v) for v in arm), tuple(tuple(float(v) for v in row)
                                                               for row in R))
 
-    def vector3(self, m, key, what):
+    def vector3(self, m: dict, key: str, what: str) -> np.ndarray:
         v = m.get(key, [0.0, 0.0, 0.0])
         try:
             a = np.array(v, dtype=float)
@@ -504,7 +517,8 @@ class _Parser:
             self.fail(f'{what}: {key} = {v!r} must be a list of 3 finite numbers')
         return a
 
-    def sensor(self, typ, d, what):
+    def sensor(self, typ: str, d: dict,
+               what: str) -> tuple[tuple[str, ...], tuple[tuple[str, Any], ...]]:
         if typ == IMU:
             return self.names(d, 'fields', what, IMU_FIELDS), ()
         if typ == DVL:
@@ -530,7 +544,7 @@ class _Parser:
         return (), (('datum', (lat, lon)),)
 
 
-def parse_input_map(doc, where='input map'):
+def parse_input_map(doc: object, where: object = 'input map') -> InputMap:
     """The :class:`InputMap` of a parsed YAML document (module docstring); InputMapError
     naming the first problem."""
     p = _Parser(str(where))
@@ -557,13 +571,13 @@ def parse_input_map(doc, where='input map'):
     return InputMap(entries, str(where), body_frame)
 
 
-def input_maps_dir():
+def input_maps_dir() -> str:
     """config/inputs/ of the installed or source tree."""
     from auv_ident.vehicles import config_dir
     return os.path.join(config_dir(), 'inputs')
 
 
-def resolve_input_map(name_or_path):
+def resolve_input_map(name_or_path: object) -> str:
     """The file of an input map name (config/inputs/NAME.yaml) or path; InputMapError if
     there is none."""
     text = str(name_or_path).strip() or DEFAULT_MAP
@@ -580,10 +594,10 @@ def resolve_input_map(name_or_path):
     return path
 
 
-_CACHE = {}
+_CACHE: dict[tuple[str, str], InputMap] = {}
 
 
-def load_input_map(name_or_path=DEFAULT_MAP):
+def load_input_map(name_or_path: 'str | os.PathLike[str] | InputMap' = DEFAULT_MAP) -> InputMap:
     """Read and check an input map by name or path (module docstring), once per file
     content; InputMapError naming the file and the entry."""
     if isinstance(name_or_path, InputMap):

@@ -12,22 +12,28 @@ input feeds are 0 (the vehicle's model does not use them: InputMap.check_vehicle
 Reading is duck-typed (attribute access), as session/messages.py: rclpy and rosbags messages
 alike. A message that cannot be read raises :class:`ConversionError` naming the culprit.
 """
+from collections.abc import Callable, Iterable, Sequence
 import math
+from typing import Any
 
 import numpy as np
 
 from auv_ident.core.model.state import INPUT_NAMES, N_INPUT
+from auv_ident.core.model.vehicle import Vehicle
 from auv_ident.session.input_map import (
+    Channel,
     command_limits,
     FLOAT64,
     FLOAT64_ARRAY,
+    InputEntry,
+    InputMap,
     JOINT_STATE,
     WRENCH,
 )
 from auv_ident.session.messages import ConversionError, RPM_TO_RAD_S
 
 
-def _joint_values(msg, channels):
+def _joint_values(msg: Any, channels: Sequence[Channel]) -> list[tuple[Channel, Any]]:
     """[(channel, raw value)] of a JointState: joints matched by name in any order."""
     try:
         names = list(msg.name)
@@ -59,7 +65,7 @@ def _joint_values(msg, channels):
     return out
 
 
-def _array_values(msg, channels):
+def _array_values(msg: Any, channels: Sequence[Channel]) -> list[tuple[Channel, Any]]:
     try:
         data = msg.data
         n = len(data)
@@ -74,7 +80,7 @@ def _array_values(msg, channels):
     return out
 
 
-def _wrench_values(msg, channels):
+def _wrench_values(msg: Any, channels: Sequence[Channel]) -> list[tuple[Channel, Any]]:
     out = []
     for c in channels:
         part, axis = c.field.split('.')
@@ -86,18 +92,20 @@ def _wrench_values(msg, channels):
     return out
 
 
-def _float_values(msg, channels):
+def _float_values(msg: Any, channels: Sequence[Channel]) -> list[tuple[Channel, Any]]:
     try:
         return [(channels[0], msg.data)]
     except AttributeError:
         raise ConversionError('not a std_msgs/Float64: no data') from None
 
 
-_READERS = {JOINT_STATE: _joint_values, FLOAT64_ARRAY: _array_values, WRENCH: _wrench_values,
+_READERS: dict[str, Callable[[Any, Sequence[Channel]], list[tuple[Channel, Any]]]] = {
+    JOINT_STATE: _joint_values, FLOAT64_ARRAY: _array_values, WRENCH: _wrench_values,
             FLOAT64: _float_values}
 
 
-def convert(channel, raw, fin_limit, shaft_limit):
+def convert(channel: Channel, raw: Any, fin_limit: float,
+            shaft_limit: float) -> float | None:
     """A channel's raw message value in the input vector's unit (rad, rpm, N); None: its
     default (the field array was empty)."""
     if raw is None:
@@ -118,7 +126,8 @@ def convert(channel, raw, fin_limit, shaft_limit):
     return x if f == 1.0 else x * f
 
 
-def read_channels(entry, msg, fin_limit, shaft_limit):
+def read_channels(entry: InputEntry, msg: Any, fin_limit: float,
+                  shaft_limit: float) -> list[tuple[int, float | None]]:
     """[(actuator index, value in the input unit)] of one command message of `entry`
     (an input_map.InputEntry with role 'command'); ConversionError naming the culprit."""
     pairs = _READERS[entry.type](msg, entry.channels)
@@ -131,7 +140,7 @@ class CommandHolder:
     fed : input-vector indices some input feeds; limits : (fin rad, shaft rpm) of the vehicle
     """
 
-    def __init__(self, fed, limits):
+    def __init__(self, fed: Iterable[int], limits: tuple[float, float]) -> None:
         self.fed = tuple(sorted(fed))
         self.fin_limit, self.shaft_limit = limits
         self.u = np.zeros(N_INPUT)
@@ -141,10 +150,10 @@ class CommandHolder:
         self._all[list(self.fed)] = True
 
     @classmethod
-    def of(cls, input_map, vehicle):
+    def of(cls, input_map: InputMap, vehicle: Vehicle) -> 'CommandHolder':
         return cls(input_map.fed(), command_limits(vehicle))
 
-    def update(self, entry, msg, stamp_ns):
+    def update(self, entry: InputEntry, msg: Any, stamp_ns: int) -> np.ndarray | None:
         """Read a command message stamped stamp_ns (int ns); returns the whole u (7,) copy once
         every fed actuator has been heard, else None (what is still missing: :meth:`missing`).
         ConversionError for an unreadable message (nothing is updated then)."""
@@ -157,11 +166,11 @@ class CommandHolder:
             return self.u.copy()
         return None
 
-    def missing(self):
+    def missing(self) -> list[str]:
         """Names of the fed actuators not heard yet."""
         return [INPUT_NAMES[i] for i in self.fed if not self.heard[i]]
 
-    def stale(self, stamp_ns, limit_s):
+    def stale(self, stamp_ns: int, limit_s: float | None) -> list[str]:
         """Names of the fed actuators whose last value is older than limit_s at stamp_ns."""
         if limit_s is None:
             return []
