@@ -54,13 +54,22 @@ from auv_ident.core.model.state import INPUT_NAMES, N_INPUT
 from auv_ident.offline.column_map import ColumnMapError, INPUT_OF
 from auv_ident.offline.sim_bag import (
     ACTUATOR_TOPIC,
+    command_message,
     joint_state_msg,
     ODOM_TOPIC,
     odometry_msg,
     SIM_EPOCH,
     write_message_bag,
 )
-from auv_ident.session.input_map import vehicle_actuators
+from auv_ident.session.input_map import (
+    command_limits,
+    InputMapError,
+    load_input_map,
+    ODOMETRY,
+    vehicle_actuators,
+    WRENCH,
+)
+from auv_ident.session.inputs import unconvert
 from auv_ident.session.messages import NOT_MEASURED_VARIANCE, NS_PER_S
 from auv_ident.vehicles import load_vehicle
 
@@ -121,11 +130,22 @@ def input_arrays(run):
     return u
 
 
-def imported_messages(run, epoch_ns):
+def _default_layout(t_ns, u, x, pose_cov, twist_cov):
+    """Today's layout: [(topic, message)] of one row's command (u, or None) and odometry (x,
+    or None)."""
+    out = [] if u is None else [(ACTUATOR_TOPIC, joint_state_msg(t_ns, u))]
+    if x is not None:
+        out.append((ODOM_TOPIC, odometry_msg(t_ns, x, 'ned', pose_cov, twist_cov)))
+    return out
+
+
+def imported_messages(run, epoch_ns, layout=_default_layout):
     """(topic, t_ns, rosbags message) of every row, the actuators first at each stamp: the
     actuators once every mapped input has had a value (then held), the odometry at the rows
     where some measured channel has a sample (the others written as 0 with
-    UNMEASURED_VARIANCE: not used)."""
+    UNMEASURED_VARIANCE: not used). layout(t_ns, u or None, x or None, pose_cov, twist_cov)
+    -> [(topic, message)] writes them (default: /actuators and /odom; :class:`MapLayout`: the
+    topics and forms of an input map)."""
     u = input_arrays(run)
     present = run.present
     full = bool(present[:, run.measured].all())
@@ -133,14 +153,54 @@ def imported_messages(run, epoch_ns):
     known = np.isfinite(u).all(axis=1)
     for k, tk in enumerate(run.t_ns):
         t_ns = int(epoch_ns) + int(tk)
-        if known[k]:
-            yield ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, u[k])
+        cmd = u[k] if known[k] else None
         if full:
-            yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], 'ned', pose_cov, twist_cov)
+            out = layout(t_ns, cmd, run.x[k], pose_cov, twist_cov)
         elif present[k].any():
             pc, tc = covariances(run, present[k])
-            yield ODOM_TOPIC, t_ns, odometry_msg(t_ns, np.where(present[k], run.x[k], 0.0),
-                                                 'ned', pc, tc)
+            out = layout(t_ns, cmd, np.where(present[k], run.x[k], 0.0), pc, tc)
+        else:
+            out = layout(t_ns, cmd, None, None, None)
+        for topic, msg in out:
+            yield topic, t_ns, msg
+
+
+class MapLayout:
+    """The rows of a run in the topics and message forms of an input map (session/input_map.py):
+    the odometry on the map's Odometry topic in its frame (ned unless the map says enu), every
+    command input's message with each channel's raw value (session/inputs.py unconvert: the
+    map's units, scales, offsets, PWM), on every row where the commands are known. A replay
+    through the same map reads back the run (import --input-map)."""
+
+    def __init__(self, input_map, vehicle):
+        self.map = load_input_map(input_map)
+        self.map.check_vehicle(load_vehicle(vehicle))
+        for e in self.map.commands:
+            if e.type == WRENCH:
+                raise InputMapError(f'{self.map.where}: input {e.name!r}: import writes no '
+                                    'geometry_msgs/WrenchStamped commands')
+        self.limits = command_limits(load_vehicle(vehicle))
+        odom = self.map.odometry
+        self.frame = 'enu' if odom.frame == 'enu' else 'ned'
+
+    @property
+    def topic_types(self):
+        """{topic: type}, the commands first."""
+        out = {e.bag_topic: e.type for e in self.map.commands}
+        out[self.map.odometry.bag_topic] = ODOMETRY
+        return out
+
+    def __call__(self, t_ns, u, x, pose_cov, twist_cov):
+        out = [] if u is None else [(e.bag_topic, self._command(e, t_ns, u))
+                                    for e in self.map.commands]
+        if x is not None:
+            out.append((self.map.odometry.bag_topic,
+                        odometry_msg(t_ns, x, self.frame, pose_cov, twist_cov)))
+        return out
+
+    def _command(self, entry, t_ns, u):
+        raw = [(c, unconvert(c, float(u[c.actuator]), *self.limits)) for c in entry.channels]
+        return command_message(entry.type, t_ns, raw)
 
 
 def unmapped_inputs(run, vehicle):
@@ -171,12 +231,15 @@ def import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command=''):
     }
 
 
-def write_imported_bag(run, path, vehicle=None, start=None, command='', compression='zstd'):
+def write_imported_bag(run, path, vehicle=None, start=None, command='', compression='zstd',
+                       input_map=None):
     """Write a MeasuredRun as a rosbag2 MCAP bag directory at path (must not exist).
 
     vehicle : stored as auv_ident.vehicle (default for HSVA files: kvlcc2_hsva; required for
         CSV logs); start : ISO 8601 time of t = 0 (default: the nominal epoch, module
-        docstring). Returns path.
+        docstring); input_map : None (our /odom and /actuators), or an input map name or path
+        whose topics and message forms the bag is written in (:class:`MapLayout`; stored as
+        auv_ident.input_map). Returns path.
     """
     vehicle = vehicle or DEFAULT_VEHICLE.get(run.fmt)
     if not vehicle:
@@ -187,5 +250,11 @@ def write_imported_bag(run, path, vehicle=None, start=None, command='', compress
         raise ColumnMapError(f'{run.source}: the first stamp would be before 1970-01-01 '
                              f'({run.t_ns[0] / NS_PER_S:g} s from {epoch_text})')
     meta = import_metadata(run, vehicle, epoch_ns, epoch_text, nominal, command)
-    return write_message_bag(path, TOPIC_TYPES, meta, imported_messages(run, epoch_ns),
-                             compression)
+    if input_map is None:
+        return write_message_bag(path, TOPIC_TYPES, meta, imported_messages(run, epoch_ns),
+                                 compression)
+    layout = MapLayout(input_map, vehicle)
+    meta['auv_ident.input_map'] = str(input_map)
+    meta['auv_ident.frame'] = layout.frame
+    return write_message_bag(path, layout.topic_types, meta,
+                             imported_messages(run, epoch_ns, layout), compression)

@@ -126,6 +126,22 @@ def convert(channel: Channel, raw: Any, fin_limit: float,
     return x if f == 1.0 else x * f
 
 
+def unconvert(channel: Channel, value: float, fin_limit: float, shaft_limit: float) -> float:
+    """The raw message value of a channel that :func:`convert` reads as `value` (input unit):
+    what a writer in the map's layout puts into the message (import --input-map)."""
+    unit = channel.unit
+    if unit == 'rad/s':
+        x = value * RPM_TO_RAD_S
+    elif unit == 'us':
+        neutral, half = channel.pwm
+        x = value / channel.factor(fin_limit, shaft_limit) * half + neutral
+    else:
+        x = value / channel.factor(fin_limit, shaft_limit)
+    if channel.scale != 1.0 or channel.offset != 0.0:
+        x = (x - channel.offset) / channel.scale
+    return x
+
+
 def read_channels(entry: InputEntry, msg: Any, fin_limit: float,
                   shaft_limit: float) -> list[tuple[int, float | None]]:
     """[(actuator index, value in the input unit)] of one command message of `entry`
