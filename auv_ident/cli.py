@@ -302,6 +302,8 @@ def cmd_report(args):
           + '; fit % per channel (identified / prior): '
           + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
                       for ch, d in val['channels'].items()))
+    if val.get('screening'):
+        print(f"{val['source']}, read without the filter: {val['screening']['line']}")
     true_val = doc.get('validation_true_model') or {}
     if true_val.get('rms'):
         print(f"validation on the held-out {true_val['maneuver']!r} manoeuvre (seed "

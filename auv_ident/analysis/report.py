@@ -562,6 +562,9 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
     val_doc = run_val.document()
     val_doc['holdout_fraction'] = holdout
     val_doc['identification_run'] = src.description
+    # a --validate bag is read without the filter: what its screening dropped (one line)
+    val_doc['screening'] = (None if run.screening is None
+                            else dict(run.screening[0], line=run.screening[1]))
 
     try:        # the run's own seed when the source knows it (a bag's metadata: text)
         val_seed = int(src.seed) + 1000
