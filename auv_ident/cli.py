@@ -287,6 +287,9 @@ def cmd_report(args):
                       sim_current=_sim_current(args.sim_current), validate_bag=args.validate,
                       holdout=args.holdout, methods=_report_methods(args.methods))
     doc = out['result']
+    verdict = (doc.get('diagnosis') or {}).get('messages') or []
+    if verdict:  # the first line a user reads is whether to trust the result (as identify's)
+        print(verdict[0])
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{settings.noise_mode}")
     print(doc_table(doc))
