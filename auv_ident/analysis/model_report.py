@@ -67,7 +67,9 @@ class SavedModel:
 
     vehicle : core.model.vehicle.Vehicle; names, estimate, std : the coefficients (vehicle-file
     units); current : (3,) m/s NED or None; bags : the identification bags (paths as written);
-    noise_std, q_state : (12,) the noise the identification judged the data with, or None
+    noise_std, q_state : (12,) the noise the identification judged the data with, or None;
+    source : what it was identified from, as the model file says it ('' if it does not);
+    mass_inverse : how the identification formed M^-1 ('default': as the vehicle file says)
     """
 
     path: str
@@ -79,6 +81,8 @@ class SavedModel:
     bags: list
     noise_std: object
     q_state: object
+    source: str = ''
+    mass_inverse: str = 'default'
 
 
 def _twelve(doc, key, path):
@@ -100,6 +104,7 @@ def load_model(path, vehicle=None):
             doc = json.load(fh)
     except json.JSONDecodeError as err:
         raise ConfigError(f'--model {path}: not JSON ({err.msg}, line {err.lineno})') from None
+    doc = _from_estimate_file(doc)
     if not isinstance(doc, dict) or 'vehicle' not in doc or not isinstance(
             doc.get('coefficients'), dict) or not doc['coefficients']:
         raise ConfigError(f'--model {path}: not a model written by identify --json (needs '
@@ -131,7 +136,24 @@ def load_model(path, vehicle=None):
     return SavedModel(path=str(path), vehicle=v, names=names, estimate=np.array(est),
                       std=np.array(std), current=current, bags=[str(b) for b in bags],
                       noise_std=_twelve(doc, 'noise_std', path),
-                      q_state=_twelve(doc, 'q_state', path))
+                      q_state=_twelve(doc, 'q_state', path),
+                      source=str(doc.get('source') or ''),
+                      mass_inverse=str(doc.get('mass_inverse') or 'default'))
+
+
+def _from_estimate_file(doc):
+    """The identifier node's estimate file (session/estimate_file.py: 'coefficients' a list
+    of names beside 'estimate' and 'std' lists) in identify --json's layout; other
+    documents as they are."""
+    if not (isinstance(doc, dict) and isinstance(doc.get('coefficients'), list)
+            and isinstance(doc.get('estimate'), list)
+            and len(doc['estimate']) == len(doc['coefficients'])):
+        return doc
+    std = doc.get('std') if isinstance(doc.get('std'), list) else []
+    coefficients = {str(n): {'estimate': e, 'std': std[i] if i < len(std) else None}
+                    for i, (n, e) in enumerate(zip(doc['coefficients'], doc['estimate']))}
+    source = 'the identifier node' + (f" (stamp {doc['stamp']} s)" if doc.get('stamp') else '')
+    return dict(doc, coefficients=coefficients, source=source)
 
 
 def refuse_identification_bag(bags, validate_bag):

@@ -17,7 +17,7 @@ from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
-from auv_ident.session.settings import IdentifierSettings
+from auv_ident.session.settings import IdentifierSettings, ParameterError, vehicle_named
 
 log = logging.getLogger('auv_ident.replay')
 
@@ -194,6 +194,35 @@ def metadata_settings(meta):
     return raw
 
 
+def settings_for_bag(settings, path, meta=None):
+    """`settings` with what the bag's metadata records (:func:`bag_settings`) for what they
+    were not given. A bag that records its vehicle and is given another one is a BagError
+    naming both, unless ``settings.other_vehicle`` (a renamed or corrected file of the same
+    vehicle): a wrong vehicle file otherwise fits confidently wrong coefficients."""
+    recorded = metadata_settings(bag_custom_data(path) if meta is None else meta)
+    bag_vehicle = recorded.get('vehicle')
+    if (bag_vehicle and 'vehicle' in settings.given and not settings.other_vehicle
+            and not _same_vehicle(settings.vehicle, bag_vehicle)):
+        given = vehicle_named(settings.vehicle)
+        raise BagError(f'{path}: the bag records vehicle {bag_vehicle!r}, the identification '
+                       f'was given vehicle {given.name!r} ({given.path}); leave the vehicle '
+                       "out to use the bag's, or say --other-vehicle if this file is meant "
+                       'for it')
+    return settings.over(recorded)
+
+
+def _same_vehicle(given, recorded):
+    """Whether a vehicle setting (name or YAML path) names the vehicle a bag records (a name,
+    or the path of the file the bag was made with), compared by the files' vehicle names."""
+    if given == recorded:
+        return True
+    try:
+        return vehicle_named(given).name == vehicle_named(recorded).name
+    except ParameterError:
+        # the recorded file is not on this machine: its file name stands for its vehicle
+        return Path(str(recorded)).stem == vehicle_named(given).name
+
+
 def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuators',
                allow_truncated=False, warn=True, filtering=True):
     """Identify from a bag exactly as the identifier node would have live.
@@ -226,7 +255,7 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
             listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
             raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
                            f'{listing}')
-    settings = (settings or IdentifierSettings()).over(bag_settings(path))
+    settings = settings_for_bag(settings or IdentifierSettings(), path)
     session = IdentSession(settings, keep_arrays=True, filtering=filtering)
     msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
                            actuator_topic: 'sensor_msgs/msg/JointState'},
