@@ -240,7 +240,7 @@ def _report_methods(text):
 
 def cmd_model_report(args):
     """report --model MODEL.json --validate BAG: a saved model judged on an unseen run."""
-    from auv_ident.analysis.model_report import make_model_report
+    from auv_ident.analysis.model_report import make_model_report, screening_lines
     if args.simulate or args.bag or args.methods:
         raise AuvIdentError('report --model judges a saved model: --simulate, --bag and '
                             '--methods do not apply (the model says what it was identified '
@@ -257,6 +257,8 @@ def cmd_model_report(args):
     print(f"model {args.model} on {val['source']}: free-run fit % (identified / prior) "
           + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
                       for ch, d in fits.items()))
+    for line in screening_lines(val['screening']):
+        print(line)
     zz = val['zigzag']
     if zz['detected']:
         o = zz['overshoot_deg']
@@ -265,6 +267,8 @@ def cmd_model_report(args):
                   '/'.join(_pct(o[k][i]) if i < len(o[k]) else '-'
                            for k in ('measured', 'predicted', 'prior'))
                   for i in range(len(o['measured']))))
+        print('measured reversal lag past the switch angle (deg / s): ' + '; '.join(
+            f'{d:.2f}/{t:.2f}' for d, t in zip(zz['reversal_lag_deg'], zz['reversal_lag_s'])))
     else:
         print(f"not a zig-zag run: {zz['reason']}")
     b = val.get('rudder_bias_diagnosis')
@@ -301,6 +305,8 @@ def cmd_report(args):
           + '; fit % per channel (identified / prior): '
           + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
                       for ch, d in val['channels'].items()))
+    if val.get('screening'):
+        print(f"{val['source']}, read without the filter: {val['screening']['line']}")
     true_val = doc.get('validation_true_model') or {}
     if true_val.get('rms'):
         print(f"validation on the held-out {true_val['maneuver']!r} manoeuvre (seed "
