@@ -111,6 +111,12 @@ class IdentSession:
         defaults. What needs the vehicle file (coefficient names, the warm-start file, the
         initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
+    filtering : False: screen the messages (the rules of session/screening.py, a repeated
+        odometry stamp rejected as 'duplicate stamp') and keep them (keep_arrays implied) without
+        filtering: no innovation gate, no guard, no resets, no 'auto' choice. A validation's
+        measured run is read so (offline/replay.py read_bag_run): its samples are what the data
+        are, none dropped because the model under test disagrees with them. Odometry then
+        gives Events of kind 'kept'.
     auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
         choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
 
@@ -128,8 +134,10 @@ class IdentSession:
     AutoChoice of coefficients ['auto', ...] (None: the set is fixed).
     """
 
-    def __init__(self, settings=None, keep_arrays=False, auto_runner=None):
+    def __init__(self, settings=None, keep_arrays=False, auto_runner=None, filtering=True):
         settings = IdentifierSettings() if settings is None else settings
+        self.filtering = bool(filtering)
+        keep_arrays = keep_arrays or not self.filtering
         self.settings = settings
         self.vehicle = vehicle_named(settings.vehicle)
         self.frame = settings.frame
@@ -204,8 +212,9 @@ class IdentSession:
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
-        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
-                     else None)
+        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
+                     if auto and self.filtering else None)
+        self._kept_stamps = set()   # odometry stamps kept unfiltered (filtering False)
 
     def _map_frame(self, map_frame):
         """The odometry convention: the `frame` setting, or the map's where that is 'auto';
@@ -615,6 +624,8 @@ class IdentSession:
             unmeasured = variances >= NOT_MEASURED_VARIANCE
             if unmeasured.any():    # the message says it does not measure these: skipped
                 y = np.where(unmeasured, np.nan, y)
+        if not self.filtering:
+            return self._kept(t, stamp_ns, y, r, frame_id, child_frame_id)
         filt = self.filter
         before = filt.last_good
         try:
@@ -637,6 +648,21 @@ class IdentSession:
                   + ': not taken as good')
         return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
                      step.dof, 'guard', False)
+
+    def _kept(self, t, stamp_ns, y, r, frame_id, child_frame_id):
+        """filtering False: keep a screened odometry sample as it is (the first of a stamp;
+        a repeated stamp is not a second measurement of that instant)."""
+        if stamp_ns in self._kept_stamps:
+            return self._reject('odom', 'duplicate stamp', f'duplicate stamp {t:.9f} s (the '
+                                'first message with it kept)', stamp_ns)
+        self._kept_stamps.add(stamp_ns)
+        self.counters.odom_accepted += 1
+        self.measurements.append((t, y))
+        self.variances.append(self.noise_default if r is None
+                              else np.where(np.isnan(y) & self.measured, np.nan, r))
+        if self._frame_ids is None:
+            self._frame_ids = (frame_id, child_frame_id)
+        return Event('kept', '', stamp_ns)
 
     def _taken(self, t, stamp_ns, y, r, step, before):
         """Count and keep an accepted odometry sample (y, its variances r or None); start the
