@@ -40,7 +40,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
-from auv_ident.session.auto_choice import AutoChoice, ChoiceJob
+from auv_ident.session.auto_choice import AutoChoice, ChoiceJob, ChosenFilter
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.guard import (
     Event,
@@ -63,6 +63,7 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
+from auv_ident.session.noise_learning import NoiseLearner
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
@@ -182,6 +183,9 @@ class IdentSession:
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
                      else None)
+        # the noise model learnt from the innovations (session/noise_learning.py)
+        self.noise = NoiseLearner(mask, T, settings.learn_noise
+                                  and settings.noise_mode == 'fixed')
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -227,6 +231,7 @@ class IdentSession:
         """Restart the filter from the start-up configuration (the ~/reset service): buffered
         commands, counters and the last good estimate are kept; the frame ids are forgotten."""
         self.filter.restart(self._new_stream(keep_commands_from=self.filter.stream))
+        self.noise.restarted()
         self._frame_ids = None
 
     def recover(self, reason, stamp_ns=None):
@@ -242,6 +247,7 @@ class IdentSession:
         start_from = filt.fault_start(code)
         filt.restart(self._new_stream(keep_commands_from=filt.stream, start_from=start_from),
                      fault=True)
+        self.noise.restarted()
         start = ('the last good estimate (covariance x '
                  f'{RESET_COV_INFLATION:g})' if start_from is not None
                  else 'the start-up configuration')
@@ -285,13 +291,20 @@ class IdentSession:
 
     def document(self):
         """The estimate file's dict of the best estimate (the last good one, else the prior;
-        session/estimate_file.py)."""
+        session/estimate_file.py), with the live diagnosis's verdict on its error bars and the
+        learnt noise model."""
         est, cov = self.best()
         good = self.last_good
-        return estimate_document(self.vehicle.name, self.names, est, cov,
-                                 None if good is None else good.stamp_ns,
-                                 self.counters.odom_accepted,
-                                 None if self.auto is None else self.auto.document())
+        doc = estimate_document(self.vehicle.name, self.names, est, cov,
+                                None if good is None else good.stamp_ns,
+                                self.counters.odom_accepted,
+                                None if self.auto is None else self.auto.document())
+        _, diagnosis = self.diagnosis()
+        doc['consistent'] = diagnosis['consistent']
+        doc['diagnosis'] = diagnosis['messages'][0]
+        if self.noise.enabled:
+            doc['noise_model'] = self.noise.document()
+        return doc
 
     def health(self):
         """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
@@ -304,7 +317,8 @@ class IdentSession:
         est, cov = self.best()
         prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
         verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
-        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts)
+        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts,
+                                   self.noise)
         if self.auto is not None:
             # while choosing or after a failure the set is provisional: that comes first
             line = self.auto.diagnosis_line(self.coefficient_names)
@@ -352,6 +366,7 @@ class IdentSession:
         self.warm_cov = None
         ekf = self.filter.stream.ekf
         self.counters.new_filter(float(ekf.nis), int(ekf.dof))
+        self.noise.restarted()
         good = self.filter.last_good
         self.auto.chose(result, None if good is None else good.stamp_ns)
 
@@ -457,6 +472,7 @@ class IdentSession:
             self.stream.command_rejected(t)
             if self.auto is not None:
                 self.auto.keep_command_rejected(t)
+            self.noise.keep_command_rejected(t)
         return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
     def _time(self, stamp_ns):
@@ -506,6 +522,7 @@ class IdentSession:
             self.commands.append((t, u7))
         if self.auto is not None:
             self.auto.keep_command(t, u7)
+        self.noise.keep_command(t, u7)
         self.counters.cmd_accepted += 1
         return Event('command', '', stamp_ns)
 
@@ -526,7 +543,7 @@ class IdentSession:
         filt = self.filter
         before = filt.last_good
         try:
-            step = filt.update(t, stamp_ns, y, r)
+            step = filt.update(t, stamp_ns, y, self._learnt_variances(r))
         except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
@@ -536,6 +553,8 @@ class IdentSession:
         self._taken(t, stamp_ns, y, r, step, before)
         if step.sustained:
             return self._guard_reset(t, stamp_ns)
+        if self._learn(step):
+            return self._relearnt_event(stamp_ns)
         if step.good:
             if self._frame_ids is None:
                 self._frame_ids = (frame_id, child_frame_id)
@@ -553,5 +572,63 @@ class IdentSession:
         if self.keep_arrays:
             self.measurements.append((t, y))
             self.variances.append(self.noise_default if r is None else r)
+        self.noise.keep_odometry(t, stamp_ns, y, r, step.code)
         if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
             self._start_choice(before)
+
+    # -- the noise model learnt from the innovations (session/noise_learning.py) --
+
+    def _learnt_variances(self, r):
+        """The variances to fuse a sample with: r (or, None, the configured ones) times the
+        learnt scale; None (the filter's own) while nothing has been learnt."""
+        scale = self.noise.scale
+        if self.noise.reruns == 0:
+            return r
+        return (self.noise_default if r is None else r) * scale
+
+    def _learn(self, step):
+        """Hand a fused update's whitened innovations to the learner; when its fit says the
+        noise model must change, re-run the filter over the kept record with the learnt
+        variances (it replaces the running one). Returns True if it was replaced."""
+        noise = self.noise
+        if step.code not in ('', 'repaired') or not noise.innovations(self.stream.ekf.white):
+            return False
+        scale = noise.fit()
+        if scale is None:
+            self._noise_news()
+            return False
+        old = noise.scale
+        noise.scale = scale
+        fed = ChosenFilter(self._new_stream(), self.guard_on)
+        noise.restarted()
+        try:
+            fed.feed(noise.entries(self.noise_default), 'the learnt noise model',
+                     lambda filt, up: noise.innovations(filt.stream.ekf.white)
+                     if up.code in ('', 'repaired') else None)
+        except AuvIdentError as err:
+            noise.scale = old
+            noise.rerun_failed(str(err), fed.samples)
+            self._noise_news()
+            return False
+        self.filter = fed.filter
+        noise.rerun_done(scale, fed.samples)
+        ekf = self.filter.stream.ekf
+        self.counters.new_filter(float(ekf.nis), int(ekf.dof))
+        return True
+
+    def _noise_news(self):
+        """The learner's lines into the notices (the caller logs them)."""
+        self.notices += self.noise.news
+        self.noise.news = []
+
+    def _relearnt_event(self, stamp_ns):
+        """The update Event after a re-run with the learnt noise model: the re-run filter's
+        estimate, not good (the model is not yet confirmed, so the node does not publish it);
+        the reason is the learner's line, also in the notices."""
+        text = self.noise.news[-1]
+        self._noise_news()
+        est, cov = self.estimate_now()
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        ekf = self.stream.ekf
+        return Event('update', 'odom: ' + text, stamp_ns, est, std, cov,
+                     float(ekf.nis), int(ekf.dof), 'noise model', False)
