@@ -595,7 +595,6 @@ class IdentSession:
             return False
         scale = noise.fit()
         if scale is None:
-            self._noise_news()
             return False
         old = noise.scale
         noise.scale = scale
@@ -608,7 +607,6 @@ class IdentSession:
         except AuvIdentError as err:
             noise.scale = old
             noise.rerun_failed(str(err), fed.samples)
-            self._noise_news()
             return False
         self.filter = fed.filter
         noise.rerun_done(scale, fed.samples)
@@ -616,17 +614,11 @@ class IdentSession:
         self.counters.new_filter(float(ekf.nis), int(ekf.dof))
         return True
 
-    def _noise_news(self):
-        """The learner's lines into the notices (the caller logs them)."""
-        self.notices += self.noise.news
-        self.noise.news = []
-
     def _relearnt_event(self, stamp_ns):
         """The update Event after a re-run with the learnt noise model: the re-run filter's
         estimate, not good (the model is not yet confirmed, so the node does not publish it);
-        the reason is the learner's line, also in the notices."""
+        the reason is the learner's line (also in its news, for the caller to log)."""
         text = self.noise.news[-1]
-        self._noise_news()
         est, cov = self.estimate_now()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         ekf = self.stream.ekf
