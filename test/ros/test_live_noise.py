@@ -19,7 +19,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from helpers import spawn_node, stop_process
-import numpy as np
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
