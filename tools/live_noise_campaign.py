@@ -10,8 +10,8 @@ learn_noise on and off. Noises: 'ar1' (AR(1), twice the documented level, correl
 the end, the live diagnosis at the end and how many of its verdicts (every 100 odometry
 samples) said NOT consistent, the re-runs and the wall time; then per noise and learning the
 share of (seed, coefficient) cases with the truth within 3 sigma, the median |error|/sigma,
-the runs with >= 4 of 5 within 3 sigma, and the runs ever NOT consistent. Measurements, not
-assertions.
+the runs with >= 4 of 5 within 3 sigma, the runs ending consistent and the runs ever NOT
+consistent. Measurements, not assertions.
 
     PYTHONPATH=. .venv/bin/python tools/live_noise_campaign.py [--seeds 1,2,3,4]
         [--duration 120] [--out DIR]
@@ -85,13 +85,15 @@ def main(argv=None):
                       f"{r['verdicts']}, re-runs {r['reruns']}, {r['wall_s']:.1f} s",
                       flush=True)
     print('\nnoise  learn_noise  within 3 sigma  median |error|/sigma  runs >= 4 of 5  '
-          'runs ever NOT consistent')
+          'runs ending consistent  runs ever NOT consistent')
     for (noise, learn), rs in rows.items():
         z = np.array([v for r in rs for v in r['z'].values()])
         good = sum(sum(v < 3.0 for v in r['z'].values()) >= 4 for r in rs)
         ever = sum(r['not_consistent'] > 0 for r in rs)
+        ends = sum(r['consistent'] is True for r in rs)
         print(f'{noise:5s}  {str(learn):11s}  {np.mean(z < 3.0) * 100:13.0f} %  '
-              f'{np.median(z):20.2f}  {good:7d} of {len(rs)}  {ever:12d} of {len(rs)}')
+              f'{np.median(z):20.2f}  {good:7d} of {len(rs)}  {ends:14d} of {len(rs)}  '
+              f'{ever:17d} of {len(rs)}')
 
 
 if __name__ == '__main__':

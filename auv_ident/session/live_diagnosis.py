@@ -99,10 +99,11 @@ def live_diagnosis(health: Any, verdicts: Verdicts,
                              'or the model is wrong; the error bars are too small. Identify '
                              'the recorded run offline (identify --bag) for a noise model and '
                              'honest error bars'] + notes}
-    learnt = noise is not None and noise.state == HOLDS and noise.reruns > 0
+    # re-runs with a learnt model that holds (0: the configured model, not learnt)
+    learnt = noise.reruns if noise is not None and noise.state == HOLDS else 0
     if learnt:
         head = ('consistent: the noise model learnt from the innovations holds (re-run '
-                f'{noise.reruns}; mean NIS/dof {m:.3g}')
+                f'{learnt}; mean NIS/dof {m:.3g}')
         head += (f', below [{lo:.3g}, {hi:.3g}] as its colour implies)' if m < lo
                  else f' in [{lo:.3g}, {hi:.3g}])')
     else:
