@@ -73,7 +73,9 @@ Publications
     and none has confirmed it since), noise_reruns, and per measured channel noise_scale_<ch>
     (the learnt factor on its measurement variance, 1.0 as configured) and noise_factor_<ch>
     (the last fit's variance factor level^2 (1 + rho) / (1 - rho) of its whitened
-    innovations; 'n/a' before a fit). What the learning finds is logged at info level.
+    innovations; 'n/a' before a fit). What the learning finds is logged at info level; its
+    re-runs run in a worker thread (as the 'auto' choice: the callbacks go on meanwhile) and
+    the re-run filter takes over at the next odometry message or 1 Hz tick after it ends.
 
 Services (std_srvs/srv/Trigger)
     ``~/reset``: restart the filter from the start-up configuration (initial guesses or warm
@@ -287,6 +289,16 @@ class IdentifierNode(Node):
 
     # -- messages --
 
+    def _noise_news(self):
+        """Log what the noise learning found (session/noise_learning.py, info); returns True if
+        a re-run's filter took over (the caller publishes /diagnostics at once)."""
+        noise = self.session.noise
+        rerun = any(text.startswith('noise model learnt') for text in noise.news)
+        for text in noise.news:
+            self._emit('info', text)
+        noise.news.clear()
+        return rerun
+
     def _emit(self, level, text):
         """Write one log line (tests replace this to count what is logged)."""
         logger = self.get_logger()
@@ -354,12 +366,8 @@ class IdentifierNode(Node):
             for text in self.session.notices:
                 self._emit('warning', text)
             self.session.notices.clear()
-        noise = self.session.noise
-        if noise.news:      # what the noise learning found (session/noise_learning.py)
-            for text in noise.news:
-                self._emit('info', text)
-            noise.news.clear()
-        if (ev.kind == 'error' or ev.code == 'noise model') and self.context.ok():
+        rerun = self._noise_news()
+        if (ev.kind == 'error' or rerun) and self.context.ok():
             self.publish_diagnostics()
         return ev
 
@@ -445,6 +453,9 @@ class IdentifierNode(Node):
             # a choice that finished while no message arrived switches now
             self.session.poll_choice()
             self._follow_choice(diagnostics=False)
+        # so does a noise re-run
+        self.session.poll_noise()
+        self._noise_news()
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S

@@ -36,6 +36,8 @@ estimates as without learning). Only in noise mode 'fixed' (the adaptive modes a
 themselves).
 """
 from collections import deque
+from concurrent.futures import Future
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -43,7 +45,7 @@ import numpy as np
 from auv_ident.core.identification.noise_fit import MAX_RHO, NOISE_MODEL_CHANGE
 from auv_ident.core.identification.uncertainty import noise_model
 from auv_ident.core.model.state import N_STATE, STATE_NAMES
-from auv_ident.session.auto_choice import COMMAND, COMMAND_REJECTED, ODOMETRY
+from auv_ident.session.auto_choice import ChosenFilter, COMMAND, COMMAND_REJECTED, ODOMETRY
 
 LEARN_MIN_UPDATES = 200     # fused updates before the first fit (the health window's length)
 LEARN_EVERY = 100           # then a fit every this many accepted updates
@@ -52,6 +54,32 @@ FIT_SIGMAS = 3.5            # a factor this many standard errors of its log from
 RERUN_GROWTH = 2.0          # a re-run once the record is this many times the last one's
 KEEP_LIMIT = 36000          # odometry samples kept at most (1 h at 10 Hz; ~10 MB)
 LEARNING, HOLDS, RELEARNT, OFF = 'learning', 'holds', 'relearnt', 'off'
+FUSED_OK = ('', 'repaired')     # stream codes of an accepted, fused update
+
+
+@dataclass
+class Rerun:
+    """A re-run under way: its Future (of :func:`rerun`'s result), the scale (12,) it runs
+    with, and the kept entries it took."""
+
+    future: Future
+    scale: np.ndarray
+    taken: int
+
+
+def rerun(stream, guard_on, entries, fed=None):
+    """Feed entries (the kept record with the learnt variances, NoiseLearner.entries) to a
+    GuardedFilter of stream (fed None: a new ChosenFilter of it; else fed goes on); returns
+    (fed, the whitened innovations (12,) of its fused updates). Raises
+    auto_choice.ChoiceFailed where the session would reset the filter."""
+    fed = ChosenFilter(stream, guard_on) if fed is None else fed
+    whites = []
+
+    def keep(filt, step):
+        if step.code in FUSED_OK:
+            whites.append(np.array(filt.stream.ekf.white, dtype=float))
+    fed.feed(entries, 'the learnt noise model', keep)
+    return fed, whites
 
 
 def variance_factors(white, T, measured):
@@ -121,6 +149,7 @@ class NoiseLearner:
         self.factors = np.full(N_STATE, np.nan)
         self.model = {}
         self.news = []
+        self.pending = None                     # the Rerun under way, if any
 
     # -- what the session keeps --
 
@@ -162,11 +191,12 @@ class NoiseLearner:
         return self.fused >= LEARN_MIN_UPDATES and self.since_fit >= LEARN_EVERY
 
     def restarted(self):
-        """The running filter was replaced (a reset, a re-run, the 'auto' switch): its
-        innovations start anew."""
+        """The running filter was replaced by a reset or the 'auto' switch: its innovations
+        start anew, and a re-run under way (of the replaced set or start) is dropped."""
         self.white.clear()
         self.fused = 0
         self.since_fit = 0
+        self.pending = None
 
     # -- the fit --
 
@@ -205,9 +235,18 @@ class NoiseLearner:
             return f'no more re-runs: the record reached {KEEP_LIMIT} samples'
         return f'the next re-run once {self.rerun_at:.0f} samples are kept'
 
-    def rerun_done(self, scale, samples):
+    def start_rerun(self, future, scale):
+        """A re-run with scale (12,) over the whole record so far has started (future: its
+        :func:`rerun` result)."""
+        self.pending = Rerun(future, scale, len(self.kept))
+
+    def rerun_done(self, scale, samples, whites):
         """A re-run with scale (12,) over samples kept odometry samples has replaced the
-        running filter."""
+        running filter; whites: its innovations, the window from now on (so the next fit
+        judges the re-run model at once)."""
+        self.restarted()
+        for w in whites:
+            self.innovations(w)
         self.scale = scale
         self.reruns += 1
         self.rerun_at = RERUN_GROWTH * samples
@@ -221,14 +260,14 @@ class NoiseLearner:
         self.news.append(f'the re-run with the learnt noise model failed ({reason}): the '
                          f'running filter stays ({self.next_rerun()})')
 
-    def entries(self, default_variances):
-        """The kept record with each odometry sample's variances times the learnt scale
-        (default_variances (12,): those of a sample that states none)."""
+    def entries(self, default_variances, scale, start=0):
+        """The kept record from entry start on, each odometry sample's variances times scale
+        (12,) (default_variances (12,): those of a sample that states none)."""
         out = []
-        for e in self.kept:
+        for e in self.kept[start:]:
             if e[0] == ODOMETRY:
                 r = default_variances if e[4] is None else e[4]
-                e = (ODOMETRY, e[1], e[2], e[3], r * self.scale)
+                e = (ODOMETRY, e[1], e[2], e[3], r * scale)
             out.append(e)
         return out
 

@@ -40,7 +40,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
-from auv_ident.session.auto_choice import AutoChoice, ChoiceJob, ChosenFilter
+from auv_ident.session.auto_choice import AutoChoice, ChoiceJob, failure_text, run_inline
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.guard import (
     Event,
@@ -63,7 +63,7 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
-from auv_ident.session.noise_learning import NoiseLearner
+from auv_ident.session.noise_learning import FUSED_OK, NoiseLearner, rerun
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
@@ -101,7 +101,8 @@ class IdentSession:
         initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
     auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
-        choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
+        choice and the noise learning's re-runs (auto_choice.py: run_inline, the default, or
+        run_in_thread, the node's)
 
     The identified parameters (``names``) are the coefficients, then the estimated current
     components ('current_n', 'current_e'[, 'current_d']).
@@ -186,6 +187,7 @@ class IdentSession:
         # the noise model learnt from the innovations (session/noise_learning.py)
         self.noise = NoiseLearner(mask, T, settings.learn_noise
                                   and settings.noise_mode == 'fixed')
+        self._runner = run_inline if auto_runner is None else auto_runner
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -530,6 +532,8 @@ class IdentSession:
         """add_odometry after reading: stamp_ns int, x12 a (12,) float array of our own."""
         if self.auto is not None and self.auto.running:
             self.poll_choice()
+        if self.noise.pending is not None:
+            self.poll_noise()
         zero = self._zero_stamp('odom', stamp_ns)
         if zero is not None:
             return zero
@@ -588,28 +592,44 @@ class IdentSession:
 
     def _learn(self, step):
         """Hand a fused update's whitened innovations to the learner; when its fit says the
-        noise model must change, re-run the filter over the kept record with the learnt
-        variances (it replaces the running one). Returns True if it was replaced."""
+        noise model must change, start the re-run of a filter from the start-up configuration
+        over the kept record with the learnt variances, in the runner (the node's: a worker
+        thread; the messages go on meanwhile, the running filter takes them and they are
+        kept). Returns True if a re-run's filter has replaced the running one now (an inline
+        runner)."""
         noise = self.noise
-        if step.code not in ('', 'repaired') or not noise.innovations(self.stream.ekf.white):
+        if (noise.pending is not None or step.code not in FUSED_OK
+                or not noise.innovations(self.stream.ekf.white)):
             return False
         scale = noise.fit()
         if scale is None:
             return False
-        old = noise.scale
-        noise.scale = scale
-        fed = ChosenFilter(self._new_stream(), self.guard_on)
-        noise.restarted()
+        # what the worker reads, taken here: a fresh stream and a snapshot of the record
+        stream, entries, guard_on = self._new_stream(), noise.entries(self.noise_default,
+                                                                      scale), self.guard_on
+        noise.start_rerun(self._runner(lambda: rerun(stream, guard_on, entries)), scale)
+        return self.poll_noise()
+
+    def poll_noise(self):
+        """Switch to the re-run filter if its job has finished: it is fed what was kept
+        meanwhile and replaces the running filter (its estimate, covariance, windows and last
+        good estimate); a failed re-run is recorded and the running filter stays. Called before
+        every odometry message; the node also calls it from its timer. Returns True if the
+        filter was replaced."""
+        noise = self.noise
+        job = noise.pending
+        if job is None or not job.future.done():
+            return False
+        noise.pending = None
         try:
-            fed.feed(noise.entries(self.noise_default), 'the learnt noise model',
-                     lambda filt, up: noise.innovations(filt.stream.ekf.white)
-                     if up.code in ('', 'repaired') else None)
-        except AuvIdentError as err:
-            noise.scale = old
-            noise.rerun_failed(str(err), fed.samples)
+            fed, whites = job.future.result()
+            whites += rerun(None, self.guard_on, noise.entries(self.noise_default, job.scale,
+                                                               job.taken), fed)[1]
+        except Exception as err:                 # noqa: BLE001 - the running filter stays
+            noise.rerun_failed(failure_text(err), noise.kept_odometry)
             return False
         self.filter = fed.filter
-        noise.rerun_done(scale, fed.samples)
+        noise.rerun_done(job.scale, fed.samples, whites)
         ekf = self.filter.stream.ekf
         self.counters.new_filter(float(ekf.nis), int(ekf.dof))
         return True

@@ -2,6 +2,7 @@
 level and AR(1) colour from its own innovations and re-runs its filter with it, so that its
 error bars hold on coloured noise; white noise of the configured level changes nothing and is
 never called NOT consistent."""
+from concurrent.futures import Future
 import math
 
 import numpy as np
@@ -91,9 +92,9 @@ def test_the_learner_keeps_the_record_and_says_when_to_fit():
     for k in range(3):
         learner.keep_odometry(k * T, k, np.zeros(12), None, '')
     r = np.full(12, 2.0)
-    learner.scale = np.full(12, 3.0)
-    entries = learner.entries(r)
+    entries = learner.entries(r, np.full(12, 3.0))
     assert len(entries) == 4 and np.all(entries[1][4] == 6.0)
+    assert len(learner.entries(r, np.ones(12), start=2)) == 2
     learner.keep_odometry(0.0, 9, np.zeros(12), None, 'time jump')   # a new time line
     assert learner.kept_odometry == 1 and len(learner.kept) == 2
     off = NoiseLearner(np.ones(12, dtype=bool), T, enabled=False)
@@ -129,6 +130,50 @@ def test_coloured_noise_is_learnt_and_the_error_bars_hold(run):
     assert np.sum(z_plain < 3.0) < 4, z_plain
     assert plain_verdicts[-1] is False and 'noise_state' not in dict(
         diagnostic_values(plain, plain.health()))
+
+
+def test_a_rerun_in_the_background_takes_over_with_what_arrived_meanwhile(run):
+    """The node's runner is a worker thread: while a re-run runs, the running filter takes the
+    messages and they are kept; at the first message after it ends, the re-run filter is fed
+    them and takes over. Here the runner runs the job when the test says (deterministic)."""
+    jobs = []
+
+    def later(work):
+        future = Future()
+        jobs.append((work, future))
+        return future
+
+    rng = np.random.default_rng(1)
+    y = run.x + 2.0 * DEFAULT_NOISE_STD * ar1(rng, len(run.t), math.exp(-T / 1.0))
+
+    def feed(s, k0, k1):
+        for k in range(k0, k1):
+            ns = int(round(run.t[k] * 1e9))
+            s.add_command(ns, run.u[k])
+            s.add_odometry(ns, y[k])
+    s = IdentSession(auto_runner=later)
+    feed(s, 0, LEARN_MIN_UPDATES + 50)
+    assert len(jobs) == 1 and s.noise.pending is not None and s.noise.reruns == 0
+    running = s.filter
+    assert s.diagnosis()[1]['consistent'] is False      # the model is off, the re-run runs
+    work, future = jobs[0]
+    future.set_result(work())
+    assert s.filter is running                           # not switched between messages
+    feed(s, LEARN_MIN_UPDATES + 50, LEARN_MIN_UPDATES + 51)
+    assert s.filter is not running and s.noise.pending is None and s.noise.reruns == 1
+    # fed the whole record: the 200 it was started with and the 50 kept meanwhile
+    assert any(f'over {LEARN_MIN_UPDATES + 50} kept samples' in n for n in s.noise.news)
+    assert s.counters.odom_accepted == LEARN_MIN_UPDATES + 51
+    # a failed re-run leaves the running filter; the next one waits for twice the record
+    jobs.clear()
+    failing = IdentSession(auto_runner=later)
+    feed(failing, 0, LEARN_MIN_UPDATES + 10)
+    jobs[0][1].set_exception(RuntimeError('boom'))
+    running = failing.filter
+    feed(failing, LEARN_MIN_UPDATES + 10, LEARN_MIN_UPDATES + 11)
+    assert failing.filter is running and failing.noise.reruns == 0
+    assert 'internal error: RuntimeError: boom' in failing.noise.news[-1]
+    assert failing.noise.rerun_at == 2 * (LEARN_MIN_UPDATES + 10)
 
 
 def test_white_noise_of_the_configured_level_is_left_alone(run):
