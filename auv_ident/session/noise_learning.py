@@ -13,21 +13,25 @@ does the same from the running filter:
    ``level^2 (1 + rho) / (1 - rho)``: the variance a white noise would need to carry the
    information the channel really carries about slowly varying quantities such as the
    coefficients (the long-run variance of an AR(1) process; noise_fit.effective_std);
-3. the noise model holds when every channel's factor is within NOISE_MODEL_CHANGE of 1 either
-   way (noise_fit's rule) or within FIT_SIGMAS standard errors of its logarithm (a fit of
-   strongly correlated noise is uncertain: with rho 0.9, 600 innovations carry the
-   information of ~30 independent ones, and the factor scatters by +-30 %; the standard error
-   :func:`log_factor_sd`). Otherwise the learnt variance scale of every fitted channel is
+3. the noise model holds when every channel's factor is within NOISE_MODEL_CHANGE of 1 either way
+   (noise_fit's rule) or within FIT_SIGMAS standard errors of its logarithm (a fit of strongly
+   correlated noise is uncertain: with rho 0.9, 600 innovations carry the information of ~30
+   independent ones, and the factor scatters by ~30 %; the standard error :func:`log_factor_sd`).
+   Measured with the plain 1.5x rule alone: runs with the model learnt flipped to NOT consistent
+   and back on that scatter. Otherwise the learnt variance scale of every fitted channel is
    multiplied by its factor and a filter from the start-up configuration is fed the whole kept
-   record with the measurement variances times that scale (the offline second pass, online);
-   it replaces the running filter (its estimate, covariance, windows and last good estimate).
-   Its innovations are whitened by the new variances, so the next fit of a learnt model gives
-   factors near 1: a fixed point. A re-run costs one filter pass over the record (~1 ms per
-   sample, in the message's callback), so one is made only once the record holds RERUN_GROWTH
-   times the samples of the last one (at 200, 400, 800, ... samples): all re-runs together
-   cost at most about twice one pass over the final record, however long the run. A fit that
-   is off meanwhile leaves the estimate NOT consistent until the next re-run and a fit after
-   it. The record is kept up to KEEP_LIMIT odometry samples; after that no more re-runs.
+   record with the measurement variances times that scale (the offline second pass, online); it
+   replaces the running filter (its estimate, covariance, windows and last good estimate). The
+   re-run runs in the session's runner (the node's: a worker thread, as the 'auto' choice; the
+   running filter takes and keeps the messages meanwhile, and the re-run filter is fed them before
+   it takes over at the next message after it ends: IdentSession.poll_noise). Its innovations are
+   whitened by the new variances, so the next fit of a learnt model gives factors near 1: a fixed
+   point. A re-run costs one filter pass over the record (~0.6 ms per sample), so one is made only
+   once the record holds RERUN_GROWTH times the samples of the last one (at 200, 400, 800, ...
+   samples): all re-runs together cost at most about twice one pass over the final record, however
+   long the run. A fit that is off meanwhile leaves the estimate NOT consistent until the next
+   re-run and a fit after it. The record is kept up to KEEP_LIMIT odometry samples; after that no
+   more re-runs.
 
 Until a fit has found the model holding, the estimate is NOT consistent (live_diagnosis.py):
 the error bars of a filter whose noise model is wrong do not hold. Before the first fit nothing

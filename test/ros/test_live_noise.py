@@ -15,13 +15,17 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers import spawn_node, stop_process
+from helpers import (
+    probe_node,
+    read_text,
+    spawn_identifier,
+    spawn_node,
+    spin_until,
+    stop_process,
+)
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -38,28 +42,10 @@ LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def _read(path):
-    with open(path, encoding='utf-8') as fh:
-        return fh.read()
-
-
 @pytest.fixture
 def probe(ros_env):
-    ctx = rclpy.context.Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node('noise_probe', context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    yield node, ex
-    node.destroy_node()
-    rclpy.try_shutdown(context=ctx)
-
-
-def _spin_until(ex, cond, timeout):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        ex.spin_once(timeout_sec=0.05)
-    return cond()
+    with probe_node('noise_probe') as probe:
+        yield probe
 
 
 def _values(diag):
@@ -77,29 +63,22 @@ def _play_into_identifier(probe, ros_env, tmp_path, bag):
     save = tmp_path / 'estimate.json'
     procs = []
     try:
-        ident = spawn_node('identifier', ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
+        ident = spawn_identifier(probe, ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
         procs.append(ident)
-
-        def subscribed():
-            return any(i.node_name == 'identifier'
-                       for i in node.get_subscriptions_info_by_topic('/odom'))
-        # up to 40 s: a stale numba cache makes the identifier compile its EKF first
-        assert _spin_until(ex, lambda: subscribed() or ident.poll() is not None, 40.0)
-        assert ident.poll() is None, _read(tmp_path / 'identifier.err')
         player = spawn_node('play', ['-p', f'bag:={bag}', '-p', f'rate:={RATE}',
                                      '-p', "wait_for_subscribers:=['/odom', '/actuators']"],
                             ros_env, str(tmp_path))
         procs.append(player)
-        assert _spin_until(ex, lambda: player.poll() is not None, DURATION / RATE + 40.0), \
+        assert spin_until(ex, lambda: player.poll() is not None, DURATION / RATE + 40.0), \
             'the player did not finish'
-        assert stop_process(player) == 0, _read(tmp_path / 'play.err')
+        assert stop_process(player) == 0, read_text(tmp_path / 'play.err')
 
         def drained():
             return diags and int(diags[-1]['accepted']) + int(diags[-1]['rejected']) >= N_ODOM
-        _spin_until(ex, drained, 20.0)
-        _spin_until(ex, lambda: False, 1.5)    # one more /diagnostics after the last message
-        assert stop_process(ident, signal.SIGINT) == 0, _read(tmp_path / 'identifier.err')
-        log = _read(tmp_path / 'identifier.err')
+        spin_until(ex, drained, 20.0)
+        spin_until(ex, lambda: False, 1.5)    # one more /diagnostics after the last message
+        assert stop_process(ident, signal.SIGINT) == 0, read_text(tmp_path / 'identifier.err')
+        log = read_text(tmp_path / 'identifier.err')
         assert 'Traceback' not in log, log
     finally:
         for p in procs:
