@@ -206,6 +206,7 @@ class IdentifierNode(Node):
         # that the callbacks go on taking (and keeping) messages while it runs
         self.session = IdentSession(IdentifierSettings.from_values(**values),
                                     auto_runner=run_in_thread)
+        self._reruns_seen = 0      # noise re-runs already announced (_noise_news)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
@@ -293,7 +294,8 @@ class IdentifierNode(Node):
         """Log what the noise learning found (session/noise_learning.py, info); returns True if
         a re-run's filter took over (the caller publishes /diagnostics at once)."""
         noise = self.session.noise
-        rerun = any(text.startswith('noise model learnt') for text in noise.news)
+        rerun = noise.reruns != self._reruns_seen
+        self._reruns_seen = noise.reruns
         for text in noise.news:
             self._emit('info', text)
         noise.news.clear()
