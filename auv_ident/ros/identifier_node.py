@@ -202,8 +202,9 @@ class IdentifierNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         values = declare_parameters(self, _PARAMETERS)
         self.save_path = values.pop('save_path')
-        # ParameterError names a bad parameter; an 'auto' choice runs in a worker thread, so
-        # that the callbacks go on taking (and keeping) messages while it runs
+        # ParameterError names a bad parameter; an 'auto' choice and the noise learning's
+        # re-runs run in worker threads, so that the callbacks go on taking (and keeping)
+        # messages while they run
         self.session = IdentSession(IdentifierSettings.from_values(**values),
                                     auto_runner=run_in_thread)
         self._reruns_seen = 0      # noise re-runs already announced (_noise_news)
