@@ -97,8 +97,8 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates, "consistent": true/false/null, "diagnosis": first line,
-"noise_model": {...}}`` (auv_ident/session/estimate_file.py) of the last good estimate; with
+null, "steps": accepted updates, "diagnosis": {"consistent": true/false/null, "messages"},
+"live_noise_model": {...}}`` (auv_ident/session/estimate_file.py) of the last good estimate; with
 ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
 JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
 Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady

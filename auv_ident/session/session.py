@@ -301,11 +301,12 @@ class IdentSession:
                                 None if good is None else good.stamp_ns,
                                 self.counters.odom_accepted,
                                 None if self.auto is None else self.auto.document())
-        _, diagnosis = self.diagnosis()
-        doc['consistent'] = diagnosis['consistent']
-        doc['diagnosis'] = diagnosis['messages'][0]
+        # the offline result's layout ({'consistent', 'messages'}), so that what reads one
+        # reads the other; the learnt noise model under a key of its own (the offline
+        # 'noise_model' is another document)
+        _, doc['diagnosis'] = self.diagnosis()
         if self.noise.enabled:
-            doc['noise_model'] = self.noise.document()
+            doc['live_noise_model'] = self.noise.document()
         return doc
 
     def health(self):

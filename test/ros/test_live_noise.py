@@ -113,8 +113,8 @@ def test_live_error_bars_hold_on_the_played_bag(ros_env, probe, tmp_path, noise,
           f' of {len(said)}; ' + ', '.join(f'{k} {last[k]}' for k in last
                                            if k.startswith('noise_scale_')))
     # the estimate file says what /diagnostics says at the end
-    assert doc['consistent'] == {'true': True, 'false': False, 'not judged': None}[
-        last['consistent']]
+    assert doc['diagnosis']['consistent'] == {'true': True, 'false': False,
+                                              'not judged': None}[last['consistent']]
     if noise == 'ar1':
         # the done-when: truth within 3 sigma for >= 4 of 5, or NOT consistent all along
         assert within >= 4 or all(c != 'true' for c in said), (z, said)

@@ -123,7 +123,8 @@ def test_coloured_noise_is_learnt_and_the_error_bars_hold(run):
     assert values['consistent'] == 'true' and values['noise_state'] == HOLDS
     assert float(values['noise_scale_w']) == pytest.approx(s.noise.scale[2])
     doc = s.document()
-    assert doc['consistent'] is True and doc['noise_model']['reruns'] == s.noise.reruns
+    assert doc['diagnosis']['consistent'] is True
+    assert doc['live_noise_model']['reruns'] == s.noise.reruns
 
     plain, plain_verdicts = _identify(run, y, learn=False)
     z_plain = _errors_in_sigma(plain)
