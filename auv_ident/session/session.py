@@ -100,6 +100,12 @@ class IdentSession:
         defaults. What needs the vehicle file (coefficient names, the warm-start file, the
         initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
+    filtering : False: screen the messages (the rules of session/screening.py, a repeated
+        odometry stamp rejected as 'duplicate stamp') and keep them (keep_arrays implied) without
+        filtering: no innovation gate, no guard, no resets, no 'auto' choice, no noise
+        learning. A validation's measured run is read so (offline/replay.py read_bag_run): its
+        samples are what the data are, none dropped because the model under test disagrees
+        with them. Odometry then gives Events of kind 'kept'.
     auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
         choice and the noise learning's re-runs (auto_choice.py: run_inline, the default, or
         run_in_thread, the node's)
@@ -118,8 +124,10 @@ class IdentSession:
     AutoChoice of coefficients ['auto', ...] (None: the set is fixed).
     """
 
-    def __init__(self, settings=None, keep_arrays=False, auto_runner=None):
+    def __init__(self, settings=None, keep_arrays=False, auto_runner=None, filtering=True):
         settings = IdentifierSettings() if settings is None else settings
+        self.filtering = bool(filtering)
+        keep_arrays = keep_arrays or not self.filtering
         self.settings = settings
         self.vehicle = vehicle_named(settings.vehicle)
         self.frame = settings.frame
@@ -182,10 +190,12 @@ class IdentSession:
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
-        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
-                     else None)
-        # the noise model learnt from the innovations (session/noise_learning.py)
-        self.noise = NoiseLearner(mask, T, settings.learn_noise
+        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
+                     if auto and self.filtering else None)
+        self._kept_stamps = set()   # odometry stamps kept unfiltered (filtering False)
+        # the noise model learnt from the innovations (session/noise_learning.py); not
+        # without filtering (no filter, no innovations)
+        self.noise = NoiseLearner(mask, T, settings.learn_noise and self.filtering
                                   and settings.noise_mode == 'fixed')
         self._runner = run_inline if auto_runner is None else auto_runner
 
@@ -545,6 +555,8 @@ class IdentSession:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
         y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
         r = None if variances is None else self._measurement_variances(variances)
+        if not self.filtering:
+            return self._kept(t, stamp_ns, y, r, frame_id, child_frame_id)
         filt = self.filter
         before = filt.last_good
         try:
@@ -569,6 +581,20 @@ class IdentSession:
                   + ': not taken as good')
         return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
                      step.dof, 'guard', False)
+
+    def _kept(self, t, stamp_ns, y, r, frame_id, child_frame_id):
+        """filtering False: keep a screened odometry sample as it is (the first of a stamp;
+        a repeated stamp is not a second measurement of that instant)."""
+        if stamp_ns in self._kept_stamps:
+            return self._reject('odom', 'duplicate stamp', f'duplicate stamp {t:.9f} s (the '
+                                'first message with it kept)', stamp_ns)
+        self._kept_stamps.add(stamp_ns)
+        self.counters.odom_accepted += 1
+        self.measurements.append((t, y))
+        self.variances.append(self.noise_default if r is None else r)
+        if self._frame_ids is None:
+            self._frame_ids = (frame_id, child_frame_id)
+        return Event('kept', '', stamp_ns)
 
     def _taken(self, t, stamp_ns, y, r, step, before):
         """Count and keep an accepted odometry sample (y, its variances r or None); start the
