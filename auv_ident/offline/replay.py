@@ -143,6 +143,10 @@ def replay_messages(messages, session, warn=None):
             for text in session.notices:
                 log.warning(text)
             session.notices.clear()
+        if session.noise.news:      # what the noise learning found
+            for text in session.noise.news:
+                log.info(text)
+            session.noise.news.clear()
         if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
             _log_choice_news(session.auto)
     return updates
