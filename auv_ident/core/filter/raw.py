@@ -68,9 +68,9 @@ from auv_ident.core.model.state import (
 KINDS = ('imu', 'dvl', 'depth', 'pressure', 'position', 'command')
 VALUE_SIZES = {'imu': (7,), 'dvl': (3,), 'depth': (1,), 'pressure': (1,), 'position': (2, 3),
                'command': (N_INPUT,)}
-# the channels each kind's innovations are recorded under (for the coloured-noise factor)
-CHANNELS = {'attitude': ('roll', 'pitch', 'yaw'), 'gyro': ('p', 'q', 'r'),
-            'dvl': ('x', 'y', 'z'), 'depth': ('z',), 'position': ('x', 'y', 'z')}
+# the channel groups: each has its default noise, its noise scale and its whitened innovations
+# (depth and pressure share 'depth', in metres; the IMU is 'attitude' and 'gyro')
+GROUPS = ('attitude', 'gyro', 'dvl', 'depth', 'position')
 # default 1-sigma of each sensor error's prior and per sqrt(s) random walk (units: ERROR_UNITS)
 ERROR_SD0 = {'gyro_bias_p': 0.005, 'gyro_bias_q': 0.005, 'gyro_bias_r': 0.005,
              'dvl_misalignment': math.radians(5.0), 'dvl_scale': 0.03, 'depth_offset': 0.5}
@@ -125,6 +125,8 @@ class RawSensorConfig:
     noise_std : per channel group ('attitude' (3,) rad, 'gyro' (3,) rad/s, 'dvl' (3,) m/s,
         'depth' (1,) m, 'position' (3,) m) the 1-sigma used where a message's covariance is
         missing or zero (default: sensors.DEFAULT_NOISE_STD)
+    noise_scale : per channel group a factor on its measurement covariance (>= 0; default 1):
+        what identify_raw's later passes set from the earlier passes' innovations
     rho, g, p_surface : kg/m^3, m/s^2, Pa: depth = (p - p_surface) / (rho g)
     max_step, max_bridge : s, the time update's longest RK4 step and longest interval bridged
     """
@@ -135,6 +137,7 @@ class RawSensorConfig:
     error_sd0: dict[str, float] = field(default_factory=dict)
     error_walk: dict[str, float] = field(default_factory=dict)
     noise_std: dict[str, Any] = field(default_factory=dict)
+    noise_scale: dict[str, float] = field(default_factory=dict)
     rho: float = rs.SEAWATER_DENSITY
     g: float = rs.GRAVITY
     p_surface: float = rs.STANDARD_ATMOSPHERE
@@ -147,6 +150,9 @@ class RawSensorConfig:
         bad = [e for e in self.estimate if e not in rs.ERROR_NAMES]
         if bad:
             raise ConfigError(f'unknown sensor error {bad[0]!r}; use ' + ', '.join(rs.ERROR_NAMES))
+        for g, f in self.noise_scale.items():
+            if g not in GROUPS or not (np.isfinite(f) and f > 0):
+                raise ConfigError(f'noise_scale {g!r}: {f!r}; groups {GROUPS}, factors > 0')
         for name in ('rho', 'g', 'max_step', 'max_bridge'):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -209,8 +215,8 @@ class RawSensorFilter:
         self.xb = np.empty(self.nb)
         self.P_out = np.empty((n, n))
         self.gain = np.empty(n)
-        self.default_R = {g: np.diag(self.sensors.default_std(g) ** 2)
-                          for g in ('attitude', 'gyro', 'dvl', 'depth', 'position')}
+        self.default_R = {g: np.diag(self.sensors.default_std(g) ** 2) for g in GROUPS}
+        self.noise_scale = {g: float(self.sensors.noise_scale.get(g, 1.0)) for g in GROUPS}
         self.xf: np.ndarray | None = None
         self.P: np.ndarray | None = None
         self.t: float | None = None         # stamp of the estimate
@@ -374,13 +380,14 @@ class RawSensorFilter:
         """The message's covariance, or the default 1-sigma's where it gives none (zero or
         non-finite diagonal)."""
         R0 = self.default_R[group]
+        f = self.noise_scale[group]
         if cov is None:
-            return R0
+            return f * R0
         m = R0.shape[0]
         c = cov[:m, :m]
         if not (np.isfinite(c).all() and (np.diagonal(c) > 0).all()):
-            return R0
-        return c
+            return f * R0
+        return f * c
 
     def _update_imu(self, m: RawMeasurement) -> None:
         """Attitude and rates in one update (either may be missing: NaN)."""
@@ -406,8 +413,9 @@ class RawSensorFilter:
         Rm[:3, :3] = parts[0][3]
         Rm[3:, 3:] = parts[1][3]
         if cov is not None and np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0):
-            Rm[:3, 3:] = cov[:3, 3:]
-            Rm[3:, :3] = cov[3:, :3]
+            f = math.sqrt(self.noise_scale['attitude'] * self.noise_scale['gyro'])
+            Rm[:3, 3:] = f * cov[:3, 3:]
+            Rm[3:, :3] = f * cov[3:, :3]
         self._fuse('imu', (('attitude', 3), ('gyro', 3)),
                    np.concatenate([parts[0][1], parts[1][1]]),
                    np.vstack([parts[0][2], parts[1][2]]), Rm)
@@ -430,15 +438,14 @@ class RawSensorFilter:
         h, H = rs.pressure(self.xf, s.mount(m.sensor or 'pressure'), self.lay, s.rho, s.g,
                            s.p_surface)
         scale = s.rho * s.g
-        Rm = (self._noise(None, 'depth') * scale ** 2 if m.covariance is None
-              or not np.all(np.diag(m.covariance) > 0) else m.covariance)
         # in metres, so that the depth and pressure innovations share one channel group
-        self._fuse('pressure', (('depth', 1),), (m.values - h) / scale, H / scale, Rm / scale ** 2)
+        Rm = self._noise(None if m.covariance is None else m.covariance / scale ** 2, 'depth')
+        self._fuse('pressure', (('depth', 1),), (m.values - h) / scale, H / scale, Rm)
 
     def _update_position(self, m: RawMeasurement) -> None:
         assert self.xf is not None
         k = m.values.shape[0]
         h, H = rs.position(self.xf, self.sensors.mount(m.sensor or 'position'), self.lay, k)
-        Rm = self._noise(m.covariance, 'position')[:k, :k] if m.covariance is not None else \
-            np.diag(self.sensors.default_std('position')[:k] ** 2)
+        Rm = (self._noise(m.covariance, 'position') if m.covariance is not None else
+              self.noise_scale['position'] * self.default_R['position'])[:k, :k]
         self._fuse('position', (('position', k),), m.values - h, H, Rm)

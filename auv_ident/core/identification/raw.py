@@ -7,7 +7,8 @@ Error bars with coloured noise: the filter takes each message's noise as white. 
 at 100 Hz are not (an AHRS attitude or a DVL averaged over pings shares most of its error with
 the next sample), and a filter that fuses N correlated samples as independent reports error
 bars about sqrt(N_eff / N) too small. Per channel group c (attitude, gyro, dvl, depth,
-position) the whitened innovations' long-run variance over their count (Newey-West with
+position) the whitened innovations' long-run variance over their count, over the run's second
+half (Newey-West with
 Bartlett weights, lag window by Andrews' rule: uncertainty.bandwidth, uncertainty.
 long_run_variance; the largest over the group's channels) is the factor lambda_c by which that
 group's information is overstated, its level included (noise larger than declared gives
@@ -48,7 +49,8 @@ class RawIdentification:
         the 1-sigma times sqrt of the largest lambda_c: every group's innovations inform it);
     fused : kind -> messages fused (commands: taken); skipped : reason -> messages not fused;
     mean_nis : kind -> mean NIS per degree of freedom; restarts : vehicle-state restarts;
-    state : (12,) the final vehicle state; wall_s : s of the pass.
+    state : (12,) the final vehicle state; noise_scale : channel group -> the factor on its
+    declared covariance the last pass used; passes : how many; wall_s : s of all passes.
     """
 
     names: list[str]
@@ -63,6 +65,8 @@ class RawIdentification:
     mean_nis: dict[str, float]
     restarts: int
     state: np.ndarray
+    noise_scale: dict[str, float]
+    passes: int = 1
     wall_s: float = math.nan
 
     @property
@@ -71,22 +75,25 @@ class RawIdentification:
         return np.sqrt(np.diag(self.covariance))
 
 
-def long_run_factors(white: dict[str, list[np.ndarray]]) -> dict[str, float]:
-    """Per channel group its coloured-noise factor lambda (module docstring), >= 1; white:
-    group -> the whitened innovations of its updates in time order (each (m,))."""
+def long_run_factors(white: dict[str, list[np.ndarray]],
+                     floor: float = 1.0) -> dict[str, float]:
+    """Per channel group its coloured-noise factor lambda (module docstring), at least floor;
+    white: group -> the whitened innovations of its updates in time order (each (m,))."""
     out = {}
     for group, ws in white.items():
-        W = np.array(ws)
+        # the second half: the first holds the convergence from the prior, whose large and
+        # slowly shrinking innovations are no property of the noise
+        W = np.array(ws[len(ws) // 2:])
         lam = 1.0
         if W.shape[0] >= MIN_INNOVATIONS:
             lags = bandwidth(W)
-            for j in range(W.shape[1]):
-                lam = max(lam, long_run_variance(W[:, j], lags) / W.shape[0])
-        out[group] = lam
+            lam = max(long_run_variance(W[:, j], lags) / W.shape[0] for j in range(W.shape[1]))
+        out[group] = max(floor, lam)
     return out
 
 
-def raw_identification(f: RawSensorFilter, wall_s: float = math.nan) -> RawIdentification:
+def raw_identification(f: RawSensorFilter, passes: int = 1,
+                       wall_s: float = math.nan) -> RawIdentification:
     """The identification of a raw-sensor filter so far (DataError if it never started)."""
     if f.xf is None or f.P is None:
         raise DataError('no raw-sensor pass: no IMU orientation after a command '
@@ -111,7 +118,7 @@ def raw_identification(f: RawSensorFilter, wall_s: float = math.nan) -> RawIdent
     mean_nis = {k: f.nis_sum[k] / f.dof_sum[k] for k in f.nis_sum if f.dof_sum[k] > 0}
     return RawIdentification(list(f.model.theta_names), th, P_th * np.outer(D, D), P_th, fac,
                              lam, errors, dict(f.fused), dict(f.skipped), mean_nis, f.restarts,
-                             f.xf[:N_STATE].copy(), wall_s)
+                             f.xf[:N_STATE].copy(), dict(f.noise_scale), passes, wall_s)
 
 
 def _check_order(records: Sequence[RawMeasurement]) -> None:
@@ -129,7 +136,8 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
     """The raw-sensor identification of one run: every record in turn through
     :class:`RawSensorFilter` (records in time order: one stamped before the previous is a
     DataError naming it), `passes` times (module docstring: each pass after the first starts
-    from the previous one's parameters and sensor errors with the first pass's prior width).
+    from the previous one's parameters and sensor errors with the first pass's prior width, and
+    weighs each channel group by the level and colour its innovations showed).
 
     model : the Model whose theta_names are identified; cfg : FilterConfig (priors, process
     noise); records : RawMeasurement in time order (sensor messages and commands);
@@ -139,20 +147,25 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
         raise ConfigError(f'passes = {passes!r} must be at least 1')
     t0 = time.perf_counter()
     _check_order(records)
+    sensors = sensors or RawSensorConfig()
     f = RawSensorFilter(model, cfg, sensors, T)
-    for _ in range(passes):
+    for k in range(passes):
         for m in records:
             f.process(m)
-        if _ == passes - 1:
+        if k == passes - 1:
             break
         res = raw_identification(f)
+        # the next pass weighs each group by what its innovations showed: its covariance times
+        # the long-run factor (level and colour) measured with this pass's weights
+        lam = long_run_factors(f.white, floor=0.0)
+        scale = {g: max(1.0, f.noise_scale[g] * lam.get(g, 1.0)) for g in f.noise_scale}
         pc = model.p_coef
         again = replace(cfg, initial=res.estimate[:pc],
                         theta_cov0=f.base.theta_cov0[:pc, :pc],
                         current_initial=_current_of(model, res.estimate))
-        f = RawSensorFilter(model, again, sensors, T,
+        f = RawSensorFilter(model, again, replace(sensors, noise_scale=scale), T,
                             errors0=np.array([res.errors[e][0] for e in f.err_names]))
-    return raw_identification(f, time.perf_counter() - t0)
+    return raw_identification(f, passes, time.perf_counter() - t0)
 
 
 def _current_of(model: Model, theta: np.ndarray) -> np.ndarray | None:
