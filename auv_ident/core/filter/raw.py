@@ -49,7 +49,7 @@ import numpy as np
 from auv_ident.core.errors import ConfigError, DataError, DivergenceError, DomainError
 from auv_ident.core.filter import ekf
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
-from auv_ident.core.filter.raw_update import joseph_update
+from auv_ident.core.filter.raw_update import imu_update, joseph_update, propagate_steps
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, interval, time_step
 from auv_ident.core.model import raw_sensors as rs
 from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
@@ -109,7 +109,8 @@ class RawMeasurement:
             if c.size != m * m:
                 raise DataError(f'{self.kind} at t = {self.t}: covariance of {c.size} entries, '
                                 f'expected {m}x{m}')
-            object.__setattr__(self, 'covariance', c.reshape(m, m))
+            # the same array when it is already m x m: the filter reuses what it made of it
+            object.__setattr__(self, 'covariance', c if c.shape == (m, m) else c.reshape(m, m))
 
 
 @dataclass(frozen=True)
@@ -217,6 +218,10 @@ class RawSensorFilter:
         self.gain = np.empty(n)
         self.default_R = {g: np.diag(self.sensors.default_std(g) ** 2) for g in GROUPS}
         self.noise_scale = {g: float(self.sensors.noise_scale.get(g, 1.0)) for g in GROUPS}
+        self.bias_idx = np.array([self.lay.errors.get(e, -1) for e in rs.ERROR_NAMES[:3]],
+                                 dtype=np.int64)
+        self._imu_cov_of: np.ndarray | None = None    # the covariance self._imu_R was made of
+        self._imu_R = np.zeros((6, 6))
         self.xf: np.ndarray | None = None
         self.P: np.ndarray | None = None
         self.t: float | None = None         # stamp of the estimate
@@ -329,16 +334,9 @@ class RawSensorFilter:
             self.need_restart = True
             return
         assert self.u is not None
-        nb = self.nb
-        Fa = self.ws.Fa
-        for _ in range(steps):
-            st = ekf.rk4_step_into(self.xf[:nb], self.u, self.model.compiled, h, True, self.xb,
-                                   Fa, self.ws)
-            self._check(st, 'time update')
-            self.F12[:, :nb] = Fa[:N_STATE]
-            ekf.propagate_covariance(self.F12, self.P, self._q(h), self.P_out, self.M, self.O)
-            self.xf[:nb] = self.xb
-            self.P, self.P_out = self.P_out, self.P
+        st = propagate_steps(self.xf, self.P, self.u, self.model.compiled, h, steps, self._q(h),
+                             self.xb, self.F12, self.M, self.O, self.P_out, self.ws)
+        self._check(st, 'time update')
 
     def _check(self, st: int, what: str) -> None:
         if st == ekf.OK:
@@ -361,13 +359,20 @@ class RawSensorFilter:
                                 np.ascontiguousarray(H, dtype=float),
                                 np.ascontiguousarray(Rm, dtype=float), self.P_out, w,
                                 self.gain)
+        self._after_update(kind, groups, st, nis, w)
+
+    def _after_update(self, kind: str, groups: tuple[tuple[str, int], ...], st: int,
+                      nis: float, w: np.ndarray) -> None:
+        """After a compiled update: its check, the heading wrapped, the bookkeeping."""
+        assert self.xf is not None
         if st != 0:
             raise DivergenceError(f'{kind} update at t = {self.t} s: the estimate or its '
                                   'covariance became unusable')
+        m = w.shape[0]
         self.xf[State.PSI] = ekf.wrap(self.xf[State.PSI])
         self.P, self.P_out = self.P_out, self.P
         c = COEFFICIENTS.start
-        info_group = '+'.join(g for g, _ in groups)
+        info_group = groups[0][0] if len(groups) == 1 else '+'.join(g for g, _ in groups)
         self.info[info_group] = self.info.get(info_group, 0.0) + self.gain[c:c + self.p]
         i = 0
         for g, k in groups:
@@ -394,6 +399,9 @@ class RawSensorFilter:
         assert self.xf is not None
         mount = self.sensors.mount(m.sensor or 'imu')
         cov = m.covariance
+        if np.isfinite(m.values).all():
+            self._update_imu_compiled(m, mount)
+            return
         parts = []
         if np.all(np.isfinite(m.values[:4])):
             nu, H = rs.attitude_innovation(self.xf, m.values[:4], mount, self.lay.n)
@@ -419,6 +427,30 @@ class RawSensorFilter:
         self._fuse('imu', (('attitude', 3), ('gyro', 3)),
                    np.concatenate([parts[0][1], parts[1][1]]),
                    np.vstack([parts[0][2], parts[1][2]]), Rm)
+
+    def _imu_noise(self, cov: np.ndarray | None) -> np.ndarray:
+        """(6, 6) the IMU message's noise (attitude then rates) with the groups' scales."""
+        Rm = np.zeros((6, 6))
+        Rm[:3, :3] = self._noise(None if cov is None else cov[:3, :3], 'attitude')
+        Rm[3:, 3:] = self._noise(None if cov is None else cov[3:, 3:], 'gyro')
+        if cov is not None and np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0):
+            f = math.sqrt(self.noise_scale['attitude'] * self.noise_scale['gyro'])
+            Rm[:3, 3:] = f * cov[:3, 3:]
+            Rm[3:, :3] = f * cov[3:, :3]
+        return Rm
+
+    def _update_imu_compiled(self, m: RawMeasurement, mount: rs.Mounting) -> None:
+        """Attitude and rates through raw_update.imu_update; the noise matrix is reused while
+        consecutive messages share one covariance array (a reader that builds one per
+        message pays the checks each time)."""
+        assert self.xf is not None and self.P is not None
+        if m.covariance is not self._imu_cov_of:
+            self._imu_R = self._imu_noise(m.covariance)
+            self._imu_cov_of = m.covariance
+        w = np.empty(6)
+        st, nis = imu_update(self.xf, self.P, m.values[:4], m.values[4:], mount.rotation,
+                             self._imu_R, self.bias_idx, self.P_out, w, self.gain)
+        self._after_update('imu', (('attitude', 3), ('gyro', 3)), st, nis, w)
 
     def _update_dvl(self, m: RawMeasurement) -> None:
         assert self.xf is not None

@@ -1,6 +1,7 @@
-"""The compiled measurement update of the raw-sensor filter (raw.py): one message's m channels
-(m <= 6) fused jointly, Joseph form, in one call (the numpy version of these few lines cost
-about ten times the arithmetic in call overhead at 100 Hz).
+"""The compiled steps of the raw-sensor filter (raw.py): the measurement update of one message's
+m channels (m <= 6) fused jointly, Joseph form; the time update over several RK4 steps; the
+IMU's attitude and rate update whole (with a 100 Hz IMU these run for most messages, and the
+numpy version cost about ten times the arithmetic in call overhead).
 
 Kept apart from raw.py so that the numba cache's group of compiled sources
 (core/__init__.py COMPILED_SOURCES) holds only this file and what it imports.
@@ -10,9 +11,13 @@ import math
 import numpy as np
 
 from auv_ident.core.compiled_cache import cached_njit
+from auv_ident.core.filter import ekf
+from auv_ident.core.model.state import N_STATE, State
 
 OK = 0
 ERR_NOT_PD = 1
+_PHI = int(State.PHI)
+_P = int(State.P)
 
 
 @cached_njit()
@@ -77,3 +82,87 @@ def joseph_update(xf, P, nu, H, Rm, P_out, w, gain):  # noqa: C901
             return ERR_NOT_PD, nis
         gain[i] = 1.0 / P_out[i, i] - 1.0 / P[i, i]
     return OK, nis
+
+
+@cached_njit()
+def propagate_steps(xf, P, ui, cm, h, steps, Q, xb, F12, M, O, P_out, ws):
+    """`steps` RK4 time updates of h s with the inputs ui held, in place: the model's part of
+    xf (its first ws.Fa.shape[0] entries: vehicle states and parameters) through
+    ekf.rk4_step_into, P through ekf.propagate_covariance with F12 (12, n) the vehicle rows of
+    the whole state's transition (the sensor errors' columns stay 0: they do not enter the
+    dynamics) and Q (n, n) per step. Returns the model's status code (ekf.OK = 0)."""
+    nb = ws.Fa.shape[0]
+    n = xf.shape[0]
+    for _ in range(steps):
+        st = ekf.rk4_step_into(xf[:nb], ui, cm, h, True, xb, ws.Fa, ws)
+        if st != ekf.OK:
+            return st
+        for i in range(N_STATE):
+            for j in range(nb):
+                F12[i, j] = ws.Fa[i, j]
+        ekf.propagate_covariance(F12, P, Q, P_out, M, O)
+        for i in range(nb):
+            xf[i] = xb[i]
+        for i in range(n):
+            for j in range(n):
+                P[i, j] = P_out[i, j]
+    return ekf.OK
+
+
+@cached_njit()
+def _rotation(phi, theta, psi):
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    return np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
+                     [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
+                     [-st, ct * sf, ct * cf]])
+
+
+@cached_njit()
+def _rotation_of_quaternion(q):
+    s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    x, y, z, w = q[0] * s, q[1] * s, q[2] * s, q[3] * s
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+@cached_njit()
+def imu_update(xf, P, q, rates, Rs, Rm, bias_idx, P_out, w, gain):
+    """The IMU's attitude and rates in one update (raw_sensors.attitude_innovation and gyro,
+    compiled): q (4,) the sensor's orientation (x y z w), rates (3,) rad/s in the sensor frame,
+    Rs (3, 3) sensor -> body, Rm (6, 6) the noise (attitude rad^2 then rates), bias_idx (3,)
+    the gyro bias states' indices in xf (-1: not estimated). For rotations of the measured
+    against the predicted attitude below pi/2 (an IMU message is never that far off a running
+    filter; the Python path handles any). Returns joseph_update's (status, NIS)."""
+    n = xf.shape[0]
+    R_meas = np.dot(_rotation_of_quaternion(q), Rs.T)
+    phi, theta, psi = xf[_PHI], xf[_PHI + 1], xf[_PHI + 2]
+    D = np.dot(R_meas, _rotation(phi, theta, psi).T)
+    c = max(-1.0, min(1.0, 0.5 * (D[0, 0] + D[1, 1] + D[2, 2] - 1.0)))
+    angle = math.acos(c)
+    f = 0.5 if angle < 1e-8 else angle / (2.0 * math.sin(angle))
+    nu = np.empty(6)
+    nu[0] = f * (D[2, 1] - D[1, 2])
+    nu[1] = f * (D[0, 2] - D[2, 0])
+    nu[2] = f * (D[1, 0] - D[0, 1])
+    H = np.zeros((6, n))
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    H[0, _PHI] = cp * ct
+    H[0, _PHI + 1] = -sp
+    H[1, _PHI] = sp * ct
+    H[1, _PHI + 1] = cp
+    H[2, _PHI] = -st
+    H[2, _PHI + 2] = 1.0
+    for i in range(3):
+        s = 0.0
+        for j in range(3):
+            b = xf[bias_idx[j]] if bias_idx[j] >= 0 else 0.0
+            s += Rs[j, i] * (xf[_P + j] + b)
+            H[3 + i, _P + j] = Rs[j, i]
+            if bias_idx[j] >= 0:
+                H[3 + i, bias_idx[j]] = Rs[j, i]
+        nu[3 + i] = rates[i] - s
+    return joseph_update(xf, P, nu, H, Rm, P_out, w, gain)

@@ -136,8 +136,9 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
     """The raw-sensor identification of one run: every record in turn through
     :class:`RawSensorFilter` (records in time order: one stamped before the previous is a
     DataError naming it), `passes` times (module docstring: each pass after the first starts
-    from the previous one's parameters and sensor errors with the first pass's prior width, and
-    weighs each channel group by the level and colour its innovations showed).
+    from the previous one's parameters and sensor errors with the first pass's prior width (from
+    the prior again when they are not plausible, _plausible, and then one pass more), and weighs
+    each channel group by the level and colour its innovations showed).
 
     model : the Model whose theta_names are identified; cfg : FilterConfig (priors, process
     noise); records : RawMeasurement in time order (sensor messages and commands);
@@ -149,23 +150,41 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
     _check_order(records)
     sensors = sensors or RawSensorConfig()
     f = RawSensorFilter(model, cfg, sensors, T)
-    for k in range(passes):
+    pc = model.p_coef
+    th0 = f.base.theta0[:pc].copy()
+    sd0 = np.sqrt(np.diag(f.base.theta_cov0)[:pc])
+    target, done = passes, 0
+    while True:
         for m in records:
             f.process(m)
-        if k == passes - 1:
+        done += 1
+        if done >= target:
             break
         res = raw_identification(f)
         # the next pass weighs each group by what its innovations showed: its covariance times
         # the long-run factor (level and colour) measured with this pass's weights
         lam = long_run_factors(f.white, floor=0.0)
         scale = {g: max(1.0, f.noise_scale[g] * lam.get(g, 1.0)) for g in f.noise_scale}
-        pc = model.p_coef
-        again = replace(cfg, initial=res.estimate[:pc],
-                        theta_cov0=f.base.theta_cov0[:pc, :pc],
-                        current_initial=_current_of(model, res.estimate))
+        again, errors0 = cfg, None
+        if _plausible(res.estimate[:pc], th0, sd0):
+            again = replace(cfg, initial=res.estimate[:pc], theta_cov0=f.base.theta_cov0[:pc, :pc],
+                            current_initial=_current_of(model, res.estimate))
+            errors0 = np.array([res.errors[e][0] for e in f.err_names])
+        elif target == passes:
+            # from the prior again, with weights measured on a pass gone wrong (its innovations
+            # overstate the noise): one more pass measures them again
+            target += 1
         f = RawSensorFilter(model, again, replace(sensors, noise_scale=scale), T,
-                            errors0=np.array([res.errors[e][0] for e in f.err_names]))
-    return raw_identification(f, passes, time.perf_counter() - t0)
+                            errors0=errors0)
+    return raw_identification(f, done, time.perf_counter() - t0)
+
+
+def _plausible(theta: np.ndarray, theta0: np.ndarray, sd0: np.ndarray) -> bool:
+    """A pass's coefficients are a start for the next one when each keeps its prior's sign and
+    lies within 3 prior 1-sigma of it (a pass whose sensors were weighted far too much can end
+    10x off; starting the next pass there would keep it there)."""
+    return bool(np.all(np.sign(theta) == np.sign(theta0))
+                and np.all(np.abs(theta - theta0) <= 3.0 * sd0))
 
 
 def _current_of(model: Model, theta: np.ndarray) -> np.ndarray | None:

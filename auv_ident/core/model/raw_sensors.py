@@ -99,7 +99,7 @@ def rotation(phi: float, theta: float, psi: float) -> np.ndarray:
 
 def rotation_of_quaternion(q: ArrayLike) -> np.ndarray:
     """Rotation matrix of the unit quaternion q = (x, y, z, w) (normalised here)."""
-    x, y, z, w = q
+    x, y, z, w = (float(c) for c in np.asarray(q, dtype=float)[:4])
     s = 1.0 / math.sqrt(x * x + y * y + z * z + w * w)
     x, y, z, w = x * s, y * s, z * s, w * s
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
