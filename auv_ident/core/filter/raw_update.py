@@ -12,6 +12,7 @@ import numpy as np
 
 from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.filter import ekf
+from auv_ident.core.model.raw_sensors import rotation, rotation_of_quaternion
 from auv_ident.core.model.state import N_STATE, State
 
 OK = 0
@@ -110,25 +111,6 @@ def propagate_steps(xf, P, ui, cm, h, steps, Q, xb, F12, M, O, P_out, ws):
 
 
 @cached_njit()
-def _rotation(phi, theta, psi):
-    cf, sf = math.cos(phi), math.sin(phi)
-    ct, st = math.cos(theta), math.sin(theta)
-    cp, sp = math.cos(psi), math.sin(psi)
-    return np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
-                     [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
-                     [-st, ct * sf, ct * cf]])
-
-
-@cached_njit()
-def _rotation_of_quaternion(q):
-    s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    x, y, z, w = q[0] * s, q[1] * s, q[2] * s, q[3] * s
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-@cached_njit()
 def imu_update(xf, P, q, rates, Rs, Rm, bias_idx, P_out, w, gain):
     """The IMU's attitude and rates in one update (raw_sensors.attitude_innovation and gyro,
     compiled): q (4,) the sensor's orientation (x y z w), rates (3,) rad/s in the sensor frame,
@@ -137,9 +119,9 @@ def imu_update(xf, P, q, rates, Rs, Rm, bias_idx, P_out, w, gain):
     against the predicted attitude below pi/2 (an IMU message is never that far off a running
     filter; the Python path handles any). Returns joseph_update's (status, NIS)."""
     n = xf.shape[0]
-    R_meas = np.dot(_rotation_of_quaternion(q), Rs.T)
+    R_meas = np.dot(rotation_of_quaternion(q), Rs.T)
     phi, theta, psi = xf[_PHI], xf[_PHI + 1], xf[_PHI + 2]
-    D = np.dot(R_meas, _rotation(phi, theta, psi).T)
+    D = np.dot(R_meas, rotation(phi, theta, psi).T)
     c = max(-1.0, min(1.0, 0.5 * (D[0, 0] + D[1, 1] + D[2, 2] - 1.0)))
     angle = math.acos(c)
     f = 0.5 if angle < 1e-8 else angle / (2.0 * math.sin(angle))

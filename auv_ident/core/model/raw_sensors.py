@@ -37,6 +37,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import ANGULAR, CURRENT_NAMES, EULER, LINEAR, N_STATE, State
 
@@ -87,8 +88,10 @@ def rotation_and_derivatives(phi: float, theta: float,
     return R, dR
 
 
+@cached_njit()
 def rotation(phi: float, theta: float, psi: float) -> np.ndarray:
-    """R = Rz(psi) Ry(theta) Rx(phi) (body -> NED)."""
+    """R = Rz(psi) Ry(theta) Rx(phi) (body -> NED). Compiled: the IMU update of
+    core/filter/raw_update.py calls it too."""
     cf, sf = math.cos(phi), math.sin(phi)
     ct, st = math.cos(theta), math.sin(theta)
     cp, sp = math.cos(psi), math.sin(psi)
@@ -97,11 +100,11 @@ def rotation(phi: float, theta: float, psi: float) -> np.ndarray:
                      [-st, ct * sf, ct * cf]])
 
 
-def rotation_of_quaternion(q: ArrayLike) -> np.ndarray:
-    """Rotation matrix of the unit quaternion q = (x, y, z, w) (normalised here)."""
-    x, y, z, w = (float(c) for c in np.asarray(q, dtype=float)[:4])
-    s = 1.0 / math.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x * s, y * s, z * s, w * s
+@cached_njit()
+def rotation_of_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the quaternion q (4,) = (x, y, z, w) (normalised here)."""
+    s = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    x, y, z, w = q[0] * s, q[1] * s, q[2] * s, q[3] * s
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
@@ -173,7 +176,7 @@ def attitude_innovation(xf: np.ndarray, q_sensor: ArrayLike, mount: Mounting,
     """(nu (3,), H (3, n)): the attitude innovation Log(R_meas R(eta)^T) (rad, world axes) of an
     IMU orientation q_sensor (x, y, z, w; sensor frame -> NED) and its Jacobian with respect to
     xf (d nu / d xf = -H: nu = H (x_true - x) to first order)."""
-    R_meas = rotation_of_quaternion(q_sensor) @ mount.rotation.T
+    R_meas = rotation_of_quaternion(np.asarray(q_sensor, dtype=float)) @ mount.rotation.T
     nu = rotation_log(R_meas @ rotation(*xf[EULER]).T)
     H = np.zeros((3, n))
     H[:, EULER] = euler_to_world_rate(*xf[EULER])
