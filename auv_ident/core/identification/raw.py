@@ -35,6 +35,8 @@ from auv_ident.core.model.state import COEFFICIENTS, N_STATE
 
 MIN_INNOVATIONS = 50      # fewer whitened innovations in a group: no coloured-noise factor (1)
 DEFAULT_PASSES = 2
+MAX_EXTRA_PASSES = 2      # passes run beyond `passes` at most (identify_raw)
+SETTLED_FACTOR = 2.0      # a pass's noise scales within this factor of those it used: settled
 
 
 @dataclass
@@ -137,8 +139,10 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
     :class:`RawSensorFilter` (records in time order: one stamped before the previous is a
     DataError naming it), `passes` times (module docstring: each pass after the first starts
     from the previous one's parameters and sensor errors with the first pass's prior width (from
-    the prior again when they are not plausible, _plausible, and then one pass more), and weighs
-    each channel group by the level and colour its innovations showed).
+    the prior again when they are not plausible, _plausible), and weighs each channel group by
+    the level and colour its innovations showed. After the `passes`-th, one more pass is run
+    (at most MAX_EXTRA_PASSES more) while the last one was not plausible or the weights its
+    innovations show differ from those it used by more than SETTLED_FACTOR).
 
     model : the Model whose theta_names are identified; cfg : FilterConfig (priors, process
     noise); records : RawMeasurement in time order (sensor messages and commands);
@@ -158,25 +162,34 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
         for m in records:
             f.process(m)
         done += 1
-        if done >= target:
+        if done >= MAX_EXTRA_PASSES + passes:
             break
         res = raw_identification(f)
         # the next pass weighs each group by what its innovations showed: its covariance times
         # the long-run factor (level and colour) measured with this pass's weights
         lam = long_run_factors(f.white, floor=0.0)
         scale = {g: max(1.0, f.noise_scale[g] * lam.get(g, 1.0)) for g in f.noise_scale}
+        plausible = _plausible(res.estimate[:pc], th0, sd0)
+        if done >= target and (passes < 2 or (plausible and _settled(f.noise_scale, scale))):
+            break
+        if done >= target:
+            # weights measured on a pass that had them far off, or a pass gone wrong, overstate
+            # or understate the noise: one pass more measures them again
+            target += 1
         again, errors0 = cfg, None
-        if _plausible(res.estimate[:pc], th0, sd0):
+        if plausible:
             again = replace(cfg, initial=res.estimate[:pc], theta_cov0=f.base.theta_cov0[:pc, :pc],
                             current_initial=_current_of(model, res.estimate))
             errors0 = np.array([res.errors[e][0] for e in f.err_names])
-        elif target == passes:
-            # from the prior again, with weights measured on a pass gone wrong (its innovations
-            # overstate the noise): one more pass measures them again
-            target += 1
         f = RawSensorFilter(model, again, replace(sensors, noise_scale=scale), T,
                             errors0=errors0)
     return raw_identification(f, done, time.perf_counter() - t0)
+
+
+def _settled(used: dict[str, float], measured: dict[str, float]) -> bool:
+    """The weights a pass used agree with those its innovations show, within SETTLED_FACTOR."""
+    return all(max(measured[g] / used[g], used[g] / measured[g]) <= SETTLED_FACTOR
+               for g in used)
 
 
 def _plausible(theta: np.ndarray, theta0: np.ndarray, sd0: np.ndarray) -> bool:
