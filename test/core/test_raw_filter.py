@@ -45,6 +45,10 @@ def test_quiet_run_gives_the_truth_and_the_sensor_errors(quiet_run, model):
     assert res.fused['imu'] == run.truth['counts']['imu']
     assert res.fused['dvl'] == run.truth['counts']['dvl']
     assert res.skipped == {}
+    # the noise shown by the first pass's innovations is below the declared (1 %): the weights
+    # stay the declared ones, settled after the two passes asked for
+    assert res.passes == 2
+    assert res.noise_scale['attitude'] == 1.0
 
 
 def test_ignoring_the_dvl_misalignment_biases_the_sway_and_heave_terms(quiet_run, model):
@@ -104,3 +108,5 @@ def test_bad_records_and_settings_are_named():
         RawSensorConfig(dvl_reference='bottom')
     with pytest.raises(ConfigError, match='gyro_drift'):
         RawSensorConfig(estimate=('gyro_drift',))
+    with pytest.raises(ConfigError, match='passes'):
+        identify_raw(Model(load_vehicle('nps_auv2'), NAMES), FilterConfig(), [], passes=0)
