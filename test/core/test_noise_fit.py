@@ -20,8 +20,8 @@ def test_a_record_of_restarts_only_keeps_the_configured_noise():
     run = simulate(Model(v), 'ident', duration=30.0, T=0.05, seed=3)
     keep = slice(None, None, 10)
     rec = Record(run.t[keep], run.y[keep], run.u[keep])
-    cfg = FilterConfig(coefficients=list(v.identify_default), noise_std=np.asarray(run.noise_std, float),
-                       mode='fixed')
+    cfg = FilterConfig(coefficients=list(v.identify_default),
+                       noise_std=np.asarray(run.noise_std, float), mode='fixed')
     fit = fit_noise(model, cfg, [rec], T=0.05)
     assert fit.model == {}
     np.testing.assert_array_equal(fit.effective_std, fit.configured_std)
