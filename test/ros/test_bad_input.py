@@ -856,6 +856,7 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
     (['-p', "coefficients:=['Z_w','Z_nonsense']"], 'coefficients'),
     (['-p', 'noise_std:=[0.01,0.01,0.01,0.001,0.001,0.001,0.5,0.5,0.05,0.002,0.002,-0.005]'],
      'noise_std'),
+    (['-p', 'save_path:=/nonexistent/folder/estimate.json'], 'save_path'),
 ])
 @pytest.mark.slow
 def test_node_process_exits_2_with_one_line_on_an_absurd_parameter(args, name, ros_env,
@@ -1010,5 +1011,39 @@ def test_estimate_file_is_autosaved_while_updates_arrive(run, ctx, tmp_path, mon
         doc = json.loads(save.read_text())
         assert doc['steps'] == 80 and doc['estimate'] == list(node.session.last_good.estimate)
         assert not list(tmp_path.glob('.*.tmp'))    # atomic: no temp file left
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('where, needle', [
+    ('missing/estimate.json', 'does not exist'),
+    ('', 'is a folder, not a file'),
+    ('file.txt/estimate.json', 'is not a folder'),
+])
+def test_a_save_path_that_cannot_be_written_is_refused_at_start_up(ctx, tmp_path, where,
+                                                                    needle):
+    """save_path is checked when the node starts (#27 item 8: a missing folder showed only at
+    shutdown, after the mission): one ParameterError naming it, which the node process prints
+    on one line with exit 2."""
+    (tmp_path / 'file.txt').write_text('x')
+    with pytest.raises(ParameterError, match=f"parameter 'save_path': .*{needle}"):
+        _node(ctx, save_path=str(tmp_path / where))
+
+
+def test_a_failed_final_save_is_a_failure(run, ctx, tmp_path):
+    """The folder of save_path removed while the node runs: the save at shutdown fails, says
+    so at ERROR and returns False, which the node's harness turns into exit 2 (#27 item 8:
+    the process exited 0 after 'cannot write')."""
+    folder = tmp_path / 'mission'
+    folder.mkdir()
+    node = _node(ctx, save_path=str(folder / 'estimate.json'))
+    try:
+        _feed_node(node, _prefix(run, 20))
+        folder.rmdir()
+        node._final_log = lambda level, text: node.log_lines.append((level, text))
+        assert node.shutdown_save() is False
+        assert node.log_lines[-1][0] == 'ERROR' and 'cannot write' in node.log_lines[-1][1]
+        folder.mkdir()
+        assert node.shutdown_save() is True and (folder / 'estimate.json').is_file()
     finally:
         node.destroy_node()
