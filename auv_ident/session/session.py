@@ -56,6 +56,7 @@ from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (
     _as_vector,
     ConversionError,
+    covariance_entry,
     header_stamp_ns,
     integer_stamp,
     joint_state_to_actuators,
@@ -66,8 +67,10 @@ from auv_ident.session.messages import (
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
+    implausible_variances,
     named_conventions,
     odometry_problem,
+    PLAUSIBLE_VARIANCE_RATIO,
 )
 from auv_ident.session.settings import (
     coefficient_list,
@@ -477,16 +480,33 @@ class IdentSession:
 
     def _measurement_variances(self, variances):
         """The R diagonal for this message (noise_source 'message'): the message's variances
-        where finite and positive, noise_std's elsewhere (noted once per channel)."""
+        where finite, positive and plausible (screening.implausible_variances: within a
+        factor of the documented level, noise_std), noise_std's elsewhere; each channel
+        noted once, naming the covariance entry and the setting that ignores them."""
         ok = np.isfinite(variances) & (variances > 0.0)
-        missing = [STATE_NAMES[i] for i in self._measured_states
-                   if not ok[i] and i not in self._fallback_noted]
+        absurd = implausible_variances(variances, self.noise_default) & ok
+        missing = [i for i in self._measured_states
+                   if not ok[i] and ('unstated', i) not in self._fallback_noted]
         if missing:
-            self._fallback_noted.update(STATE_NAMES.index(n) for n in missing)
+            self._fallback_noted.update(('unstated', i) for i in missing)
             self.notices.append('odom: the message states no usable covariance (zero, -1 or '
-                                f'not finite) for {", ".join(missing)}: noise_std used for '
-                                'them (noise_source message)')
-        return np.where(ok, variances, self.noise_default)
+                                f'not finite) for {", ".join(STATE_NAMES[i] for i in missing)}'
+                                ': noise_std used for them (noise_source message)')
+        wild = [i for i in self._measured_states
+                if absurd[i] and ('absurd', i) not in self._fallback_noted]
+        if wild:
+            self._fallback_noted.update(('absurd', i) for i in wild)
+            ratios = variances[wild] / self.noise_default[wild]
+            self.notices.append(
+                'odom: implausible message covariance ' + ', '.join(
+                    f'{covariance_entry(i, self.frame)} ({STATE_NAMES[i]}) = {variances[i]:.3g}'
+                    for i in wild)
+                + f': {ratios.min():.2g}' + ('' if ratios.min() == ratios.max() else
+                                              f' to {ratios.max():.2g}')
+                + " x the variance of noise_std (a sensor's is within "
+                f'{PLAUSIBLE_VARIANCE_RATIO:.0e}x either way); noise_std used instead. Set '
+                "noise_source parameter to ignore the messages' covariances, or fix the driver")
+        return np.where(ok & ~absurd, variances, self.noise_default)
 
     def _command(self, stamp_ns, u7):
         """add_command after reading: stamp_ns int, u7 a (7,) float array of our own."""

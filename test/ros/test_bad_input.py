@@ -1047,3 +1047,54 @@ def test_a_failed_final_save_is_a_failure(run, ctx, tmp_path):
         assert node.shutdown_save() is True and (folder / 'estimate.json').is_file()
     finally:
         node.destroy_node()
+
+
+def _scaled_covariances(run, scale_all=1.0, u_variance=None):
+    """The clean run with every odometry's covariance diagonals x scale_all, or u's variance
+    (twist.covariance[0]) set to u_variance."""
+    out = []
+    for topic, msg in _clean(run, range(len(run.t))):
+        if topic == ODOM_TOPIC:
+            twist = np.array(msg.twist.covariance) * scale_all
+            pose = np.array(msg.pose.covariance) * scale_all
+            if u_variance is not None:
+                twist[0] = u_variance
+            msg.twist.covariance, msg.pose.covariance = twist, pose
+        out.append((topic, msg))
+    return out
+
+
+@pytest.mark.parametrize('kw, entries', [
+    (dict(scale_all=1e-30), ['twist.covariance[0] (u)', 'pose.covariance[35] (psi)']),
+    (dict(u_variance=1e300), ['twist.covariance[0] (u) = 1e+300']),
+])
+def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw,
+                                                           entries):
+    """Message covariances x 1e-30, or 1e300 on one diagonal (#27 item 7: the filter diverged,
+    and the advice was 'try --noise-mode fixed' with fixed already set): one notice naming the
+    topic, the covariance entries and the setting that ignores them (noise_source parameter);
+    noise_std is used for those channels, so the run identifies as a clean one (no reset, no
+    outlier), live and from a bag alike."""
+    messages = _scaled_covariances(run, **kw)
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed'))
+    notices = []
+    for topic, msg in messages:
+        (s.on_actuators if topic == ACTUATOR_TOPIC else s.on_odom)(msg)
+        notices += s.notices
+        s.notices.clear()
+    wild = [n for n in notices if 'implausible message covariance' in n]
+    assert len(wild) == 1, notices
+    assert all(e in wild[0] for e in entries) and 'noise_source parameter' in wild[0]
+    assert 'noise-mode' not in wild[0] and wild[0].startswith('odom: ')
+    c = s.counters
+    assert (c.odom_rejected, c.outliers, c.errors) == (0, 0, 0), c.reasons
+    clean = IdentSession(IdentifierSettings.from_values(noise_mode='fixed',
+                                                        noise_source='parameter'))
+    _feed_session(clean, _clean(run, range(len(run.t))))
+    np.testing.assert_allclose(s.last_good.estimate, clean.last_good.estimate, rtol=1e-9)
+    bag = tmp_path / 'bag'
+    _write_bag(bag, messages)
+    warnings = ReplayWarnings()
+    res = replay_bag(bag, IdentifierSettings.from_values(noise_mode='fixed'), warn=warnings)
+    assert res.errors == 0 and res.rejected == 0
+    np.testing.assert_allclose(res.estimate, s.last_good.estimate, rtol=1e-6)
