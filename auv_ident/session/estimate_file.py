@@ -66,8 +66,8 @@ def check_save_path(path: str, setting: str = 'save_path') -> None:
         return
     reason = unwritable_reason(path)
     if reason:
-        raise ParameterError(setting, f'{path} {reason}: the estimate file could not be '
-                                      'written')
+        raise ParameterError(setting, f'the estimate file {path} could not be written: '
+                                      f'{reason}')
 
 
 MAX_ESTIMATE_BYTES = 16 * 1024 * 1024   # an estimate of p coefficients is ~25 p^2 bytes

@@ -307,12 +307,21 @@ def vehicle_from_file(path: str) -> Vehicle:
             try:
                 raw = yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
             except yaml.YAMLError as err:
-                raise ConfigError(f'{path}: not valid YAML: {err}') from None
+                raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
         _CACHE[key] = _build(raw, path)
     return _CACHE[key]
 
 
 _CACHE: dict[tuple[str, float], Vehicle] = {}
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    """A YAML error on one line: its problem and where (PyYAML's text spans several lines)."""
+    problem = getattr(err, 'problem', None)
+    mark = getattr(err, 'problem_mark', None)
+    if problem is None or mark is None:
+        return ' '.join(str(err).split())
+    return f'{problem} (line {mark.line + 1}, column {mark.column + 1})'
 
 
 def _build(raw: object, path: str) -> Vehicle:
