@@ -175,23 +175,24 @@ def test_resume_redoes_an_edited_bag_and_changed_settings(archive, cluster, tmp_
     for g in good[:2]:
         shutil.copytree(g, bags / os.path.basename(g))
     out = tmp_path / 'out'
-    first = run_campaign(str(bags), str(out), scheduler=cluster.scheduler_address)
+    fast = dict(scheduler=cluster.scheduler_address, refine=False, warm_up=False)
+    first = run_campaign(str(bags), str(out), **fast)
     assert (first['skipped'], first['ok']) == (0, 2)
     before = _rows(out)
     meta = bags / os.path.basename(good[1]) / 'metadata.yaml'
     meta.write_text(meta.read_text(encoding='utf-8') + '\n', encoding='utf-8')
-    edited = run_campaign(str(bags), str(out), scheduler=cluster.scheduler_address)
+    edited = run_campaign(str(bags), str(out), **fast)
     assert (edited['skipped'], edited['ok']) == (1, 1)
     after = _rows(out)
     kept, redone = (str(bags / os.path.basename(g)) for g in good[:2])
     assert after[kept] == before[kept] and after[redone]['bag_key'] != before[redone]['bag_key']
-    other = run_campaign(str(bags), str(out), coefficients='Z_w,M_ds',
-                         scheduler=cluster.scheduler_address)
+    other = run_campaign(str(bags), str(out), coefficients='Z_w,M_ds', **fast)
     assert (other['skipped'], other['ok']) == (0, 2)
     assert set(_rows(out)[kept]).issuperset({'Z_w', 'M_ds'}) and not _rows(out)[kept].get('K_v')
     vehicle = run_campaign(str(bags), str(out), coefficients='Z_w,M_ds', vehicle='nps_auv2',
-                           scheduler=cluster.scheduler_address)
+                           **fast)
     assert (vehicle['skipped'], vehicle['ok']) == (0, 2)
+    assert settings_key(None, '', True) != settings_key(None, '', False)    # --no-refine
 
 
 @pytest.mark.parametrize('content, needle', [

@@ -1098,3 +1098,25 @@ def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw,
     res = replay_bag(bag, IdentifierSettings.from_values(noise_mode='fixed'), warn=warnings)
     assert res.errors == 0 and res.rejected == 0
     np.testing.assert_allclose(res.estimate, s.last_good.estimate, rtol=1e-6)
+
+
+@pytest.mark.slow
+def test_node_process_exits_2_when_the_final_save_fails(ros_env, tmp_path):
+    """A real identifier process whose save_path folder vanishes while it runs: SIGTERM ->
+    the save fails, one ERROR line, exit status 2 (#27 item 8: it exited 0)."""
+    folder = tmp_path / 'mission'
+    folder.mkdir()
+    proc = spawn_node('identifier', ['-p', f'save_path:={folder / "estimate.json"}'], ros_env,
+                      str(tmp_path))
+    err_file = tmp_path / 'identifier.err'
+    try:
+        deadline = time.monotonic() + 120.0
+        while 'identifying' not in err_file.read_text() and time.monotonic() < deadline:
+            assert proc.poll() is None, err_file.read_text()
+            time.sleep(0.2)
+        folder.rmdir()
+    finally:
+        rc = stop_process(proc, signal.SIGTERM, timeout=30.0)
+    err = err_file.read_text()
+    assert rc == 2, err
+    assert 'cannot write' in err and 'Traceback' not in err
