@@ -90,6 +90,11 @@ __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
 TIME_ORIGIN_MIN_NS = 10 ** 15
 
 
+# message variances below this fraction of noise_std's, while the guard resets: named as a
+# likely cause (a DVL's or an INS's real 1-sigma is rarely 10x better than the documented level)
+UNDERSTATED_VARIANCE = 1e-2
+
+
 class IdentSession:
     """Online identification from arrays or ROS messages, ROS-graph-free (the node's
     per-message logic; module docstring).
@@ -257,7 +262,25 @@ class IdentSession:
         return self._fault_reset('guard', f'innovations inconsistent for '
                                           f'{t - window.since:.3f} s (median NIS/dof '
                                           f'{window.median():.4g} over the last {len(window)} '
-                                          f'updates, above {GUARD_FACTOR:g})', stamp_ns)
+                                          f'updates, above {GUARD_FACTOR:g})'
+                                          + self._understated_noise(), stamp_ns)
+
+    def _understated_noise(self):
+        """A clause for a divergence under message covariances far below noise_std's (the
+        data scatter far more than the messages say: a driver's covariance in other units, or
+        its own filter's confidence rather than the sensor's noise), else ''."""
+        r = self.filter.applied_variances
+        if self.noise_source != 'message' or r is None:
+            return ''
+        measured = list(self._measured_states)
+        ratio = r[measured] / self.noise_default[measured]
+        low = float(np.min(ratio))
+        if not low < UNDERSTATED_VARIANCE:
+            return ''
+        i = measured[int(np.argmin(ratio))]
+        return (f'; the odometry covariance states far less noise than noise_std (e.g. '
+                f'{covariance_entry(i, self.frame)} ({STATE_NAMES[i]}) = {r[i]:.3g}, '
+                f'{low:.2g} x): if the data scatter more, set noise_source parameter')
 
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba

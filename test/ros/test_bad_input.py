@@ -1120,3 +1120,21 @@ def test_node_process_exits_2_when_the_final_save_fails(ros_env, tmp_path):
     err = err_file.read_text()
     assert rc == 2, err
     assert 'cannot write' in err and 'Traceback' not in err
+
+
+def test_understated_message_covariances_are_named_when_the_guard_resets(run):
+    """Covariances x 1e-8 (1-sigma 1e-4 x the documented level: inside the plausible range,
+    but the data scatter 1e4 x more than the messages say): the guard's reset names the
+    covariance and the setting that ignores it (#27 item 7)."""
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed'))
+    resets = []
+    for topic, msg in _scaled_covariances(run, scale_all=1e-8)[:400]:
+        ev = (s.on_actuators if topic == ACTUATOR_TOPIC else s.on_odom)(msg)
+        if ev.kind == 'error':
+            resets.append(ev.reason)
+    assert resets and all('innovations inconsistent' in r for r in resets)
+    assert 'twist.covariance[' in resets[0] and 'set noise_source parameter' in resets[0]
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed',
+                                                    noise_source='parameter'))
+    _feed_session(s, _scaled_covariances(run, scale_all=1e-8)[:400])
+    assert s.counters.errors == 0
