@@ -9,6 +9,7 @@ and report.md say why.
 """
 import argparse
 import csv
+import os
 import sys
 
 import numpy as np
@@ -40,6 +41,8 @@ def _sim_current(text):
 def cmd_simulate(args):
     from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD
     from auv_ident.core.simulation.simulate import save_run_csv, simulate
+    if args.out and args.out.endswith('.csv'):
+        _check_outputs(args, '--out')       # a bag directory: the bag writer never overwrites
     m = _model(args)
     run = simulate(m, args.maneuver, duration=args.duration, T=args.dt, seed=args.seed,
                    rpm=args.rpm, process_std=DEFAULT_PROCESS_STD if args.process_noise else None,
@@ -99,9 +102,27 @@ def _option(name):
     return '--' + name.replace('_', '-')
 
 
+def _check_outputs(args, *options, folder=False):
+    """Before any work: each output option given (e.g. '--json') names a path that can be
+    written, and one that exists is overwritten only with --force (a result, a model or a
+    report is never replaced silently). folder: the outputs are folders (report --out)."""
+    from auv_ident.core.safe_files import unwritable_reason
+    for option in options:
+        path = getattr(args, option.lstrip('-').replace('-', '_'), None)
+        if not path:
+            continue
+        if os.path.lexists(path) and not args.force:
+            raise AuvIdentError(f'{option} {path}: exists already; give --force to overwrite '
+                                'it')
+        reason = unwritable_reason(path, folder=folder)
+        if reason:
+            raise AuvIdentError(f'{option} {path}: {reason}')
+
+
 def cmd_identify(args):
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
+    _check_outputs(args, '--json', '--estimate-out')
     settings = _settings(args)
     if args.bag and len(args.bag) > 1:
         from auv_ident.analysis.bag_identify import identify_bags
@@ -180,6 +201,7 @@ def _identify_simulated(args, settings):
 def cmd_montecarlo(args):
     from auv_ident.analysis import experiments as ex, results
     from auv_ident.vehicles import load_vehicle
+    _check_outputs(args, '--json')
     settings = _settings(args)
     v = load_vehicle(settings.vehicle)
     names = results.coefficient_list(v, settings.coefficients)
@@ -282,6 +304,7 @@ def cmd_model_report(args):
 def cmd_report(args):
     from auv_ident.analysis.report import make_report
     from auv_ident.analysis.results import doc_table
+    _check_outputs(args, '--out', folder=True)
     if args.model:
         return cmd_model_report(args)
     settings = _settings(args)
@@ -327,6 +350,7 @@ def cmd_compare_methods(args):
     from auv_ident.analysis.results import write_json
     if args.simulate and args.bag:
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
+    _check_outputs(args, '--json')
     methods = cm.parse_methods(args.methods)
     settings = _settings(args)
     source, validation = cm.compare_sources(
@@ -345,6 +369,7 @@ def cmd_compare_methods(args):
 
 def cmd_bench(args):
     from auv_ident.analysis.bench import bench, format_bench
+    _check_outputs(args, '--json')
     b = bench(duration=args.duration)
     print(format_bench(b))
     if args.json:
@@ -430,6 +455,7 @@ OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 def cmd_export(args):
     from auv_ident.analysis.export import export_model
+    _check_outputs(args, '--out')
     path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
                         force=args.force)
     print(f'wrote {path} ({args.format})')
@@ -499,6 +525,11 @@ def build_parser():
                         choices=('default', 'exact', 'mss_literal'),
                         help="default: the vehicle file's choice (NPS AUV II: MSS literal)")
 
+    def force_arg(sp):
+        sp.add_argument('--force', action='store_true',
+                        help='overwrite an output that exists already (without it the command '
+                             'stops at once, before any work, and says so)')
+
     def scheduler_arg(sp):
         sp.add_argument('--scheduler', default=None, metavar='ADDRESS',
                         help='run on this existing Dask cluster (tcp://host:8786, or a '
@@ -518,7 +549,9 @@ def build_parser():
                     choices=('ground', 'water'),
                     help='what the simulated DVL measures: ground (bottom lock, default) or '
                          'water (water track)')
-    sp.add_argument('--out', help='write the run: FILE.csv, or a bag directory')
+    sp.add_argument('--out', help='write the run: FILE.csv, or a bag directory (never '
+                                  'overwritten)')
+    force_arg(sp)
     sp.set_defaults(func=cmd_simulate)
 
     def settings_args(sp, names=None):
@@ -551,6 +584,7 @@ def build_parser():
                         help='EKF pass only (no batch refinement)')
         sp.add_argument('--json', help='write the result as JSON')
         sp.add_argument('--rpm', type=float, default=None)
+        force_arg(sp)
 
     sp = sub.add_parser('identify', help='identify coefficients from a simulated run or a bag',
                         description='Every identifier setting is an option; with --bag they '
@@ -622,7 +656,9 @@ def build_parser():
     sp.add_argument('--bag')
     sp.add_argument('--seed', type=int, default=0)
     sp.add_argument('--duration', type=float, default=600.0)
-    sp.add_argument('--out', required=True, help='report folder (created)')
+    sp.add_argument('--out', required=True, help='report folder (created; an existing one only '
+                                                 'with --force)')
+    force_arg(sp)
     sp.add_argument('--validate', metavar='BAG',
                     help='another bag of the same vehicle to validate on (default: the final '
                          '--holdout part of the identification run, left out of it)')
@@ -665,11 +701,13 @@ def build_parser():
     sp.add_argument('--holdout', type=float, default=0.2,
                     help='fraction of the record kept for validation without --validate')
     sp.add_argument('--json', help='write the comparison as JSON')
+    force_arg(sp)
     sp.set_defaults(func=cmd_compare_methods)
 
     sp = sub.add_parser('bench', help='EKF speed vs filterpy, real-time factor, memory')
     sp.add_argument('--duration', type=float, default=600.0)
     sp.add_argument('--json')
+    force_arg(sp)
     sp.set_defaults(func=cmd_bench)
 
     sp = sub.add_parser('bag', help='rosbag2 MCAP bags: info, repair')

@@ -76,7 +76,7 @@ def identify(vehicle, bag, coefficients, out_json, reuse=False):
         doc['cpu'] = float(times[1]) if len(times) > 1 else float('nan')
         return doc
     cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', vehicle, '--bag',
-           str(bag), '--coefficients', coefficients, '--json', str(out_json)]
+           str(bag), '--coefficients', coefficients, '--json', str(out_json), '--force']
     env = dict(os.environ, PYTHONPATH=str(REPO))
     t0 = time.perf_counter()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

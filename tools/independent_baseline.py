@@ -62,7 +62,7 @@ CASES = {
 
 def identify(bag, out_json, refine):
     cmd = [sys.executable, '-m', 'auv_ident', 'identify', '--vehicle', 'nps_auv2', '--bag',
-           str(bag), '--json', str(out_json)] + ([] if refine else ['--no-refine'])
+           str(bag), '--json', str(out_json), '--force'] + ([] if refine else ['--no-refine'])
     env = dict(os.environ, PYTHONPATH=str(REPO))
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True)

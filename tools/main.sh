@@ -9,4 +9,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-exec .venv/bin/python -m auv_ident report --bag bags/nps_auv2_ident --out report "$@"
+exec .venv/bin/python -m auv_ident report --bag bags/nps_auv2_ident --out report --force "$@"

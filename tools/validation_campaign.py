@@ -184,7 +184,7 @@ def run_case(set_name, seed, args):
     coefficients = ','.join(SETS[set_name])
     cmd = [sys.executable, '-m', 'auv_ident', 'report', '--bag', str(a_dir / 'bag'),
            '--vehicle', 'nps_auv2', '--coefficients', coefficients,
-           '--validate', str(b_dir / 'bag'), '--out', str(out / 'report')]
+           '--validate', str(b_dir / 'bag'), '--out', str(out / 'report'), '--force']
     if args.mass_inverse != 'default':
         cmd += ['--mass-inverse', args.mass_inverse]
     t0 = time.perf_counter()

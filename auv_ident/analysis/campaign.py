@@ -5,7 +5,11 @@ A bag that cannot be identified is a row with its one-line error, never the end 
 campaign. The table is rewritten (atomically) every TABLE_EVERY_S while bags finish and when
 the campaign ends or is interrupted, so an interrupted campaign keeps what it finished, and a
 run with the same output folder skips the bags already 'ok' (bags that failed are tried
-again: one may have been repaired meanwhile). Why CSV and no
+again: one may have been repaired meanwhile). A row is trusted only for the bag and the settings
+it was made from: each row records the bag's content key (its files' names, sizes and
+modification times) and the campaign's settings key (vehicle file content, coefficients,
+refinement); a bag edited or replaced since, or a run with other settings, is identified again
+(rows of a table without the keys are too). Why CSV and no
 Parquet: a campaign table is one row per bag, thousands of rows at most; CSV is read by
 everything the operators use, and pyarrow (a wheel of tens of MB) would weigh on every
 install for nothing measurable at that size.
@@ -13,7 +17,9 @@ install for nothing measurable at that size.
 import csv
 import datetime
 import glob
+import hashlib
 import io
+import json
 import os
 import tempfile
 import time
@@ -33,7 +39,7 @@ from auv_ident.vehicles import load_vehicle
 CSV_NAME = 'campaign.csv'
 TRENDS_NAME = 'trends.png'
 HEAD_COLUMNS = ('bag', 'status', 'worker', 'wall_s', 'start_time', 'duration_s', 'vehicle')
-TAIL_COLUMNS = ('consistent', 'error')
+TAIL_COLUMNS = ('consistent', 'error', 'bag_key', 'settings_key')
 WARM_UP_DURATION_S = 20.0    # s of the simulated bag each worker identifies before its tasks
 # s between rewrites of campaign.csv during a campaign: a rewrite after every bag would cost
 # O(bags^2) rows written on a large archive; a crash loses at most this much of finished work
@@ -115,12 +121,56 @@ def warm_up_plugin(vehicle, coefficients, refine):
     return engine.WarmUp(warm_up_bag, (vehicle, coefficients, refine), name=name)
 
 
+def _digest(value):
+    """First 16 hex digits of the sha256 of value's JSON."""
+    return hashlib.sha256(json.dumps(value, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def bag_key(bag):
+    """What a resumed row is trusted for: the bag's files (a folder's, recursively; or the
+    .mcap file) by relative name, size and modification time in ns. Cheap on archives of
+    many GB (nothing is read), and any rewrite, repair or copy over the bag changes it."""
+    if os.path.isdir(bag):
+        files = sorted(os.path.join(folder, f) for folder, _, names in os.walk(bag)
+                       for f in names)
+    else:
+        files = [bag]
+    stats = []
+    for f in files:
+        st = os.stat(f)
+        stats.append([os.path.relpath(f, bag) if f != bag else '', st.st_size, st.st_mtime_ns])
+    return _digest(stats)
+
+
+def settings_key(vehicle, coefficients, refine):
+    """The campaign settings a row was computed with (vehicle: VehicleText or None, the bag's
+    metadata names it) as a digest."""
+    return _digest([vehicle.digest if vehicle is not None else 'bag metadata',
+                    str(coefficients), bool(refine)])
+
+
 def read_table(path):
-    """Rows (dicts of strings) of an existing campaign.csv, [] if there is none."""
+    """Rows (dicts of strings) of an existing campaign.csv, [] if there is none. ConfigError
+    naming the file when it is not a campaign table (not UTF-8 text, not CSV, no 'bag'
+    column, a row with more fields than the header)."""
     if not os.path.isfile(path):
         return []
-    with open(path, newline='', encoding='utf-8') as fh:
-        return list(csv.DictReader(fh))
+    try:
+        with open(path, newline='', encoding='utf-8') as fh:
+            reader = csv.DictReader(fh)
+            rows = list(reader)
+            columns = reader.fieldnames or []
+    except (UnicodeDecodeError, csv.Error) as err:
+        raise ConfigError(f'{path}: not a campaign table ({err}); move it away or choose '
+                          'another --out') from None
+    if 'bag' not in columns or 'status' not in columns:
+        raise ConfigError(f"{path}: not a campaign table (no 'bag' and 'status' columns); "
+                          'move it away or choose another --out')
+    for i, row in enumerate(rows):
+        if None in row:
+            raise ConfigError(f'{path}: not a campaign table (row {i + 2} has more fields '
+                              'than the header); move it away or choose another --out')
+    return rows
 
 
 def write_table(path, rows):
@@ -161,10 +211,15 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
     all_bags = find_bags(bags)
     os.makedirs(out, exist_ok=True)
     csv_path = os.path.join(out, CSV_NAME)
-    done = {r['bag']: r for r in read_table(csv_path) if r.get('status') == 'ok'}
-    todo = [b for b in all_bags if b not in done]
-    rows = dict(done)
     vtext = engine.VehicleText.read(vehicle) if vehicle else None
+    keys = {b: bag_key(b) for b in all_bags}
+    settings = settings_key(vtext, coefficients, refine)
+    rows = {r['bag']: r for r in read_table(csv_path)}
+    done = {b for b, r in rows.items() if r.get('status') == 'ok' and b in keys
+            and r.get('bag_key') == keys[b] and r.get('settings_key') == settings}
+    todo = [b for b in all_bags if b not in done]
+    for b in todo:                  # an old row of a bag to redo must not outlive an abort
+        rows.pop(b, None)
     jobs = [{'bag': b, 'vehicle': vtext, 'coefficients': coefficients, 'refine': refine}
             for b in todo]
     used_workers, start_s, tasks_s, warm_up_s = 0, 0.0, 0.0, {}
@@ -183,6 +238,7 @@ def run_campaign(bags, out, vehicle=None, coefficients='', refine=True, schedule
                     if isinstance(outcome, Exception):     # the task itself was lost
                         outcome = {'bag': jobs[i]['bag'], 'status': 'error',
                                    'error': engine.one_line(outcome)}
+                    outcome.update(bag_key=keys[outcome['bag']], settings_key=settings)
                     rows[outcome['bag']] = outcome
                     if time.monotonic() - written > TABLE_EVERY_S:
                         write_table(csv_path, list(rows.values()))

@@ -58,6 +58,27 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes, mode: int | No
     return path
 
 
+def unwritable_reason(path: str | os.PathLike[str], folder: bool = False) -> str | None:
+    """Why :func:`write_atomic` could not write `path` (folder: a folder to be created with its
+    parents, e.g. a report's), or None. Checked when the settings enter, so that a missing or
+    read-only folder is said at start-up, not after an hour of work (or at a mission's end)."""
+    path = Path(os.path.abspath(path))
+    if path.is_dir() and not folder:
+        return 'is a folder, not a file'
+    parent = path.parent
+    if folder:                      # makedirs creates the missing ones: the first that exists
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+    elif not parent.exists():
+        return f'its folder {parent} does not exist'
+    if not parent.is_dir():
+        return f'{parent} is not a folder'
+    # write_atomic makes a file in the folder and renames it: write and search permission
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f'its folder {parent} is not writable by this user'
+    return None
+
+
 def ensure_content(path: str | os.PathLike, text: str, mode: int | None = None) -> Path:
     """`path` holding `text`: left as it is when it already does (read as UTF-8), else written
     with :func:`write_atomic` (a file changed behind our back, or unreadable, is written

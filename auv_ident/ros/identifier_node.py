@@ -162,7 +162,7 @@ from auv_ident.ros.toolkit import (
     STREAM_QOS,
 )
 from auv_ident.session.auto_choice import run_in_thread
-from auv_ident.session.estimate_file import write_estimate_json
+from auv_ident.session.estimate_file import check_save_path, write_estimate_json
 from auv_ident.session.messages import (
     current_indices,
     current_twist_fields,
@@ -209,6 +209,7 @@ class IdentifierNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         values = declare_parameters(self, _PARAMETERS)
         self.save_path = values.pop('save_path')
+        check_save_path(self.save_path)     # a bad folder: exit 2 now, not at shutdown
         # ParameterError names a bad parameter; an 'auto' choice and the noise learning's
         # re-runs run in worker threads, so that the callbacks go on taking (and keeping)
         # messages while they run
@@ -537,7 +538,9 @@ class IdentifierNode(Node):
         return response
 
     def shutdown_save(self):
-        """On shutdown: write save_path if set, and log the final estimate."""
+        """On shutdown: write save_path if set, and log the final estimate. False when the
+        file could not be written (the process then exits 2: a mission's estimate lost is
+        no success)."""
         est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         counters = self.session.counters
@@ -549,6 +552,8 @@ class IdentifierNode(Node):
         if self.save_path:
             ok, message = self.save()
             self._final_log('INFO' if ok else 'ERROR', message)
+            return ok
+        return True
 
     def _final_log(self, level, message):
         # After SIGINT/SIGTERM the context is already shut down and every log call would add
@@ -563,7 +568,8 @@ class IdentifierNode(Node):
 
 
 def main(args=None):
-    """Entry point: identify until SIGINT/SIGTERM (0), or exit 2 on a bad parameter."""
+    """Entry point: identify until SIGINT/SIGTERM (0), or exit 2 on a bad parameter (a
+    save_path whose folder is missing or read-only included) or when the final save fails."""
     return run_node('identifier', args, __doc__, '-p vehicle:=nps_auv2', IdentifierNode, spin,
                     finish=lambda node: node.shutdown_save())
 

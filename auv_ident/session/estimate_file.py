@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from auv_ident.core.safe_files import write_atomic
+from auv_ident.core.safe_files import unwritable_reason, write_atomic
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import ParameterError
 
@@ -61,6 +61,19 @@ def write_estimate_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> Pa
     refused."""
     text = json.dumps(doc, indent=1, allow_nan=False) + '\n'
     return write_atomic(Path(path), text)
+
+
+def check_save_path(path: str, setting: str = 'save_path') -> None:
+    """ParameterError naming `setting` unless an estimate file can be written at `path` (its
+    folder exists and is writable, the path is no folder): checked at start-up, so that a
+    mission does not learn at its end that its estimate had nowhere to go. '' = no file."""
+    if not path:
+        return
+    reason = unwritable_reason(path)
+    if reason:
+        raise ParameterError(setting, f'the estimate file {path} could not be written: '
+                                      f'{reason}')
+
 
 MAX_ESTIMATE_BYTES = 16 * 1024 * 1024   # an estimate of p coefficients is ~25 p^2 bytes
 

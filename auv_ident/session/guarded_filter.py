@@ -100,6 +100,11 @@ class GuardedFilter:
         """True once the current stream's filter has fused a measurement."""
         return self.stream.ekf.xa is not None
 
+    @property
+    def applied_variances(self):
+        """(12,) the message variances the filter last took (use_variances), or None."""
+        return None if self._variances_of is None else self._variances_of[1]
+
     def use_variances(self, r):
         """Make r (12,) the measurement variances (fixed mode: R; adaptive modes: R0, the
         reference the adaptation starts from and is bounded by) unless they already are."""

@@ -460,6 +460,17 @@ def odometry_state(msg: Any, frame: str = 'ned') -> tuple[float, np.ndarray]:
 _POSE_DIAG = (0, 7, 14, 21, 28, 35)   # row-major 6x6 diagonal
 
 
+def covariance_entry(channel: int, frame: str = 'ned') -> str:
+    """The Odometry field holding the variance of state channel `channel` (0..11, NED/FRD
+    order, as odometry_variances reads it), e.g. 'twist.covariance[0]' for u."""
+    if channel < 6:
+        return f'twist.covariance[{_POSE_DIAG[channel]}]'
+    j = channel - 6
+    if frame == 'enu' and j < 2:
+        j = 1 - j
+    return f'pose.covariance[{_POSE_DIAG[j]}]'
+
+
 def odometry_variances(msg: Any, frame: str = 'ned') -> np.ndarray:
     """The 12 variances an Odometry states for ``[u v w p q r x y z phi theta psi]``.
 

@@ -49,6 +49,13 @@ these make the innovations inconsistent with the model instead, which the diverg
 Simulated runs of every vehicle and manoeuvre and the shipped bag are far inside the bounds
 (|u| < 0.7 m/s, rates < 0.16 rad/s, tilt < 0.4 rad).
 
+Message covariance rule (noise_source 'message'): a stated variance of a measured channel more
+than PLAUSIBLE_VARIANCE_RATIO (1e16, a 1-sigma 1e8 times) above or below the variance of
+noise_std (the documented sensor level) is no sensor's: a driver that scaled it twice or wrote
+1e300 for "unknown" (:func:`implausible_variances`). The session uses noise_std for it and
+says so once per channel, naming the covariance entry; real data span far less (the importer's
+1e6 "unmeasured" variance is 1e12 x the default variance of p; the HSVA runs' r at 1.4e-8 x).
+
 The functions take plain lists of floats (``ndarray.tolist()``): a message has a dozen values,
 and Python arithmetic on them costs less than numpy's per-call overhead.
 """
@@ -56,6 +63,8 @@ from collections.abc import Sequence
 from functools import lru_cache
 import math
 import re
+
+import numpy as np
 
 from auv_ident.core.model.state import Input, N_FINS, State, STATE_NAMES, STATE_UNITS
 from auv_ident.session.messages import JOINT_NAMES
@@ -67,6 +76,7 @@ MAX_DEPTH = 11000.0         # m, |z|
 MAX_HORIZONTAL = 2.0e7      # m, |x| |y|
 FIN_LIMIT_FACTOR = 2.0      # x the vehicle's fin limit
 SHAFT_LIMIT_FACTOR = 2.0    # x the vehicle's shaft-speed limit
+PLAUSIBLE_VARIANCE_RATIO = 1e16   # a message variance / noise_std's variance, either way
 
 _BOUNDS = {State.U: MAX_BODY_SPEED, State.V: MAX_BODY_SPEED, State.W: MAX_BODY_SPEED,
            State.P: MAX_BODY_RATE, State.Q: MAX_BODY_RATE, State.R: MAX_BODY_RATE,
@@ -122,6 +132,16 @@ def frame_problem(frame_id: str, child_frame_id: str, frame: str,
                                  f'{first_ids[0]!r} / {first_ids[1]!r} of the first accepted '
                                  'odometry')
     return None
+
+
+def implausible_variances(variances: np.ndarray, documented: np.ndarray) -> np.ndarray:
+    """(12,) bool: the message variances more than PLAUSIBLE_VARIANCE_RATIO away from the
+    documented ones (noise_std squared) either way (module docstring). NaN, 0 and -1 ('not
+    stated') are not judged here (False)."""
+    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
+        ratio = np.asarray(variances, dtype=float) / np.asarray(documented, dtype=float)
+        return (ratio > PLAUSIBLE_VARIANCE_RATIO) | (ratio < 1.0 / PLAUSIBLE_VARIANCE_RATIO) \
+            & (ratio > 0.0)
 
 
 def nonfinite_states(x12: Sequence[float], channels: Sequence[int]) -> list[str]:

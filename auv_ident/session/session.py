@@ -63,6 +63,7 @@ from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (
     _as_vector,
     ConversionError,
+    covariance_entry,
     header_stamp_ns,
     integer_stamp,
     joint_state_to_actuators,
@@ -75,8 +76,10 @@ from auv_ident.session.noise_learning import FUSED_OK, NoiseLearner, rerun
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
+    implausible_variances,
     named_conventions,
     odometry_problem,
+    PLAUSIBLE_VARIANCE_RATIO,
 )
 from auv_ident.session.settings import (
     coefficient_list,
@@ -98,6 +101,11 @@ class InputMapSettingError(ParameterError, InputMapError):
 # stamps from this on (~11.6 days after 1970) are wall-clock times: the session then counts
 # time from the whole second of the first stamp (IdentSession docstring)
 TIME_ORIGIN_MIN_NS = 10 ** 15
+
+
+# message variances below this fraction of noise_std's, while the guard resets: named as a
+# likely cause (a DVL's or an INS's real 1-sigma is rarely 10x better than the documented level)
+UNDERSTATED_VARIANCE = 1e-2
 
 
 class IdentSession:
@@ -306,7 +314,25 @@ class IdentSession:
         return self._fault_reset('guard', f'innovations inconsistent for '
                                           f'{t - window.since:.3f} s (median NIS/dof '
                                           f'{window.median():.4g} over the last {len(window)} '
-                                          f'updates, above {GUARD_FACTOR:g})', stamp_ns)
+                                          f'updates, above {GUARD_FACTOR:g})'
+                                          + self._understated_noise(), stamp_ns)
+
+    def _understated_noise(self):
+        """A clause for a divergence under message covariances far below noise_std's (the
+        data scatter far more than the messages say: a driver's covariance in other units, or
+        its own filter's confidence rather than the sensor's noise), else ''."""
+        r = self.filter.applied_variances
+        if self.noise_source != 'message' or r is None:
+            return ''
+        measured = list(self._measured_states)
+        ratio = r[measured] / self.noise_default[measured]
+        low = float(np.min(ratio))
+        if not low < UNDERSTATED_VARIANCE:
+            return ''
+        i = measured[int(np.argmin(ratio))]
+        return (f'; the odometry covariance states far less noise than noise_std (e.g. '
+                f'{covariance_entry(i, self.frame)} ({STATE_NAMES[i]}) = {r[i]:.3g}, '
+                f'{low:.2g} x): if the data scatter more, set noise_source parameter')
 
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
@@ -592,16 +618,33 @@ class IdentSession:
 
     def _measurement_variances(self, variances):
         """The R diagonal for this message (noise_source 'message'): the message's variances
-        where finite and positive, noise_std's elsewhere (noted once per channel)."""
+        where finite, positive and plausible (screening.implausible_variances: within a
+        factor of the documented level, noise_std), noise_std's elsewhere; each channel
+        noted once, naming the covariance entry and the setting that ignores them."""
         ok = np.isfinite(variances) & (variances > 0.0)
-        missing = [STATE_NAMES[i] for i in self._measured_states
-                   if not ok[i] and i not in self._fallback_noted]
+        absurd = implausible_variances(variances, self.noise_default) & ok
+        missing = [i for i in self._measured_states
+                   if not ok[i] and ('unstated', i) not in self._fallback_noted]
         if missing:
-            self._fallback_noted.update(STATE_NAMES.index(n) for n in missing)
+            self._fallback_noted.update(('unstated', i) for i in missing)
             self.notices.append('odom: the message states no usable covariance (zero, -1 or '
-                                f'not finite) for {", ".join(missing)}: noise_std used for '
-                                'them (noise_source message)')
-        return np.where(ok, variances, self.noise_default)
+                                f'not finite) for {", ".join(STATE_NAMES[i] for i in missing)}'
+                                ': noise_std used for them (noise_source message)')
+        wild = [i for i in self._measured_states
+                if absurd[i] and ('absurd', i) not in self._fallback_noted]
+        if wild:
+            self._fallback_noted.update(('absurd', i) for i in wild)
+            ratios = variances[wild] / self.noise_default[wild]
+            self.notices.append(
+                'odom: implausible message covariance ' + ', '.join(
+                    f'{covariance_entry(i, self.frame)} ({STATE_NAMES[i]}) = {variances[i]:.3g}'
+                    for i in wild)
+                + f': {ratios.min():.2g}' + ('' if ratios.min() == ratios.max() else
+                                              f' to {ratios.max():.2g}')
+                + " x the variance of noise_std (a sensor's is within "
+                f'{PLAUSIBLE_VARIANCE_RATIO:.0e}x either way); noise_std used instead. Set '
+                "noise_source parameter to ignore the messages' covariances, or fix the driver")
+        return np.where(ok & ~absurd, variances, self.noise_default)
 
     def _command(self, stamp_ns, u7, what='actuators'):
         """add_command after reading: stamp_ns int, u7 a (7,) float array of our own; what:

@@ -22,7 +22,8 @@ identifier:
 # the identifier node's own parameter (not an identification setting; ros/identifier_node.py
 # declares it from here): name, default, description
 SAVE_PATH = ('save_path', '', 'estimate JSON written on ~/save, on shutdown and every 10 s; '
-                              'empty = none')
+                              'empty = none; its folder must exist and be writable (checked '
+                              'at start-up: exit 2), a failed save at shutdown exits 2')
 INDENT = '    '
 
 

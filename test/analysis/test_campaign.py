@@ -18,7 +18,7 @@ import pytest
 
 from auv_ident.analysis import engine
 from auv_ident.analysis.bag_identify import identify_bag
-from auv_ident.analysis.campaign import find_bags, run_campaign
+from auv_ident.analysis.campaign import bag_key, find_bags, run_campaign, settings_key
 from auv_ident.analysis.experiments import identify_simulated, montecarlo
 from auv_ident.analysis.results import make_config
 from auv_ident.core.errors import ConfigError
@@ -142,7 +142,8 @@ def test_resume_skips_the_bags_already_done(archive, cluster, tmp_path):
     out.mkdir()
     earlier = [{'bag': good[0], 'status': 'ok', 'worker': 'an earlier run', 'wall_s': '1',
                 'start_time': '2024-01-01T00:00:00.000Z', 'duration_s': '30', 'vehicle':
-                'nps_auv2', 'Z_w': '-0.25', 'Z_w_std': '0.01', 'consistent': 'True', 'error': ''},
+                'nps_auv2', 'Z_w': '-0.25', 'Z_w_std': '0.01', 'consistent': 'True', 'error': '',
+                'bag_key': bag_key(good[0]), 'settings_key': settings_key(None, '', True)},
                {'bag': good[1], 'status': 'error', 'worker': 'an earlier run', 'error': 'boom'}]
     with open(out / 'campaign.csv', 'w', newline='', encoding='utf-8') as fh:
         w = csv.DictWriter(fh, list(earlier[0]))
@@ -158,9 +159,62 @@ def test_resume_skips_the_bags_already_done(archive, cluster, tmp_path):
     assert rows[good[1]]['vehicle'] == 'nps_auv2' and float(rows[good[1]]['K_v_std']) > 0
     assert rows[good[2]]['status'] == 'ok'
     # all done: a third run identifies nothing and starts no cluster
-    again = run_campaign(str(root / 'auv1' / 'mission*'), str(out), vehicle='nps_auv2',
+    again = run_campaign(str(root / 'auv1' / 'mission*'), str(out),
                          scheduler='tcp://127.0.0.1:9')
     assert (again['skipped'], again['ok'], again['error'], again['workers']) == (3, 0, 0, 0)
+
+
+@pytest.mark.slow
+def test_resume_redoes_an_edited_bag_and_changed_settings(archive, cluster, tmp_path):
+    """A row is trusted for its bag's content and the campaign's settings only (#27 item 10:
+    resume trusted rows by path alone): a bag rewritten since (here: its metadata.yaml edited,
+    same path) is identified again, the others kept; other settings (coefficients, vehicle
+    file) redo every bag."""
+    root, good, _ = archive
+    bags = tmp_path / 'bags'
+    for g in good[:2]:
+        shutil.copytree(g, bags / os.path.basename(g))
+    out = tmp_path / 'out'
+    fast = dict(scheduler=cluster.scheduler_address, refine=False, warm_up=False)
+    first = run_campaign(str(bags), str(out), **fast)
+    assert (first['skipped'], first['ok']) == (0, 2)
+    before = _rows(out)
+    meta = bags / os.path.basename(good[1]) / 'metadata.yaml'
+    meta.write_text(meta.read_text(encoding='utf-8') + '\n', encoding='utf-8')
+    edited = run_campaign(str(bags), str(out), **fast)
+    assert (edited['skipped'], edited['ok']) == (1, 1)
+    after = _rows(out)
+    kept, redone = (str(bags / os.path.basename(g)) for g in good[:2])
+    assert after[kept] == before[kept] and after[redone]['bag_key'] != before[redone]['bag_key']
+    other = run_campaign(str(bags), str(out), coefficients='Z_w,M_ds', **fast)
+    assert (other['skipped'], other['ok']) == (0, 2)
+    assert set(_rows(out)[kept]).issuperset({'Z_w', 'M_ds'}) and not _rows(out)[kept].get('K_v')
+    vehicle = run_campaign(str(bags), str(out), coefficients='Z_w,M_ds', vehicle='nps_auv2',
+                           **fast)
+    assert (vehicle['skipped'], vehicle['ok']) == (0, 2)
+    assert settings_key(None, '', True) != settings_key(None, '', False)    # --no-refine
+
+
+@pytest.mark.parametrize('content, needle', [
+    (b'\xff\xfe\x00garbage\x89', 'not a campaign table'),
+    (b'name,value\n1,2\n', "no 'bag' and 'status' columns"),
+    (b'bag,status\n/x,ok,extra\n', 'row 2 has more fields than the header'),
+])
+def test_a_corrupt_campaign_table_is_one_clear_error(archive, tmp_path, content, needle):
+    """A campaign.csv that is not ours (binary, another table, broken rows): one ConfigError
+    naming it, no UnicodeDecodeError (#27 item 6); the CLI prints it on one line, exit 2."""
+    root, _, _ = archive
+    out = tmp_path / 'out'
+    out.mkdir()
+    (out / 'campaign.csv').write_bytes(content)
+    with pytest.raises(ConfigError, match=needle) as info:
+        run_campaign(str(root / 'auv1' / 'mission*'), str(out), scheduler='tcp://127.0.0.1:9')
+    assert str(out / 'campaign.csv') in str(info.value)
+    proc = subprocess.run([sys.executable, '-m', 'auv_ident', 'campaign', '--bags',
+                           str(root / 'auv1' / 'mission*'), '--out', str(out)],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert proc.returncode == 2 and len(lines) == 1 and needle in lines[0], proc.stderr
 
 
 def test_a_worker_killed_mid_campaign_loses_no_bag(archive, tmp_path):

@@ -258,7 +258,7 @@ def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set
 
 def test_report_auto_needs_a_recorded_run(tmp_path, capsys):
     rc = main(['report', '--simulate', 'ident', '--duration', '10', '--coefficients', 'auto',
-               '--out', str(tmp_path)])
+               '--out', str(tmp_path / 'report')])
     assert rc == 2 and 'report --bag' in capsys.readouterr().err
 
 

@@ -128,18 +128,18 @@ def test_identify_command_line_current_options(tmp_path):
     assert 'current (m/s)' in p.stdout
     # with the down component
     p = _cli('identify', '--bag', str(data.bag), '--coefficients', 'Z_w,M_ds', '--no-refine',
-             '--current-down', '--json', str(out))
+             '--current-down', '--json', str(out), '--force')
     assert p.returncode == 0, p.stderr
     cur = json.loads(out.read_text())['current']
     assert cur['estimated'] == ['current_n', 'current_e', 'current_d'] and cur['std'][2] > 0
     # still water: no current in the result
     p = _cli('identify', '--bag', str(data.bag), '--coefficients', 'Z_w,M_ds', '--no-refine',
-             '--current', 'none', '--json', str(out))
+             '--current', 'none', '--json', str(out), '--force')
     assert p.returncode == 0, p.stderr
     assert json.loads(out.read_text())['current'] is None and 'current (m/s)' not in p.stdout
     # a known current: held, reported as given
     p = _cli('identify', '--bag', str(data.bag), '--coefficients', 'Z_w,M_ds', '--no-refine',
-             '--current=-0.026,0.148', '--json', str(out))
+             '--current=-0.026,0.148', '--json', str(out), '--force')
     assert p.returncode == 0, p.stderr
     cur = json.loads(out.read_text())['current']
     assert cur['estimated'] == [] and cur['north'] == -0.026 and cur['std'] == [0.0] * 3

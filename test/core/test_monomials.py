@@ -122,3 +122,13 @@ def test_a_coefficient_with_two_terms_is_refused():
     ti[1, 1] = ti[0, 1]
     with pytest.raises(ConfigError, match='more than one term'):
         kernel_source(ti, v.terms_s)
+
+
+def test_a_non_finite_scale_is_refused_not_written_as_inf():
+    """A term table built without the vehicle file's checks (#27 item 6: numba's "name 'inf'
+    is not defined" from generated code)."""
+    v = load_vehicle('nps_auv2')
+    ts = v.terms_s.copy()
+    ts[3] = np.inf
+    with pytest.raises(ConfigError, match=r'term 3 of the term table has the scale inf'):
+        kernel_source(v.terms_i, ts)

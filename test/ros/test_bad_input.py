@@ -856,6 +856,7 @@ def test_corrupt_warm_start_file_is_one_clear_error(tmp_path, run):
     (['-p', "coefficients:=['Z_w','Z_nonsense']"], 'coefficients'),
     (['-p', 'noise_std:=[0.01,0.01,0.01,0.001,0.001,0.001,0.5,0.5,0.05,0.002,0.002,-0.005]'],
      'noise_std'),
+    (['-p', 'save_path:=/nonexistent/folder/estimate.json'], 'save_path'),
 ])
 @pytest.mark.slow
 def test_node_process_exits_2_with_one_line_on_an_absurd_parameter(args, name, ros_env,
@@ -1012,3 +1013,128 @@ def test_estimate_file_is_autosaved_while_updates_arrive(run, ctx, tmp_path, mon
         assert not list(tmp_path.glob('.*.tmp'))    # atomic: no temp file left
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize('where, needle', [
+    ('missing/estimate.json', 'does not exist'),
+    ('', 'is a folder, not a file'),
+    ('file.txt/estimate.json', 'is not a folder'),
+])
+def test_a_save_path_that_cannot_be_written_is_refused_at_start_up(ctx, tmp_path, where,
+                                                                    needle):
+    """save_path is checked when the node starts (#27 item 8: a missing folder showed only at
+    shutdown, after the mission): one ParameterError naming it, which the node process prints
+    on one line with exit 2."""
+    (tmp_path / 'file.txt').write_text('x')
+    with pytest.raises(ParameterError, match=f"parameter 'save_path': .*{needle}"):
+        _node(ctx, save_path=str(tmp_path / where))
+
+
+def test_a_failed_final_save_is_a_failure(run, ctx, tmp_path):
+    """The folder of save_path removed while the node runs: the save at shutdown fails, says
+    so at ERROR and returns False, which the node's harness turns into exit 2 (#27 item 8:
+    the process exited 0 after 'cannot write')."""
+    folder = tmp_path / 'mission'
+    folder.mkdir()
+    node = _node(ctx, save_path=str(folder / 'estimate.json'))
+    try:
+        _feed_node(node, _prefix(run, 20))
+        folder.rmdir()
+        node._final_log = lambda level, text: node.log_lines.append((level, text))
+        assert node.shutdown_save() is False
+        assert node.log_lines[-1][0] == 'ERROR' and 'cannot write' in node.log_lines[-1][1]
+        folder.mkdir()
+        assert node.shutdown_save() is True and (folder / 'estimate.json').is_file()
+    finally:
+        node.destroy_node()
+
+
+def _scaled_covariances(run, scale_all=1.0, u_variance=None):
+    """The clean run with every odometry's covariance diagonals x scale_all, or u's variance
+    (twist.covariance[0]) set to u_variance."""
+    out = []
+    for topic, msg in _clean(run, range(len(run.t))):
+        if topic == ODOM_TOPIC:
+            twist = np.array(msg.twist.covariance) * scale_all
+            pose = np.array(msg.pose.covariance) * scale_all
+            if u_variance is not None:
+                twist[0] = u_variance
+            msg.twist.covariance, msg.pose.covariance = twist, pose
+        out.append((topic, msg))
+    return out
+
+
+@pytest.mark.parametrize('kw, entries', [
+    (dict(scale_all=1e-30), ['twist.covariance[0] (u)', 'pose.covariance[35] (psi)']),
+    (dict(u_variance=1e300), ['twist.covariance[0] (u) = 1e+300']),
+])
+def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw,
+                                                           entries):
+    """Message covariances x 1e-30, or 1e300 on one diagonal (#27 item 7: the filter diverged,
+    and the advice was 'try --noise-mode fixed' with fixed already set): one notice naming the
+    topic, the covariance entries and the setting that ignores them (noise_source parameter);
+    noise_std is used for those channels, so the run identifies as a clean one (no reset, no
+    outlier), live and from a bag alike."""
+    messages = _scaled_covariances(run, **kw)
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed'))
+    notices = []
+    for topic, msg in messages:
+        (s.on_actuators if topic == ACTUATOR_TOPIC else s.on_odom)(msg)
+        notices += s.notices
+        s.notices.clear()
+    wild = [n for n in notices if 'implausible message covariance' in n]
+    assert len(wild) == 1, notices
+    assert all(e in wild[0] for e in entries) and 'noise_source parameter' in wild[0]
+    assert 'noise-mode' not in wild[0] and wild[0].startswith('odom: ')
+    c = s.counters
+    assert (c.odom_rejected, c.outliers, c.errors) == (0, 0, 0), c.reasons
+    clean = IdentSession(IdentifierSettings.from_values(noise_mode='fixed',
+                                                        noise_source='parameter'))
+    _feed_session(clean, _clean(run, range(len(run.t))))
+    np.testing.assert_allclose(s.last_good.estimate, clean.last_good.estimate, rtol=1e-9)
+    bag = tmp_path / 'bag'
+    _write_bag(bag, messages)
+    warnings = ReplayWarnings()
+    res = replay_bag(bag, IdentifierSettings.from_values(noise_mode='fixed'), warn=warnings)
+    assert res.errors == 0 and res.rejected == 0
+    np.testing.assert_allclose(res.estimate, s.last_good.estimate, rtol=1e-6)
+
+
+@pytest.mark.slow
+def test_node_process_exits_2_when_the_final_save_fails(ros_env, tmp_path):
+    """A real identifier process whose save_path folder vanishes while it runs: SIGTERM ->
+    the save fails, one ERROR line, exit status 2 (#27 item 8: it exited 0)."""
+    folder = tmp_path / 'mission'
+    folder.mkdir()
+    proc = spawn_node('identifier', ['-p', f'save_path:={folder / "estimate.json"}'], ros_env,
+                      str(tmp_path))
+    err_file = tmp_path / 'identifier.err'
+    try:
+        deadline = time.monotonic() + 120.0
+        while 'identifying' not in err_file.read_text() and time.monotonic() < deadline:
+            assert proc.poll() is None, err_file.read_text()
+            time.sleep(0.2)
+        folder.rmdir()
+    finally:
+        rc = stop_process(proc, signal.SIGTERM, timeout=30.0)
+    err = err_file.read_text()
+    assert rc == 2, err
+    assert 'cannot write' in err and 'Traceback' not in err
+
+
+def test_understated_message_covariances_are_named_when_the_guard_resets(run):
+    """Covariances x 1e-8 (1-sigma 1e-4 x the documented level: inside the plausible range,
+    but the data scatter 1e4 x more than the messages say): the guard's reset names the
+    covariance and the setting that ignores it (#27 item 7)."""
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed'))
+    resets = []
+    for topic, msg in _scaled_covariances(run, scale_all=1e-8)[:400]:
+        ev = (s.on_actuators if topic == ACTUATOR_TOPIC else s.on_odom)(msg)
+        if ev.kind == 'error':
+            resets.append(ev.reason)
+    assert resets and all('innovations inconsistent' in r for r in resets)
+    assert 'twist.covariance[' in resets[0] and 'set noise_source parameter' in resets[0]
+    s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed',
+                                                    noise_source='parameter'))
+    _feed_session(s, _scaled_covariances(run, scale_all=1e-8)[:400])
+    assert s.counters.errors == 0

@@ -90,6 +90,18 @@ def _timeline(f, t, Y, U, max_step, max_bridge):
     return K.Timeline(n_sub, h, x0, sd0)
 
 
+def _divergence_advice(f):
+    """What to try after a divergence, never what is already set: an adaptive noise mode can
+    run away (fixed holds R and Q); with fixed noise the noise given does not fit the data."""
+    if f.cfg.mode != 'fixed':
+        return '(try --noise-mode fixed)'
+    r = np.asarray(f.cfg.noise_std, dtype=float)
+    return (f'with fixed noise: the measurement 1-sigma given (here {r.min():.3g} to '
+            f"{r.max():.3g}, from noise_std or the messages' covariances) or the process noise "
+            'does not fit the data; check noise_std and q_state (--noise-source parameter '
+            "ignores the messages' covariances)")
+
+
 def _run_one(f, t, Y, U, hist_every, want_white, max_step, max_bridge):
     """The compiled loop over one checked record from Y[0]: (stats, histories, whitened
     innovations); the filter's state is replaced by the result."""
@@ -109,7 +121,7 @@ def _run_one(f, t, Y, U, hist_every, want_white, max_step, max_bridge):
             raise DomainError(f'EKF stopped at sample {k} (t = {t[k]:.2f} s): '
                               f'{STATUS_TEXT[st]}')
         raise DivergenceError(f'EKF diverged at sample {k} (t = {t[k]:.2f} s): the '
-                              'covariance lost positive definiteness (try --noise-mode fixed)')
+                              'covariance lost positive definiteness ' + _divergence_advice(f))
     hist = {'t': t[::hist_every][:nh] - t[0], 'theta': out.theta, 'std': out.std,
             'nis': out.nis[:, 0], 'dof': out.nis[:, 1], 'R_diag': out.rq[:, :N_STATE],
             'Q_theta_diag': out.rq[:, N_STATE:]} if nh else {}

@@ -110,9 +110,20 @@ def _levels(white, measured):
     for j in np.flatnonzero(measured):
         x = white[:, j]
         x = x[np.isfinite(x)]
-        if x.size > LJUNG_BOX_LAGS:
+        if x.size > LJUNG_BOX_LAGS and np.any(x != 0.0):     # all 0: no information
             out[j] = math.sqrt(float(np.mean(x ** 2)))
     return out
+
+
+def _informative(model):
+    """The channels of a noise model (uncertainty.noise_model) whose innovations carry
+    information: a level of exactly 0 (or not finite) says nothing about the noise. It happens
+    when every sample of a channel restarted the vehicle states from the measurement (each
+    accepted sample more than max_bridge from the last, e.g. when nearly every message was
+    rejected): the innovation of a restart is 0 by construction. Such a channel keeps its
+    configured noise, as one without samples does."""
+    return {name: d for name, d in model.items()
+            if math.isfinite(d['level']) and d['level'] > 0.0}
 
 
 @dataclass
@@ -192,7 +203,7 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
         matched = match_process_noise(model, cfg_base, runs, T, first, max_step, max_bridge,
                                       hist_every)
         q, last, passes = matched.q_state, matched.last, matched.passes
-    nm = noise_model(_pooled(last), T, STATE_NAMES)
+    nm = _informative(noise_model(_pooled(last), T, STATE_NAMES))
     eff = effective_std(base, nm, measured)
     ratio = (eff / conf) ** 2
     used = bool(factor != 1.0 or passes > 0

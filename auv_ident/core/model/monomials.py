@@ -96,6 +96,9 @@ def kernel_source(terms_i: np.ndarray, terms_s: np.ndarray) -> str:
             raise ConfigError(f'coefficient #{ci} has more than one term in the term table')
         seen.add(ci)
         fs = [int(f) for f in terms_i[t, 2:] if f >= 0]
+        if not np.isfinite(terms_s[t]):     # repr gives 'inf'/'nan': no Python literal
+            raise ConfigError(f'term {t} of the term table has the scale '
+                              f'{float(terms_s[t])!r}, not a finite number')
         rows.append((t, eq, ci, fs, float(terms_s[t])))
     used = sorted({f for _, _, _, fs, _ in rows for f in fs})
     L = ['def monomial_terms(c, zz, want_jac, xdot, A, dprod):']

@@ -38,6 +38,18 @@ P_FIN, P_NMAX, P_PROP, P_PROP_A, P_PROP_B, P_PROP_C, P_PROP_D = range(10, 17)
 P_CF, P_CF_N, P_CF_CY, P_CF_CZ, P_RECOMPUTE_MINV, P_U_MIN, P_SPEED_FACTOR = range(17, 24)
 N_PAR = 24
 
+# crossflow.stations: the strip sum needs both ends (dx = L / (stations - 1)); its cost is linear
+# in the count, and MSS's 11 stations already converge it to ~1e-3 relative: 1000 is far past
+# any use and keeps one model evaluation below a millisecond
+MAX_STATIONS = 1000
+# W / mass is the gravity the file assumes (m/s^2): 9.78-9.83 on Earth's surface; the shipped
+# files use 9.79-9.81, g = 10 is a common round value. Outside this the mass (or the weight) is
+# in other units or mistyped, and the dynamics would be off by that factor.
+G_RANGE = (9.5, 10.5)
+# mss_inverse is MSS's hard-coded M^-1: it must invert M_RB + M_A to this (max |Minv M - I|;
+# NPS AUV II's literal: 2.7e-4). A singular or unrelated matrix is a typo, not a model choice.
+MSS_INVERSE_TOL = 0.05
+
 U_MIN = 1e-6          # m/s: |u| below this is outside the Healey-Lienard propeller's domain
 COS_THETA_MIN = 1e-6  # |cos(theta)| below this: Euler-angle kinematics singular (theta ~ +-90 deg)
 
@@ -147,7 +159,8 @@ def _term_scale(rho: float, L: float, k: int, factors: tuple, scaling: str) -> f
     deduction), in either scaling."""
     if scaling != 'nondimensional':
         return 1.0
-    scale = 0.5 * rho * L ** k
+    with np.errstate(over='ignore'):    # an overflow is inf, refused by _check_finite_terms
+        scale = float(0.5 * rho * np.float64(L) ** k)
     if FACTOR_INDEX['thrust'] in factors:
         scale /= 0.5 * rho
     return scale
@@ -261,6 +274,25 @@ def rigid_body_mass_matrix(mass: float, r_G: np.ndarray, I: Sequence[float]) -> 
     return M
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that refuses a mapping holding one key twice (PyYAML keeps the last
+    silently, so a coefficient written twice would take whichever came last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:       # an unhashable key: the base class says so
+                break
+            if first != key_node.start_mark.line + 1:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f'duplicate key {key!r} (first on line {first})',
+                    key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
 def vehicle_from_file(path: str) -> Vehicle:
     """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
     parsed once, never in a hot path). Looking a vehicle up by name is
@@ -273,14 +305,23 @@ def vehicle_from_file(path: str) -> Vehicle:
     if key not in _CACHE:
         with open(path, encoding='utf-8') as fh:
             try:
-                raw = yaml.safe_load(fh)
+                raw = yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
             except yaml.YAMLError as err:
-                raise ConfigError(f'{path}: not valid YAML: {err}') from None
+                raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
         _CACHE[key] = _build(raw, path)
     return _CACHE[key]
 
 
 _CACHE: dict[tuple[str, float], Vehicle] = {}
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    """A YAML error on one line: its problem and where (PyYAML's text spans several lines)."""
+    problem = getattr(err, 'problem', None)
+    mark = getattr(err, 'problem_mark', None)
+    if problem is None or mark is None:
+        return ' '.join(str(err).split())
+    return f'{problem} (line {mark.line + 1}, column {mark.column + 1})'
 
 
 def _build(raw: object, path: str) -> Vehicle:
@@ -296,6 +337,10 @@ def _build(raw: object, path: str) -> Vehicle:
     L = _num(raw, 'L', where, positive=True)
     mass = _num(raw, 'mass', where, positive=True)
     W = _num(raw, 'W', where, positive=True)
+    if not G_RANGE[0] <= W / mass <= G_RANGE[1]:
+        raise ConfigError(f'{where}: mass = {mass!r} kg and W = {W!r} N give W / mass = '
+                          f'{W / mass:.4g} m/s^2; W is m g (g {G_RANGE[0]:g}-{G_RANGE[1]:g} '
+                          'm/s^2): check the units of mass and W')
     B = _num(raw, 'B', where, positive=True)
     r_G = _vec3(raw, 'r_G', where)
     r_B = _vec3(raw, 'r_B', where)
@@ -330,9 +375,11 @@ def _build(raw: object, path: str) -> Vehicle:
         M_RB=_held_rigid_body_mass(mass, r_G, I, free), Minv_literal=Minv_literal,
         mass_inverse=mass_inverse,
         identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
-        cruise_rpm=float(raw.get('cruise_rpm', 500.0)),
+        cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
+                    else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
         free_states=free)
+    _check_finite_terms(v, where)
     M = v.mass_matrix()
     if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):
         raise ConfigError(f'{where}: M_RB + M_A is not symmetric (check added-mass pairs)')
@@ -340,9 +387,29 @@ def _build(raw: object, path: str) -> Vehicle:
         np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
         raise ConfigError(f'{where}: M_RB + M_A is not positive definite') from None
+    if Minv_literal is not None:
+        err = float(np.abs(Minv_literal @ M - np.eye(N_NU)).max())
+        if not err <= MSS_INVERSE_TOL:
+            raise ConfigError(f'{where}: mss_inverse is not the inverse of M_RB + M_A (max '
+                              f'|mss_inverse M - I| = {err:.3g}, at most {MSS_INVERSE_TOL:g}): '
+                              'a singular or mistyped matrix; use mass_inverse: exact')
     for n in v.identify_default:
         v.index(n)
     return v
+
+
+def _check_finite_terms(v: Vehicle, where: str) -> None:
+    """Every term of the model finite: a coefficient's scale (rho/2) L^k and its dimensional
+    value, the rigid-body constants. An overflow (rho: 1e308) would otherwise reach the
+    generated kernels as 'inf' and the numerics as NaN."""
+    for c in v.coefficients:
+        if not (np.isfinite(c.scale) and np.isfinite(c.scale * c.value)):
+            raise ConfigError(f'{where}: coefficient {c.name}: its scale (rho/2) L^{c.k} = '
+                              f'{c.scale:.3g} times the value {c.value:.3g} is not a finite '
+                              'number: check rho, L and the value')
+    if not (np.all(np.isfinite(v.terms_s)) and np.all(np.isfinite(v.M_RB))):
+        raise ConfigError(f'{where}: the rigid-body terms (mass times r_G, the inertia) are not '
+                          'finite numbers: check mass, r_G and inertia')
 
 
 def _propulsion(prop: dict, where: str, par: np.ndarray) -> None:
@@ -370,7 +437,11 @@ def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
                           + ', '.join(CROSSFLOW_MODELS))
     par[P_CF] = CROSSFLOW_MODELS[cm]
     if cm == 'mss_classic_strip':
-        par[P_CF_N] = int(_num(cf, 'stations', where + ' crossflow', positive=True))
+        ns = _num(cf, 'stations', where + ' crossflow', positive=True)
+        if ns != int(ns) or not 2 <= ns <= MAX_STATIONS:
+            raise ConfigError(f'{where} crossflow: stations = {cf["stations"]!r} must be a '
+                              f'whole number from 2 to {MAX_STATIONS}')
+        par[P_CF_N] = ns
         par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
         par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
 

@@ -1,0 +1,48 @@
+"""The noise model read off the data (core/identification/noise_fit.py) on records that carry
+no innovation information (#27 item 6: 'ValueError: math domain error' when a level is 0)."""
+import numpy as np
+import pytest
+
+from auv_ident.core.errors import DivergenceError
+from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
+from auv_ident.core.identification.batch import run_ekf
+from auv_ident.core.identification.noise_fit import fit_noise
+from auv_ident.core.identification.results import Record
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.simulation.simulate import simulate
+from auv_ident.vehicles import load_vehicle
+
+
+def test_a_record_of_restarts_only_keeps_the_configured_noise():
+    """Every sample 0.5 s after the last (> max_bridge 0.25 s): each restarts the vehicle
+    states from its measurement, so every innovation is 0 by construction. That is no noise
+    level (the level 0 made log(0) raise); the configured noise stands and no channel has a
+    model."""
+    v = load_vehicle('nps_auv2')
+    model = Model(v, v.identify_default)
+    run = simulate(Model(v), 'ident', duration=30.0, T=0.05, seed=3)
+    keep = slice(None, None, 10)
+    rec = Record(run.t[keep], run.y[keep], run.u[keep])
+    cfg = FilterConfig(coefficients=list(v.identify_default),
+                       noise_std=np.asarray(run.noise_std, float), mode='fixed')
+    fit = fit_noise(model, cfg, [rec], T=0.05)
+    assert fit.model == {}
+    np.testing.assert_array_equal(fit.effective_std, fit.configured_std)
+    assert np.all(fit.effective_std > 0)
+
+
+@pytest.mark.parametrize('mode, advice, not_advised', [
+    ('fixed', 'check noise_std and q_state (--noise-source parameter', 'try --noise-mode fixed'),
+    ('matching', 'try --noise-mode fixed', 'check noise_std'),
+])
+def test_a_divergence_advises_what_is_not_set_already(mode, advice, not_advised):
+    """A 1-sigma 1e-15 times the data's (#27 item 7: message covariances x 1e-30 gave 'try
+    --noise-mode fixed' with fixed already set): the advice depends on the noise mode."""
+    v = load_vehicle('nps_auv2')
+    run = simulate(Model(v), 'ident', duration=10.0, T=0.05, seed=3)
+    cfg = FilterConfig(coefficients=list(v.identify_default),
+                       noise_std=np.asarray(run.noise_std, float) * 1e-15, mode=mode)
+    with pytest.raises(DivergenceError) as info:
+        run_ekf(AugmentedEKF(Model(v, v.identify_default), cfg, 0.05),
+                [Record(run.t, run.y, run.u)])
+    assert advice in str(info.value) and not_advised not in str(info.value)
