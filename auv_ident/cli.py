@@ -453,6 +453,14 @@ THRUST_COL = 'thrust'     # N, optional (0 when absent): the input of measured_t
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
 
 
+def cmd_vehicle_check(args):
+    """0: the file is ready; 1: it loads and flies, with warnings; 2: errors."""
+    from auv_ident.analysis.vehicle_check import check_vehicle
+    check = check_vehicle(args.vehicle)
+    print('\n'.join(check.lines()))
+    return 2 if not check.ok else (1 if check.warnings else 0)
+
+
 def cmd_export(args):
     from auv_ident.analysis.export import export_model
     _check_outputs(args, '--out')
@@ -751,6 +759,14 @@ def build_parser():
     sp.add_argument('input')
     sp.add_argument('output')
     sp.set_defaults(func=cmd_derivatives)
+
+    sp = sub.add_parser('vehicle', help='vehicle files: check one before its first run')
+    vehicle_sub = sp.add_subparsers(dest='vehicle_command', required=True)
+    vp = vehicle_sub.add_parser('check', help='every missing or implausible key of a vehicle '
+                                               'file at once, its trim and stability '
+                                               '(docs/vehicles.md)')
+    vp.add_argument('vehicle', help='vehicle YAML path or name (config/<name>.yaml)')
+    vp.set_defaults(func=cmd_vehicle_check)
 
     sp = sub.add_parser('export', help='write an identified model where it is used: an updated '
                                        'vehicle file (docs/export.md)')

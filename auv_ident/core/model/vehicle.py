@@ -180,9 +180,32 @@ def _dofs(raw: dict, where: str) -> np.ndarray:
     return free
 
 
+# what a required key is, for the message that says it is missing (docs/vehicles.md)
+KEY_MEANING = {
+    'rho': 'water density, kg/m^3', 'L': 'length, m (the scaling length of prime values)',
+    'mass': 'kg', 'W': 'weight m g, N', 'B': 'buoyancy rho g V, N',
+    'Ix': 'roll inertia about the origin, kg m^2', 'Iy': 'pitch inertia, kg m^2',
+    'Iz': 'yaw inertia, kg m^2', 'fin_rad': 'largest fin deflection, rad',
+    'n_rpm': 'largest propeller shaft speed, rpm',
+}
+
+
+class VehicleFileProblems(ConfigError):
+    """Every problem found in a vehicle file's entries at once (``problems``: one text each),
+    so that a new file is put right in one round, not one run per missing key."""
+
+    def __init__(self, where: str, problems: list[str]):
+        self.where = where
+        self.problems = list(problems)
+        count = f'{len(problems)} problems' if len(problems) > 1 else 'problem'
+        super().__init__(f'{where}: {count}: ' + '; '.join(problems))
+
+
 def _num(d: dict, key: str, where: str, positive: bool = False) -> float:
     if key not in d:
-        raise ConfigError(f'{where}: missing key {key!r}')
+        meaning = KEY_MEANING.get(key)
+        raise ConfigError(f'{where}: missing key {key!r}'
+                          + (f' ({meaning})' if meaning else ''))
     try:
         v = float(d[key])
     except (TypeError, ValueError):
@@ -328,36 +351,50 @@ def _build(raw: object, path: str) -> Vehicle:
     """The Vehicle of a parsed vehicle file `raw` (read from `path`), or ConfigError naming the
     file and the first bad entry."""
     where = os.path.basename(path)
-    if not isinstance(raw, dict) or 'coefficients' not in raw:
-        raise ConfigError(f'{where}: not a vehicle file (no `coefficients:` mapping)')
+    raw = {} if raw is None else raw     # an empty file: every required key is missing
+    if not isinstance(raw, dict):
+        raise ConfigError(f'{where}: not a vehicle file (a YAML mapping of keys, '
+                          f'docs/vehicles.md; got {type(raw).__name__})')
+    problems: list[str] = []
+
+    def checked(check, *args, default, **kwargs):
+        # the independent entries are all checked before any is used, each problem kept
+        try:
+            return check(*args, **kwargs)
+        except ConfigError as err:
+            problems.append(str(err).removeprefix(f'{where}: ').removeprefix(f'{where} '))
+            return default
+
+    if not isinstance(raw.get('coefficients'), dict) or not raw['coefficients']:
+        problems.append('missing key `coefficients:` (NAME: [value, equation, k, multiplier] '
+                        'per hydrodynamic term, docs/vehicles.md)')
     scaling = raw.get('scaling', 'nondimensional')
     if scaling not in ('nondimensional', 'dimensional'):
-        raise ConfigError(f'{where}: scaling = {scaling!r}; use nondimensional or dimensional')
-    rho = _num(raw, 'rho', where, positive=True)
-    L = _num(raw, 'L', where, positive=True)
-    mass = _num(raw, 'mass', where, positive=True)
-    W = _num(raw, 'W', where, positive=True)
-    if not G_RANGE[0] <= W / mass <= G_RANGE[1]:
-        raise ConfigError(f'{where}: mass = {mass!r} kg and W = {W!r} N give W / mass = '
-                          f'{W / mass:.4g} m/s^2; W is m g (g {G_RANGE[0]:g}-{G_RANGE[1]:g} '
-                          'm/s^2): check the units of mass and W')
-    B = _num(raw, 'B', where, positive=True)
-    r_G = _vec3(raw, 'r_G', where)
-    r_B = _vec3(raw, 'r_B', where)
+        problems.append(f'scaling = {scaling!r}; use nondimensional or dimensional')
+    rho, L, mass, W, B = (checked(_num, raw, key, where, positive=True, default=float('nan'))
+                          for key in ('rho', 'L', 'mass', 'W', 'B'))
+    if np.isfinite(mass) and np.isfinite(W) and not G_RANGE[0] <= W / mass <= G_RANGE[1]:
+        problems.append(f'mass = {mass!r} kg and W = {W!r} N give W / mass = '
+                        f'{W / mass:.4g} m/s^2; W is m g (g {G_RANGE[0]:g}-{G_RANGE[1]:g} '
+                        'm/s^2): check the units of mass and W')
+    r_G, r_B = (checked(_vec3, raw, key, where, default=np.zeros(3)) for key in ('r_G', 'r_B'))
     inertia = raw.get('inertia') or {}
-    I = tuple(_num(inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'))
+    I = tuple(checked(_num, inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'),
+                      default=float('nan'))
               if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
               for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
     limits = raw.get('limits') or {}
-    fin = _num(limits, 'fin_rad', where + ' limits', positive=True)
-    nmax = _num(limits, 'n_rpm', where + ' limits', positive=True)
+    fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
+                         default=float('nan')) for key in ('fin_rad', 'n_rpm'))
+    free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
+    if problems:
+        raise VehicleFileProblems(where, problems)
 
     par = np.zeros(N_PAR)
     par[P_RHO], par[P_L], par[P_W], par[P_B] = rho, L, W, B
     par[P_XG:P_ZG + 1] = r_G
     par[P_XB:P_ZB + 1] = r_B
     par[P_FIN], par[P_NMAX], par[P_U_MIN] = fin, nmax, U_MIN
-    free = _dofs(raw, where)
     _propulsion(raw.get('propulsion') or {'model': 'none'}, where, par)
     _crossflow(raw.get('crossflow') or {'model': 'none'}, where, par)
     coefs = _coefficients(raw, where, rho, L, scaling, free)

@@ -1,0 +1,132 @@
+"""``python -m auv_ident vehicle check FILE``: is this vehicle file ready to simulate and to be
+identified with? Every problem of its entries at once (the loader collects them,
+core/model/vehicle.py VehicleFileProblems), then what a model engineer looks at before the first
+run: the straight run's trim, the stability of the velocity dynamics there, the static
+stability in roll and pitch, the net buoyancy, and damping derivatives with the sign physics
+forbids (core/identification/plausibility.py).
+
+Findings are ``error`` (the file does not load, or the vehicle has no straight run: nothing can
+be simulated) or ``warning`` (it loads and flies, but a value is unusual: read it again).
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from auv_ident.core.errors import ConfigError, DomainError
+from auv_ident.core.identification.plausibility import is_self_damping
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import Input, N_INPUT, NU_NAMES, State
+from auv_ident.core.model.trim import initial_state, trim_speed
+from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file, VehicleFileProblems
+from auv_ident.vehicles import resolve_vehicle_path
+
+NET_BUOYANCY_WARN = 0.05    # |B - W| / W above this: a vehicle that surfaces or sinks hard
+DIFF_STEP = 1e-6            # relative finite-difference step of the linearisation
+
+
+@dataclass
+class VehicleCheck:
+    """What ``vehicle check`` found: ``errors`` and ``warnings`` (texts), ``facts`` (what was
+    measured: trim speed, eigenvalues, ...) and the vehicle's name ('' if it did not load)."""
+
+    path: str
+    name: str = ''
+    errors: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    facts: list = field(default_factory=list)
+
+    @property
+    def ok(self):
+        return not self.errors
+
+    def lines(self):
+        head = (f'{self.path}: vehicle {self.name!r} loads' if self.name
+                else f'{self.path}: does not load')
+        verdict = ('ready' if self.ok and not self.warnings else
+                   f'{len(self.warnings)} warning(s)' if self.ok else
+                   f'{len(self.errors)} error(s)')
+        out = [f'{head}: {verdict}']
+        out += [f'  error: {e}' for e in self.errors]
+        out += [f'  warning: {w}' for w in self.warnings]
+        out += [f'  {f}' for f in self.facts]
+        return out
+
+
+def _velocity_jacobian(model, x, u):
+    """d(nu_dot)/d(nu) (6x6) at (x, u), central differences."""
+    J = np.zeros((6, 6))
+    for j in range(6):
+        h = DIFF_STEP * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        J[:, j] = (model.f(xp, u)[:6] - model.f(xm, u)[:6]) / (2 * h)
+    return J
+
+
+def _static_checks(vehicle, check):
+    raw = vehicle.raw
+    W, B = float(raw['W']), float(raw['B'])
+    net = (B - W) / W
+    check.facts.append(f'net buoyancy (B - W) / W = {net:+.2%}')
+    if abs(net) > NET_BUOYANCY_WARN:
+        check.warnings.append(f'B and W differ by {net:+.1%} of W: the vehicle '
+                              f'{"rises" if net > 0 else "sinks"} hard (check both, in N)')
+    z_g, z_b = float(vehicle.par[P_ZG]), float(vehicle.par[P_ZB])
+    bg = z_g - z_b
+    check.facts.append(f'BG (z_G - z_B, down) = {bg:+.4g} m')
+    if vehicle.free_states[State.P] or vehicle.free_states[State.Q]:
+        if bg <= 0:
+            check.warnings.append(f'the centre of gravity is not below the centre of buoyancy '
+                                  f'(z_G - z_B = {bg:+.3g} m, FRD): no restoring moment in '
+                                  'roll and pitch (check the signs of r_G and r_B: z is down)')
+    wrong = [c.name for c in vehicle.coefficients if is_self_damping(c) and c.value > 0]
+    if wrong:
+        check.warnings.append('damping derivatives with a positive value (they take energy '
+                              'out of their own motion, so negative): ' + ', '.join(wrong))
+
+
+def _trim_checks(vehicle, check):
+    model = Model(vehicle)
+    try:
+        speed = trim_speed(model, vehicle.cruise_rpm)
+    except DomainError as err:
+        check.errors.append(f'no straight run at cruise_rpm {vehicle.cruise_rpm:g}: {err}')
+        return
+    check.facts.append(f'straight run at cruise_rpm {vehicle.cruise_rpm:g}: u = {speed:.3f} m/s')
+    x = initial_state(model, vehicle.cruise_rpm)
+    u = np.zeros(N_INPUT)
+    u[Input.N_RPM] = vehicle.cruise_rpm
+    u[Input.THRUST] = vehicle.cruise_thrust
+    free = [i for i in range(6) if vehicle.free_states[i]]
+    J = _velocity_jacobian(model, x, u)[np.ix_(free, free)]
+    eig = np.linalg.eigvals(J)
+    text = ', '.join(f'{e.real:.3g}' + (f'{e.imag:+.3g}j' if abs(e.imag) > 1e-9 else '')
+                     for e in sorted(eig, key=lambda e: e.real))
+    states = ' '.join(NU_NAMES[i] for i in free)
+    check.facts.append(f'eigenvalues of the velocity dynamics ({states}) there, 1/s: {text}')
+    unstable = [e for e in eig if e.real > 0]
+    if unstable:
+        check.warnings.append(
+            f'{len(unstable)} unstable mode(s) of the straight run (largest real part '
+            f'{max(e.real for e in unstable):.3g} 1/s): common in sway/yaw for slender '
+            'AUVs (then steer in closed loop); elsewhere, check the damping signs')
+
+
+def check_vehicle(name_or_path):
+    """A VehicleCheck of a vehicle name (config/) or YAML path; raises nothing for a bad file
+    (its problems are the check's errors) but ConfigError for a path that does not exist."""
+    path = resolve_vehicle_path(name_or_path)
+    check = VehicleCheck(path=str(name_or_path))
+    try:
+        vehicle = vehicle_from_file(path)
+    except VehicleFileProblems as err:
+        check.errors.extend(err.problems)
+        return check
+    except ConfigError as err:
+        check.errors.append(str(err))
+        return check
+    check.name = vehicle.name
+    _static_checks(vehicle, check)
+    _trim_checks(vehicle, check)
+    return check
