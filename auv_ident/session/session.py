@@ -63,6 +63,7 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
+from auv_ident.session.record import Rows
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
@@ -160,9 +161,10 @@ class IdentSession:
         self._measured_states = tuple(int(i) for i in np.flatnonzero(mask))
         self._all_measured = bool(mask.all())
         self.keep_arrays = keep_arrays
-        self.commands = []          # (t, u7) in arrival order, if keep_arrays
-        self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
-        self.variances = []         # (12,) R diagonal used by each accepted update, if kept
+        # if keep_arrays (record.Rows, compact: a replay keeps every message of a bag):
+        self.commands = Rows(1 + N_INPUT)           # [t, u7] in arrival order
+        self.measurements = Rows(1 + N_STATE)       # [t, y12] of accepted updates
+        self.variances = Rows(N_STATE)              # R diagonal used by each accepted update
         self.time_origin_ns = None  # stamps are taken relative to this (class docstring)
         self.notices = []           # one-time notes for the caller to log (then clear)
         self._fallback_noted = set()
@@ -503,7 +505,7 @@ class IdentSession:
         if not out.accepted:
             return self._reject('actuators', out.code, out.reason, stamp_ns)
         if self.keep_arrays:
-            self.commands.append((t, u7))
+            self.commands.append(t, u7)
         if self.auto is not None:
             self.auto.keep_command(t, u7)
         self.counters.cmd_accepted += 1
@@ -551,7 +553,7 @@ class IdentSession:
         'auto' choice, from the last good estimate before it, when its window fills."""
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
-            self.measurements.append((t, y))
+            self.measurements.append(t, y)
             self.variances.append(self.noise_default if r is None else r)
         if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
             self._start_choice(before)
