@@ -123,9 +123,9 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
     Returns the UpdateLog (session/record.py) of (stamp_ns, estimate, std) of the accepted
-    updates (with coefficients ['auto', ...] their length changes once, at the switch). The session's one-time notices
-    (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
-    as info (an error if it failed)."""
+    updates (with coefficients ['auto', ...] their length changes once, at the switch). The
+    session's one-time notices (e.g. message covariances not usable) are logged as warnings,
+    what an 'auto' choice says as info (an error if it failed)."""
     updates = UpdateLog()
     for topic, _, msg in messages:
         if topic == actuator_topic:

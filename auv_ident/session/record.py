@@ -141,7 +141,8 @@ def exact_hold(t: np.ndarray, Y: np.ndarray, U: np.ndarray, t_cmd: np.ndarray,
     return Record(t2, Y2, U2)
 
 
-def median_noise_std(variances: Sequence[np.ndarray] | np.ndarray, default_variances: ArrayLike) -> np.ndarray:
+def median_noise_std(variances: Sequence[np.ndarray] | np.ndarray,
+                     default_variances: ArrayLike) -> np.ndarray:
     """(12,) the measurement 1-sigma the filter used over a record, per channel: the square
     root of the median of the R diagonals of its accepted updates (the messages' covariances
     with noise_source 'message'), or of default_variances (noise_std squared) if there were
