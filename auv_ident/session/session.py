@@ -78,7 +78,7 @@ from auv_ident.session.settings import (
     ParameterError,
     vehicle_named,
 )
-from auv_ident.session.status import Counters
+from auv_ident.session.status import Counters, StampGaps
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -180,6 +180,8 @@ class IdentSession:
         self.fin_limit = float(v[P_FIN])        # rad
         self.shaft_limit = float(v[P_NMAX])     # rpm
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
+        # odometry lost before it reached us, from the gaps in its stamps (status.StampGaps)
+        self.odom_gaps = StampGaps(max_gap)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
@@ -518,6 +520,7 @@ class IdentSession:
         zero = self._zero_stamp('odom', stamp_ns)
         if zero is not None:
             return zero
+        self.odom_gaps.see(stamp_ns)
         t = self._time(stamp_ns)
         problem = odometry_problem(x12.tolist(), t, frame_id, child_frame_id, self.frame,
                                    self._frame_ids, self._measured_states)
