@@ -60,8 +60,8 @@ Publications
     queue overflow), odom_lost (odometry lost before the node read it, from the gaps in the
     stamps against the observed rate: session/status.py StampGaps; a warning at 1 Hz at most
     says how many and what to do), odom_rate_hz (the rate the stamps show), last_error,
-    mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
-    last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
+    mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof,
+    last_stamp (of the last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
     session/live_diagnosis.py), then per coefficient <name>, <name>_std and <name>_verdict of
     the last good estimate (repr floats), R_<channel> (adapted measurement
     variance of u ... psi) and Q_<name> (coefficient random-walk variance). With
