@@ -30,7 +30,7 @@ class Rows:
     rows so far (a view, valid until the next append); len(): n."""
 
     def __init__(self, width: int, dtype: type = float, capacity: int = 64) -> None:
-        self._a = np.empty((capacity, width), dtype=dtype)
+        self._a: np.ndarray = np.empty((capacity, width), dtype=dtype)
         self._n = 0
 
     def append(self, *parts: ArrayLike) -> None:
