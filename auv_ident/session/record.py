@@ -94,21 +94,25 @@ class UpdateLog:
 
 
 def paired(
-        commands: Sequence[tuple[float, np.ndarray]] | np.ndarray,
-        measurements: Sequence[tuple[float, np.ndarray]] | np.ndarray,
+        commands: Sequence[tuple[float, np.ndarray]] | np.ndarray | Rows,
+        measurements: Sequence[tuple[float, np.ndarray]] | np.ndarray | Rows,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, Y, U, t_cmd, U_cmd) of accepted messages.
 
-    commands : [(t, u (7,)), ...] in arrival order, or their (M, 8) rows [t, u];
-    measurements : [(t, y (12,)), ...], or their (N, 13) rows [t, y]
-    Returns t (N,), Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in force at t[k]
-    (latest stamp <= t[k]; NaN rows where there is none yet), and the commands by stamp,
-    t_cmd (M,), U_cmd (M, 7), where a later message with the same stamp wins."""
+    commands : [(t, u (7,)), ...] in arrival order, or their (M, 8) rows [t, u] (an array or
+    Rows);
+    measurements : [(t, y (12,)), ...], or their (N, 13) rows [t, y] (any order, distinct
+    stamps)
+    Returns t (N,) increasing, Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in
+    force at t[k] (latest stamp <= t[k]; NaN rows where there is none yet), and the commands
+    by stamp, t_cmd (M,), U_cmd (M, 7), where a later message with the same stamp wins."""
     cmd = _rows(commands, N_INPUT)
     meas = _rows(measurements, N_STATE)
     order = np.argsort(cmd[:, 0], kind='stable')    # a later same-stamp one last
     cmd = cmd[order]
     cmd_t = cmd[:, 0]
+    # by stamp: the filter takes them in order, an unfiltered session in arrival order
+    meas = meas[np.argsort(meas[:, 0], kind='stable')]
     t = meas[:, 0].copy()
     Y = meas[:, 1:].copy()
     U = np.full((len(t), N_INPUT), np.nan)
@@ -120,8 +124,12 @@ def paired(
     return t, Y, U, cmd_t[last].copy(), cmd[last, 1:].copy()
 
 
-def _rows(entries: Sequence[tuple[float, np.ndarray]] | np.ndarray, width: int) -> np.ndarray:
-    """(n, 1 + width) float rows [t, values] of (t, values) pairs or of such rows."""
+def _rows(entries: Sequence[tuple[float, np.ndarray]] | np.ndarray | Rows,
+          width: int) -> np.ndarray:
+    """(n, 1 + width) float rows [t, values] of (t, values) pairs or of such rows (an array
+    or Rows)."""
+    if isinstance(entries, Rows):
+        entries = entries.array
     if isinstance(entries, np.ndarray):
         return np.asarray(entries, dtype=float).reshape(-1, 1 + width)
     out = np.empty((len(entries), 1 + width))
@@ -141,12 +149,14 @@ def exact_hold(t: np.ndarray, Y: np.ndarray, U: np.ndarray, t_cmd: np.ndarray,
     return Record(t2, Y2, U2)
 
 
-def median_noise_std(variances: Sequence[np.ndarray] | np.ndarray,
+def median_noise_std(variances: Sequence[np.ndarray] | np.ndarray | Rows,
                      default_variances: ArrayLike) -> np.ndarray:
     """(12,) the measurement 1-sigma the filter used over a record, per channel: the square
     root of the median of the R diagonals of its accepted updates (the messages' covariances
     with noise_source 'message'), or of default_variances (noise_std squared) if there were
     none."""
+    if isinstance(variances, Rows):
+        variances = variances.array
     if len(variances) == 0:
         return np.sqrt(np.asarray(default_variances, dtype=float))
     return np.sqrt(np.median(np.array(variances), axis=0))

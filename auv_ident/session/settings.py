@@ -382,6 +382,13 @@ class IdentifierSettings:
     vehicle: str = setting('nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
                            note='Its file gives the model, the coefficient names and units, '
                                 'and the true values.')
+    other_vehicle: bool = setting(
+        False, 'identify a bag that records another vehicle than `vehicle` (offline: without '
+               'it that is an error naming both)',
+        note='A bag our simulator, recorder or importer wrote records its vehicle; '
+             '`identify --bag` uses it when `vehicle` is not given, and refuses a different '
+             '`vehicle` unless this is set (a renamed or corrected file of the same vehicle). '
+             'The live node has no recorded vehicle to compare with.')
     coefficients: tuple = setting(
         (), "coefficients to identify; empty = the vehicle file's identify_default (or the "
             "warm-start file's list); [auto] or [auto, NAME, ...] = chosen from the first "
@@ -407,6 +414,12 @@ class IdentifierSettings:
                               note="fixed: Q, R as given; paper: the paper's Eqs. 16-19; "
                                    'paper_q: Eq. 16 only; matching: innovation-based '
                                    'covariance matching.')
+    learn_noise: bool = setting(True, "learn the measurement noise's level and AR(1) colour "
+                                      'from the innovations and re-run the filter with it '
+                                      "(noise_mode fixed; session/noise_learning.py)",
+                                note='The live form of the offline noise model: the estimate '
+                                     'is NOT consistent until a fit finds the noise model '
+                                     'holding (docs/ros.md).')
     tau: float = setting(10.0, 'time constant of the forgetting factor of the adaptation',
                          unit='s', check=_positive)
     lam: float = setting(2e-3, "the paper's lambda of the adaptation", unit='-',

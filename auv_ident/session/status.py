@@ -174,7 +174,8 @@ def diagnostic_values(session, health, own=()):
     """[(key, text)] of the /diagnostics status of an IdentSession with this health (its
     health()): the counters, then own (the caller's (key, text) counts, e.g. the node's
     internal_errors), the health window, the guard, the last update, the diagnosis, per
-    parameter its last good value, 1-sigma and verdict, the 'auto' choice's values, and the
+    parameter its last good value, 1-sigma and verdict, the 'auto' choice's values, the noise
+    learner's (session/noise_learning.py; with learn_noise on in noise mode fixed), and the
     filter's R and Q diagonals. Floats are repr, 'n/a' if not finite."""
     s = session
     c = s.counters
@@ -207,6 +208,8 @@ def diagnostic_values(session, health, own=()):
                    (name + '_verdict', verdicts[name]['verdict'])]
     if s.auto is not None:
         values += s.auto.diagnostic_values()
+    if s.noise.enabled:
+        values += s.noise.diagnostic_values()
     values += [('R_' + n, _num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
     values += [('Q_' + n, _num(v)) for n, v in zip(s.names, np.diag(f.Q)[12:])]
     return values

@@ -7,6 +7,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.replay import replay_bag
 from auv_ident.offline.sim_bag import write_run_bag
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 # bytes per sample (tracemalloc) at the replay's peak and kept in its result; measured 1122 and
@@ -21,10 +22,12 @@ def test_replay_keeps_compact_arrays_per_sample(tmp_path):
     run = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=150.0, T=0.05, seed=2)
     path = tmp_path / 'run'
     write_run_bag(run, path)
-    replay_bag(path)                    # compiled, imported, cached
+    # the live noise learning keeps a record of its own, bounded (noise_learning.KEEP_LIMIT)
+    settings = IdentifierSettings.from_values(learn_noise=False)
+    replay_bag(path, settings)          # compiled, imported, cached
     tracemalloc.start()
     try:
-        rr = replay_bag(path)
+        rr = replay_bag(path, settings)
         kept, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
