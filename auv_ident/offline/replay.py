@@ -16,7 +16,7 @@ from auv_ident.bags.schema import custom_data_of, read_metadata
 from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.input_map import InputMapError
-from auv_ident.session.record import median_noise_std, paired
+from auv_ident.session.record import median_noise_std, paired, UpdateLog
 from auv_ident.session.session import Health, IdentSession
 from auv_ident.session.settings import IdentifierSettings, ParameterError, vehicle_named
 
@@ -28,7 +28,8 @@ class ReplayResult:
 
     names : parameter names (coefficients, then any estimated current components);
         vehicle, frame : what was used
-    updates : list of (stamp_ns, estimate (p,), std (p,)), one per accepted odometry update
+    updates : session.record.UpdateLog of (stamp_ns, estimate (p,), std (p,)), one per
+        accepted odometry update
     estimate, std, cov : final (last good) estimate, 1-sigma, covariance (p,), (p,), (p, p)
     initial : the initial guesses; truth : the vehicle file's values (the truth of a simulated
         bag)
@@ -49,7 +50,7 @@ class ReplayResult:
     names: list
     vehicle: str
     frame: str
-    updates: list
+    updates: UpdateLog
     estimate: np.ndarray
     std: np.ndarray
     cov: np.ndarray
@@ -124,11 +125,11 @@ def replay_messages(messages, session, warn=None):
     ignored.
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
-    Returns the list of (stamp_ns, estimate, std) of the accepted updates (with coefficients
-    ['auto', ...] their length changes once, at the switch). The session's one-time notices
-    (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
-    as info (an error if it failed)."""
-    updates = []
+    Returns the UpdateLog (session/record.py) of (stamp_ns, estimate, std) of the accepted
+    updates (with coefficients ['auto', ...] their length changes once, at the switch). The
+    session's one-time notices (e.g. message covariances not usable) are logged as warnings,
+    what an 'auto' choice says as info (an error if it failed)."""
+    updates = UpdateLog()
     names = {e.bag_topic: e.name for e in session.input_map.inputs}
     for topic, t_ns, msg in messages:
         name = names.get(topic)
@@ -136,7 +137,7 @@ def replay_messages(messages, session, warn=None):
             continue
         ev = session.on_input(name, msg, t_ns)
         if ev.kind == 'update':
-            updates.append((ev.stamp_ns, ev.estimate, ev.std))
+            updates.append(ev.stamp_ns, ev.estimate, ev.std)
         if warn is not None and ev.kind in ('rejected', 'error'):
             warn(ev)
         if session.notices:
@@ -159,7 +160,7 @@ def _log_choice_news(auto):
 
 def session_result(session, updates, settings=None):
     """Pack a finished session into a ReplayResult (arrays aligned by the pairing rule)."""
-    t, Y, U, t_cmd, U_cmd = paired(session.commands, session.measurements)
+    t, Y, U, t_cmd, U_cmd = paired(session.commands.array, session.measurements.array)
     est, cov = session.best()
     counters = session.counters
     return ReplayResult(
@@ -171,7 +172,7 @@ def session_result(session, updates, settings=None):
         t=t, Y=Y, U=U, mean_nis_per_dof=session.filter.mean_nis_per_dof(),
         health=session.health(),
         T=session.T, settings=dict(settings or {}),
-        noise_std=median_noise_std(session.variances, session.noise_default),
+        noise_std=median_noise_std(session.variances.array, session.noise_default),
         time_origin_ns=int(session.time_origin_ns or 0),
         t_cmd=t_cmd, U_cmd=U_cmd, model=session.model)
 

@@ -62,9 +62,13 @@ Publications
     by the reset rule: core errors and divergence-guard resets), guard_resets, outliers
     (innovation gate), repairs (covariance repairs), time_jumps (confirmed backward jumps),
     actuator_publishers (on the actuator topic, checked at 1 Hz), internal_errors (unexpected
-    exceptions caught in a callback; 0 unless there is a bug), last_error, mean_nis_per_dof,
-    nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
-    last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
+    exceptions caught in a callback; 0 unless there is a bug), odom_lost_event (odometry the
+    middleware reports lost: rclpy's message-lost event, which Fast DDS does not raise for a
+    queue overflow), odom_lost (odometry lost before the node read it, from the gaps in the
+    stamps against the observed rate: session/status.py StampGaps; a warning at 1 Hz at most
+    says how many and what to do), odom_rate_hz (the rate the stamps show), last_error,
+    mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof,
+    last_stamp (of the last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
     session/live_diagnosis.py: 'false' also while the noise model the filter runs with is not
     confirmed by the innovations), then per coefficient <name>, <name>_std and <name>_verdict of
     the last good estimate (repr floats), R_<channel> (adapted measurement
@@ -134,6 +138,7 @@ covariance messages are built once and refilled per update. docs/latency.md has 
 path publish(odom) -> estimate received and the command that measures it.
 """
 from array import array
+import math
 import sys
 import time
 
@@ -142,6 +147,7 @@ from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -219,6 +225,8 @@ class IdentifierNode(Node):
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
+        self.odom_lost_event = 0            # odometry the middleware reports lost
+        self._lost_reported = 0             # lost odometry already in a warning
         self.actuator_publishers = 0        # publishers on the actuator topic (1 Hz check)
         self._odom_at_last_check = 0
         self._saved_steps = 0
@@ -272,8 +280,11 @@ class IdentifierNode(Node):
         self._command_name = imap.commands[0].name
         self._odom_name = imap.odometry.name
         self._odom_view = OdometryView()
-        self.sub_odom = self.create_subscription(Odometry, imap.odometry.topic,
-                                                 self.on_odom_payload, STREAM_QOS, raw=True)
+        # the middleware's message-lost event is counted too, but Fast DDS does not raise it
+        # when the queue overflows (measured): the stamps' gaps are what tell (check_lost)
+        self.sub_odom = self.create_subscription(
+            Odometry, imap.odometry.topic, self.on_odom_payload, STREAM_QOS, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_message_lost))
 
     def _lay_out(self):
         """Names and layout of the published estimate and covariance, from the session's
@@ -457,7 +468,8 @@ class IdentifierNode(Node):
         s = self.session
         h = s.health()
         values = diagnostic_values(s, h, [('actuator_publishers', str(self.actuator_publishers)),
-                                          ('internal_errors', str(self.internal_errors))])
+                                          ('internal_errors', str(self.internal_errors)),
+                                          ('odom_lost_event', str(self.odom_lost_event))])
         return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
                                 hardware_id=s.vehicle.name,
                                 values=[KeyValue(key=k, value=v) for k, v in values])
@@ -480,10 +492,38 @@ class IdentifierNode(Node):
         self._odom_at_last_check = accepted
         return count
 
+    def _on_message_lost(self, info):
+        """rclpy's message-lost event of the odom subscription (total_count: lost so far)."""
+        self.odom_lost_event = int(info.total_count)
+
+    def check_lost(self):
+        """Warn (rate-limited) when odometry was lost before the node read it: counted from the
+        gaps in the stamps (session/status.py StampGaps), or the middleware's event if that
+        says more. Returns the count."""
+        gaps = self.session.odom_gaps
+        lost = max(gaps.lost, self.odom_lost_event)
+        if lost > self._lost_reported:
+            expected = max(gaps.expected, gaps.seen + lost)
+            rate = 1.0 / gaps.interval_s if gaps.interval_s > 0 else math.nan
+            line = self._warn_limit(
+                ('odom', 'lost'),
+                f'odom: {lost} messages lost before the identifier read them '
+                f'({100.0 * lost / expected:.0f} % of the {expected} the stamps imply at '
+                f'{rate:.0f} Hz; /diagnostics odom_lost): odometry arrives faster than the '
+                f'identifier takes it and the subscription queue (KEEP_LAST, depth '
+                f'{STREAM_QOS.depth}) drops the oldest. Publish odometry at a lower rate (200 '
+                'Hz is measured to keep up, docs/speed.md) or give the node a core of its own; '
+                'a deeper queue only absorbs bursts')
+            if line:
+                self._emit('warning', line)
+                self._lost_reported = lost
+        return lost
+
     def on_timer(self):
-        """1 Hz: /diagnostics, the actuator topic's publisher check, and the autosave of the
-        estimate file."""
+        """1 Hz: /diagnostics, the actuator topic's publisher check, the lost-odometry check
+        and the autosave of the estimate file."""
         self.actuator_publishers = self.check_actuator_publisher()
+        self.check_lost()
         if self.session.auto is not None:
             # a choice that finished while no message arrived switches now
             self.session.poll_choice()

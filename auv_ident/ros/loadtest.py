@@ -168,8 +168,8 @@ class _Receiver:
     def all_counted(self):
         """The last estimate is in, and a /diagnostics report counts every message."""
         d = self.diag
-        return (d is not None and int(d['accepted']) + int(d['rejected']) >= self.n
-                and self.last_k >= self.n - 1)
+        return (d is not None and int(d['accepted']) + int(d['rejected'])
+                + int(d.get('odom_lost', 0)) >= self.n and self.last_k >= self.n - 1)
 
 
 class _RssSampler:
@@ -406,6 +406,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
             'accepted': int(d.get('accepted', -1)), 'rejected': int(d.get('rejected', -1)),
             'commands': int(d.get('commands', -1)),
             'commands_rejected': int(d.get('commands_rejected', -1)),
+            'odom_lost': int(d.get('odom_lost', -1)),
             'filter_resets': int(d.get('errors', -1)),
             'internal_errors': int(d.get('internal_errors', -1)),
             'estimates_received': int(receiver.estimates),
@@ -474,7 +475,9 @@ def format_loadtest(d):
         f"processed: odometry {d['accepted']} accepted + {d['rejected']} rejected of "
         f"{d['published_odom']} published; commands {d['commands']} + "
         f"{d['commands_rejected']} rejected of {d['published_actuators']}; "
-        + ('EVERY MESSAGE PROCESSED' if d['all_processed'] else 'MESSAGES MISSING')
+        + ('EVERY MESSAGE PROCESSED' if d['all_processed'] else
+           f"MESSAGES MISSING: {d['published_odom'] - d['accepted'] - d['rejected']} odometry, "
+           f"of which the identifier counted {d.get('odom_lost', -1)} lost (odom_lost)")
         + f"; filter resets {d['filter_resets']}, internal errors {d['internal_errors']}",
         f"estimates received: {d['estimates_received']} (non-finite: "
         f"{d['non_finite_estimates']}); estimate file steps: {d['saved_steps']}",
@@ -515,6 +518,10 @@ def main(argv=None):
                     help='real-time factor of the publisher (default 1; 0 = as fast as the '
                          'identifier keeps up)')
     ap.add_argument('--vehicle', default='nps_auv2')
+    ap.add_argument('--max-backlog', type=int, default=600,
+                    help='samples the identifier may fall behind before the publisher waits '
+                         '(default 600; larger than the run: never wait, the subscription '
+                         'queue overflows when the identifier cannot keep up)')
     ap.add_argument('--json', help='write the figures as JSON')
     ap.add_argument('--split', action='store_true',
                     help='also split the latency at the DDS timestamps of the estimate (receives '
@@ -523,7 +530,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     d = run_loadtest(rate_hz=args.rate, sim_seconds=args.seconds,
                      real_time_factor=args.rtf, vehicle=args.vehicle, split=args.split,
-                     samples_path=args.samples)
+                     samples_path=args.samples, max_backlog=args.max_backlog)
     print(format_loadtest(d))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as fh:

@@ -45,6 +45,7 @@ import operator
 
 import numpy as np
 
+from auv_ident.core import chi2
 from auv_ident.core.errors import DivergenceError
 from auv_ident.core.filter.augmented import is_positive_definite
 from auv_ident.core.model.state import N_STATE
@@ -129,7 +130,6 @@ class Health:
 @lru_cache(maxsize=1)
 def innovation_gate():
     """(13,) largest NIS accepted from an update with m = 0..12 channels (m = 0: no limit)."""
-    from scipy.stats import chi2
     gate = np.array([math.inf] + [OUTLIER_GATE_FACTOR * chi2.ppf(1.0 - OUTLIER_P, m)
                                   for m in range(1, N_STATE + 1)])
     gate.flags.writeable = False        # one array shared by every session's filter
@@ -141,7 +141,6 @@ def nis_band(dof):
     """(lo, hi): two-sided NIS_BAND_PROB chi-square band of a mean NIS per dof over `dof`
     (an int, the window's summed dof) degrees of freedom. Cached: a window of constant
     channels has one dof sum once full, and at most NIS_WINDOW x 12 exist."""
-    from scipy.stats import chi2
     a = 0.5 * (1.0 - NIS_BAND_PROB)
     D = float(dof)
     return float(chi2.ppf(a, D) / D), float(chi2.ppf(1.0 - a, D) / D)

@@ -73,6 +73,7 @@ from auv_ident.session.messages import (
     odometry_variances,
 )
 from auv_ident.session.noise_learning import FUSED_OK, NoiseLearner, rerun
+from auv_ident.session.record import Rows
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
@@ -89,7 +90,7 @@ from auv_ident.session.settings import (
     ParameterError,
     vehicle_named,
 )
-from auv_ident.session.status import Counters
+from auv_ident.session.status import Counters, StampGaps
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -202,9 +203,10 @@ class IdentSession:
         self._measured_states = tuple(int(i) for i in np.flatnonzero(mask))
         self._all_measured = bool(mask.all())
         self.keep_arrays = keep_arrays
-        self.commands = []          # (t, u7) in arrival order, if keep_arrays
-        self.measurements = []      # (t, y12) of accepted updates, if keep_arrays
-        self.variances = []         # (12,) R diagonal used by each accepted update, if kept
+        # if keep_arrays (record.Rows, compact: a replay keeps every message of a bag):
+        self.commands = Rows(1 + N_INPUT)           # [t, u7] in arrival order
+        self.measurements = Rows(1 + N_STATE)       # [t, y12] of accepted updates
+        self.variances = Rows(N_STATE)              # R diagonal used by each accepted update
         self.time_origin_ns = None  # stamps are taken relative to this (class docstring)
         self.notices = []           # one-time notes for the caller to log (then clear)
         self._fallback_noted = set()
@@ -220,6 +222,8 @@ class IdentSession:
         self.fin_limit = float(v[P_FIN])        # rad
         self.shaft_limit = float(v[P_NMAX])     # rpm
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
+        # odometry lost before it reached us, from the gaps in its stamps (status.StampGaps)
+        self.odom_gaps = StampGaps(max_gap)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
@@ -662,7 +666,7 @@ class IdentSession:
         if not out.accepted:
             return self._reject(what, out.code, out.reason, stamp_ns)
         if self.keep_arrays:
-            self.commands.append((t, u7))
+            self.commands.append(t, u7)
         if self.auto is not None:
             self.auto.keep_command(t, u7)
         self.noise.keep_command(t, u7)
@@ -678,6 +682,7 @@ class IdentSession:
         zero = self._zero_stamp('odom', stamp_ns)
         if zero is not None:
             return zero
+        self.odom_gaps.see(stamp_ns)
         t = self._time(stamp_ns)
         problem = odometry_problem(x12.tolist(), t, frame_id, child_frame_id, self.frame,
                                    self._frame_ids, self._measured_states)
@@ -725,7 +730,7 @@ class IdentSession:
                                 'first message with it kept)', stamp_ns)
         self._kept_stamps.add(stamp_ns)
         self.counters.odom_accepted += 1
-        self.measurements.append((t, y))
+        self.measurements.append(t, y)
         self.variances.append(self.noise_default if r is None
                               else np.where(np.isnan(y) & self.measured, np.nan, r))
         if self._frame_ids is None:
@@ -737,7 +742,7 @@ class IdentSession:
         'auto' choice, from the last good estimate before it, when its window fills."""
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
-            self.measurements.append((t, y))
+            self.measurements.append(t, y)
             # a channel the message did not measure (NaN in y) is no sample of its noise
             self.variances.append(self.noise_default if r is None
                                   else np.where(np.isnan(y) & self.measured, np.nan, r))

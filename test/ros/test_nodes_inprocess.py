@@ -526,6 +526,30 @@ def test_a_silent_actuator_topic_is_warned_about_not_dropped(ctx, nodes, run):
     assert values['actuator_publishers'] == '0'
 
 
+def test_lost_odometry_is_counted_and_warned_about(ctx, nodes, run):
+    """Odometry that never reached the node (a queue that overflowed: the middleware's
+    message-lost event does not come with Fast DDS) shows as gaps in the stamps: counted in
+    /diagnostics odom_lost, and one warning saying how many and what to do."""
+    ident = IdentifierNode(context=ctx)
+    nodes.append(ident)
+    lines = []
+    ident._emit = lambda level, text: lines.append((level, text))
+    messages = _ordered_messages(run)
+    odom = [i for i, m in enumerate(messages) if m[0] == ODOM_TOPIC]
+    missing = set(odom[40:-1:3])
+    _feed(ident, [m for i, m in enumerate(messages) if i not in missing])
+    ident.on_timer()
+    values = {v.key: v.value for v in ident.diagnostic_status().values}
+    assert values['odom_lost'] == str(len(missing)) and values['odom_lost_event'] == '0'
+    assert float(values['odom_rate_hz']) == pytest.approx(20.0, rel=0.01)
+    warned = [t for lv, t in lines if lv == 'warning' and 'lost' in t]
+    assert len(warned) == 1
+    assert warned[0].startswith(f'odom: {len(missing)} messages lost')
+    assert 'lower rate' in warned[0] and 'depth 1000' in warned[0]
+    ident.on_timer()                            # nothing new lost: nothing more said
+    assert len([t for _, t in lines if 'lost' in t]) == 1
+
+
 def test_identifier_publishes_the_water_current(ctx, nodes):
     """~/current (geometry_msgs/TwistWithCovarianceStamped) carries the estimated current and
     its covariance from the estimate, in the world frame of ``frame``; no topic in still

@@ -25,13 +25,12 @@ the rules of timing.py (RK4 steps of at most max_step with the command held, a r
 vehicle states after a gap longer than max_bridge), the rules of the streaming identifier.
 """
 from concurrent.futures import ThreadPoolExecutor
-import inspect
 import os
 import threading
 import time
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import _minpack, OptimizeResult
 
 from auv_ident.core.errors import ConfigError, DimensionError, DivergenceError, DomainError
 from auv_ident.core.filter import ekf as K
@@ -271,7 +270,92 @@ class FilterErrorResiduals:
         return r0, J, failed
 
 
-LEAST_SQUARES_WORKERS = 'workers' in inspect.signature(least_squares).parameters
+RELATIVE_STEP = 1e-5    # forward-difference step of the refinement, relative to each parameter
+LM_TOLERANCE = 1e-8     # ftol, xtol and gtol of the Levenberg-Marquardt fit (least_squares')
+# scipy.optimize.least_squares' status and messages of its 'lm' method, from MINPACK's info
+_LM_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
+_LM_MESSAGES = {
+    -1: 'Improper input parameters status returned from `leastsq`',
+    0: 'The maximum number of function evaluations is exceeded.',
+    1: '`gtol` termination condition is satisfied.',
+    2: '`ftol` termination condition is satisfied.',
+    3: '`xtol` termination condition is satisfied.',
+    4: 'Both `ftol` and `xtol` termination conditions are satisfied.'}
+
+
+class ForwardJacobian:
+    """The Jacobian of a residual vector by forward differences, in one buffer reused by every
+    evaluation (scipy's least_squares(diff_step=...) keeps the p perturbed residual vectors,
+    their differences, their quotients and the Jacobian at once). The numbers are scipy 1.17's
+    2-point rule to the bit: step h_i = rel_step * sign(z_i) * |z_i| (sqrt(eps) * max(1, |z_i|)
+    where that adds nothing to z_i), column i = (r(z + h_i e_i) - r(z)) / ((z_i + h_i) - z_i).
+
+    residuals : z -> (M,) new array; mapper : map-like evaluating the p columns (a thread
+    pool's map). :meth:`fun` is the residual function to fit (it remembers its last point and
+    value, the r(z) a Jacobian at that point starts from, as scipy's does); :meth:`rows` gives
+    the Jacobian as (p, M) rows, a call as (M, p) (a Fortran-ordered view, as scipy's); both
+    are the buffer, overwritten by the next evaluation at another point."""
+
+    def __init__(self, residuals, m, p, rel_step=RELATIVE_STEP, mapper=map):
+        self.residuals = residuals
+        self.rel_step = rel_step
+        self.mapper = mapper
+        self._rows = np.empty((p, m))    # row i: column i of the Jacobian
+        self._at = None                  # the point whose Jacobian the buffer holds
+        self._last = None                # (z, r(z)) of the last fun call
+
+    def fun(self, z):
+        r = self.residuals(z)
+        self._last = (np.array(z, dtype=float), r)
+        return r
+
+    def __call__(self, z):
+        return self.rows(z).T
+
+    def rows(self, z):
+        z = np.array(z, dtype=float)
+        out = self._rows
+        if self._at is not None and np.array_equal(self._at, z):
+            return out
+        if self._last is not None and np.array_equal(self._last[0], z):
+            r0 = self._last[1]
+        else:
+            r0 = self.fun(z)
+        self._at = None                  # being overwritten
+        sign = (z >= 0).astype(float) * 2 - 1
+        h = self.rel_step * sign * np.abs(z)
+        eps_step = np.finfo(float).eps ** 0.5
+        h = np.where(((z + h) - z) == 0, eps_step * sign * np.maximum(1.0, np.abs(z)), h)
+
+        def column(i):
+            z1 = z.copy()
+            z1[i] = z[i] + h[i]
+            np.subtract(self.residuals(z1), r0, out=out[i])
+            out[i] /= (z[i] + h[i]) - z[i]
+
+        for _ in self.mapper(column, range(z.size)):
+            pass
+        self._at = z
+        return out
+
+
+def levenberg_marquardt(jac, z0, max_nfev):
+    """least_squares(jac.fun, z0, jac=jac, method='lm', x_scale=1, max_nfev=max_nfev): the same
+    MINPACK lmder call with the same arguments, without least_squares' copies of the (M, p)
+    Jacobian (five more, 170 MB at M = 720 000, p = 6: measured); the Jacobian goes to MINPACK
+    as the (p, M) rows it is computed in (col_deriv). jac : ForwardJacobian.
+
+    Returns a scipy.optimize.OptimizeResult with x, fun, cost, jac (at x, (M, p): jac's
+    buffer), status, message and nfev as least_squares gives them."""
+    z0 = np.array(z0, dtype=float)
+    x, info, ier = _minpack._lmder(jac.fun, jac.rows, z0, (), True, True, LM_TOLERANCE,
+                                   LM_TOLERANCE, LM_TOLERANCE, max_nfev, 100.0,
+                                   np.ones(z0.size))
+    f, nfev = info['fvec'], int(info['nfev'])
+    del info        # MINPACK's own copy of the Jacobian, no longer needed
+    status = _LM_STATUS[ier]
+    return OptimizeResult(x=x, fun=f, cost=0.5 * np.dot(f, f), jac=jac(x), status=status,
+                          message=_LM_MESSAGES[status], nfev=nfev)
 
 
 def difference_threads():
@@ -323,12 +407,11 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
 
     z0 = theta_start / scale
     with ThreadPoolExecutor(difference_threads()) as pool:
-        # scipy >= 1.16 evaluates the Jacobian's columns with `workers`; an older scipy (e.g.
-        # Ubuntu 24.04's python3-scipy under `ros2 run`) does them one after the other
-        threads = {'workers': pool.map} if LEAST_SQUARES_WORKERS else {}
-        sol = least_squares(residuals, z0, method='lm', x_scale=np.ones(p),
-                            max_nfev=max_nfev * p, diff_step=1e-5, **threads)
-    J = sol.jac / scale[None, :]
+        # the Jacobian's columns on the pool's threads, whatever scipy's version
+        jac = ForwardJacobian(residuals, white.size, p, mapper=pool.map)
+        sol = levenberg_marquardt(jac, z0, max_nfev * p)
+    J = sol.jac         # the Jacobian's own buffer, scaled in place (not another copy)
+    J /= scale[None, :]
     n_res = np.count_nonzero(sol.fun)
     s2 = 2.0 * sol.cost / max(1, n_res - p)
     try:

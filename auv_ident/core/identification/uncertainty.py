@@ -29,7 +29,8 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
+
+from auv_ident.core import chi2
 
 # Verdicts of :func:`identifiability` (relative 1-sigma = CRB 1-sigma / |estimate|)
 REL_STD_IDENTIFIABLE = 0.05     # below this: 'identifiable'
