@@ -29,7 +29,7 @@ from auv_ident.analysis.report_noise import (
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.pipeline import identify_with_diagnosis
-from auv_ident.core.identification.results import Record, SelectionRequest
+from auv_ident.core.identification.results import percent, Record, SelectionRequest, times
 from auv_ident.core.identification.selection import AUTO
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -147,9 +147,11 @@ def _coef_unit(vehicle):
 
 def fig_convergence(path, vehicle, res, noise_mode):
     """EKF estimate with its +-3-sigma band per coefficient, truth, initial and refined."""
+    p = len(res.names)
+    if p == 0:          # 'auto' alone chose no coefficient (the current alone): no panel
+        return None
     plt = _plt()
     h = res.history
-    p = len(res.names)
     ncol = 1 if p <= 3 else 2
     nrow = -(-p // ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(6.5 * ncol, 2.6 * nrow + 0.8), sharex=True,
@@ -392,8 +394,18 @@ def _selection_markdown(doc):
          + ', '.join(sel['chosen'])
          + (f'; always included (named): {", ".join(sel["named"])}' if sel['named'] else '')
          + ". The others keep the vehicle file's values; the error bars include their "
-         f'errors ({100 * sel["criteria"]["prior_rel_std"]:g} % 1-sigma each, consider '
-         'analysis).', '']
+         'errors as far as the residuals allow them (consider analysis'
+         + (f': {percent(sel["consider_scale"])} of their values, 1-sigma, the '
+            f'{100 * sel["criteria"]["consider_confidence"]:.0f} % upper bound'
+            if sel.get('consider_scale') is not None else '') + ').', '']
+    widened = {n: r for n, r in sel.get('consider_inflation', {}).items() if r >= 1.005}
+    if widened:
+        sources = sel.get('consider_sources') or {}
+        L.append(_table(['coefficient', 'error bar / statistical one', 'widening from (share)'],
+                        [[n, times(r), ', '.join(f'{k} {100 * f:.0f} %' for k, f in
+                                                 sources.get(n, {}).items()) or '-']
+                         for n, r in widened.items()]))
+        L.append('')
     groups = {}     # by the reason's kind, as Selection.summary (figures in result.json)
     for name, why in sel['left_out'].items():
         groups.setdefault(why.split(':')[0].split(' (')[0], []).append(name)
@@ -602,7 +614,10 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
     def j(name):
         return os.path.join(out_dir, name + '.png')
 
-    figures = {'convergence': fig_convergence(j('convergence'), v, res, noise_mode)}
+    figures = {}
+    convergence = fig_convergence(j('convergence'), v, res, noise_mode)
+    if convergence:
+        figures['convergence'] = convergence
     what = f'{v.title}, validation run: {run.description}'
     figures['measured_speeds'] = mv.fig_measured(
         j('measured_speeds'), run_val, [State.U, State.V, State.W, State.P, State.Q, State.R],

@@ -41,9 +41,15 @@ only it, on its first `auto_window` seconds, and lets its filter identify the ch
 :func:`identify_auto` runs both passes.
 
 Error bars: the final covariance adds the consider covariance of the coefficients left at the
-file's values (PRIOR_REL_STD 1-sigma each; added-mass terms a literal M^-1 cannot change
-included, their sensitivities from a model with the exact inverse), so that it covers the bias
-a wrong prior causes. Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
+file's values (added-mass terms a literal M^-1 cannot change included, their sensitivities from
+a model with the exact inverse), so that it covers the bias a wrong prior causes. How far off
+the left-out coefficients may be is read off the residuals, not assumed
+(:func:`left_out_deviation`): one relative 1-sigma tau for all of them, the upper bound at
+CONSIDER_CONFIDENCE of what the part of the residuals that only they can explain allows (a
+record the file's values fit leaves tau near 0 and the bars statistical; one they do not fit
+widens them as far as the misfit says). The widening of each member is traced to the left-out
+terms it comes from (Selection.consider_sources). Measured in docs/accuracy.md
+(tools/auto_selection_campaign.py).
 
 Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
 out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
@@ -54,6 +60,7 @@ from dataclasses import replace
 import math
 
 import numpy as np
+from scipy.stats import gamma
 
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.identification.batch import FilterErrorResiduals, parameter_scale
@@ -75,6 +82,9 @@ REL_STD_MAX = REL_STD_IDENTIFIABLE   # relative CRB 1-sigma of a member: below 5
 CORRELATION_MAX = CORRELATION_WEAK   # |correlation| between members: at most 0.95
 SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitivities
 PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
+CONSIDER_CONFIDENCE = 0.68  # one-sided level of the upper bound of the left-out deviation
+MAX_LEFT_OUT_SCALE = 1.0    # the left-out deviation taken at most: 100 % of the file's values
+SOURCES_SHOWN = 3           # left-out terms named per member as the source of its widening
 
 
 def parse_request(vehicle, names):
@@ -206,6 +216,107 @@ def consider_bias(G, members, left, sigma):
         return np.zeros((S.size, S.size))
     B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
     return B @ B.T
+
+
+def _left_out_part(G, b, members, left):
+    """The left-out coefficients' information and score with the members' part projected out
+    (the members are fitted, so only what the members cannot absorb is evidence about the
+    others): K = G_LL - G_LS G_SS^-1 G_SL, c = b_L - G_LS G_SS^-1 b_S."""
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
+    proj = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)]
+    K = G[np.ix_(L, L)] - G[np.ix_(L, S)] @ proj
+    c = b[L] - proj.T @ b[S]
+    return 0.5 * (K + K.T), c
+
+
+def left_out_deviation(lin, members, left, white, confidence=CONSIDER_CONFIDENCE):
+    """How far the coefficients left at the file's values may be off, by what the residuals
+    allow: tau, one relative 1-sigma for all of them (d_L ~ (0, tau^2 diag(prior_L^2))).
+
+    The whitened residuals of the identified set, r ~ J_L d_L + e, e white of unit variance
+    (the configured noise), J the sensitivities at the file's values (the Linearisation): the
+    members were fitted (their large, nonlinear corrections are in r already, which the
+    residuals at the file's values would leave to a linear guess); what the left-out terms
+    alone can explain is X = c^T K^+ c (:func:`_left_out_part`, b = J^T r).
+    In the eigenvectors of W = diag|prior_L| K diag|prior_L| (eigenvalues lambda_i > 0),
+    X = sum_i (1 + tau^2 lambda_i) chi2_1, taken as a gamma variable of that mean and variance
+    (Satterthwaite). tau is its upper bound at `confidence`: the largest tau under which an X as
+    small as the one measured has probability 1 - confidence, at most MAX_LEFT_OUT_SCALE.
+    Coloured or louder noise adds to X and so widens the bound: never narrower than the
+    evidence.
+
+    lin : Linearisation (G, jacobian, prior); members, left : indices into it (the identified
+    set with the current components; the left-out coefficients); white : (N, 12) the residuals
+    of the identified set whitened by the configured noise (NaN: no measurement)
+    Returns (tau, {'explained': X, 'directions': len(lambda), 'point': the moment estimate
+    sqrt(max(0, X - n) / sum lambda), 'suspects': [(name, partial F)] the left-out terms the
+    residuals point at most, largest first (each alone: c_j^2 / K_jj, white)})."""
+    info = {'explained': 0.0, 'directions': 0, 'point': 0.0, 'suspects': []}
+    if not len(left) or lin.jacobian is None:
+        return 0.0, info
+    score = (lin.jacobian.T @ np.nan_to_num(np.asarray(white, dtype=np.float32).ravel())
+             ).astype(float)
+    K, c = _left_out_part(lin.G, score, members, left)
+    scale = np.abs(lin.prior[np.asarray(left, dtype=int)])
+    lam, Q = np.linalg.eigh(scale[:, None] * K * scale[None, :])
+    keep = lam > 1e-9 * max(float(lam.max()), 0.0)
+    if not np.any(keep):
+        return 0.0, info
+    lam, Q = lam[keep], Q[:, keep]
+    X = float(np.sum((Q.T @ (scale * c)) ** 2 / lam))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        single = np.where(np.diag(K) > 0.0, c ** 2 / np.diag(K), 0.0)
+    order = np.argsort(-single)
+    info.update(explained=X, directions=int(lam.size),
+                point=math.sqrt(max(0.0, X - lam.size) / float(lam.sum())),
+                suspects=[(lin.names[left[j]], float(single[j])) for j in order[:SOURCES_SHOWN]
+                          if single[j] >= F_TO_ENTER])
+
+    def below(tau):
+        # P(X_model <= X measured | tau) > 1 - confidence: tau is not yet excluded
+        a = 1.0 + tau * tau * lam
+        mean, var = float(a.sum()), 2.0 * float(np.sum(a * a))
+        return gamma.cdf(X, mean * mean / var, scale=var / mean) > 1.0 - confidence
+
+    lo, hi = 1e-6, MAX_LEFT_OUT_SCALE
+    if not below(lo):
+        return 0.0, info
+    if below(hi):
+        return hi, info
+    for _ in range(60):             # bisection on log tau: 1e-6 .. 1 to 0.03 %
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if below(mid) else (lo, mid)
+    return hi, info
+
+
+def configured_white(fit):
+    """The refined residuals (NoiseFit.white, whitened by the noise the refinement used) in
+    units of the configured noise, as the sensitivities at the file's values were whitened:
+    each channel times its effective over configured 1-sigma (1 when the configured noise was
+    used)."""
+    ratio = np.asarray(fit.effective_std, dtype=float) / np.asarray(fit.configured_std,
+                                                                    dtype=float)
+    return np.asarray(fit.white, dtype=float) * ratio[None, :]
+
+
+def consider_sources(G, members, left, sigma, names, member_names):
+    """Per member, the left-out terms its consider variance comes from: {member name:
+    {left-out name: share of its consider variance}}, the SOURCES_SHOWN largest (each term's
+    own part (B_ij sigma_j)^2 over their sum; members without widening are left out)."""
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
+    if L.size == 0:
+        return {}
+    B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
+    parts = B ** 2
+    out = {}
+    for k, name in enumerate(member_names):
+        total = float(parts[k].sum())
+        if total <= 0.0:
+            continue
+        top = np.argsort(-parts[k])[:SOURCES_SHOWN]
+        out[name] = {names[L[j]]: round(float(parts[k, j] / total), 3) for j in top
+                     if parts[k, j] > 0.0}
+    return out
 
 
 def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
@@ -419,7 +530,7 @@ def choose_coefficients(make_model, cfg, runs, named=(), T=None, max_step=None,
     chosen = [names[i] for i in members if i < all_model.p_coef]
     lin = Linearisation(G=J.T @ J, names=names, prior=prior,
                         left_candidates=list(range(len(named), all_model.p_coef))
-                        + consider_idx)
+                        + consider_idx, jacobian=J.astype(np.float32), white=white)
     sel = Selection(chosen=chosen, named=named, left_out=_in_file_order(vehicle, left_out),
                     steps=steps, candidates=len(cands), reassessed=False, criteria=criteria())
     return Choice(sel, lin)
@@ -468,17 +579,30 @@ def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
         start = [out.estimate[out.model.theta_names.index(n)] for n in kept_coefs]
         out = run(kept_coefs, start)
         chosen = kept_coefs
-    # error bars that cover the coefficients left at the file's values (consider analysis)
+    # error bars that cover the coefficients left at the file's values (consider analysis),
+    # as far off as the residuals allow them to be
     names = lin.names
     idx = [names.index(n) for n in out.model.theta_names]
     left = [i for i in lin.left_candidates if names[i] not in chosen]
-    bias = consider_bias(lin.G, idx, left, PRIOR_REL_STD * np.abs(lin.prior))
+    # without a refinement the residuals at the file's values (their misfit of the members
+    # then counts as the left-out terms': wider, never narrower)
+    white = lin.white if out.noise.white is None else configured_white(out.noise)
+    tau, evidence = left_out_deviation(lin, idx, left, white)
+    sigma = tau * np.abs(lin.prior)
+    out.statistical_cov = out.cov
     stat_sd = np.sqrt(np.diag(out.cov))
-    out.cov = out.cov + bias
-    inflation = np.sqrt(np.diag(out.cov)) / stat_sd
-    out.selection = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
-                            steps=[s for s in sel.steps if s['name'] in chosen],
-                            reassessed=True,
-                            consider_inflation={n: float(inflation[i])
-                                                for i, n in enumerate(out.model.theta_names)})
+    out.cov = out.cov + consider_bias(lin.G, idx, left, sigma)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        inflation = np.where(stat_sd > 0, np.sqrt(np.diag(out.cov)) / stat_sd, 1.0)
+    out.selection = replace(
+        sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
+        steps=[s for s in sel.steps if s['name'] in chosen], reassessed=True,
+        consider_inflation={n: float(inflation[i])
+                            for i, n in enumerate(out.model.theta_names)},
+        consider_scale=float(tau),
+        consider_sources=consider_sources(lin.G, idx, left, sigma, names,
+                                          out.model.theta_names),
+        suspects=[name for name, _ in evidence['suspects']],
+        criteria=dict(sel.criteria, consider_confidence=CONSIDER_CONFIDENCE,
+                      left_out_point=round(evidence['point'], 4)))
     return out
