@@ -14,6 +14,7 @@ import numpy as np
 from auv_ident.analysis import experiments as ex, results, validation as mv
 from auv_ident.analysis.report_format import (
     cell as _num,
+    finite_cell,
     markdown_table as _table,
     package_versions,
     pyplot as _plt,
@@ -318,7 +319,8 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          + ' '.join(f'{s:g}' for s in cfg.q_state),
          f'- coefficient random walk 1-sigma per step: {cfg.q_theta_rel:g} x |initial guess|; '
          f'initial 1-sigma {cfg.p0_rel:g} x |initial guess|',
-         f'- {doc["steps"]} EKF steps, mean NIS/dof {doc["mean_nis_per_dof"]:.3f} '
+         f'- {doc["steps"]} EKF steps, mean NIS/dof '
+         f'{finite_cell(doc["mean_nis_per_dof"], ".3f")} '
          f'(expected 1), wall {doc["wall_s"]:.1f} s', '',
          '## Coefficients', '',
          'Refined (batch filter-error) estimates; the same numbers are in `result.json`.'

@@ -113,7 +113,8 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
         }
     d = {'vehicle': vehicle.name, 'coefficients': coeffs, 'steps': res.steps,
          'wall_s': res.wall_s, 'refined': res.refined,
-         'mean_nis_per_dof': res.mean_nis_per_dof,
+         'mean_nis_per_dof': (float(res.mean_nis_per_dof) if np.isfinite(res.mean_nis_per_dof)
+                              else None),
          'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
          + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
             else 'dimensional SI') + ')',

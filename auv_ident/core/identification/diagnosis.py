@@ -31,7 +31,7 @@ from auv_ident.core.identification.plausibility import (
     implausible_coefficients,
     what_to_check,
 )
-from auv_ident.core.identification.results import Diagnosis, Selection
+from auv_ident.core.identification.results import Diagnosis, percent, Selection, times
 from auv_ident.core.identification.uncertainty import (
     identifiability,
     input_correlation,
@@ -104,7 +104,7 @@ def weak_notes(verdicts: Verdicts) -> list[str]:
         partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
                    if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
         size = (f'1-sigma {d["crb_std"]:.2g} m/s' if n.startswith('current_')
-                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
+                else f'1-sigma {percent(d["rel_std"])} of its value')
         notes.append(f'{n} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
     return notes
 
@@ -195,8 +195,8 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
         notes.extend(fit.notes)
         if fit.covariance == 'sandwich':
             notes.append('error bars from the sandwich covariance (residuals correlated in '
-                         'time; up to {:.2g}x the white-noise ones)'.format(
-                             float(max(fit.inflation))))
+                         'time; up to {} the white-noise ones)'.format(
+                             times(float(max(fit.inflation)), 2)))
     if math.isfinite(mean_nis_per_dof):
         checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
     if verdicts:

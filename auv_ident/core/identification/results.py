@@ -177,17 +177,33 @@ class NoiseFit:
             'refined_cost_per_residual': _finite(self.refine_cost)}
 
 
-def percent(fraction: float) -> str:
-    """A fraction as a percentage of 2 significant digits ('13 %', '0.41 %', '0 %')."""
-    value = 100.0 * fraction
+def readable(x: float, digits: int = 3) -> str:
+    """A number for a person: `digits` significant digits, never an exponent ('12200',
+    '0.0413', '< 0.001'); 'unbounded' for an infinity, '-' when not a number."""
+    if not math.isfinite(x):
+        return '-' if math.isnan(x) else 'unbounded'
+    value = float(f'{x:.{digits}g}')
     if value == 0.0:
-        return '0 %'
-    return f'{value:.0f} %' if abs(value) >= 10.0 else f'{value:.2g} %'
+        return '0'
+    if abs(value) < 1e-3:
+        return '< 0.001' if value > 0 else '> -0.001'
+    if abs(value) >= 10.0 ** digits:
+        return f'{value:.0f}'
+    return f'{value:.{digits}g}'
 
 
-def times(ratio: float) -> str:
-    """A ratio of 3 significant digits without an exponent ('1.52x', '130x', '2410x')."""
-    return f'{ratio:.0f}x' if abs(ratio) >= 100.0 else f'{ratio:.3g}x'
+def percent(fraction: float) -> str:
+    """A fraction as a percentage of 2 significant digits ('13 %', '0.41 %', '12200 %')."""
+    value = 100.0 * fraction
+    if math.isfinite(value) and abs(value) >= 10.0:
+        return f'{value:.0f} %'
+    return readable(value, 2) + ' %'
+
+
+def times(ratio: float, digits: int = 3) -> str:
+    """A ratio of `digits` significant digits without an exponent ('1.52x', '130x',
+    '2410x')."""
+    return f'{ratio:.0f}x' if abs(ratio) >= 10.0 ** (digits - 1) else f'{ratio:.{digits}g}x'
 
 
 def _finite(x: float | None) -> float | None:

@@ -65,7 +65,13 @@ from scipy.stats import gamma
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.identification.batch import FilterErrorResiduals, parameter_scale
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
-from auv_ident.core.identification.results import Choice, Linearisation, Selection
+from auv_ident.core.identification.results import (
+    Choice,
+    Linearisation,
+    percent,
+    readable,
+    Selection,
+)
 from auv_ident.core.identification.uncertainty import (
     bandwidth,
     CORRELATION_WEAK,
@@ -402,12 +408,12 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             c = int(cand[k])
             if f_white[k] < F_TO_ENTER:
                 last[c] = ('residual reduction too small: partial F (white) '
-                           f'{f_white[k]:.3g} < {F_TO_ENTER:g}')
+                           f'{readable(f_white[k])} < {F_TO_ENTER:g}')
                 continue
             trial = members + [c]
             rel, cmax, partner = _set_figures(G, trial, s2, prior)
             if rel[-1] >= REL_STD_MAX:
-                reasons[names[c]] = (f'not identifiable: relative 1-sigma {100 * rel[-1]:.3g} % '
+                reasons[names[c]] = (f'not identifiable: relative 1-sigma {percent(rel[-1])} '
                                      f'>= {100 * REL_STD_MAX:g} %')
                 pool.remove(c)
                 continue
@@ -420,11 +426,11 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             if after >= current:
                 last[c] = ('would not lower the expected error: it absorbs the errors of '
                            'coefficients left at their prior (consider analysis, '
-                           f'{after:.3g} >= {current:.3g})')
+                           f'{readable(after)} >= {readable(current)})')
                 continue
             f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, n_samples)
             if f_hac < F_TO_ENTER:
-                last[c] = (f'residual reduction too small: partial F {f_hac:.3g} < '
+                last[c] = (f'residual reduction too small: partial F {readable(f_hac)} < '
                            f'{F_TO_ENTER:g} (long-run variance)')
                 continue
             members.append(c)
@@ -462,7 +468,7 @@ def prune(names, estimate, cov, keep_always):
         j = max(bad, key=lambda j: rel[j])
         i = keep[j]
         if rel[j] >= REL_STD_MAX:
-            why = f'relative 1-sigma {100 * rel[j]:.3g} % >= {100 * REL_STD_MAX:g} %'
+            why = f'relative 1-sigma {percent(rel[j])} >= {100 * REL_STD_MAX:g} %'
         else:
             why = (f'correlated {cmax[j]:.3f} with {names[keep[partner[j]]]} (limit '
                    f'{CORRELATION_MAX:g})')
