@@ -30,7 +30,13 @@ from auv_ident.analysis.report_noise import (
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.pipeline import identify_with_diagnosis
-from auv_ident.core.identification.results import percent, Record, SelectionRequest, times
+from auv_ident.core.identification.results import (
+    confidence_words,
+    percent,
+    Record,
+    SelectionRequest,
+    times,
+)
 from auv_ident.core.identification.selection import AUTO
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -397,8 +403,8 @@ def _selection_markdown(doc):
          + (f'; always included (named): {", ".join(sel["named"])}' if sel['named'] else '')
          + ". The others keep the vehicle file's values; the error bars include their "
          'errors as far as the residuals allow them (consider analysis'
-         + (f': {percent(sel["consider_scale"])} of their values, 1-sigma, the '
-            f'{100 * sel["criteria"]["consider_confidence"]:.0f} % upper bound'
+         + (f': {percent(sel["consider_scale"])} of their values, 1-sigma, '
+            + confidence_words(sel['criteria']['consider_confidence'])
             if sel.get('consider_scale') is not None else '') + ').', '']
     widened = {n: r for n, r in sel.get('consider_inflation', {}).items() if r >= 1.005}
     if widened:

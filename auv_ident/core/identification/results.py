@@ -200,6 +200,13 @@ def percent(fraction: float) -> str:
     return readable(value, 2) + ' %'
 
 
+def confidence_words(confidence: float) -> str:
+    """How the left-out deviation was read off the residuals, in words."""
+    if confidence == 0.5:
+        return 'median-unbiased'
+    return f'the {100 * confidence:.0f} % upper bound'
+
+
 def times(ratio: float, digits: int = 3) -> str:
     """A ratio of `digits` significant digits without an exponent ('1.52x', '130x',
     '2410x')."""
@@ -292,9 +299,8 @@ class Selection:
         ratio = self.consider_inflation[worst]
         tau = self.consider_scale
         allowed = ('' if tau is None else
-                   f'the residuals allow them {percent(tau)} of their values (1-sigma, '
-                   f'the {100 * self.criteria["consider_confidence"]:.0f} % upper '
-                   'bound), ')
+                   f'the residuals put them {percent(tau)} of their values off, 1-sigma, '
+                   + confidence_words(self.criteria['consider_confidence']) + '; ')
         head = ("error bars include the errors of the coefficients left at the file's values "
                 f'({allowed}consider analysis): ')
         if ratio < 1.005:

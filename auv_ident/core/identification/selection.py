@@ -44,12 +44,12 @@ Error bars: the final covariance adds the consider covariance of the coefficient
 file's values (added-mass terms a literal M^-1 cannot change included, their sensitivities from
 a model with the exact inverse), so that it covers the bias a wrong prior causes. How far off
 the left-out coefficients may be is read off the residuals, not assumed
-(:func:`left_out_deviation`): one relative 1-sigma tau for all of them, the upper bound at
-CONSIDER_CONFIDENCE of what the part of the residuals that only they can explain allows (a
-record the file's values fit leaves tau near 0 and the bars statistical; one they do not fit
-widens them as far as the misfit says). The widening of each member is traced to the left-out
-terms it comes from (Selection.consider_sources). Measured in docs/accuracy.md
-(tools/auto_selection_campaign.py).
+(:func:`left_out_deviation`): one relative 1-sigma tau for all of them, the value under which
+the part of the residuals that only they can explain is the median of its distribution
+(CONSIDER_CONFIDENCE 0.5: median-unbiased; a record the file's values fit leaves tau near 0
+and the bars statistical, one they do not fit widens them as far as the misfit says). The
+widening of each member is traced to the left-out terms it comes from
+(Selection.consider_sources). Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
 
 Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
 out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
@@ -88,7 +88,7 @@ REL_STD_MAX = REL_STD_IDENTIFIABLE   # relative CRB 1-sigma of a member: below 5
 CORRELATION_MAX = CORRELATION_WEAK   # |correlation| between members: at most 0.95
 SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitivities
 PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
-CONSIDER_CONFIDENCE = 0.68  # one-sided level of the upper bound of the left-out deviation
+CONSIDER_CONFIDENCE = 0.5   # the left-out deviation: median-unbiased (module docstring)
 MAX_LEFT_OUT_SCALE = 1.0    # the left-out deviation taken at most: 100 % of the file's values
 SOURCES_SHOWN = 3           # left-out terms named per member as the source of its widening
 
@@ -235,7 +235,8 @@ def _left_out_part(G, b, members, left):
     return 0.5 * (K + K.T), c
 
 
-def left_out_deviation(lin, members, left, white, confidence=CONSIDER_CONFIDENCE):
+def left_out_deviation(lin, members, left, white, weights=None,
+                       confidence=CONSIDER_CONFIDENCE):
     """How far the coefficients left at the file's values may be off, by what the residuals
     allow: tau, one relative 1-sigma for all of them (d_L ~ (0, tau^2 diag(prior_L^2))).
 
@@ -246,23 +247,30 @@ def left_out_deviation(lin, members, left, white, confidence=CONSIDER_CONFIDENCE
     alone can explain is X = c^T K^+ c (:func:`_left_out_part`, b = J^T r).
     In the eigenvectors of W = diag|prior_L| K diag|prior_L| (eigenvalues lambda_i > 0),
     X = sum_i (1 + tau^2 lambda_i) chi2_1, taken as a gamma variable of that mean and variance
-    (Satterthwaite). tau is its upper bound at `confidence`: the largest tau under which an X as
-    small as the one measured has probability 1 - confidence, at most MAX_LEFT_OUT_SCALE.
-    Coloured or louder noise adds to X and so widens the bound: never narrower than the
-    evidence.
+    (Satterthwaite). tau is the largest value under which an X as small as the one measured
+    has probability 1 - confidence (0.5: the measured X is the median, a median-unbiased
+    estimate; higher: an upper bound), at most MAX_LEFT_OUT_SCALE. The residuals and J are
+    whitened alike (weights); coloured noise adds to X and so only widens the bars.
 
     lin : Linearisation (G, jacobian, prior); members, left : indices into it (the identified
     set with the current components; the left-out coefficients); white : (N, 12) the residuals
-    of the identified set whitened by the configured noise (NaN: no measurement)
+    of the identified set, whitened (NaN: no measurement); weights : (12,) per channel the
+    factor that takes J (whitened by the configured noise) to the whitening of `white` (the
+    configured over the effective 1-sigma), None: 1
     Returns (tau, {'explained': X, 'directions': len(lambda), 'point': the moment estimate
     sqrt(max(0, X - n) / sum lambda), 'suspects': [(name, partial F)] the left-out terms the
     residuals point at most, largest first (each alone: c_j^2 / K_jj, white)})."""
     info = {'explained': 0.0, 'directions': 0, 'point': 0.0, 'suspects': []}
     if not len(left) or lin.jacobian is None:
         return 0.0, info
-    score = (lin.jacobian.T @ np.nan_to_num(np.asarray(white, dtype=np.float32).ravel())
-             ).astype(float)
-    K, c = _left_out_part(lin.G, score, members, left)
+    J, G = lin.jacobian, lin.G
+    if weights is not None and np.any(np.asarray(weights) != 1.0):
+        n = J.shape[0] // len(weights)
+        J = (J.reshape(n, len(weights), -1)
+             * np.asarray(weights, dtype=np.float32)[None, :, None]).reshape(J.shape)
+        G = (J.T @ J).astype(float)
+    score = (J.T @ np.nan_to_num(np.asarray(white, dtype=np.float32).ravel())).astype(float)
+    K, c = _left_out_part(G, score, members, left)
     scale = np.abs(lin.prior[np.asarray(left, dtype=int)])
     lam, Q = np.linalg.eigh(scale[:, None] * K * scale[None, :])
     keep = lam > 1e-9 * max(float(lam.max()), 0.0)
@@ -295,14 +303,14 @@ def left_out_deviation(lin, members, left, white, confidence=CONSIDER_CONFIDENCE
     return hi, info
 
 
-def configured_white(fit):
-    """The refined residuals (NoiseFit.white, whitened by the noise the refinement used) in
-    units of the configured noise, as the sensitivities at the file's values were whitened:
-    each channel times its effective over configured 1-sigma (1 when the configured noise was
-    used)."""
-    ratio = np.asarray(fit.effective_std, dtype=float) / np.asarray(fit.configured_std,
+def whitening_weights(fit):
+    """(12,) per channel the configured over the effective 1-sigma of a NoiseFit: what takes
+    the sensitivities at the file's values (whitened by the configured noise) to the whitening
+    of the refined residuals (by the noise the refinement used); 1 where the configured noise
+    was used. Weighting J, not the residuals, keeps the noise in the residuals at unit variance
+    (a noise louder than configured is not taken for the left-out terms' deviation)."""
+    return np.asarray(fit.configured_std, dtype=float) / np.asarray(fit.effective_std,
                                                                     dtype=float)
-    return np.asarray(fit.white, dtype=float) * ratio[None, :]
 
 
 def consider_sources(G, members, left, sigma, names, member_names):
@@ -592,8 +600,11 @@ def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
     left = [i for i in lin.left_candidates if names[i] not in chosen]
     # without a refinement the residuals at the file's values (their misfit of the members
     # then counts as the left-out terms': wider, never narrower)
-    white = lin.white if out.noise.white is None else configured_white(out.noise)
-    tau, evidence = left_out_deviation(lin, idx, left, white)
+    if out.noise.white is None:
+        tau, evidence = left_out_deviation(lin, idx, left, lin.white)
+    else:
+        tau, evidence = left_out_deviation(lin, idx, left, out.noise.white,
+                                           weights=whitening_weights(out.noise))
     sigma = tau * np.abs(lin.prior)
     out.statistical_cov = out.cov
     stat_sd = np.sqrt(np.diag(out.cov))
