@@ -140,7 +140,6 @@ class NoiseFit:
     notes: list = field(default_factory=list)
     white: Optional[np.ndarray] = None
     jacobian: Optional[np.ndarray] = None
-    white: Optional[np.ndarray] = None
     ekf_run: Optional[FilterPass] = None
     configured_pass: Optional[FilterPass] = None
     configured_q: Optional[np.ndarray] = None
