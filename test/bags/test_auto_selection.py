@@ -51,7 +51,7 @@ def test_auto_with_a_name_lists_every_coefficient_as_chosen_or_left_out(perturbe
     # carry no nan, None or exponent
     assert 0.0 <= sel['consider_scale'] <= 1.0
     assert ("error bars include the errors of the coefficients left at the file's values "
-            '(the residuals put them') in text
+            '(the residuals ') in text
     widened = [n for n, r in sel['consider_inflation'].items() if r >= 1.005]
     assert all(sel['consider_sources'][n] for n in widened)
     machine = re.compile(r'\bnan\b|\bNone\b|\binf\b|\d[eE][+-]?\d')

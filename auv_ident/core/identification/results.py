@@ -297,9 +297,13 @@ class Selection:
         worst = max(self.consider_inflation, key=lambda n: self.consider_inflation[n])
         ratio = self.consider_inflation[worst]
         tau = self.consider_scale
-        allowed = ('' if tau is None else
-                   f'the residuals put them {percent(tau)} of their values off, 1-sigma, '
-                   + confidence_words(self.criteria['consider_confidence']) + '; ')
+        if tau is None:
+            allowed = ''
+        elif tau < 5e-4:
+            allowed = 'the residuals show them at those values; '
+        else:
+            allowed = (f'the residuals put them {percent(tau)} of their values off, 1-sigma, '
+                       + confidence_words(self.criteria['consider_confidence']) + '; ')
         head = ("error bars include the errors of the coefficients left at the file's values "
                 f'({allowed}consider analysis): ')
         if ratio < 1.005:
