@@ -1,6 +1,7 @@
 """Tier 1: the report (figures, report.md, result.json) and the held-out validation."""
 import json
 import os
+import re
 
 import matplotlib.image
 import numpy as np
@@ -249,6 +250,14 @@ def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set
     assert any(abs(d['fit_percent'] - d['fit_percent_prior']) > 0.1 for d in ch.values())
     md = (tmp_path / 'report' / 'report.md').read_text()
     assert '## Automatic selection' in md and ', '.join(sel['chosen']) in md
+    # the error bars' widening is what the residuals allow, with its sources; no nan or None
+    # where a person reads
+    assert 'as far as the residuals allow them (consider analysis' in md
+    section = md.split('## Automatic selection')[1].split('\n## ')[0]
+    for name, ratio in sel['consider_inflation'].items():
+        if ratio >= 1.005:
+            assert f'| {name} | ' in section
+    assert not re.search(r'\bnan\b|\bNone\b', md)
     # the EKF histories are the chosen set's (the convergence figure)
     assert (tmp_path / 'report' / 'convergence.png').is_file()
 
