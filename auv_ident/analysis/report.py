@@ -311,7 +311,7 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          f'Command: `{command or "(not given)"}`', '',
          'Versions: ' + ', '.join(f'{k} {s}' for k, s in doc['versions'].items()), '',
          f'- source: {src.description}',
-         f'- seed: {doc["seed"]}',
+         f'- seed: {doc["seed"] if doc["seed"] is not None else "- (recorded data)"}',
          f'- coefficients ({doc["units"]}): {", ".join(co)}',
          f'- water current: {doc["current_option"]}; velocities over '
          f'{doc["velocity_reference"]}',
