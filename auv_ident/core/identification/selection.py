@@ -315,8 +315,9 @@ def whitening_weights(fit):
 
 def consider_sources(G, members, left, sigma, names, member_names):
     """Per member, the left-out terms its consider variance comes from: {member name:
-    {left-out name: share of its consider variance}}, the SOURCES_SHOWN largest (each term's
-    own part (B_ij sigma_j)^2 over their sum; members without widening are left out)."""
+    {left-out name: share of its consider variance}}, the SOURCES_SHOWN largest of at least
+    1 % (each term's own part (B_ij sigma_j)^2 over their sum; members without widening are
+    left out)."""
     S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
     if L.size == 0:
         return {}
@@ -329,7 +330,7 @@ def consider_sources(G, members, left, sigma, names, member_names):
             continue
         top = np.argsort(-parts[k])[:SOURCES_SHOWN]
         out[name] = {names[L[j]]: round(float(parts[k, j] / total), 3) for j in top
-                     if parts[k, j] > 0.0}
+                     if parts[k, j] >= 0.01 * total}
     return out
 
 
