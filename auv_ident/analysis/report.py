@@ -293,7 +293,8 @@ def fig_noise(path, res, noise_mode):
     axes[4].set_xlabel('time (s)')
     for ax in axes:
         ax.grid(alpha=0.3, which='both')
-        ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
+        if ax.get_legend_handles_labels()[0]:       # no coefficient: nothing to label
+            ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
     note = ('\nmode fixed: Q and R are not adapted and stay at their configured values'
             if noise_mode == 'fixed' else '')
     fig.suptitle(f'Noise covariances used by the EKF, adaptation mode {noise_mode!r}{note}',
@@ -443,9 +444,10 @@ def _current_markdown(doc):
               'from north).']
     ident = cur.get('identifiability')
     if ident:
-        L += ['', f'Headings covered: {ident["heading_span_deg"]:.0f} deg; largest correlation '
-                  f'of a current component with a coefficient: {ident["max_correlation"]:.2f} '
-                  f'({ident["correlated_with"]}).']
+        L += ['', f'Headings covered: {ident["heading_span_deg"]:.0f} deg; '
+                  + (f'largest correlation of a current component with a coefficient: '
+                     f'{ident["max_correlation"]:.2f} ({ident["correlated_with"]}).'
+                     if ident['correlated_with'] else 'no coefficient identified with it.')]
     for w in doc.get('warnings') or []:
         L += ['', f'**{w}**']
     return L

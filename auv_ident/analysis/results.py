@@ -163,9 +163,10 @@ def current_table(cur):
                  f'{cur["velocity_reference"]}')
     ident = cur.get('identifiability')
     if ident:
-        lines.append(f'headings covered {ident["heading_span_deg"]:.0f} deg; largest correlation '
-                     f'with a coefficient {ident["max_correlation"]:.2f} '
-                     f'({ident["correlated_with"]})')
+        lines.append(f'headings covered {ident["heading_span_deg"]:.0f} deg; '
+                     + (f'largest correlation with a coefficient {ident["max_correlation"]:.2f} '
+                        f'({ident["correlated_with"]})' if ident['correlated_with']
+                        else 'no coefficient identified with it'))
     return '\n'.join(lines)
 
 
