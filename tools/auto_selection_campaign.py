@@ -14,8 +14,9 @@ auto,hand,five, the default set alone: does the diagnosis flag it?). Errors are 
 bag's truth.json. Printed: per seed the default set (error % / |error|/1-sigma), the wall
 time of the command and the diagnosis; then per method the median |error| % of each of them,
 the share of (seed, coefficient) cases with the truth within 3 sigma (the default set, and
-every identified coefficient) and the median |error|/sigma. These are measurements, not
-assertions.
+every identified coefficient) and the median |error|/sigma (of both; an honest sigma gives
+~0.67), then one line per method saying so with the number of bags. These are measurements,
+not assertions.
 
     PYTHONPATH=. .venv/bin/python tools/auto_selection_campaign.py [--vehicle nps_auv2]
         [--out DIR] [--seeds 1,2,3] [--duration 600] [--reuse] [--methods auto,hand]
