@@ -8,12 +8,12 @@ records identified together by core.identification.pipeline.identify_with_diagno
 is a list of one. :func:`identify_bag` and :func:`identify_bags` print and document it.
 """
 from dataclasses import dataclass, replace
-import math
 import time
 
 import numpy as np
 
 from auv_ident.analysis import results as ex
+from auv_ident.analysis.report_format import finite_cell
 from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.core.errors import ConfigError
@@ -299,11 +299,9 @@ def _initial(res, first):
 
 def _mean_nis(res, replays, auto):
     """The mean NIS/dof reported: with one bag the replay's (what the live node showed); with
-    several the reported EKF pass's; NaN for a chosen set (the replays' filters identified
-    another set)."""
-    if auto:
-        return math.nan
-    if len(replays.replays) == 1:
+    several, or for a chosen set (the replays' filters identified another set), the reported
+    EKF pass's."""
+    if len(replays.replays) == 1 and not auto:
         return replays.replays[0].mean_nis_per_dof
     return res.noise.reported_pass.mean_nis_per_dof
 
@@ -356,7 +354,7 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
                          current_truth=_bag_current_truth(meta))
     head = diagnosis.messages[0] + '\n' + head
     table = (head + '\n' + ex.result_table(v, res, doc) + f'\n{res.steps} EKF steps, mean '
-             f'NIS/dof {res.mean_nis_per_dof:.3f}, wall {res.wall_s:.2f} s'
+             f'NIS/dof {finite_cell(res.mean_nis_per_dof, ".3f")}, wall {res.wall_s:.2f} s'
              + ''.join('\n- ' + m for m in diagnosis.messages[1:])
              + ('' if selection is None else '\n' + '\n'.join(selection.summary())))
     return doc, table

@@ -14,6 +14,7 @@ import numpy as np
 from auv_ident.analysis import experiments as ex, results, validation as mv
 from auv_ident.analysis.report_format import (
     cell as _num,
+    finite_cell,
     markdown_table as _table,
     package_versions,
     pyplot as _plt,
@@ -29,7 +30,13 @@ from auv_ident.analysis.report_noise import (
 from auv_ident.core.angles import wrap_angle
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.identification.pipeline import identify_with_diagnosis
-from auv_ident.core.identification.results import Record, SelectionRequest
+from auv_ident.core.identification.results import (
+    confidence_words,
+    percent,
+    Record,
+    SelectionRequest,
+    times,
+)
 from auv_ident.core.identification.selection import AUTO
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_PROCESS_STD, DEFAULT_T
@@ -147,9 +154,11 @@ def _coef_unit(vehicle):
 
 def fig_convergence(path, vehicle, res, noise_mode):
     """EKF estimate with its +-3-sigma band per coefficient, truth, initial and refined."""
+    p = len(res.names)
+    if p == 0:          # 'auto' alone chose no coefficient (the current alone): no panel
+        return None
     plt = _plt()
     h = res.history
-    p = len(res.names)
     ncol = 1 if p <= 3 else 2
     nrow = -(-p // ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(6.5 * ncol, 2.6 * nrow + 0.8), sharex=True,
@@ -284,7 +293,8 @@ def fig_noise(path, res, noise_mode):
     axes[4].set_xlabel('time (s)')
     for ax in axes:
         ax.grid(alpha=0.3, which='both')
-        ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
+        if ax.get_legend_handles_labels()[0]:       # no coefficient: nothing to label
+            ax.legend(fontsize=8, loc='center left', bbox_to_anchor=(1.01, 0.5))
     note = ('\nmode fixed: Q and R are not adapted and stay at their configured values'
             if noise_mode == 'fixed' else '')
     fig.suptitle(f'Noise covariances used by the EKF, adaptation mode {noise_mode!r}{note}',
@@ -302,7 +312,7 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          f'Command: `{command or "(not given)"}`', '',
          'Versions: ' + ', '.join(f'{k} {s}' for k, s in doc['versions'].items()), '',
          f'- source: {src.description}',
-         f'- seed: {doc["seed"]}',
+         f'- seed: {doc["seed"] if doc["seed"] is not None else "- (recorded data)"}',
          f'- coefficients ({doc["units"]}): {", ".join(co)}',
          f'- water current: {doc["current_option"]}; velocities over '
          f'{doc["velocity_reference"]}',
@@ -316,7 +326,8 @@ def _markdown(doc, src, cfg, val_error, figures, command, holdout=None):
          + ' '.join(f'{s:g}' for s in cfg.q_state),
          f'- coefficient random walk 1-sigma per step: {cfg.q_theta_rel:g} x |initial guess|; '
          f'initial 1-sigma {cfg.p0_rel:g} x |initial guess|',
-         f'- {doc["steps"]} EKF steps, mean NIS/dof {doc["mean_nis_per_dof"]:.3f} '
+         f'- {doc["steps"]} EKF steps, mean NIS/dof '
+         f'{finite_cell(doc["mean_nis_per_dof"], ".3f")} '
          f'(expected 1), wall {doc["wall_s"]:.1f} s', '',
          '## Coefficients', '',
          'Refined (batch filter-error) estimates; the same numbers are in `result.json`.'
@@ -392,8 +403,18 @@ def _selection_markdown(doc):
          + ', '.join(sel['chosen'])
          + (f'; always included (named): {", ".join(sel["named"])}' if sel['named'] else '')
          + ". The others keep the vehicle file's values; the error bars include their "
-         f'errors ({100 * sel["criteria"]["prior_rel_std"]:g} % 1-sigma each, consider '
-         'analysis).', '']
+         'errors as far as the residuals allow them (consider analysis'
+         + (f': {percent(sel["consider_scale"])} of their values, 1-sigma, '
+            + confidence_words(sel['criteria']['consider_confidence'])
+            if sel.get('consider_scale') is not None else '') + ').', '']
+    widened = {n: r for n, r in sel.get('consider_inflation', {}).items() if r >= 1.005}
+    if widened:
+        sources = sel.get('consider_sources') or {}
+        L.append(_table(['coefficient', 'error bar / statistical one', 'widening from (share)'],
+                        [[n, times(r), ', '.join(f'{k} {100 * f:.0f} %' for k, f in
+                                                 sources.get(n, {}).items()) or '-']
+                         for n, r in widened.items()]))
+        L.append('')
     groups = {}     # by the reason's kind, as Selection.summary (figures in result.json)
     for name, why in sel['left_out'].items():
         groups.setdefault(why.split(':')[0].split(' (')[0], []).append(name)
@@ -423,9 +444,10 @@ def _current_markdown(doc):
               'from north).']
     ident = cur.get('identifiability')
     if ident:
-        L += ['', f'Headings covered: {ident["heading_span_deg"]:.0f} deg; largest correlation '
-                  f'of a current component with a coefficient: {ident["max_correlation"]:.2f} '
-                  f'({ident["correlated_with"]}).']
+        L += ['', f'Headings covered: {ident["heading_span_deg"]:.0f} deg; '
+                  + (f'largest correlation of a current component with a coefficient: '
+                     f'{ident["max_correlation"]:.2f} ({ident["correlated_with"]}).'
+                     if ident['correlated_with'] else 'no coefficient identified with it.')]
     for w in doc.get('warnings') or []:
         L += ['', f'**{w}**']
     return L
@@ -607,7 +629,10 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
     def j(name):
         return os.path.join(out_dir, name + '.png')
 
-    figures = {'convergence': fig_convergence(j('convergence'), v, res, noise_mode)}
+    figures = {}
+    convergence = fig_convergence(j('convergence'), v, res, noise_mode)
+    if convergence:
+        figures['convergence'] = convergence
     what = f'{v.title}, validation run: {run.description}'
     figures['measured_speeds'] = mv.fig_measured(
         j('measured_speeds'), run_val, [State.U, State.V, State.W, State.P, State.Q, State.R],

@@ -1,5 +1,6 @@
 """Formatting shared by the report's sections: matplotlib off-screen, figure files, Markdown
 table cells and tables, and the versions a report records."""
+import math
 import platform
 
 import numpy as np
@@ -23,9 +24,12 @@ def save_figure(fig, path):
 
 
 def cell(v):
-    """A table cell: 6 significant digits (the tests parse these back), '-' when unknown."""
-    if v is None:
+    """A table cell: 6 significant digits (the tests parse these back), '-' when unknown or
+    not a number, 'inf' for an infinity."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
         return '-'
+    if isinstance(v, float) and math.isinf(v):
+        return 'inf' if v > 0 else '-inf'
     return f'{v:.6g}' if isinstance(v, (int, float)) else str(v)
 
 

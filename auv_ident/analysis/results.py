@@ -116,7 +116,8 @@ def result_dict(vehicle, res, extra=None, current_truth=None):
         }
     d = {'vehicle': vehicle.name, 'coefficients': coeffs, 'steps': res.steps,
          'wall_s': res.wall_s, 'refined': res.refined,
-         'mean_nis_per_dof': res.mean_nis_per_dof,
+         'mean_nis_per_dof': (float(res.mean_nis_per_dof) if np.isfinite(res.mean_nis_per_dof)
+                              else None),
          'covariance': res.cov.tolist(), 'units': 'vehicle file units ('
          + ('SNAME prime, (rho/2) L^k' if vehicle.raw.get('scaling') != 'dimensional'
             else 'dimensional SI') + ')',
@@ -165,9 +166,10 @@ def current_table(cur):
                  f'{cur["velocity_reference"]}')
     ident = cur.get('identifiability')
     if ident:
-        lines.append(f'headings covered {ident["heading_span_deg"]:.0f} deg; largest correlation '
-                     f'with a coefficient {ident["max_correlation"]:.2f} '
-                     f'({ident["correlated_with"]})')
+        lines.append(f'headings covered {ident["heading_span_deg"]:.0f} deg; '
+                     + (f'largest correlation with a coefficient {ident["max_correlation"]:.2f} '
+                        f'({ident["correlated_with"]})' if ident['correlated_with']
+                        else 'no coefficient identified with it'))
     return '\n'.join(lines)
 
 

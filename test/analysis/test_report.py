@@ -1,6 +1,7 @@
 """Tier 1: the report (figures, report.md, result.json) and the held-out validation."""
 import json
 import os
+import re
 
 import matplotlib.image
 import numpy as np
@@ -252,6 +253,14 @@ def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set
     assert any(abs(d['fit_percent'] - d['fit_percent_prior']) > 0.1 for d in ch.values())
     md = (tmp_path / 'report' / 'report.md').read_text()
     assert '## Automatic selection' in md and ', '.join(sel['chosen']) in md
+    # the error bars' widening is what the residuals allow, with its sources; no nan or None
+    # where a person reads
+    assert 'as far as the residuals allow them (consider analysis' in md
+    section = md.split('## Automatic selection')[1].split('\n## ')[0]
+    for name, ratio in sel['consider_inflation'].items():
+        if ratio >= 1.005:
+            assert f'| {name} | ' in section
+    assert not re.search(r'\bnan\b|\bNone\b', md)
     # the EKF histories are the chosen set's (the convergence figure)
     assert (tmp_path / 'report' / 'convergence.png').is_file()
 
@@ -277,3 +286,23 @@ def test_report_mass_inverse_applies_to_every_model(tmp_path):
         make_report(str(tmp_path / 'literal'),
                     IdentifierSettings.from_values(coefficients='Z_w,Z_wdot'), bag=str(data.bag),
                     progress=False)
+
+
+def test_nothing_chosen_gives_no_convergence_panel_and_no_none(tmp_path):
+    """`--coefficients auto` on a record the file's values fit chooses no coefficient (the
+    current alone): the convergence figure is left out instead of failing, and the current's
+    lines say no coefficient was identified with it rather than '(None)'."""
+    from types import SimpleNamespace
+
+    from auv_ident.analysis.report import _current_markdown, fig_convergence
+    from auv_ident.analysis.results import current_table
+    res = SimpleNamespace(names=[], history={}, initial=np.zeros(0), estimate=np.zeros(0))
+    assert fig_convergence(tmp_path / 'c.png', load_vehicle('nps_auv2'), res, 'fixed') is None
+    cur = {'north': 0.0, 'east': 0.0, 'down': 0.0, 'std': [1e-4, 1e-4, 0.0],
+           'estimated': ['current_n', 'current_e'], 'velocity_reference': 'ground',
+           'speed': 0.0, 'direction_deg': 0.0, 'truth': None,
+           'ekf': {'north': 0.0, 'east': 0.0, 'down': 0.0, 'std': [1e-4, 1e-4, 0.0]},
+           'identifiability': {'heading_span_deg': 80.0, 'max_correlation': 0.0,
+                               'correlated_with': None}}
+    text = current_table(cur) + '\n'.join(_current_markdown({'current': cur}))
+    assert 'None' not in text and 'no coefficient identified with it' in text

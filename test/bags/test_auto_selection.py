@@ -4,6 +4,7 @@ node, and the errors (an unknown name; 'auto' where only a fixed set is possible
 node's own [auto] is test/session/test_auto_choice.py."""
 import json
 from pathlib import Path
+import re
 import sys
 
 import pytest
@@ -46,6 +47,22 @@ def test_auto_with_a_name_lists_every_coefficient_as_chosen_or_left_out(perturbe
     # every left-out coefficient is named in the printed text, none silently valued
     for name in sel['left_out']:
         assert name in text
+    # the widening is what the residuals allow, said with its sources; sentences for people
+    # carry no nan, None or exponent
+    assert 0.0 <= sel['consider_scale'] <= 1.0
+    assert ("error bars include the errors of the coefficients left at the file's values "
+            '(the residuals ') in text
+    widened = [n for n, r in sel['consider_inflation'].items() if r >= 1.005]
+    assert all(sel['consider_sources'][n] for n in widened)
+    machine = re.compile(r'\bnan\b|\bNone\b|\binf\b|\d[eE][+-]?\d')
+    sentences = (doc['diagnosis']['messages'] + list(sel['left_out'].values())
+                 + [line for line in text.splitlines() if line.startswith(('- ', 'error bars'))])
+    assert not [s for s in sentences if machine.search(s)]
+    assert 'mean NIS/dof nan' not in text
+    # a coefficient's verdict is judged by the run's information, not by the widened bar
+    for name in widened:
+        if name in doc['coefficients']:
+            assert doc['identifiability'][name]['crb_std'] < doc['coefficients'][name]['std']
     warm = json.loads(est.read_text())
     assert warm['vehicle'] == 'nps_auv2' and warm['coefficients'] == sel['chosen']
     session = IdentSession(IdentifierSettings.from_values(vehicle='nps_auv2', warm_start=str(est)))

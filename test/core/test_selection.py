@@ -7,8 +7,23 @@ import pytest
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
-from auv_ident.core.identification.results import Record
-from auv_ident.core.identification.selection import forward_stepwise, identify_auto, parse_request
+from auv_ident.core.identification.diagnosis import inadequacy_remedy
+from auv_ident.core.identification.results import (
+    Linearisation,
+    percent,
+    readable,
+    Record,
+    Selection,
+    times,
+)
+from auv_ident.core.identification.selection import (
+    consider_bias,
+    consider_sources,
+    forward_stepwise,
+    identify_auto,
+    left_out_deviation,
+    parse_request,
+)
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
@@ -78,6 +93,12 @@ def test_auto_on_a_short_simulated_run_picks_the_wrong_excited_coefficients():
         assert abs(est[i] - truth) < 3.0 * np.sqrt(cov[i, i]), (name, est[i], truth)
     doc = sel.document()
     assert doc['chosen'] == sel.chosen and doc['left_out'] == sel.left_out
+    # every other coefficient is at the file's value: the residuals allow the left-out ones
+    # little deviation, and the bars stay near the statistical ones (a blanket 20 % widened
+    # them several times)
+    assert sel.consider_scale < 0.05
+    assert max(sel.consider_inflation.values()) < 2.0
+    assert np.all(np.diag(out.statistical_cov) <= np.diag(cov) * (1 + 1e-12))
 
 
 def test_stepwise_with_nothing_forced():
@@ -89,3 +110,74 @@ def test_stepwise_with_nothing_forced():
     members, steps, reasons = forward_stepwise(J, r.reshape(n, 12), np.full(3, 2.0),
                                                ['A', 'none', 'B'], [], [0, 1, 2])
     assert members == [0, 2] and list(reasons) == ['none']
+
+
+def _left_out_problem(rel_dev, seed=3, n=1500):
+    """Linear problem: 2 members, 6 left-out terms off by rel_dev x N(0, 1) of their prior
+    values; returns the Linearisation and the members' residuals (whitened, unit noise)."""
+    rng = np.random.default_rng(seed)
+    p = 8
+    J = rng.normal(size=(n * 12, p))
+    J[:, 2] += 0.6 * J[:, 0]                    # a left-out term that biases member 0
+    prior = np.array([1.0, -2.0, 0.5, 1.5, -1.0, 2.0, 0.8, -0.3])
+    d = rel_dev * np.abs(prior) * rng.normal(size=p)
+    d[:2] = [0.2, -0.1]                         # the members' own errors: fitted away
+    r = J @ d + rng.normal(size=n * 12)
+    members, left = [0, 1], list(range(2, p))
+    coef = np.linalg.lstsq(J[:, members], r, rcond=None)[0]
+    white = (r - J[:, members] @ coef).reshape(n, 12)
+    lin = Linearisation(G=J.T @ J, names=[f'c{i}' for i in range(p)], prior=prior,
+                        left_candidates=left, jacobian=J.astype(np.float32),
+                        white=r.reshape(n, 12))
+    return lin, members, left, white
+
+
+def test_left_out_deviation_is_what_the_residuals_allow():
+    """The left-out terms' 1-sigma is read off the members' residuals: ~0 when they are at
+    their prior (no blanket widening), of the size of their real deviation when they are off,
+    and larger for a larger deviation; the suspects are the terms the residuals point at."""
+    lin, members, left, white = _left_out_problem(0.0)
+    tau0, info0 = left_out_deviation(lin, members, left, white)
+    assert tau0 < 0.03 and info0['suspects'] == []     # the old blanket: 0.2
+    lin, members, left, white = _left_out_problem(0.1)
+    tau1, info1 = left_out_deviation(lin, members, left, white)
+    assert 0.03 < info1['point'] < 0.3 and info1['point'] <= tau1 < 0.4
+    lin, members, left, white = _left_out_problem(0.4)
+    tau2, _ = left_out_deviation(lin, members, left, white)
+    assert tau2 > 2 * tau1
+    assert left_out_deviation(lin, members, [], white)[0] == 0.0
+
+
+def test_consider_sources_name_the_term_a_widening_comes_from():
+    lin, members, left, _ = _left_out_problem(0.1)
+    sigma = 0.1 * np.abs(lin.prior)
+    src = consider_sources(lin.G, members, left, sigma, lin.names, ['c0', 'c1'])
+    assert next(iter(src['c0'])) == 'c2' and src['c0']['c2'] > 0.9
+    bias = consider_bias(lin.G, members, left, sigma)
+    assert bias[0, 0] > 10 * bias[1, 1]
+
+
+def test_inadequacy_advice_after_auto_names_what_was_left_out_not_auto_again():
+    v = load_vehicle('nps_auv2')
+    sel = Selection(chosen=['K_v', 'Z_w'], named=['K_v'],
+                    left_out={'N_r': 'correlated 0.970 with Z_w (limit 0.95)',
+                              'M_qdot': "added mass: the vehicle's fixed (literal) mass inverse "
+                                        'does not change with it', 'Y_v': 'not reached'},
+                    suspects=['N_r', 'M_qdot'])
+    text = inadequacy_remedy(v, sel)
+    assert '(--coefficients auto)' not in text and 'used here' in text
+    assert '--coefficients auto,K_v,N_r,M_qdot --mass-inverse exact' in text
+    assert 'rudder zig-zags' in text and 'quick fin reversals' in text
+    assert 'identify more coefficients (--coefficients auto)' in inadequacy_remedy(v, None)
+    none = inadequacy_remedy(v, Selection(chosen=['K_v'], named=['K_v'], left_out={}))
+    assert 'no left-out coefficient the residuals point at' in none
+
+
+def test_numbers_for_people_have_no_exponent_and_no_nan():
+    assert readable(7.63e-06) == '< 0.001' and readable(12345.6) == '12300'
+    assert readable(0.041345) == '0.0413' and readable(float('nan')) == '-'
+    assert readable(float('inf')) == 'unbounded' and readable(0.0) == '0'
+    assert percent(122.0) == '12200 %' and percent(0.0041) == '0.41 %' and percent(0.13) == '13 %'
+    assert times(822.4) == '822x' and times(1.523) == '1.52x' and times(2.345, 2) == '2.3x'
+    for text in (readable(1e-9), readable(3e7), percent(2.65e1), times(1e6)):
+        assert 'e+' not in text and 'e-' not in text and 'nan' not in text

@@ -31,7 +31,7 @@ from auv_ident.core.identification.plausibility import (
     implausible_coefficients,
     what_to_check,
 )
-from auv_ident.core.identification.results import Diagnosis
+from auv_ident.core.identification.results import Diagnosis, percent, Selection, times
 from auv_ident.core.identification.uncertainty import (
     identifiability,
     input_correlation,
@@ -104,7 +104,7 @@ def weak_notes(verdicts: Verdicts) -> list[str]:
         partner = (f', correlated {d["max_correlation"]:.2f} with {d["correlated_with"]}'
                    if d['correlated_with'] and d['max_correlation'] > 0.9 else '')
         size = (f'1-sigma {d["crb_std"]:.2g} m/s' if n.startswith('current_')
-                else f'1-sigma {100 * d["rel_std"]:.2g} % of its value')
+                else f'1-sigma {percent(d["rel_std"])} of its value')
         notes.append(f'{n} is {d["verdict"]} ({size}{partner}): {d["advice"]}')
     return notes
 
@@ -116,9 +116,40 @@ def coefficient_verdicts(vehicle: Vehicle, names: Sequence[str], estimate: np.nd
                                                 absolute_std=current_std_limits(names)))
 
 
+BARS_COVER = ('(the error bars include it as far as the residuals allow the left-out '
+              'coefficients to be off: consider analysis)')
+
+
+def inadequacy_remedy(vehicle: Vehicle, selection: Selection | None) -> str:
+    """What to do about a model the residuals call inadequate, something not just done: with
+    named coefficients, identify more (--coefficients auto); after an automatic choice (which
+    did that), the left-out coefficients the residuals point at, to name, and the manoeuvre
+    that would determine them, or a look at the model's structure when they point at none."""
+    if selection is None:
+        return '(bias no error bar covers): identify more coefficients (--coefficients auto)'
+    named = ','.join(['auto'] + list(selection.named))
+    suspects = [n for n in selection.suspects if n in selection.left_out]
+    if not suspects:
+        return (f'{BARS_COVER}: the automatic choice (--coefficients auto, used here) finds no '
+                'left-out coefficient the residuals point at: a term the model lacks, or inputs '
+                'that are not what the vehicle received (commands, not measured fin angles?)')
+    reasons = '; '.join(f'{n}: {selection.left_out[n]}' for n in suspects)
+    moves = sorted({excitation_advice(vehicle, n) for n in suspects})
+    return (f'{BARS_COVER}: the automatic choice (--coefficients auto, used here) left out '
+            f'{", ".join(suspects)}'
+            f', which the residuals point at ({reasons}); name them to identify them '
+            f'(--coefficients {named},{",".join(suspects)}'
+            + (' --mass-inverse exact' if any(selection.left_out[n].startswith('added mass')
+                                              for n in suspects) else '')
+            + ') or add runs that determine them: '
+            + '; '.join(moves))
+
+
 def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = None,
              dt: float | None = None, mean_nis_per_dof: float = math.nan,
-             verdicts: Verdicts | None = None, refined: bool = True) -> dict[str, Any]:
+             verdicts: Verdicts | None = None, refined: bool = True,
+             remedy: str = '(bias no error bar covers): identify more coefficients '
+                           '(--coefficients auto)') -> dict[str, Any]:
     """The diagnosis of one identification.
 
     Parameters
@@ -129,6 +160,7 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
     mean_nis_per_dof : of the EKF pass with the configured noise
     verdicts : coefficient_verdicts() output (or None)
     refined : whether a refinement ran (its convergence is then checked)
+    remedy : what the inadequacy message advises (:func:`inadequacy_remedy`)
 
     Returns
     -------
@@ -150,8 +182,7 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
                 f'correlation {abs(z):.1f} sd, limit {XCORR_Z:g}'
                 + (f', at a lag of {lag * dt:.2g} s' if dt is not None else '')
                 + '); coefficients that are not identified are wrong or missing, and the '
-                'estimates absorb that error (bias no error bar covers): identify more '
-                'coefficients (--coefficients auto)')
+                'estimates absorb that error ' + remedy)
     if refined and fit is not None:
         checks['refinement_converged'] = bool(fit.refine_converged)
         if not fit.refine_converged:
@@ -164,8 +195,8 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
         notes.extend(fit.notes)
         if fit.covariance == 'sandwich':
             notes.append('error bars from the sandwich covariance (residuals correlated in '
-                         'time; up to {:.2g}x the white-noise ones)'.format(
-                             float(max(fit.inflation))))
+                         'time; up to {} the white-noise ones)'.format(
+                             times(float(max(fit.inflation)), 2)))
     if math.isfinite(mean_nis_per_dof):
         checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
     if verdicts:
@@ -180,14 +211,21 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
 
 def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np.ndarray,
            fit: Any, U: np.ndarray, dt: float, mean_nis_per_dof: float = math.nan,
-           refined: bool = True, depth: np.ndarray | None = None) -> Diagnosis:
+           refined: bool = True, depth: np.ndarray | None = None,
+           information_cov: np.ndarray | None = None,
+           selection: Selection | None = None) -> Diagnosis:
     """Identifiability and diagnosis of an identification made with
     core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
     residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
     (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
     the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
     lag pairs a residual of one run with an input of another. depth : (N,) the runs' measured
-    z (m, NED; NaN where not measured) for the frame's plausibility, or None. Returns a
+    z (m, NED; NaN where not measured) for the frame's plausibility, or None.
+    information_cov : the covariance of what the run's information alone says (an automatic
+    choice's, without the consider covariance of the left-out coefficients): the verdicts are
+    judged by it, since a coefficient the run determines well is not 'not excited' because the
+    coefficients left at the file's values widen its bar (None: cov). selection : the automatic
+    choice that was made (its advice then names what it left out), or None. Returns a
     core.identification.results.Diagnosis (its identifiability None without the refined
     residuals); an estimate that is not plausible for the vehicle file
     (core/identification/plausibility.py) puts 'NOT plausible: ...' on its first line."""
@@ -205,9 +243,10 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
             U = with_gaps(split_rows(U, fit.bounds), gap)
         xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
-                                        cov)
+                                        cov if information_cov is None else information_cov)
     diagnosis = Diagnosis(identifiability=verdicts,
-                          **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined))
+                          **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined,
+                                     remedy=inadequacy_remedy(vehicle, selection)))
     return judge_plausibility(diagnosis, vehicle, names, estimate, cov, depth)
 
 

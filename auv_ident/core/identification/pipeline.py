@@ -81,7 +81,8 @@ def identify_with_diagnosis(model: Model | None, cfg: FilterConfig, runs: list[R
     U = np.concatenate([np.asarray(r.U) for r in runs])
     depth = np.concatenate([np.asarray(r.Y)[:, State.Z] for r in runs])
     diagnosis = assess(est.model.vehicle, est.model.theta_names, est.estimate, est.cov, fit, U,
-                       T, nis, refined=refine_pass, depth=depth)
+                       T, nis, refined=refine_pass, depth=depth,
+                       information_cov=est.statistical_cov, selection=est.selection)
     return Identification.of(est, runs, initial=reported.theta0[:est.model.p_coef].copy(),
                              truth=truth, steps=reported.steps,
                              wall_s=time.perf_counter() - t0,

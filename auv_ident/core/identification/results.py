@@ -176,6 +176,42 @@ class NoiseFit:
             'refined_cost_per_residual': _finite(self.refine_cost)}
 
 
+def readable(x: float, digits: int = 3) -> str:
+    """A number for a person: `digits` significant digits, never an exponent ('12200',
+    '0.0413', '< 0.001'); 'unbounded' for an infinity, '-' when not a number."""
+    if not math.isfinite(x):
+        return '-' if math.isnan(x) else 'unbounded'
+    value = float(f'{x:.{digits}g}')
+    if value == 0.0:
+        return '0'
+    if abs(value) < 1e-3:
+        return '< 0.001' if value > 0 else '> -0.001'
+    if abs(value) >= 10.0 ** digits:
+        return f'{value:.0f}'
+    return f'{value:.{digits}g}'
+
+
+def percent(fraction: float) -> str:
+    """A fraction as a percentage of 2 significant digits ('13 %', '0.41 %', '12200 %')."""
+    value = 100.0 * fraction
+    if math.isfinite(value) and abs(value) >= 10.0:
+        return f'{value:.0f} %'
+    return readable(value, 2) + ' %'
+
+
+def confidence_words(confidence: float) -> str:
+    """How the left-out deviation was read off the residuals, in words."""
+    if confidence == 0.5:
+        return 'median-unbiased'
+    return f'the {100 * confidence:.0f} % upper bound'
+
+
+def times(ratio: float, digits: int = 3) -> str:
+    """A ratio of `digits` significant digits without an exponent ('1.52x', '130x',
+    '2410x')."""
+    return f'{ratio:.0f}x' if abs(ratio) >= 10.0 ** (digits - 1) else f'{ratio:.{digits}g}x'
+
+
 def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
@@ -196,6 +232,13 @@ class Selection:
     candidates : how many coefficients the selection could choose from
     consider_inflation : per identified parameter, its final 1-sigma over the statistical one
         (identify_auto; empty when the set was only chosen)
+    consider_scale : the relative 1-sigma of the left-out coefficients the residuals allow
+        (core.identification.selection.left_out_deviation), which the consider covariance uses;
+        None when the set was only chosen
+    consider_sources : {member: {left-out coefficient: share of its consider variance}}, the
+        terms each widening comes from (the largest few)
+    suspects : the left-out coefficients the residuals point at most (largest partial F alone,
+        white, at least the entry threshold), largest first
     reassessed : True when pass 2 ran (identify_auto); False for pass 1 alone
         (choose_coefficients, the live identifier's choice)
     criteria : the thresholds the choice applied ({'f_to_enter', 'rel_std_max',
@@ -210,6 +253,9 @@ class Selection:
     consider_inflation: dict = field(default_factory=dict)
     reassessed: bool = True
     criteria: dict = field(default_factory=dict)
+    consider_scale: Optional[float] = None
+    consider_sources: dict = field(default_factory=dict)
+    suspects: list = field(default_factory=list)
 
     def document(self) -> dict:
         """JSON-ready dict (the result's `selection`)."""
@@ -217,6 +263,9 @@ class Selection:
                 'left_out': dict(self.left_out), 'steps': list(self.steps),
                 'candidates': int(self.candidates),
                 'consider_inflation': dict(self.consider_inflation),
+                'consider_scale': self.consider_scale,
+                'consider_sources': {n: dict(d) for n, d in self.consider_sources.items()},
+                'suspects': list(self.suspects),
                 'criteria': dict(self.criteria,
                                  method='stepwise regression on the filter-error residuals '
                                         '(partial F with the long-run variance)'
@@ -233,17 +282,36 @@ class Selection:
             key = why.split(':')[0].split(' (')[0]
             groups.setdefault(key, []).append(name)
         if self.consider_inflation:
-            worst = max(self.consider_inflation, key=lambda n: self.consider_inflation[n])
-            ratio = self.consider_inflation[worst]
-            lines.append("error bars include the errors of the coefficients left at the file's "
-                         f'values ({100 * self.criteria["prior_rel_std"]:g} % 1-sigma each, '
-                         f'consider analysis): up to {ratio:.3g}x the statistical ones '
-                         f'({worst})')
+            lines.append(self.widening_line())
         lines.append('left out (vehicle file values kept; reasons per coefficient in the JSON '
                      '`selection`):')
         for key, members in groups.items():
             lines.append(f'  {key}: {", ".join(members)}')
         return lines
+
+    def widening_line(self) -> str:
+        """One sentence: how far the left-out coefficients may be off by the residuals, how
+        much that widens the error bars, and where the widest one's widening comes from."""
+        if not self.consider_inflation:
+            return ''
+        worst = max(self.consider_inflation, key=lambda n: self.consider_inflation[n])
+        ratio = self.consider_inflation[worst]
+        tau = self.consider_scale
+        if tau is None:
+            allowed = ''
+        elif tau < 5e-4:
+            allowed = 'the residuals show them at those values; '
+        else:
+            allowed = (f'the residuals put them {percent(tau)} of their values off, 1-sigma, '
+                       + confidence_words(self.criteria['consider_confidence']) + '; ')
+        head = ("error bars include the errors of the coefficients left at the file's values "
+                f'({allowed}consider analysis): ')
+        if ratio < 1.005:
+            return head + 'the statistical ones to within 0.5 %'
+        src = self.consider_sources.get(worst, {})
+        return (head + f'up to {times(ratio)} the statistical ones ({worst}'
+                + (', from ' + ', '.join(f'{n} {100 * share:.0f} %' for n, share in src.items())
+                   if src else '') + ')')
 
 
 @dataclass
@@ -256,12 +324,18 @@ class Linearisation:
     names : (q,) their names; prior : (q,) the values the sensitivities were taken at
     left_candidates : indices of the coefficients whose errors bias the set when they are left
         at their prior (the candidates and the considered added mass)
+    jacobian : (N * 12, q) the sensitivities J (float32) behind G, kept for the evidence of
+        the left-out terms in the final residuals (selection.left_out_deviation); None when
+        not kept
+    white : (N, 12) the whitened residuals at the prior (NaN: no measurement), or None
     """
 
     G: np.ndarray
     names: list
     prior: np.ndarray
     left_candidates: list
+    jacobian: Optional[np.ndarray] = None
+    white: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -296,6 +370,9 @@ class Estimate:
         covariance the residuals support (core/identification/noise_fit.py)
     noise : the noise model (None when identified without one, core.identification.batch)
     selection : the automatic choice, or None when the coefficients were given
+    statistical_cov : with an automatic choice, cov without the consider covariance of the
+        left-out coefficients: what the run's information alone says (the identifiability
+        verdicts are judged by it); None: cov is that
     """
 
     model: Model
@@ -305,6 +382,7 @@ class Estimate:
     cov: np.ndarray
     noise: Optional[NoiseFit] = None
     selection: Optional[Selection] = None
+    statistical_cov: Optional[np.ndarray] = None
 
 
 @dataclass

@@ -41,9 +41,15 @@ only it, on its first `auto_window` seconds, and lets its filter identify the ch
 :func:`identify_auto` runs both passes.
 
 Error bars: the final covariance adds the consider covariance of the coefficients left at the
-file's values (PRIOR_REL_STD 1-sigma each; added-mass terms a literal M^-1 cannot change
-included, their sensitivities from a model with the exact inverse), so that it covers the bias
-a wrong prior causes. Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
+file's values (added-mass terms a literal M^-1 cannot change included, their sensitivities from
+a model with the exact inverse), so that it covers the bias a wrong prior causes. How far off
+the left-out coefficients may be is read off the residuals, not assumed
+(:func:`left_out_deviation`): one relative 1-sigma tau for all of them, the value under which
+the part of the residuals that only they can explain is the median of its distribution
+(CONSIDER_CONFIDENCE 0.5: median-unbiased; a record the file's values fit leaves tau near 0
+and the bars statistical, one they do not fit widens them as far as the misfit says). The
+widening of each member is traced to the left-out terms it comes from
+(Selection.consider_sources). Measured in docs/accuracy.md (tools/auto_selection_campaign.py).
 
 Coefficients never enter silently: every coefficient of the vehicle is either chosen or left
 out with its reason (:class:`Selection`); the left-out ones keep the vehicle file's values.
@@ -54,11 +60,18 @@ from dataclasses import replace
 import math
 
 import numpy as np
+from scipy.stats import gamma
 
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.identification.batch import FilterErrorResiduals, parameter_scale
 from auv_ident.core.identification.noise_fit import identify_with_noise_model
-from auv_ident.core.identification.results import Choice, Linearisation, Selection
+from auv_ident.core.identification.results import (
+    Choice,
+    Linearisation,
+    percent,
+    readable,
+    Selection,
+)
 from auv_ident.core.identification.uncertainty import (
     bandwidth,
     CORRELATION_WEAK,
@@ -75,6 +88,9 @@ REL_STD_MAX = REL_STD_IDENTIFIABLE   # relative CRB 1-sigma of a member: below 5
 CORRELATION_MAX = CORRELATION_WEAK   # |correlation| between members: at most 0.95
 SENSITIVITY_STEP = 1e-4     # relative finite-difference step of the sensitivities
 PRIOR_REL_STD = 0.2         # 1-sigma of a vehicle file's value, relative (formulas: 10-50 % off)
+CONSIDER_CONFIDENCE = 0.5   # the left-out deviation: median-unbiased (module docstring)
+MAX_LEFT_OUT_SCALE = 1.0    # the left-out deviation taken at most: 100 % of the file's values
+SOURCES_SHOWN = 3           # left-out terms named per member as the source of its widening
 
 
 def parse_request(vehicle, names):
@@ -208,6 +224,116 @@ def consider_bias(G, members, left, sigma):
     return B @ B.T
 
 
+def _left_out_part(G, b, members, left):
+    """The left-out coefficients' information and score with the members' part projected out
+    (the members are fitted, so only what the members cannot absorb is evidence about the
+    others): K = G_LL - G_LS G_SS^-1 G_SL, c = b_L - G_LS G_SS^-1 b_S."""
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
+    proj = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)]
+    K = G[np.ix_(L, L)] - G[np.ix_(L, S)] @ proj
+    c = b[L] - proj.T @ b[S]
+    return 0.5 * (K + K.T), c
+
+
+def left_out_deviation(lin, members, left, white, weights=None,
+                       confidence=CONSIDER_CONFIDENCE):
+    """How far the coefficients left at the file's values may be off, by what the residuals
+    allow: tau, one relative 1-sigma for all of them (d_L ~ (0, tau^2 diag(prior_L^2))).
+
+    The whitened residuals of the identified set, r ~ J_L d_L + e, e white of unit variance
+    (the configured noise), J the sensitivities at the file's values (the Linearisation): the
+    members were fitted (their large, nonlinear corrections are in r already, which the
+    residuals at the file's values would leave to a linear guess); what the left-out terms
+    alone can explain is X = c^T K^+ c (:func:`_left_out_part`, b = J^T r).
+    In the eigenvectors of W = diag|prior_L| K diag|prior_L| (eigenvalues lambda_i > 0),
+    X = sum_i (1 + tau^2 lambda_i) chi2_1, taken as a gamma variable of that mean and variance
+    (Satterthwaite). tau is the largest value under which an X as small as the one measured
+    has probability 1 - confidence (0.5: the measured X is the median, a median-unbiased
+    estimate; higher: an upper bound), at most MAX_LEFT_OUT_SCALE. The residuals and J are
+    whitened alike (weights); coloured noise adds to X and so only widens the bars.
+
+    lin : Linearisation (G, jacobian, prior); members, left : indices into it (the identified
+    set with the current components; the left-out coefficients); white : (N, 12) the residuals
+    of the identified set, whitened (NaN: no measurement); weights : (12,) per channel the
+    factor that takes J (whitened by the configured noise) to the whitening of `white` (the
+    configured over the effective 1-sigma), None: 1
+    Returns (tau, {'explained': X, 'directions': len(lambda), 'point': the moment estimate
+    sqrt(max(0, X - n) / sum lambda), 'suspects': [(name, partial F)] the left-out terms the
+    residuals point at most, largest first (each alone: c_j^2 / K_jj, white)})."""
+    info = {'explained': 0.0, 'directions': 0, 'point': 0.0, 'suspects': []}
+    if not len(left) or lin.jacobian is None:
+        return 0.0, info
+    J, G = lin.jacobian, lin.G
+    if weights is not None and np.any(np.asarray(weights) != 1.0):
+        n = J.shape[0] // len(weights)
+        J = (J.reshape(n, len(weights), -1)
+             * np.asarray(weights, dtype=np.float32)[None, :, None]).reshape(J.shape)
+        G = (J.T @ J).astype(float)
+    score = (J.T @ np.nan_to_num(np.asarray(white, dtype=np.float32).ravel())).astype(float)
+    K, c = _left_out_part(G, score, members, left)
+    scale = np.abs(lin.prior[np.asarray(left, dtype=int)])
+    lam, Q = np.linalg.eigh(scale[:, None] * K * scale[None, :])
+    keep = lam > 1e-9 * max(float(lam.max()), 0.0)
+    if not np.any(keep):
+        return 0.0, info
+    lam, Q = lam[keep], Q[:, keep]
+    X = float(np.sum((Q.T @ (scale * c)) ** 2 / lam))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        single = np.where(np.diag(K) > 0.0, c ** 2 / np.diag(K), 0.0)
+    order = np.argsort(-single)
+    info.update(explained=X, directions=int(lam.size),
+                point=math.sqrt(max(0.0, X - lam.size) / float(lam.sum())),
+                suspects=[(lin.names[left[j]], float(single[j])) for j in order[:SOURCES_SHOWN]
+                          if single[j] >= F_TO_ENTER])
+
+    def below(tau):
+        # P(X_model <= X measured | tau) > 1 - confidence: tau is not yet excluded
+        a = 1.0 + tau * tau * lam
+        mean, var = float(a.sum()), 2.0 * float(np.sum(a * a))
+        return gamma.cdf(X, mean * mean / var, scale=var / mean) > 1.0 - confidence
+
+    lo, hi = 1e-6, MAX_LEFT_OUT_SCALE
+    if not below(lo):
+        return 0.0, info
+    if below(hi):
+        return hi, info
+    for _ in range(60):             # bisection on log tau: 1e-6 .. 1 to 0.03 %
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if below(mid) else (lo, mid)
+    return hi, info
+
+
+def whitening_weights(fit):
+    """(12,) per channel the configured over the effective 1-sigma of a NoiseFit: what takes
+    the sensitivities at the file's values (whitened by the configured noise) to the whitening
+    of the refined residuals (by the noise the refinement used); 1 where the configured noise
+    was used. Weighting J, not the residuals, keeps the noise in the residuals at unit variance
+    (a noise louder than configured is not taken for the left-out terms' deviation)."""
+    return np.asarray(fit.configured_std, dtype=float) / np.asarray(fit.effective_std,
+                                                                    dtype=float)
+
+
+def consider_sources(G, members, left, sigma, names, member_names):
+    """Per member, the left-out terms its consider variance comes from: {member name:
+    {left-out name: share of its consider variance}}, the SOURCES_SHOWN largest of at least
+    1 % (each term's own part (B_ij sigma_j)^2 over their sum; members without widening are
+    left out)."""
+    S, L = np.asarray(members, dtype=int), np.asarray(left, dtype=int)
+    if L.size == 0:
+        return {}
+    B = np.linalg.pinv(G[np.ix_(S, S)]) @ G[np.ix_(S, L)] * sigma[L][None, :]
+    parts = B ** 2
+    out = {}
+    for k, name in enumerate(member_names):
+        total = float(parts[k].sum())
+        if total <= 0.0:
+            continue
+        top = np.argsort(-parts[k])[:SOURCES_SHOWN]
+        out[name] = {names[L[j]]: round(float(parts[k, j] / total), 3) for j in top
+                     if parts[k, j] >= 0.01 * total}
+    return out
+
+
 def expected_error(G, members, pool_all, s2, prior, sigma, of_interest=()):
     """The selection's objective, from the expected squared relative error of a coefficient:
     PRIOR_REL_STD^2 for one left at its prior, and for a member its white-noise CRB variance
@@ -291,12 +417,12 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             c = int(cand[k])
             if f_white[k] < F_TO_ENTER:
                 last[c] = ('residual reduction too small: partial F (white) '
-                           f'{f_white[k]:.3g} < {F_TO_ENTER:g}')
+                           f'{readable(f_white[k])} < {F_TO_ENTER:g}')
                 continue
             trial = members + [c]
             rel, cmax, partner = _set_figures(G, trial, s2, prior)
             if rel[-1] >= REL_STD_MAX:
-                reasons[names[c]] = (f'not identifiable: relative 1-sigma {100 * rel[-1]:.3g} % '
+                reasons[names[c]] = (f'not identifiable: relative 1-sigma {percent(rel[-1])} '
                                      f'>= {100 * REL_STD_MAX:g} %')
                 pool.remove(c)
                 continue
@@ -309,11 +435,11 @@ def forward_stepwise(J, white, prior, names, forced, candidates, consider_only=(
             if after >= current:
                 last[c] = ('would not lower the expected error: it absorbs the errors of '
                            'coefficients left at their prior (consider analysis, '
-                           f'{after:.3g} >= {current:.3g})')
+                           f'{readable(after)} >= {readable(current)})')
                 continue
             f_hac = _hac_partial_f(J, r_set, J_set, proj[:, k], c, n_samples)
             if f_hac < F_TO_ENTER:
-                last[c] = (f'residual reduction too small: partial F {f_hac:.3g} < '
+                last[c] = (f'residual reduction too small: partial F {readable(f_hac)} < '
                            f'{F_TO_ENTER:g} (long-run variance)')
                 continue
             members.append(c)
@@ -351,7 +477,7 @@ def prune(names, estimate, cov, keep_always):
         j = max(bad, key=lambda j: rel[j])
         i = keep[j]
         if rel[j] >= REL_STD_MAX:
-            why = f'relative 1-sigma {100 * rel[j]:.3g} % >= {100 * REL_STD_MAX:g} %'
+            why = f'relative 1-sigma {percent(rel[j])} >= {100 * REL_STD_MAX:g} %'
         else:
             why = (f'correlated {cmax[j]:.3f} with {names[keep[partner[j]]]} (limit '
                    f'{CORRELATION_MAX:g})')
@@ -419,7 +545,7 @@ def choose_coefficients(make_model, cfg, runs, named=(), T=None, max_step=None,
     chosen = [names[i] for i in members if i < all_model.p_coef]
     lin = Linearisation(G=J.T @ J, names=names, prior=prior,
                         left_candidates=list(range(len(named), all_model.p_coef))
-                        + consider_idx)
+                        + consider_idx, jacobian=J.astype(np.float32), white=white)
     sel = Selection(chosen=chosen, named=named, left_out=_in_file_order(vehicle, left_out),
                     steps=steps, candidates=len(cands), reassessed=False, criteria=criteria())
     return Choice(sel, lin)
@@ -468,17 +594,36 @@ def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
         start = [out.estimate[out.model.theta_names.index(n)] for n in kept_coefs]
         out = run(kept_coefs, start)
         chosen = kept_coefs
-    # error bars that cover the coefficients left at the file's values (consider analysis)
+    # error bars that cover the coefficients left at the file's values (consider analysis),
+    # as far off as the residuals allow them to be
     names = lin.names
     idx = [names.index(n) for n in out.model.theta_names]
     left = [i for i in lin.left_candidates if names[i] not in chosen]
-    bias = consider_bias(lin.G, idx, left, PRIOR_REL_STD * np.abs(lin.prior))
+    # without a refinement, or when the process noise was matched to the innovations (that
+    # filter tracks the model error into its states and its residuals hide it: a REMUS 100
+    # campaign bag gave tau 0.5 % and errors of 9 sigma), the residuals at the file's values,
+    # of the filter the sensitivities were taken with (the members' misfit beyond the linear
+    # fit then counts as the left-out terms': wider, never narrower)
+    if out.noise.white is None or out.noise.process_used:
+        tau, evidence = left_out_deviation(lin, idx, left, lin.white)
+    else:
+        tau, evidence = left_out_deviation(lin, idx, left, out.noise.white,
+                                           weights=whitening_weights(out.noise))
+    sigma = tau * np.abs(lin.prior)
+    out.statistical_cov = out.cov
     stat_sd = np.sqrt(np.diag(out.cov))
-    out.cov = out.cov + bias
-    inflation = np.sqrt(np.diag(out.cov)) / stat_sd
-    out.selection = replace(sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
-                            steps=[s for s in sel.steps if s['name'] in chosen],
-                            reassessed=True,
-                            consider_inflation={n: float(inflation[i])
-                                                for i, n in enumerate(out.model.theta_names)})
+    out.cov = out.cov + consider_bias(lin.G, idx, left, sigma)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        inflation = np.where(stat_sd > 0, np.sqrt(np.diag(out.cov)) / stat_sd, 1.0)
+    out.selection = replace(
+        sel, chosen=chosen, left_out=_in_file_order(vehicle, left_out),
+        steps=[s for s in sel.steps if s['name'] in chosen], reassessed=True,
+        consider_inflation={n: float(inflation[i])
+                            for i, n in enumerate(out.model.theta_names)},
+        consider_scale=float(tau),
+        consider_sources=consider_sources(lin.G, idx, left, sigma, names,
+                                          out.model.theta_names),
+        suspects=[name for name, _ in evidence['suspects']],
+        criteria=dict(sel.criteria, consider_confidence=CONSIDER_CONFIDENCE,
+                      left_out_point=round(evidence['point'], 4)))
     return out
