@@ -45,6 +45,9 @@ Publications
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
             updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
             (rules and reset in auv_ident/session/guard.py);
+        ERROR 'stuck sensor: ...': a measured channel group repeats its values exactly for
+            10 samples and 2 s or more (session/stuck.py: the repeats are not fed, no update
+            is good until it changes);
         WARN 'waiting for data': no update since start-up or the last restart;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
@@ -55,7 +58,9 @@ Publications
     by the reset rule: core errors and divergence-guard resets), guard_resets, outliers
     (innovation gate), repairs (covariance repairs), time_jumps (confirmed backward jumps),
     actuator_publishers (on the actuator topic, checked at 1 Hz), internal_errors (unexpected
-    exceptions caught in a callback; 0 unless there is a bug), last_error, mean_nis_per_dof,
+    exceptions caught in a callback; 0 unless there is a bug), last_error, repeated
+    (measured channel-group samples not fed because they repeated the previous sample
+    exactly), stuck_sensor (the active stuck-sensor fault, or 'none'), mean_nis_per_dof,
     nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
     last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
     session/live_diagnosis.py), then per coefficient <name>, <name>_std and <name>_verdict of

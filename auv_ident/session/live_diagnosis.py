@@ -50,6 +50,10 @@ def live_diagnosis(health: Any, verdicts: Verdicts) -> dict[str, Any]:
     from the filter's Health (session/guard.py judge_health) and live_verdicts()."""
     m, (lo, hi), n = health.mean_nis_per_dof, health.band, health.window
     notes = weak_notes(verdicts)
+    if health.level == 'ERROR' and health.message.startswith('stuck sensor'):
+        return {'consistent': False,
+                'messages': [f'NOT consistent: {health.message}; the estimate shown is the last '
+                             'good one, from before the fault'] + notes}
     if health.level == 'ERROR':
         return {'consistent': False,
                 'messages': [f'NOT consistent: the filter is {health.message} (a reset or '

@@ -31,6 +31,8 @@ accepted messages of the first ``auto_window`` s and switches, once, to the set 
 them (session/auto_choice.py, whose chosen filter is a GuardedFilter too; the switch:
 :meth:`IdentSession.poll_choice`).
 """
+from dataclasses import replace
+
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
@@ -78,6 +80,7 @@ from auv_ident.session.settings import (
     vehicle_named,
 )
 from auv_ident.session.status import Counters
+from auv_ident.session.stuck import StuckDetector
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -178,6 +181,8 @@ class IdentSession:
         self.fin_limit = float(v[P_FIN])        # rad
         self.shaft_limit = float(v[P_NMAX])     # rpm
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
+        # exact repeats of a measured channel group: not fed; a stuck sensor (session/stuck.py)
+        self.stuck = StuckDetector(self._measured_states)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
@@ -276,7 +281,11 @@ class IdentSession:
     # -- the estimate, its file, health and diagnosis --
 
     def best(self):
-        """(estimate, covariance) to report: the last good one, else estimate_now()."""
+        """(estimate, covariance) to report: the last good one, else estimate_now(); with no
+        good estimate yet while a sensor is stuck (session/stuck.py), the start-up prior, not
+        what the filter formed during the fault."""
+        if self.last_good is None and self.stuck.active():
+            return self.theta0.copy(), self.stream.ekf.theta_cov0.copy()
         return self.filter.best()
 
     def estimate_now(self):
@@ -294,8 +303,13 @@ class IdentSession:
                                  None if self.auto is None else self.auto.document())
 
     def health(self):
-        """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
-        return self.counters.health(self.filter)
+        """The filter's health (session/guard.py judge_health: the /diagnostics status); ERROR
+        'stuck sensor: ...' while a measured channel group is stuck (session/stuck.py)."""
+        health = self.counters.health(self.filter)
+        stuck = self.stuck.describe_active()
+        if stuck:
+            return replace(health, level='ERROR', message=f'stuck sensor: {stuck}')
+        return health
 
     def diagnosis(self, health=None):
         """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
@@ -521,12 +535,22 @@ class IdentSession:
                                    self._frame_ids, self._measured_states)
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
+        held = self._repeats(t, x12)
+        if held is not None and self.stuck.all_held(held):
+            return self._reject('odom', 'repeated', 'every measured channel group ('
+                                + ', '.join(g.name for g in held) + ') repeats the previous '
+                                f'sample exactly at {t:.9f} s: not fed (a stuck sensor?)',
+                                stamp_ns)
         y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
+        if held:
+            y = y.copy()
+            y[self.stuck.channels(held)] = np.nan
         r = None if variances is None else self._measurement_variances(variances)
         filt = self.filter
         before = filt.last_good
+        stuck = self.stuck.describe_active()
         try:
-            step = filt.update(t, stamp_ns, y, r)
+            step = filt.update(t, stamp_ns, y, r, trusted=not stuck)
         except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
@@ -541,10 +565,28 @@ class IdentSession:
                 self._frame_ids = (frame_id, child_frame_id)
             return Event('update', f'odom: {step.reason}' if step.reason else '', stamp_ns,
                          step.estimate, step.std, step.cov, step.nis, step.dof, step.code, True)
-        reason = ('odom: ' + (step.reason + '; ' if step.reason else '') + filt.why_not_good()
+        why = f'stuck sensor: {stuck}' if stuck else filt.why_not_good()
+        reason = ('odom: ' + (step.reason + '; ' if step.reason else '') + why
                   + ': not taken as good')
         return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
                      step.dof, 'guard', False)
+
+    def _repeats(self, t, x12):
+        """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s):
+        the measured channel groups that repeat the previous sample exactly (None: not
+        judged, a stamp not after the last fed one, which the stream's time rules take), their
+        repeats counted and any fault started or ended, said once in the notices."""
+        prev = self.stream.t_prev
+        if prev is not None and t <= prev:
+            return None
+        stuck = self.stuck
+        xl = x12.tolist()
+        held = stuck.held(xl)
+        stuck.observe(t, xl, held)
+        if stuck.notices:
+            self.notices.extend(stuck.notices)
+            stuck.notices.clear()
+        return held
 
     def _taken(self, t, stamp_ns, y, r, step, before):
         """Count and keep an accepted odometry sample (y, its variances r or None); start the
