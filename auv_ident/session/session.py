@@ -80,7 +80,7 @@ from auv_ident.session.settings import (
     vehicle_named,
 )
 from auv_ident.session.status import Counters
-from auv_ident.session.stuck import StuckDetector
+from auv_ident.session.stuck import describe_spans, StuckDetector
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -536,7 +536,7 @@ class IdentSession:
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
         held = self._repeats(t, x12)
-        if held is not None and self.stuck.all_held(held):
+        if held and self.stuck.all_held(held):
             return self._reject('odom', 'repeated', 'every measured channel group ('
                                 + ', '.join(g.name for g in held) + ') repeats the previous '
                                 f'sample exactly at {t:.9f} s: not fed (a stuck sensor?)',
@@ -548,16 +548,20 @@ class IdentSession:
         r = None if variances is None else self._measurement_variances(variances)
         filt = self.filter
         before = filt.last_good
-        stuck = self.stuck.describe_active()
+        # the faults that go on with this sample (a stuck group that changes now ends its own)
+        stuck = describe_spans(self.stuck.faults_among(held))
         try:
             step = filt.update(t, stamp_ns, y, r, trusted=not stuck)
         except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
+        if step.accepted:
+            self.stuck.renew(t, x12.tolist(), held)
+            self._stuck_notices()
         if not step.accepted:
             ev = self._reject('odom', step.code, step.reason, stamp_ns)
             return self._guard_reset(t, stamp_ns) if step.sustained else ev
-        self._taken(t, stamp_ns, y, r, step, before)
+        self._taken(t, stamp_ns, y, r, step, before, not stuck)
         if step.sustained:
             return self._guard_reset(t, stamp_ns)
         if step.good:
@@ -573,27 +577,32 @@ class IdentSession:
 
     def _repeats(self, t, x12):
         """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s):
-        the measured channel groups that repeat the previous sample exactly (None: not
-        judged, a stamp not after the last fed one, which the stream's time rules take), their
-        repeats counted and any fault started or ended, said once in the notices."""
+        the measured channel groups that repeat the last sample the filter took exactly
+        ([] for a stamp not after it, which the stream's time rules take), their repeats
+        counted and a fault started, said once in the notices."""
         prev = self.stream.t_prev
         if prev is not None and t <= prev:
-            return None
+            return []
+        held = self.stuck.held(x12.tolist())
+        if held:
+            self.stuck.repeat(t, held)
+            self._stuck_notices()
+        return held
+
+    def _stuck_notices(self):
         stuck = self.stuck
-        xl = x12.tolist()
-        held = stuck.held(xl)
-        stuck.observe(t, xl, held)
         if stuck.notices:
             self.notices.extend(stuck.notices)
             stuck.notices.clear()
-        return held
 
-    def _taken(self, t, stamp_ns, y, r, step, before):
-        """Count and keep an accepted odometry sample (y, its variances r or None); start the
-        'auto' choice, from the last good estimate before it, when its window fills."""
+    def _taken(self, t, stamp_ns, y, r, step, before, trusted):
+        """Count and keep an accepted odometry sample (y, its variances r or None; trusted:
+        no sensor fault active); start the 'auto' choice, from the last good estimate before
+        it, when its window fills."""
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
             self.measurements.append((t, y))
             self.variances.append(self.noise_default if r is None else r)
-        if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
+        if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code,
+                                                            trusted):
             self._start_choice(before)

@@ -26,13 +26,17 @@ The rule of :class:`StuckDetector`, per group:
 
 A group held for a whole run (a driver that fills only the twist and leaves the orientation
 at the identity quaternion, position at zero) is the same fault: never fed after its first
-sample, ERROR throughout, and offline the identification NOT consistent naming it
+sample, ERROR from STUCK_SECONDS on, and offline the identification NOT consistent naming it
 (analysis/bag_identify.py). Set ``measured`` to the channels the sensor really provides.
 
 Not a fault by this rule: a group that changes in any bit. Commands are not measured channels
 (drivers publish them on change) and are not judged. A noise-free source whose vehicle holds
 a state exactly (a simulator without sensor noise, at rest or at a steady trim) reads as
-stuck: give the simulated sensors noise (every simulator of this package does).
+stuck: give the simulated sensors noise (the package's simulators add it by default).
+
+A sample whose stamp is not after the last fed one is not judged (the stream's time rules
+reject it as a duplicate or out of order). The updates between a span's first repeat and the
+fault (up to 2 s) may become good: they were formed without the repeats.
 
 Defaults, not settings: 10 samples and 2 s are far beyond any noisy sensor (a repeat of three
 noisy floats has probability ~0) and far below the 5 s spans of the faults it is for; the
@@ -94,9 +98,11 @@ class StuckDetector:
     measured_states : the measured State indices; a group counts those of its members only
         (none measured: the group is not judged)
 
-    Per odometry sample the session asks :meth:`held` which groups repeat and hands the
-    sample to :meth:`observe` before the filter sees it (the held groups left out, or the
-    whole message rejected when every group is held). ``spans`` lists
+    Per odometry sample the session asks :meth:`held` which groups repeat, counts them with
+    :meth:`repeat` (the whole message rejected when every group is held), feeds the rest and,
+    if the filter took the sample, hands it to :meth:`renew`: the values compared with are
+    those of the last sample the filter took, so a message re-sent after a rejection (no
+    command yet, say) is not a repeat. ``spans`` lists
     every fault since start-up (StuckSpan, the active ones last updated), ``notices`` the
     one-time lines to log (the caller moves them on and clears them)."""
 
@@ -122,23 +128,37 @@ class StuckDetector:
     def all_held(self, groups):
         return len(groups) == len(self.groups)
 
-    def observe(self, t, x12, groups):
-        """A sample at stamp t (s), x12 a list of 12 floats, of which `groups` (held()) repeat
-        and are not fed: count them and start a fault where the rule says so; the other groups
-        bring new values (a fault of theirs ends). A fault's start and end are said once
-        (one notice for the groups that start or end together)."""
+    def repeat(self, t, groups):
+        """These groups (held()) repeat at stamp t (s) and are not fed: count them, and start
+        a fault where the rule says so (said once, one notice for the groups that start
+        together)."""
         self.repeats += len(groups)
+        started = []
+        for g in groups:
+            g.repeats += 1
+            if g.span is not None:
+                g.span.last, g.span.repeats = t, g.repeats
+            elif g.repeats + 1 >= STUCK_SAMPLES and t - g.since >= STUCK_SECONDS:
+                g.span = StuckSpan(g.name, g.since, t, g.repeats)
+                self.spans.append(g.span)
+                started.append(g.span)
+        if started:
+            self.notices.append(
+                f'odom: {describe_spans(started)}: a stuck sensor? Its repeats are not fed to '
+                'the filter; health ERROR and no estimate taken as good until it changes')
+
+    def faults_among(self, groups):
+        """The active faults (StuckSpan) of these groups."""
+        return [g.span for g in groups if g.span is not None]
+
+    def renew(self, t, x12, groups):
+        """The filter took the sample at stamp t (s), x12 a list of 12 floats, without
+        `groups` (held()): the other groups' values are the ones to compare with from now on,
+        and a fault of theirs ends (said once)."""
         held = {id(g) for g in groups}
-        started, ended = [], []
+        ended = []
         for g in self.groups:
             if id(g) in held:
-                g.repeats += 1
-                if g.span is not None:
-                    g.span.last, g.span.repeats = t, g.repeats
-                elif g.repeats + 1 >= STUCK_SAMPLES and t - g.since >= STUCK_SECONDS:
-                    g.span = StuckSpan(g.name, g.since, t, g.repeats)
-                    self.spans.append(g.span)
-                    started.append(g.span)
                 continue
             if g.span is not None:
                 g.span.active = False
@@ -146,10 +166,6 @@ class StuckDetector:
                 g.span = None
             g.values = tuple(x12[i] for i in g.channels)
             g.since, g.repeats = t, 0
-        if started:
-            self.notices.append(
-                f'odom: {describe_spans(started)}: a stuck sensor? Its repeats are not fed to '
-                'the filter; health ERROR and no estimate taken as good until it changes')
         if ended:
             self.notices.append(f'odom: changes again at t = {t:.3f} s after '
                                 f'{describe_spans(ended)}')
