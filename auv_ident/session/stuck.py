@@ -9,6 +9,10 @@ states):
 
     position (x y z), attitude (phi theta psi), linear velocity (u v w), angular velocity (p q r)
 
+A group of which only one channel is measured is not judged alone (one channel may repeat
+legitimately); the groups' lone measured channels are judged together instead (a planar
+vehicle: position x y, linear velocity u v, and 'psi, r').
+
 The rule of :class:`StuckDetector`, per group:
 
 - an exact repeat of the group's previous values is NOT FED to the filter (its channels are
@@ -44,7 +48,7 @@ repeats are not fed from the first one, so the thresholds decide only when ERROR
 """
 from dataclasses import dataclass
 
-from auv_ident.core.model.state import State
+from auv_ident.core.model.state import State, STATE_NAMES
 
 STUCK_SAMPLES = 10      # consecutive samples with the same values (the first one included) ...
 STUCK_SECONDS = 2.0     # ... spanning at least this many seconds of stamps: a stuck sensor
@@ -95,8 +99,10 @@ class _Group:
 class StuckDetector:
     """The stuck-sensor rule (module docstring) over the measured channels.
 
-    measured_states : the measured State indices; a group counts those of its members only
-        (none measured: the group is not judged)
+    measured_states : the measured State indices; a group counts those of its members only;
+        a group with one measured member is not judged alone: such members form one group
+        together (named by their channels, e.g. 'psi, r' for a planar vehicle), judged if
+        there are two or more
 
     Per odometry sample the session asks :meth:`held` which groups repeat, counts them with
     :meth:`repeat` (the whole message rejected when every group is held), feeds the rest and,
@@ -108,9 +114,19 @@ class StuckDetector:
 
     def __init__(self, measured_states):
         measured = set(measured_states)
-        self.groups = [_Group(name, tuple(i for i in channels if i in measured))
-                       for name, channels in CHANNEL_GROUPS
-                       if any(i in measured for i in channels)]
+        self.groups = []
+        singles = []
+        for name, channels in CHANNEL_GROUPS:
+            ours = tuple(i for i in channels if i in measured)
+            if len(ours) >= 2:
+                self.groups.append(_Group(name, ours))
+            else:
+                singles.extend(ours)
+        # one measured channel of a group alone may repeat (a quantised heading on a straight
+        # course): such channels are judged together (a planar vehicle's psi and r)
+        if len(singles) >= 2:
+            self.groups.append(_Group(', '.join(STATE_NAMES[i] for i in singles),
+                                      tuple(singles)))
         self.spans = []
         self.notices = []
         self.repeats = 0        # group-samples not fed because they repeated

@@ -10,7 +10,7 @@ from auv_ident.core.simulation.simulate import simulate
 from auv_ident.session.session import IdentSession
 from auv_ident.session.settings import IdentifierSettings
 from auv_ident.session.status import diagnostic_values
-from auv_ident.session.stuck import STUCK_SAMPLES, STUCK_SECONDS
+from auv_ident.session.stuck import STUCK_SAMPLES, STUCK_SECONDS, StuckDetector
 from auv_ident.vehicles import load_vehicle
 
 T = 0.05
@@ -161,3 +161,24 @@ def test_no_good_estimate_during_a_fault_saves_the_prior(run):
     doc = s.document()
     assert doc['stamp'] is None and doc['estimate'] == list(s.theta0)
     assert not np.array_equal(s.estimate_now()[0], s.theta0)
+
+
+def test_lone_measured_channels_are_judged_together():
+    """A planar vehicle measures u v r x y psi: psi and r are each the only measured member of
+    their group, and one channel may repeat legitimately (a quantised heading on a straight
+    course); they are judged together."""
+    planar = [State.U, State.V, State.R, State.X, State.Y, State.PSI]
+    d = StuckDetector(planar)
+    assert [(g.name, g.channels) for g in d.groups] == [
+        ('position', (State.X, State.Y)), ('linear velocity', (State.U, State.V)),
+        ('psi, r', (State.PSI, State.R))]
+    x = np.arange(12.0)
+    d.renew(0.0, x.tolist(), [])
+    moved = x + 1e-6
+    moved[State.PSI] = x[State.PSI]     # the heading repeats, nothing else does
+    assert d.held(moved.tolist()) == []
+    moved[State.R] = x[State.R]         # heading and yaw rate repeat
+    moved[State.X:State.Z] = x[State.X:State.Z]     # so does the position
+    assert [g.name for g in d.held(moved.tolist())] == ['position', 'psi, r']
+    assert [g.name for g in StuckDetector([State.Z, State.U, State.V]).groups] == [
+        'linear velocity']      # a lone z is not judged
