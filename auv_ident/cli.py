@@ -240,7 +240,7 @@ def _report_methods(text):
 
 def cmd_model_report(args):
     """report --model MODEL.json --validate BAG: a saved model judged on an unseen run."""
-    from auv_ident.analysis.model_report import make_model_report
+    from auv_ident.analysis.model_report import make_model_report, screening_lines
     if args.simulate or args.bag or args.methods:
         raise AuvIdentError('report --model judges a saved model: --simulate, --bag and '
                             '--methods do not apply (the model says what it was identified '
@@ -257,6 +257,8 @@ def cmd_model_report(args):
     print(f"model {args.model} on {val['source']}: free-run fit % (identified / prior) "
           + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
                       for ch, d in fits.items()))
+    for line in screening_lines(val['screening']):
+        print(line)
     zz = val['zigzag']
     if zz['detected']:
         o = zz['overshoot_deg']
@@ -265,6 +267,8 @@ def cmd_model_report(args):
                   '/'.join(_pct(o[k][i]) if i < len(o[k]) else '-'
                            for k in ('measured', 'predicted', 'prior'))
                   for i in range(len(o['measured']))))
+        print('measured reversal lag past the switch angle (deg / s): ' + '; '.join(
+            f'{d:.2f}/{t:.2f}' for d, t in zip(zz['reversal_lag_deg'], zz['reversal_lag_s'])))
     else:
         print(f"not a zig-zag run: {zz['reason']}")
     b = val.get('rudder_bias_diagnosis')
@@ -287,6 +291,9 @@ def cmd_report(args):
                       sim_current=_sim_current(args.sim_current), validate_bag=args.validate,
                       holdout=args.holdout, methods=_report_methods(args.methods))
     doc = out['result']
+    verdict = (doc.get('diagnosis') or {}).get('messages') or []
+    if verdict:  # the first line a user reads is whether to trust the result (as identify's)
+        print(verdict[0])
     print(f"{doc.get('source', '')}: EKF pass + batch refinement, noise adaptation "
           f"{settings.noise_mode}")
     print(doc_table(doc))
@@ -298,6 +305,8 @@ def cmd_report(args):
           + '; fit % per channel (identified / prior): '
           + ', '.join(f"{ch} {_pct(d['fit_percent'])}/{_pct(d['fit_percent_prior'])}"
                       for ch, d in val['channels'].items()))
+    if val.get('screening'):
+        print(f"{val['source']}, read without the filter: {val['screening']['line']}")
     true_val = doc.get('validation_true_model') or {}
     if true_val.get('rms'):
         print(f"validation on the held-out {true_val['maneuver']!r} manoeuvre (seed "
@@ -399,6 +408,14 @@ IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
            'delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs', 'n_rpm')
 THRUST_COL = 'thrust'     # N, optional (0 when absent): the input of measured_thrust vehicles
 OUT_COLS = tuple(c + '_dot' for c in IN_COLS[:12])
+
+
+def cmd_export(args):
+    from auv_ident.analysis.export import export_model
+    path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
+                        force=args.force)
+    print(f'wrote {path} ({args.format})')
+    return 0
 
 
 def cmd_derivatives(args):
@@ -674,6 +691,17 @@ def build_parser():
     sp.add_argument('input')
     sp.add_argument('output')
     sp.set_defaults(func=cmd_derivatives)
+
+    sp = sub.add_parser('export', help='write an identified model where it is used: an updated '
+                                       'vehicle file (docs/export.md)')
+    sp.add_argument('model', help='result.json of identify --json or report, or the identifier '
+                                  "node's estimate file (save_path)")
+    sp.add_argument('--vehicle', help='the vehicle file or name the model was identified with '
+                                      '(default: the one the model names)')
+    sp.add_argument('--format', default='vehicle', help='vehicle (default)')
+    sp.add_argument('--out', required=True, help='file to write')
+    sp.add_argument('--force', action='store_true', help='replace an existing --out')
+    sp.set_defaults(func=cmd_export)
     return p
 
 

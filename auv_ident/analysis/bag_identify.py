@@ -28,7 +28,13 @@ from auv_ident.core.identification.results import (
 )
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_CURRENT
-from auv_ident.offline.replay import bag_custom_data, metadata_settings, replay_bag
+from auv_ident.offline.replay import (
+    bag_custom_data,
+    metadata_settings,
+    read_bag_run,
+    rejections,
+    replay_bag,
+)
 from auv_ident.session.record import exact_hold
 from auv_ident.session.settings import coefficient_request, IdentifierSettings
 from auv_ident.session.stuck import describe_spans
@@ -381,10 +387,10 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
 
 # what the replay that pairs a bag's arrays for the batch methods takes (bag_source)
 PAIRING_SETTINGS = frozenset({'vehicle', 'coefficients', 'noise_std', 'q_state',
-                              'velocity_reference', 'mass_inverse'})
+                              'velocity_reference', 'mass_inverse', 'other_vehicle'})
 
 
-def bag_source(path, settings=None):
+def bag_source(path, settings=None, filtering=True):
     """experiments.Source of a bag: the paired arrays (U[k] = command in force from t_k on, the
     command changes between samples inserted as rows without a measurement). The replay that
     pairs them takes the PAIRING_SETTINGS of `settings` (IdentifierSettings; None: the
@@ -395,13 +401,17 @@ def bag_source(path, settings=None):
     with (noise_source then 'parameter'; a real run needs the noise its identification used,
     docs/kvlcc2.md, or the gate rejects its samples). mass_inverse: the replay model's M^-1,
     which the Source's vehicle then says (Vehicle.with_mass_inverse), so that every Model made
-    of it forms M^-1 so."""
+    of it forms M^-1 so. filtering False (a validation's measured run): the messages are
+    screened and paired by stamp without the filter (offline/replay.py read_bag_run), every
+    well-formed sample kept whatever a model says of it; the Source's `screening` then says
+    what was dropped (replay.rejections), and the noise settings do not matter."""
     settings = settings or IdentifierSettings()
     given = {n: getattr(settings, n) for n in settings.given & PAIRING_SETTINGS}
     if 'noise_std' in given:
         given['noise_source'] = 'parameter'
     meta = bag_custom_data(path)
-    rr = replay_bag(path, IdentifierSettings.from_values(**given))
+    rr = (replay_bag if filtering else read_bag_run)(path,
+                                                     IdentifierSettings.from_values(**given))
     vr = rr.model.velocity_reference
     # the replay's vehicle (a YAML path stays that file), forming M^-1 as the replay did
     v = rr.model.vehicle.with_mass_inverse(rr.model.mass_inverse)
@@ -413,7 +423,8 @@ def bag_source(path, settings=None):
                   truth=truth, seed=meta.get('auv_ident.seed'),
                   maneuver=meta.get('auv_ident.maneuver', ''),
                   current_truth=_bag_current_truth(meta), velocity_reference=vr,
-                  time_origin_ns=rr.time_origin_ns)
+                  time_origin_ns=rr.time_origin_ns,
+                  screening=None if filtering else rejections(rr))
 
 
 def identify_bags(paths, settings=None, refine_pass=True, progress=None):

@@ -49,6 +49,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input, N_STATE, State
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
 from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
+from auv_ident.core.simulation.zigzag import zigzag_problem
 from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
@@ -56,7 +57,6 @@ DEG = 180.0 / np.pi
 CSV_CHANNELS = ('u', 'v', 'r', 'U', 'psi')      # validation.csv, SI: m/s, m/s, rad/s, m/s, rad
 BIAS_BOUND_DEG = 3.0        # the rudder-neutral diagnosis searches a bias within +-this
 BIAS_TOL_DEG = 0.02
-SWITCH_TOL_DEG = 1.0        # deg: a zig-zag's rudder reversals lie this close to one heading
 
 
 # ------------------------------------------------------------------------------ the model file
@@ -67,7 +67,9 @@ class SavedModel:
 
     vehicle : core.model.vehicle.Vehicle; names, estimate, std : the coefficients (vehicle-file
     units); current : (3,) m/s NED or None; bags : the identification bags (paths as written);
-    noise_std, q_state : (12,) the noise the identification judged the data with, or None
+    noise_std, q_state : (12,) the noise the identification judged the data with, or None;
+    source : what it was identified from, as the model file says it ('' if it does not);
+    mass_inverse : how the identification formed M^-1 ('default': as the vehicle file says)
     """
 
     path: str
@@ -79,6 +81,8 @@ class SavedModel:
     bags: list
     noise_std: object
     q_state: object
+    source: str = ''
+    mass_inverse: str = 'default'
 
 
 def _twelve(doc, key, path):
@@ -100,6 +104,7 @@ def load_model(path, vehicle=None):
             doc = json.load(fh)
     except json.JSONDecodeError as err:
         raise ConfigError(f'--model {path}: not JSON ({err.msg}, line {err.lineno})') from None
+    doc = _from_estimate_file(doc)
     if not isinstance(doc, dict) or 'vehicle' not in doc or not isinstance(
             doc.get('coefficients'), dict) or not doc['coefficients']:
         raise ConfigError(f'--model {path}: not a model written by identify --json (needs '
@@ -131,7 +136,24 @@ def load_model(path, vehicle=None):
     return SavedModel(path=str(path), vehicle=v, names=names, estimate=np.array(est),
                       std=np.array(std), current=current, bags=[str(b) for b in bags],
                       noise_std=_twelve(doc, 'noise_std', path),
-                      q_state=_twelve(doc, 'q_state', path))
+                      q_state=_twelve(doc, 'q_state', path),
+                      source=str(doc.get('source') or ''),
+                      mass_inverse=str(doc.get('mass_inverse') or 'default'))
+
+
+def _from_estimate_file(doc):
+    """The identifier node's estimate file (session/estimate_file.py: 'coefficients' a list
+    of names beside 'estimate' and 'std' lists) in identify --json's layout; other
+    documents as they are."""
+    if not (isinstance(doc, dict) and isinstance(doc.get('coefficients'), list)
+            and isinstance(doc.get('estimate'), list)
+            and len(doc['estimate']) == len(doc['coefficients'])):
+        return doc
+    std = doc.get('std') if isinstance(doc.get('std'), list) else []
+    coefficients = {str(n): {'estimate': e, 'std': std[i] if i < len(std) else None}
+                    for i, (n, e) in enumerate(zip(doc['coefficients'], doc['estimate']))}
+    source = 'the identifier node' + (f" (stamp {doc['stamp']} s)" if doc.get('stamp') else '')
+    return dict(doc, coefficients=coefficients, source=source)
 
 
 def refuse_identification_bag(bags, validate_bag):
@@ -187,26 +209,34 @@ def helm_and_thrust(vehicle, runs, bags):
 
 
 def detect_zigzag(run):
-    """(ZigzagMeasures, None) if the run is a zig-zag (core.simulation.zigzag finds a held rudder
-    angle,
-    reversals and at least one completed overshoot), else (None, why)."""
+    """(ZigzagMeasures, None) if the run is a zig-zag, else (None, why): recognised by its
+    rudder and heading pattern (core/simulation/zigzag.py zigzag_problem: the rudder switching
+    sign between +-delta after the heading deviation passes +-psi, within a helm's lag; the
+    lags are in the measures, not a reason to refuse)."""
     from auv_ident.analysis.zigzag import measured_measures
     try:
         m = measured_measures(run)
     except DataError as err:
         return None, str(err)
-    if not m.check_times or not m.overshoots_deg:
-        return None, 'the heading never passes the switch angle and turns back'
-    # a zig-zag reverses the rudder when the heading passes the switch angle: a rudder
-    # sequence timed otherwise (e.g. our simulator's 'zigzag', legs of fixed length) reverses
-    # it at headings that differ by far more than the heading noise and the gear's delay
-    spread = float(np.max(np.abs(np.array(m.onset_deviation_deg) - m.switch_deg)))
-    if m.nominal[1] <= 0 or len(m.rudder_onsets) > len(m.check_times) or spread > SWITCH_TOL_DEG:
-        return None, ('the rudder is not reversed when the heading passes one switch angle '
-                      f'(heading deviations at the reversals differ by up to {spread:.1f} deg '
-                      f'from their median {m.switch_deg:.1f} deg): a timed rudder sequence, '
-                      'not a zig-zag')
-    return m, None
+    why = zigzag_problem(m)
+    return (None, why) if why else (m, None)
+
+
+def screening_doc(validate_bag, src, ident_bags, ident_srcs):
+    """{'how', 'bags': {bag: {'role', 'line', counts...}}}: what reading each bag without the
+    filter dropped (offline/replay.py rejections: malformed messages only)."""
+    bags = {str(validate_bag): dict(src.screening[0], role='validation',
+                                    line=src.screening[1])}
+    for b, s in zip(ident_bags, ident_srcs):
+        bags[str(b)] = dict(s.screening[0], role='gear and thrust', line=s.screening[1])
+    return {'how': 'every well-formed odometry message paired with the command in force at '
+                   'its stamp; no innovation gate (a model under test cannot drop samples)',
+            'bags': bags}
+
+
+def screening_lines(doc):
+    """One line per bag read: what its screening dropped."""
+    return [f'{b} ({d["role"]}): {d["line"]}' for b, d in doc['bags'].items()]
 
 
 # ------------------------------------------------------------------------------ the zig-zag
@@ -241,6 +271,9 @@ def zigzag_validation(saved, run, x0, ident_runs, ident_bag_names):
     doc = {'detected': True, 'test': m.label, 'first': m.first,
            'rudder_deg': m.nominal[0], 'switch_deg': m.nominal[1],
            'execute_time_s': m.execute_time,
+           # the measured helm: how far past the switch angle each reversal came (deg, s)
+           'reversal_lag_deg': list(m.reversal_lag_deg),
+           'reversal_lag_s': list(m.reversal_lag_s),
            'overshoot_deg': {'measured': list(m.overshoots_deg),
                              'predicted': _sim_doc(sim_g)['overshoot_deg'],
                              'prior': _sim_doc(prior_g)['overshoot_deg'],
@@ -411,6 +444,13 @@ def zigzag_lines(zz):
           f'reversals): dead time {g["delay_s"]:.3f} s, rate {g["rate_deg_s"]:.2f} deg/s, '
           f'servo time constant {g["time_constant_s"]:.3f} s, rms {g["rms_deg"]:.3f} deg. '
           'The ideal helm has no dead time and no servo lag, the same rate.']
+    lag_d, lag_s = zz['reversal_lag_deg'], zz['reversal_lag_s']
+    L += ['', 'The measured helm reversed the rudder '
+          + ', '.join(f'{d:.2f} deg / {t:.2f} s' for d, t in zip(lag_d, lag_s))
+          + f' past the {zz["switch_deg"]:g} deg switch angle (reversal lag per reversal: '
+          'heading deviation at the rudder onset minus the switch angle, and time since the '
+          'heading passed it); the closed loops reverse through the identified gear at the '
+          'switch angle itself.']
     th = zz['thrust_model']
     L += ['', 'Thrust: ' + ("not an input of this vehicle (the shaft speed of the run's first "
                             'sample is held).' if th is None else
@@ -451,6 +491,8 @@ def markdown(doc, figures):
                           _f(c['std'], '.3g')] for n, c in doc['coefficients'].items()]
                         ).split('\n')
     L += mv.markdown_lines(val)
+    L += ['', 'The bags were read without the filter (' + val['screening']['how'] + '):', '']
+    L += ['- ' + line for line in screening_lines(val['screening'])]
     L += zigzag_lines(val['zigzag'])
     b = val.get('rudder_bias_diagnosis')
     if b:
@@ -501,8 +543,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     v = saved.vehicle
     if not os.path.exists(validate_bag):
         raise ConfigError(f'--validate {validate_bag}: no such bag')
-    val, src = mv.validate_on_bag(v, saved.names, saved.estimate, saved.current, validate_bag,
-                                  noise_std=saved.noise_std, q_state=saved.q_state)
+    val, src = mv.validate_on_bag(v, saved.names, saved.estimate, saved.current, validate_bag)
     if src.vehicle.name != v.name:
         raise ConfigError(f'--validate {validate_bag} is a run of {src.vehicle.name!r}, the '
                           f'model one of {v.name!r}')
@@ -513,9 +554,10 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
         if not os.path.exists(b):
             raise ConfigError(f'identification bag {b} (from the model, or --ident-bags) does '
                               'not exist: give --ident-bags A,B')
-        s = bag_source(b, IdentifierSettings.from_values(
-            vehicle=v.path, coefficients=saved.names, noise_std=saved.noise_std,
-            q_state=saved.q_state))
+        # the measured rudder and thrust as the data are (no filter judges the samples)
+        s = bag_source(b, IdentifierSettings.from_values(vehicle=v.path,
+                                                         coefficients=saved.names),
+                       filtering=False)
         mv.refuse_identification_run(s, src)
         ident_srcs.append(s)
         ident_runs.append(measured_run(s))
@@ -524,6 +566,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
                           '--ident-bags A,B (the steering gear and thrust come from them)')
     zz, sims = zigzag_validation(saved, run, val.x0, ident_runs, ident_bags)
     vd['zigzag'] = zz
+    vd['screening'] = screening_doc(validate_bag, src, ident_bags, ident_srcs)
     vd['rudder_bias_diagnosis'] = rudder_bias(saved, val) if bias_diagnosis else None
     os.makedirs(out_dir, exist_ok=True)
     prior = v.values

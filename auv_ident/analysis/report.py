@@ -459,10 +459,12 @@ def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, vali
         src, run = mv.split_held_out(full, holdout)
         return src, run, holdout, named
     v = full.vehicle
+    # the validation run as the data are: no filter's gate drops samples the model disagrees
+    # with (bag_source filtering False)
     run = bag_source(validate_bag, IdentifierSettings.from_values(
         vehicle=v.path, coefficients=full.names, mass_inverse=v.mass_inverse,
         velocity_reference=(settings.velocity_reference if 'velocity_reference'
-                            in settings.given else full.velocity_reference)))
+                            in settings.given else full.velocity_reference)), filtering=False)
     mv.refuse_identification_run(full, run)
     return full, run, None, named
 
@@ -560,6 +562,9 @@ def make_report(out_dir, settings=None, simulate_maneuver=None, bag=None, seed=0
     val_doc = run_val.document()
     val_doc['holdout_fraction'] = holdout
     val_doc['identification_run'] = src.description
+    # a --validate bag is read without the filter: what its screening dropped (one line)
+    val_doc['screening'] = (None if run.screening is None
+                            else dict(run.screening[0], line=run.screening[1]))
 
     try:        # the run's own seed when the source knows it (a bag's metadata: text)
         val_seed = int(src.seed) + 1000

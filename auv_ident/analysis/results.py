@@ -53,6 +53,9 @@ class Source:
     current_truth: object = None        # (3,) m/s NED the run flew in, if known
     velocity_reference: str = 'ground'  # what Y's u v w are (ground or water)
     time_origin_ns: int = 0             # absolute stamp of t = 0 (a bag's; 0 if simulated)
+    # a bag read without the filter (bag_source filtering False): offline/replay.py
+    # rejections' (dict, line) of what its screening dropped; None otherwise
+    screening: object = None
 
 def paper_values(vehicle, name):
     """(paper's estimate, paper's error % text) or (None, None)."""

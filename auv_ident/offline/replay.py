@@ -17,7 +17,7 @@ from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
-from auv_ident.session.settings import IdentifierSettings
+from auv_ident.session.settings import IdentifierSettings, ParameterError, vehicle_named
 
 log = logging.getLogger('auv_ident.replay')
 
@@ -197,8 +197,37 @@ def metadata_settings(meta):
     return raw
 
 
+def settings_for_bag(settings, path, meta=None):
+    """`settings` with what the bag's metadata records (:func:`bag_settings`) for what they
+    were not given. A bag that records its vehicle and is given another one is a BagError
+    naming both, unless ``settings.other_vehicle`` (a renamed or corrected file of the same
+    vehicle): a wrong vehicle file otherwise fits confidently wrong coefficients."""
+    recorded = metadata_settings(bag_custom_data(path) if meta is None else meta)
+    bag_vehicle = recorded.get('vehicle')
+    if (bag_vehicle and 'vehicle' in settings.given and not settings.other_vehicle
+            and not _same_vehicle(settings.vehicle, bag_vehicle)):
+        given = vehicle_named(settings.vehicle)
+        raise BagError(f'{path}: the bag records vehicle {bag_vehicle!r}, the identification '
+                       f'was given vehicle {given.name!r} ({given.path}); leave the vehicle '
+                       "out to use the bag's, or say --other-vehicle if this file is meant "
+                       'for it')
+    return settings.over(recorded)
+
+
+def _same_vehicle(given, recorded):
+    """Whether a vehicle setting (name or YAML path) names the vehicle a bag records (a name,
+    or the path of the file the bag was made with), compared by the files' vehicle names."""
+    if given == recorded:
+        return True
+    try:
+        return vehicle_named(given).name == vehicle_named(recorded).name
+    except ParameterError:
+        # the recorded file is not on this machine: its file name stands for its vehicle
+        return Path(str(recorded)).stem == vehicle_named(given).name
+
+
 def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuators',
-               allow_truncated=False, warn=True):
+               allow_truncated=False, warn=True, filtering=True):
     """Identify from a bag exactly as the identifier node would have live.
 
     Odometry and actuator messages are read in log-time order (as recorded) and fed to an
@@ -215,6 +244,9 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
         default: such a bag is a BagError naming the option
     warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
         then a count), or False
+    filtering : False: the messages screened and paired by stamp without the filter (no
+        innovation gate, no resets: IdentSession's filtering), nothing logged per message;
+        :func:`read_bag_run`
 
     Returns a ReplayResult (its `settings`: the settings used, as a dict). Raises BagError for
     an unreadable bag (empty, truncated, corrupted, not an MCAP bag), a missing topic or a
@@ -226,12 +258,12 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
             listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
             raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
                            f'{listing}')
-    settings = (settings or IdentifierSettings()).over(bag_settings(path))
-    session = IdentSession(settings, keep_arrays=True)
+    settings = settings_for_bag(settings or IdentifierSettings(), path)
+    session = IdentSession(settings, keep_arrays=True, filtering=filtering)
     msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
                            actuator_topic: 'sensor_msgs/msg/JointState'},
                     allow_truncated=allow_truncated)
-    warner = ReplayWarnings() if warn else None
+    warner = ReplayWarnings() if warn and filtering else None
     try:
         updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
         if session.poll_choice():   # an 'auto' window that filled with the last message
@@ -240,3 +272,34 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
         if warner is not None:
             warner.summary()
     return session_result(session, updates, settings.as_dict())
+
+
+def read_bag_run(path, settings=None, **kwargs):
+    """A bag's measured run as the data are, for a validation: :func:`replay_bag` with
+    filtering False. Every odometry message that passes the screening of malformed messages
+    (session/screening.py: unreadable, wrong or changed frame ids, non-finite, implausible;
+    and a repeated stamp) is kept and paired with the command in force at its stamp
+    (session/record.py paired); no innovation gate judges the samples against a model, so a
+    model under test cannot thin out the run it is judged on. kwargs: replay_bag's topics and
+    allow_truncated. Returns a ReplayResult (its estimate the prior: nothing was filtered;
+    :func:`rejections` says what was dropped)."""
+    return replay_bag(path, settings, warn=False, filtering=False, **kwargs)
+
+
+def rejections(rr):
+    """What a replay dropped, as a dict (JSON-ready) and one line: {'odometry': messages read,
+    'rejected': of them dropped, 'without_command': kept but before the first command (not
+    paired), 'commands': read, 'commands_rejected', 'reasons': {'<topic>: <code>': n}} and
+    e.g. '0 of 3601 odometry messages and 0 of 3601 commands rejected' or '... (odom:
+    duplicate stamp 1, odom: non-finite 2)'."""
+    n_odom = int(rr.accepted + rr.rejected)
+    n_cmd_bad = int(sum(n for k, n in rr.reasons.items() if k.startswith('actuators:')))
+    no_cmd = int(np.sum(~np.all(np.isfinite(rr.U), axis=1))) if len(rr.t) else 0
+    doc = {'odometry': n_odom, 'rejected': int(rr.rejected), 'without_command': no_cmd,
+           'commands': int(rr.commands + n_cmd_bad), 'commands_rejected': n_cmd_bad,
+           'reasons': {k: int(n) for k, n in sorted(rr.reasons.items())}}
+    why = ', '.join(f'{k} {n}' for k, n in doc['reasons'].items())
+    line = (f'{doc["rejected"]} of {n_odom} odometry messages and {n_cmd_bad} of '
+            f'{doc["commands"]} commands rejected' + (f' ({why})' if why else '')
+            + (f'; {no_cmd} samples before the first command not paired' if no_cmd else ''))
+    return doc, line

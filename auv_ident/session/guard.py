@@ -74,7 +74,8 @@ GROSS_NIS_FACTOR = 10.0   # mean NIS/dof above 10x the band's upper edge: ERROR
 class Event:
     """What one message did.
 
-    kind : 'update' (odometry fused), 'command' (actuators buffered), 'rejected' (dropped, see
+    kind : 'update' (odometry fused), 'kept' (odometry kept unfiltered: IdentSession with
+        filtering False), 'command' (actuators buffered), 'rejected' (dropped, see
         reason) or 'error' (a core error or a divergence-guard reset; the filter was reset by
         the reset rule, see reason)
     reason : why rejected / the error text / a note on an accepted update ('' if none),
@@ -99,7 +100,7 @@ class Event:
 
     @property
     def accepted(self):
-        return self.kind in ('update', 'command')
+        return self.kind in ('update', 'kept', 'command')
 
 
 @dataclass

@@ -25,11 +25,15 @@ def paired(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, Y, U, t_cmd, U_cmd) of accepted messages.
 
-    commands : [(t, u (7,)), ...] in arrival order; measurements : [(t, y (12,)), ...]
-    Returns t (N,), Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in force at t[k]
-    (latest stamp <= t[k]; NaN rows where there is none yet), and the commands by stamp,
+    commands : [(t, u (7,)), ...] in arrival order; measurements : [(t, y (12,)), ...] (any
+    order, distinct stamps)
+    Returns t (N,) increasing, Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in
+    force at t[k] (latest stamp <= t[k]; NaN rows where there is none yet), and the commands
+    by stamp,
     t_cmd (M,), U_cmd (M, 7), where a later message with the same stamp wins."""
     cmd = sorted(commands, key=lambda c: c[0])   # stable: a later same-stamp one last
+    # by stamp: the filter takes them in order, an unfiltered session in arrival order
+    measurements = sorted(measurements, key=lambda m: m[0])
     by_stamp = {}
     for tc, uc in cmd:
         by_stamp[tc] = uc

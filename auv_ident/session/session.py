@@ -102,6 +102,12 @@ class IdentSession:
         defaults. What needs the vehicle file (coefficient names, the warm-start file, the
         initial guesses) is checked here, a bad value raising :class:`ParameterError` naming it.
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
+    filtering : False: screen the messages (the rules of session/screening.py, a repeated
+        odometry stamp rejected as 'duplicate stamp') and keep them (keep_arrays implied) without
+        filtering: no innovation gate, no guard, no resets, no 'auto' choice. A validation's
+        measured run is read so (offline/replay.py read_bag_run): its samples are what the data
+        are, none dropped because the model under test disagrees with them. Odometry then
+        gives Events of kind 'kept'.
     auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
         choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
 
@@ -119,8 +125,10 @@ class IdentSession:
     AutoChoice of coefficients ['auto', ...] (None: the set is fixed).
     """
 
-    def __init__(self, settings=None, keep_arrays=False, auto_runner=None):
+    def __init__(self, settings=None, keep_arrays=False, auto_runner=None, filtering=True):
         settings = IdentifierSettings() if settings is None else settings
+        self.filtering = bool(filtering)
+        keep_arrays = keep_arrays or not self.filtering
         self.settings = settings
         self.vehicle = vehicle_named(settings.vehicle)
         self.frame = settings.frame
@@ -185,8 +193,9 @@ class IdentSession:
         self.stuck = StuckDetector(self._measured_states)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
-        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner) if auto
-                     else None)
+        self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
+                     if auto and self.filtering else None)
+        self._kept_stamps = set()   # odometry stamps kept unfiltered (filtering False)
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -535,7 +544,8 @@ class IdentSession:
                                    self._frame_ids, self._measured_states)
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
-        held = self._repeats(t, x12)
+        # the stuck-sensor rule decides what the filter takes; unfiltered, samples are kept
+        held = self._repeats(t, x12) if self.filtering else []
         if held and self.stuck.all_held(held):
             return self._reject('odom', 'repeated', 'every measured channel group ('
                                 + ', '.join(g.name for g in held) + ') repeats the previous '
@@ -546,6 +556,8 @@ class IdentSession:
             y = y.copy()
             y[self.stuck.channels(held)] = np.nan
         r = None if variances is None else self._measurement_variances(variances)
+        if not self.filtering:
+            return self._kept(t, stamp_ns, y, r, frame_id, child_frame_id)
         filt = self.filter
         before = filt.last_good
         # the faults that go on with this sample (a stuck group that changes now ends its own)
@@ -574,6 +586,20 @@ class IdentSession:
                   + ': not taken as good')
         return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
                      step.dof, 'guard', False)
+
+    def _kept(self, t, stamp_ns, y, r, frame_id, child_frame_id):
+        """filtering False: keep a screened odometry sample as it is (the first of a stamp;
+        a repeated stamp is not a second measurement of that instant)."""
+        if stamp_ns in self._kept_stamps:
+            return self._reject('odom', 'duplicate stamp', f'duplicate stamp {t:.9f} s (the '
+                                'first message with it kept)', stamp_ns)
+        self._kept_stamps.add(stamp_ns)
+        self.counters.odom_accepted += 1
+        self.measurements.append((t, y))
+        self.variances.append(self.noise_default if r is None else r)
+        if self._frame_ids is None:
+            self._frame_ids = (frame_id, child_frame_id)
+        return Event('kept', '', stamp_ns)
 
     def _repeats(self, t, x12):
         """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s):

@@ -382,6 +382,13 @@ class IdentifierSettings:
     vehicle: str = setting('nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
                            note='Its file gives the model, the coefficient names and units, '
                                 'and the true values.')
+    other_vehicle: bool = setting(
+        False, 'identify a bag that records another vehicle than `vehicle` (offline: without '
+               'it that is an error naming both)',
+        note='A bag our simulator, recorder or importer wrote records its vehicle; '
+             '`identify --bag` uses it when `vehicle` is not given, and refuses a different '
+             '`vehicle` unless this is set (a renamed or corrected file of the same vehicle). '
+             'The live node has no recorded vehicle to compare with.')
     coefficients: tuple = setting(
         (), "coefficients to identify; empty = the vehicle file's identify_default (or the "
             "warm-start file's list); [auto] or [auto, NAME, ...] = chosen from the first "

@@ -88,7 +88,8 @@ def test_noise_and_process_noise_options_are_checked(bags, capsys):
 def test_a_vehicle_given_as_a_yaml_path_is_that_file(bags, tmp_path):
     """--vehicle PATH with bags: the file at PATH is the model (its name need not be a shipped
     vehicle's, and a shipped vehicle of the same name does not replace it), for one bag, for
-    several and for the arrays of report/compare-methods (bag_source)."""
+    several and for the arrays of report/compare-methods (bag_source); the bags record
+    kvlcc2_hsva, so the renamed file needs other_vehicle."""
     from auv_ident.analysis.bag_identify import bag_source, identify_bag
     from auv_ident.vehicles import resolve_vehicle_path
     raw = yaml.safe_load(open(resolve_vehicle_path('kvlcc2_hsva'), encoding='utf-8'))
@@ -98,14 +99,17 @@ def test_a_vehicle_given_as_a_yaml_path_is_that_file(bags, tmp_path):
     path = tmp_path / 'my_ship.yaml'
     path.write_text(yaml.safe_dump(raw, sort_keys=False), encoding='utf-8')
     doc, _ = identify_bag(bags[0], IdentifierSettings.from_values(
-        vehicle=str(path), coefficients='N_r', initial_offset=0.1, current='none'),
+        vehicle=str(path), other_vehicle=True, coefficients='N_r', initial_offset=0.1,
+        current='none'),
         refine_pass=False)
     assert doc['vehicle'] == 'my_ship'
     assert doc['coefficients']['N_r']['initial'] == pytest.approx(2.2 * file_n_r)
     doc, _ = identify_bags(bags, IdentifierSettings.from_values(
-        vehicle=str(path), coefficients='N_r', initial_offset=0.1), refine_pass=False)
+        vehicle=str(path), other_vehicle=True, coefficients='N_r', initial_offset=0.1),
+        refine_pass=False)
     assert doc['vehicle'] == 'my_ship'
     src = bag_source(bags[0], IdentifierSettings.from_values(vehicle=str(path),
+                                                             other_vehicle=True,
                                                              coefficients='N_r'))
     assert src.vehicle.name == 'my_ship' and src.truth[0] == pytest.approx(2.0 * file_n_r)
 

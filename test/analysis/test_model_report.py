@@ -5,7 +5,10 @@ steering gear, written as a manoeuvre CSV and simulated with sensor noise), one 
 model JSON, the other validated on; and the real HSVA runs (skipped without them, slow)."""
 import csv
 import json
+import os
 from pathlib import Path
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -35,9 +38,10 @@ def _thrust(x):
     return 41.0 + 60.0 * (1.178 - x[..., State.U])
 
 
-def _zigzag_bag(out, first, seed, duration=62.0, rudder=20.0, switch=10.0):
+def _zigzag_bag(out, first, seed, duration=62.0, rudder=20.0, switch=10.0, spoil=None):
     """A bag of a true zig-zag of the vehicle file's model: its closed loop through GEAR, the
-    rudder and thrust written as a manoeuvre CSV, simulated with the sensor noise."""
+    rudder and thrust written as a manoeuvre CSV, simulated with the sensor noise (then
+    spoil(run), if given, changes its measurements run.y in place)."""
     v = load_vehicle(VEHICLE)
     m = Model(v)
     x0 = initial_state(m, v.cruise_rpm, depth=0.0)
@@ -58,6 +62,8 @@ def _zigzag_bag(out, first, seed, duration=62.0, rudder=20.0, switch=10.0):
     noise = DEFAULT_NOISE_STD.copy()
     noise[State.PSI] = 1e-3
     run = simulate(m, str(path), duration=duration - 0.5, seed=seed, noise_std=noise)
+    if spoil is not None:
+        spoil(run)
     write_run_bag(run, str(out))
     return str(out), sim
 
@@ -153,6 +159,43 @@ def test_a_timed_rudder_sequence_is_not_a_zigzag(runs, tmp_path, capsys):
     assert zz == {'detected': False, 'reason': zz['reason']} and 'not a zig-zag' in zz['reason']
     assert doc['validation']['channels']['r']['fit_percent'] > 80.0
     assert not (out / 'zigzag.png').exists()
+
+
+def test_validation_reads_the_run_as_it_is_and_says_so_in_one_line(runs, tmp_path):
+    """A validation run with wild yaw-rate samples (every 25th, 0.2 rad/s off: a gate judging
+    them against the model drops them as outliers) and 3 malformed ones (u NaN): the wild
+    samples are scored, not dropped, the malformed ones rejected, and the console says it in
+    one line per bag read, with no per-sample lines (before: 'rejected odom: outlier ...',
+    'filter reset: ...' from each bag's replay)."""
+    def spoil(run):
+        run.y[::25, State.R] += 0.2
+        run.y[[100, 400, 700], State.U] = np.nan
+
+    bag, _ = _zigzag_bag(tmp_path / 'wild', 'port', seed=4, spoil=spoil)
+    out = tmp_path / 'rep'
+    repo = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(repo))
+    done = subprocess.run([sys.executable, '-m', 'auv_ident', 'report', '--model',
+                           runs['model'], '--validate', bag, '--out', str(out)],
+                          capture_output=True, text=True, env=env, cwd=str(repo), timeout=600)
+    assert done.returncode == 0, done.stderr
+    console = (done.stdout + done.stderr).splitlines()
+    # free-run fits, one screening line per bag (validation, gear and thrust), the zig-zag's
+    # overshoots and reversal lags, the rudder diagnosis, the files
+    assert len(console) == 7, console
+    assert not any('outlier' in ln or 'filter reset' in ln for ln in console), console
+    lines = [ln for ln in console if 'odometry messages' in ln]
+    assert lines[0] == (f'{bag} (validation): 3 of 1231 odometry messages and 0 of 1231 '
+                        'commands rejected (odom: non-finite 3)'), lines
+    assert lines[1].startswith(f"{runs['ident']} (gear and thrust): 0 of ")
+    doc = json.loads((out / 'result.json').read_text())
+    val = doc['validation']
+    assert val['samples'] == 1231 - 3 and val['zigzag']['detected']
+    assert val['screening']['bags'][bag]['reasons'] == {'odom: non-finite': 3}
+    # the wild samples are in the scored series
+    with open(out / 'validation.csv', newline='') as fh:
+        r = np.array([float(row['r_measured']) for row in csv.DictReader(fh)])
+    assert np.sum(np.abs(np.diff(r)) > 0.15) >= 2 * 40
 
 
 # --------------------------------------------------------------------- the real HSVA runs

@@ -222,7 +222,8 @@ def test_report_with_methods_side_by_side(tmp_path):
     assert '| ekf |' in md and '| equation_error |' in md
 
 
-def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set(tmp_path):
+def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set(tmp_path,
+                                                                                  capsys):
     """`report --bag A --coefficients auto,NAME --validate B`: the set is chosen from A
     (core/identification/selection.py), identified, and the chosen set (not only NAME) flies in the
     validation
@@ -236,6 +237,8 @@ def test_report_chooses_the_coefficients_from_a_bag_and_validates_the_chosen_set
                '--out', str(tmp_path / 'report')])
     assert rc == 0
     doc = json.loads((tmp_path / 'report' / 'result.json').read_text())
+    # the first line printed is the verdict, as report.md's and identify's
+    assert capsys.readouterr().out.splitlines()[0] == doc['diagnosis']['messages'][0]
     sel = doc['selection']
     assert sel['named'] == ['K_v'] and sel['chosen'][0] == 'K_v' and len(sel['chosen']) > 1
     assert list(doc['coefficients']) == sel['chosen']

@@ -5,8 +5,10 @@ the repository root) and the tests skip without them. Asserted: what the data sh
 consistently (tools/zigzag_measures.py prints the figures; docs/zigzag.md), not literature
 values.
 """
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from auv_ident.analysis.zigzag import (
@@ -115,3 +117,59 @@ def test_closed_loop_shows_the_helm(runs, ident):
 def test_a_missing_file_is_named(tmp_path):
     with pytest.raises(DataError, match='HSVA_CPMC_KVLCC2_Z_10_10_S.dat: no such file'):
         load_hsva_runs(tmp_path)
+
+
+# a small model is enough: the run's recognition and its measured overshoots and lags do not
+# depend on the model under test (the run is read without a filter judging it)
+SMALL_MODEL = 'Y_v,N_v,Y_r,N_r,Y_dr,N_dr'
+
+
+@pytest.mark.slow
+def test_every_hsva_zigzag_is_recognised_when_validated_on(runs, ident, tmp_path, capsys):
+    """Each of the four HSVA runs (Z_10_10_S, Z_10_10_P, Z_20_10_S, Z_20_10_P), imported to a
+    bag and validated on with `report --model` of a model identified from the two runs of the
+    other side, is recognised as the zig-zag it is: its test, side and every complete
+    overshoot as measured from the file (tools/zigzag_measures.py), the reversal lags of the
+    basin's helm (0.16-0.52 deg, 0.09-0.17 s: the gear's onset) reported, no sample dropped.
+    Before, Z_20_10_S validated so was refused as 'a timed rudder sequence' (heading
+    deviations at the reversals up to 2.9 deg from their median: the replay's innovation gate
+    had dropped samples against the model under test, shifting the rudder onsets), or the
+    report stopped on the gear's runs thinned at a reversal. 2-4 min."""
+    from auv_ident.cli import EXIT_UNTRUSTED, main
+    bags = {}
+    for name in HSVA_RUNS:
+        bags[name] = str(tmp_path / name)
+        assert main(['import', '--format', 'hsva', str(DATA / f'HSVA_CPMC_KVLCC2_{name}.dat'),
+                     '--out', bags[name]]) == 0
+    models = {}
+    for side in 'SP':
+        models[side] = str(tmp_path / f'model_{side}.json')
+        assert main(['identify', '--bag', bags[f'Z_10_10_{side}'], '--bag',
+                     bags[f'Z_20_10_{side}'], '--vehicle', 'kvlcc2_hsva', '--coefficients',
+                     SMALL_MODEL, '--json', models[side]]) in (0, EXIT_UNTRUSTED)
+    capsys.readouterr()
+    for name in HSVA_RUNS:
+        other = 'P' if name.endswith('_S') else 'S'
+        out = tmp_path / f'rep_{name}'
+        assert main(['report', '--model', models[other], '--vehicle', 'kvlcc2_hsva',
+                     '--validate', bags[name], '--out', str(out)]) == 0, name
+        printed = capsys.readouterr()
+        assert 'not a zig-zag' not in printed.out, (name, printed.out)
+        val = json.loads((out / 'result.json').read_text())['validation']
+        zz = val['zigzag']
+        assert zz['detected'], (name, zz)
+        file_m = measured_measures(runs[name], ident)
+        assert zz['test'] == file_m.label and zz['first'] == file_m.first, name
+        # every complete overshoot of the file, to the bag's rounding
+        assert zz['overshoot_deg']['measured'] == pytest.approx(file_m.overshoots_deg,
+                                                                 abs=0.01), name
+        lag_d, lag_s = np.array(zz['reversal_lag_deg']), np.array(zz['reversal_lag_s'])
+        assert len(lag_d) == len(lag_s) == len(file_m.rudder_onsets), name
+        assert np.all((lag_d > 0.0) & (lag_d < 1.0)) and np.all((lag_s > 0.0) & (lag_s < 0.3))
+        assert lag_d == pytest.approx(file_m.reversal_lag_deg, abs=0.01), name
+        # nothing dropped from the run the model is judged on, nor from the gear's runs
+        for d in val['screening']['bags'].values():
+            assert d['rejected'] == 0 and d['without_command'] == 0, (name, d)
+        assert val['samples'] == len(runs[name].t), name
+        # one line per bag read, not a line per rejected sample
+        assert printed.out.count('odometry messages') == 3 and printed.err == '', name

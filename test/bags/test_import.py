@@ -219,6 +219,7 @@ def test_replay_reads_every_message_without_a_rejection(s_run, s_bag):
     NPS AUV II's with a wide noise and the file's measured channels, so that no innovation gate
     (a model question, not a reading one) can reject anything."""
     res = replay_bag(s_bag, IdentifierSettings.from_values(vehicle='nps_auv2',
+                                                           other_vehicle=True,
                                                            noise_source='parameter',
                                                            noise_std=np.full(12, 10.0),
                                                            measured=tuple(MEASURED)))

@@ -15,7 +15,11 @@ from auv_ident.core.identification.thrust_fit import fit_thrust_model, SPEED_TER
 from auv_ident.core.model.state import Input, State
 from auv_ident.core.simulation.nomoto import fit_nomoto, NomotoModel
 from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
-from auv_ident.core.simulation.zigzag import zigzag_measures
+from auv_ident.core.simulation.zigzag import (
+    MAX_REVERSAL_LAG_S,
+    zigzag_measures,
+    zigzag_problem,
+)
 from auv_ident.core.simulation.zigzag_sim import simulate_zigzag
 
 DEG = np.pi / 180.0
@@ -363,3 +367,84 @@ def test_a_model_leaving_its_domain_ends_the_run_early():
     short = simulate_zigzag(nomoto, x0, 20.0, 10.0, 1.0, SteeringGear.ideal(15.8))
     assert short.measures is None and 'no zig-zag measures' in short.stopped
     assert len(short.t) == 21
+
+
+def helm_run(orders_by, duration=130.0, K=0.18, T=12.0, rate=15.0, dt=0.01, out_dt=0.05):
+    """(t, psi, delta) at out_dt of a first-order Nomoto ship (T r' = -K delta - r, K 1/s,
+    T s; delta positive to port turns it to port), its rudder moving at `rate` deg/s to the
+    order, the first order -20 deg (to starboard) at T_EXEC. orders_by(k, t, dev_deg, side)
+    -> True when the k-th reversal is ordered at time t, the heading deviation dev_deg from
+    psi_0 and side (+1: the leg turns to starboard); the order then flips the rudder."""
+    n = int(round(duration / dt))
+    every = int(round(out_dt / dt))
+    psi = r = delta = 0.0
+    order, k, side = 0.0, 0, 1.0
+    rec = []
+    for i in range(n + 1):
+        t = i * dt
+        if i % every == 0:
+            rec.append((t, psi, delta))
+        if order == 0.0 and t >= T_EXEC:
+            order = -20.0
+        elif order != 0.0 and orders_by(k, t, np.rad2deg(psi), side):
+            order, k, side = -order, k + 1, -side
+        delta += float(np.clip(order - delta, -rate * dt, rate * dt))
+        r += dt * (-K * np.deg2rad(delta) - r) / T
+        psi += dt * r
+    t, p, d = np.array(rec).T
+    return t, p, np.deg2rad(d)
+
+
+def test_a_helm_delay_is_a_lag_not_a_reason_to_refuse():
+    """A helm that reverses the rudder 0.1-2.5 s after the heading passes 10 deg, at yaw rates
+    of ~3 deg/s: reversals several degrees past the switch angle. Recognised as the 20/10
+    zig-zag it is, each reversal's lag reported (deg and s); the old rule (reversal headings
+    within 1 deg of their median) refused it."""
+    delays = [0.1, 1.6, 0.4, 2.5, 1.0, 0.2]
+    passed = {}
+
+    def helm(k, t, dev, side):
+        if k >= len(delays):
+            return False
+        if k not in passed and side * dev >= 10.0:
+            passed[k] = t
+        return k in passed and t >= passed[k] + delays[k]
+
+    t, psi, delta = helm_run(helm, duration=190.0)
+    m = zigzag_measures(t, psi, delta)
+    assert zigzag_problem(m) is None
+    assert m.label == '20/10' and m.first == 'starboard'
+    assert len(m.rudder_onsets) == len(delays) and len(m.overshoots_deg) >= 5
+    # the lag in time: the helm's delay, to the sample (the onset is the last 20 Hz sample
+    # still at the held angle, up to one sample before the order)
+    assert np.all(np.array(m.reversal_lag_s) >= np.array(delays) - 0.06)
+    assert np.all(np.array(m.reversal_lag_s) <= np.array(delays) + 0.01)
+    assert max(m.reversal_lag_s) < MAX_REVERSAL_LAG_S
+    # in degrees: the yaw rate times the delay, several degrees at the slow reversals
+    assert max(m.reversal_lag_deg) > 5.0 and min(m.reversal_lag_deg) < 0.6
+    assert m.reversal_lag_deg == pytest.approx(np.array(m.onset_deviation_deg) - 10.0)
+    # the measures use the ordered angle: the heading passes +-10 deg at the check times
+    assert np.all(np.array(m.rudder_onsets) > np.array(m.check_times[:len(delays)]))
+    spread = max(abs(np.array(m.onset_deviation_deg) - m.switch_deg))
+    assert spread > 1.0      # what the previous rule refused
+
+
+@pytest.mark.parametrize('times, why', [
+    # legs of 16 s: the heading drifts to starboard, the second reversal comes with it still
+    # there
+    ([16.0 * (k + 1) for k in range(6)], 'towards the side it had turned to'),
+    # a long first leg, then 24 s legs: the first reversal 6.6 s after the heading passed
+    # the angle the others would make the switch angle
+    ([12.0, 36.0, 60.0, 84.0, 108.0], 's after the heading deviation passed')])
+def test_a_timed_rudder_sequence_is_told_apart(times, why):
+    """Rudder reversals timed by a clock (at T_EXEC + times), not by the heading: refused,
+    naming the reversal that came long after, or short of, the heading passing the switch
+    angle."""
+    def clock(k, t, dev, side):
+        return k < len(times) and t >= T_EXEC + times[k]
+
+    t, psi, delta = helm_run(clock, duration=130.0)
+    m = zigzag_measures(t, psi, delta)
+    problem = zigzag_problem(m)
+    assert problem is not None and problem.endswith('a timed rudder sequence, not a zig-zag')
+    assert why in problem and problem.startswith('reversal ')

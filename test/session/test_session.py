@@ -339,6 +339,46 @@ def test_the_session_updates_through_one_guarded_filter(run):
     assert s.filter.guard_median() == g.guard_median()
 
 
+def test_without_filtering_every_wellformed_sample_is_kept_by_stamp(run):
+    """filtering False (a validation's measured run): samples a filter's gate would reject as
+    outliers are kept as the data are, in stamp order; malformed ones (non-finite) and a
+    repeated stamp are still rejected, and counted."""
+    def feed(s, y_of, order):
+        events = []
+        for k in order:
+            stamp_ns = round(run.t[k] * 1e9)
+            s.add_command(stamp_ns, run.u[k])
+            events.append(s.add_odometry(stamp_ns, y_of(k)))
+        return events
+
+    def wild(k):
+        y = run.y[k].copy()
+        if k % 10 == 5:
+            y[State.R] += 1.0           # rad/s: hundreds of noise sigmas, within plausibility
+        if k == 33:
+            y[State.U] = math.nan
+        return y
+
+    order = list(range(60))
+    order[40], order[41] = order[41], order[40]      # two samples out of order
+    gated = IdentSession(keep_arrays=True)
+    feed(gated, wild, order)
+    assert gated.counters.reasons['odom: outlier'] >= 3     # what the gate drops
+    s = IdentSession(filtering=False)
+    events = feed(s, wild, order)
+    events.append(s.add_odometry(round(run.t[59] * 1e9), run.y[59]))     # stamp repeated
+    assert {e.kind for e in events} == {'kept', 'rejected'}
+    assert dict(s.counters.reasons) == {'odom: non-finite': 1, 'odom: duplicate stamp': 1}
+    assert s.counters.odom_accepted == 59 and s.auto is None
+    from auv_ident.session.record import paired
+    t, Y, U, _, _ = paired(s.commands, s.measurements)
+    assert np.all(np.diff(t) > 0) and len(t) == 59
+    kept = [k for k in range(60) if k != 33]
+    assert np.allclose(t, run.t[kept], atol=1e-9) and np.allclose(Y[:, State.R], [wild(k)[State.R]
+                                                                          for k in kept])
+    assert np.array_equal(U, run.u[kept])
+
+
 def test_status_values_are_the_diagnostics_without_ros(run):
     s = IdentSession()
     _feed_messages(s, _corrupted(run))

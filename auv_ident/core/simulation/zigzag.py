@@ -19,10 +19,18 @@ execute), times in s:
   on the other (noise about zero makes none);
 - *switch angle* (``switch_deg``): the heading deviation at which the rudder leaves its held
   angle at each reversal (median over the reversals). It exceeds the ordered switch angle by
-  the heading change over the gear's onset delay (0.26-0.47 deg in the HSVA runs), so
-  ``nominal`` takes the largest whole degree not above it plus one sample's heading change
-  (the order precedes the onset; this assumes the heading moves less than 1 deg from order to
-  onset, else give switch_deg); every time measure below uses the nominal (ordered) angle;
+  the heading change over the helm's and the gear's delay (0.26-0.47 deg in the HSVA runs), so
+  ``nominal`` takes the largest whole degree not above the smallest of them plus one sample's
+  heading change (the order precedes the onset, and a helm never reverses before the heading
+  reaches the angle; this assumes the heading moves less than 1 deg from order to onset at
+  the quickest reversal, else give switch_deg); every time measure below uses the nominal
+  (ordered) angle;
+- *reversal lag* k (``reversal_lag_deg[k]``, ``reversal_lag_s[k]``): how far past the nominal
+  switch angle the k-th reversal came, the heading deviation at the rudder onset minus the
+  nominal (deg), and the time from the heading passing the nominal angle in that leg to the
+  onset (s; NaN when the heading did not pass it in the leg). A helm's delay at a high yaw
+  rate moves the reversal by degrees; the lag says so, it does not make the run less of a
+  zig-zag (:func:`zigzag_problem`);
 - *check times* (``check_times``): the instants the heading deviation passes +-nominal switch
   angle, one per reversal: the reversal orders (the second, third, ... executes);
 - *overshoot angle* k (``overshoots_deg[k]``): the heading's excursion beyond the switch
@@ -64,6 +72,10 @@ RATE_SPAN_S = 0.5         # s: the rudder rate that decides 'held' is a differen
 #                           so sensor noise (0.05 deg at 20 Hz: 1.4 deg/s sample to sample) does
 #                           not hide a hold (0.14 deg/s over 0.5 s)
 RETURN_DEG = 0.1          # deg: how far the heading must turn back for an extreme to count
+MAX_REVERSAL_LAG_S = 3.0  # s: a helm reverses the rudder within this long of the heading passing
+#                           the switch angle (the basin's 0.09-0.17 s onset, a person's reaction
+#                           of 1-2 s); a reversal later than this, or before the heading got
+#                           there, was timed by something else (zigzag_problem)
 
 
 @dataclass
@@ -76,6 +88,9 @@ class ZigzagMeasures:
     execute_time : s; initial_heading_deg : deg, psi_0
     rudder_onsets : s, per reversal, when the rudder leaves its held angle
     onset_deviation_deg : deg, per reversal, s_k (psi - psi_0) at the rudder onset
+    reversal_lag_deg, reversal_lag_s : deg, s, per reversal: onset deviation minus the nominal
+        switch angle, and time from the heading passing the nominal angle in that leg to the
+        onset (NaN: it did not pass it)
     check_times : s, per reversal, the heading passing the nominal switch angle
     overshoots_deg, overshoot_times, times_to_overshoot : deg, s (absolute), s (from the check
         time), per complete overshoot
@@ -90,6 +105,8 @@ class ZigzagMeasures:
     initial_heading_deg: float
     rudder_onsets: list = field(default_factory=list)
     onset_deviation_deg: list = field(default_factory=list)
+    reversal_lag_deg: list = field(default_factory=list)
+    reversal_lag_s: list = field(default_factory=list)
     check_times: list = field(default_factory=list)
     overshoots_deg: list = field(default_factory=list)
     overshoot_times: list = field(default_factory=list)
@@ -245,6 +262,61 @@ def reversal_onsets(t: np.ndarray, delta_deg: np.ndarray, start: int, tol_deg: f
     return out
 
 
+def reversal_lags(t: np.ndarray, dev: np.ndarray, s0: float, switch: float, start: int,
+                  onsets: Sequence[int]) -> list[float]:
+    """s, per reversal: from the heading deviation dev (deg, from psi_0) passing the switch
+    angle (deg) towards the leg's side (s0 (-1)^k) for the last time in the leg (from the
+    previous onset, or sample ``start`` for the first) to the rudder onset (sample index);
+    NaN when it did not pass it there (reversed before the heading got there)."""
+    out = []
+    leg = start
+    for k, i in enumerate(onsets):
+        # to the sample after the onset: the order precedes the onset, so the heading may pass
+        # the angle within the onset's sample (a lag of less than one sample below 0)
+        end = min(i + 1, len(dev) - 1)
+        y = s0 * (-1) ** k * dev[leg:end + 1]
+        rise = np.flatnonzero((y[:-1] < switch) & (y[1:] >= switch))
+        if not len(rise):
+            out.append(float('nan'))
+        else:
+            j = int(rise[-1]) + 1
+            a = (switch - y[j - 1]) / (y[j] - y[j - 1])
+            tj = leg + j
+            out.append(float(t[i] - (t[tj - 1] + a * (t[tj] - t[tj - 1]))))
+        leg = i
+    return out
+
+
+def zigzag_problem(m: ZigzagMeasures, max_lag_s: float = MAX_REVERSAL_LAG_S) -> str | None:
+    """Why a run whose measures are m is not a zig-zag, or None if it is one: the rudder
+    switches sign between +-rudder_deg (zigzag_measures finds a held angle and reversals), each
+    reversal comes after the heading deviation passed +-the nominal switch angle in its leg and
+    within max_lag_s (s) of it, and at least one overshoot is complete. A helm's lag is
+    reported (m.reversal_lag_deg, m.reversal_lag_s), not refused, up to max_lag_s: a rudder
+    sequence timed otherwise (legs of fixed length, reversals independent of the heading)
+    reverses at lags of many seconds, or before the heading reaches the angle."""
+    if not m.rudder_onsets:
+        return 'the rudder is never reversed'
+    if m.nominal[1] <= 0:
+        k = int(np.argmin(m.onset_deviation_deg))
+        return (f'reversal {k + 1} of the rudder came at a heading deviation of '
+                f'{m.onset_deviation_deg[k]:.1f} deg towards the side it had turned to, short '
+                'of any switch angle of 1 deg or more: a timed rudder sequence, not a zig-zag')
+    if not m.check_times or not m.overshoots_deg:
+        return 'the heading never passes the switch angle and turns back'
+    lags = np.array(m.reversal_lag_s, dtype=float)
+    early = np.flatnonzero(~np.isfinite(lags))
+    late = np.flatnonzero(np.isfinite(lags) & (lags > max_lag_s))
+    if len(early) or len(late):
+        k = int(early[0] if len(early) else late[np.argmax(lags[late])])
+        what = ('before the heading deviation passed' if len(early) else
+                f'{lags[k]:.1f} s after the heading deviation passed')
+        return (f'reversal {k + 1} of the rudder came {what} the switch angle '
+                f'{m.nominal[1]:g} deg (a helm reverses within {max_lag_s:g} s of it): a timed '
+                'rudder sequence, not a zig-zag')
+    return None
+
+
 def zigzag_measures(t: ArrayLike, psi: ArrayLike, delta: ArrayLike,
                     execute_time: float | None = None, rudder_deg: float | None = None,
                     switch_deg: float | None = None, rudder_tol_deg: float | None = None,
@@ -295,10 +367,11 @@ def zigzag_measures(t: ArrayLike, psi: ArrayLike, delta: ArrayLike,
                             'give switch_deg')
         switch_meas = float(np.median(onset_dev))
         # the order comes before the onset, so the ordered angle is at most the onset
-        # deviation plus the heading change over one sample (the onset's resolution)
-        psi_step = [abs(dev[i + 1] - dev[i]) for i in onsets if i + 1 < len(dev)]
-        switch_nom = float(np.floor(np.median(np.array(onset_dev) + np.array(psi_step))
-                                    + 1e-9))
+        # deviation plus the heading change over one sample (the onset's resolution); a helm
+        # may reverse late (its delay at a high yaw rate is degrees), never early: the
+        # quickest reversal bounds the ordered angle
+        psi_step = [abs(dev[i + 1] - dev[i]) if i + 1 < len(dev) else 0.0 for i in onsets]
+        switch_nom = float(np.floor(np.min(np.array(onset_dev) + np.array(psi_step)) + 1e-9))
     else:
         switch_meas = switch_nom = float(switch_deg)
     rudder_nom = float(round(amp)) if rudder_deg is None else float(rudder_deg)
@@ -318,7 +391,10 @@ def zigzag_measures(t: ArrayLike, psi: ArrayLike, delta: ArrayLike,
                        nominal=(rudder_nom, switch_nom), first=first,
                        execute_time=execute_time, initial_heading_deg=psi0,
                        rudder_onsets=[float(t[i]) for i in onsets],
-                       onset_deviation_deg=onset_dev, check_times=checks)
+                       onset_deviation_deg=onset_dev,
+                       reversal_lag_deg=[d - switch_nom for d in onset_dev],
+                       reversal_lag_s=reversal_lags(t, dev, s0, switch_nom, first_move, onsets),
+                       check_times=checks)
     if checks:
         m.initial_turning_time = checks[0] - execute_time
     if len(checks) >= 3:
