@@ -1,10 +1,12 @@
 """Helpers shared by the test modules: node processes and message comparison."""
 import array
+from contextlib import contextmanager
 import dataclasses
 import os
 import signal
 import subprocess
 import sys
+import time
 
 from conftest import require_loopback_dds
 import numpy as np
@@ -41,6 +43,55 @@ def stop_process(proc, sig=signal.SIGINT, timeout=10.0):
     for fh in proc.logs:
         fh.close()
     return proc.returncode
+
+
+def read_text(path):
+    """The text of a (log) file."""
+    with open(path, encoding='utf-8') as fh:
+        return fh.read()
+
+
+@contextmanager
+def probe_node(name):
+    """(node, executor): a node of the test process in a context of its own, for probing the
+    graph of spawned node processes; shut down on leaving."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(name, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        yield node, ex
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def spin_until(ex, cond, timeout):
+    """Spin the executor ex until cond() or timeout s; returns cond()."""
+    deadline = time.monotonic() + timeout
+    while not cond() and time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.05)
+    return cond()
+
+
+def spawn_identifier(probe, ros_args, env, log_dir):
+    """Spawn the identifier process (as spawn_node) and wait, spinning the probe (node,
+    executor), until it subscribes to /odom: up to 40 s, since a stale numba cache makes it
+    compile its EKF first (~15 s). Returns the process, running (its log in the assertion
+    message otherwise)."""
+    node, ex = probe
+    ident = spawn_node('identifier', ros_args, env, log_dir)
+
+    def subscribed():
+        return any(i.node_name == 'identifier'
+                   for i in node.get_subscriptions_info_by_topic('/odom'))
+    spin_until(ex, lambda: subscribed() or ident.poll() is not None, 40.0)
+    assert ident.poll() is None and subscribed(), read_text(
+        os.path.join(log_dir, 'identifier.err'))
+    return ident
 
 
 def assert_msg_equal(expected, actual, where='msg'):

@@ -144,6 +144,10 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
             for text in session.notices:
                 log.warning(text)
             session.notices.clear()
+        if session.noise.news:      # what the noise learning found
+            for text in session.noise.news:
+                log.info(text)
+            session.noise.news.clear()
         if session.auto is not None and session.auto.news:   # coefficients ['auto', ...]
             _log_choice_news(session.auto)
     return updates

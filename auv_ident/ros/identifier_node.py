@@ -38,8 +38,9 @@ Publications
     once. Depth 1 keeps only the latest: a slow reader can miss intermediate estimates (the
     count of updates is in /diagnostics; replay_bag gives every one).
     ``/diagnostics`` diagnostic_msgs/DiagnosticArray, every 1 s (steady clock) and at once on a
-    filter error: one DiagnosticStatus, name 'auv_ident identifier', hardware_id = vehicle,
-    level and message from IdentSession.health:
+    filter error or a re-run with a learnt noise model: one DiagnosticStatus, name
+    'auv_ident identifier', hardware_id = vehicle, level and message from
+    IdentSession.health:
         ERROR 'diverging': a filter reset (a core error the covariance repair could not fix,
             or the divergence guard: innovations inconsistent for 1 s) within the last 200
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
@@ -63,7 +64,8 @@ Publications
     exactly), stuck_sensor (the active stuck-sensor fault, or 'none'), mean_nis_per_dof,
     nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof, last_stamp (of the
     last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
-    session/live_diagnosis.py), then per coefficient <name>, <name>_std and <name>_verdict of
+    session/live_diagnosis.py: 'false' also while the noise model the filter runs with is not
+    confirmed by the innovations), then per coefficient <name>, <name>_std and <name>_verdict of
     the last good estimate (repr floats), R_<channel> (adapted measurement
     variance of u ... psi) and Q_<name> (coefficient random-walk variance). With
     ``coefficients`` [auto, ...] also auto_state ('choosing', 'chosen' or 'failed'),
@@ -71,7 +73,14 @@ Publications
     auto_named, auto_chosen (comma-joined), auto_left_out_count, auto_choice_wall_s,
     auto_error (why a choice failed) and auto_left_out_<name> (every left-out coefficient's
     reason); the diagnosis's first line says 'choosing coefficients from the data (X of Y
-    s)' until the switch.
+    s)' until the switch. With ``learn_noise`` (default) in noise mode fixed also
+    noise_state ('learning': no fit yet, 'holds', 'relearnt': the last fit found the model off
+    and none has confirmed it since), noise_reruns, and per measured channel noise_scale_<ch>
+    (the learnt factor on its measurement variance, 1.0 as configured) and noise_factor_<ch>
+    (the last fit's variance factor level^2 (1 + rho) / (1 - rho) of its whitened
+    innovations; 'n/a' before a fit). What the learning finds is logged at info level; its
+    re-runs run in a worker thread (as the 'auto' choice: the callbacks go on meanwhile) and
+    the re-run filter takes over at the next odometry message or 1 Hz tick after it ends.
 
 Services (std_srvs/srv/Trigger)
     ``~/reset``: restart the filter from the start-up configuration (initial guesses or warm
@@ -93,9 +102,10 @@ node keeps running.
 
 Estimate file (``save_path``, ``warm_start``): JSON ``{"vehicle", "coefficients": [names],
 "estimate": [...], "std": [...], "covariance": [[...]], "stamp": s or null, "stamp_ns": int or
-null, "steps": accepted updates}`` (auv_ident/session/estimate_file.py) of the last good
-estimate; with ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen
-the offline JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
+null, "steps": accepted updates, "diagnosis": {"consistent": true/false/null, "messages"},
+"live_noise_model": {...}}`` (auv_ident/session/estimate_file.py) of the last good estimate; with
+``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
+JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
 Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady
 clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
@@ -197,10 +207,12 @@ class IdentifierNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         values = declare_parameters(self, _PARAMETERS)
         self.save_path = values.pop('save_path')
-        # ParameterError names a bad parameter; an 'auto' choice runs in a worker thread, so
-        # that the callbacks go on taking (and keeping) messages while it runs
+        # ParameterError names a bad parameter; an 'auto' choice and the noise learning's
+        # re-runs run in worker threads, so that the callbacks go on taking (and keeping)
+        # messages while they run
         self.session = IdentSession(IdentifierSettings.from_values(**values),
                                     auto_runner=run_in_thread)
+        self._reruns_seen = 0      # noise re-runs already announced (_noise_news)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
         self.internal_errors = 0
@@ -284,6 +296,17 @@ class IdentifierNode(Node):
 
     # -- messages --
 
+    def _noise_news(self):
+        """Log what the noise learning found (session/noise_learning.py, info); returns True if
+        a re-run's filter took over (the caller publishes /diagnostics at once)."""
+        noise = self.session.noise
+        rerun = noise.reruns != self._reruns_seen
+        self._reruns_seen = noise.reruns
+        for text in noise.news:
+            self._emit('info', text)
+        noise.news.clear()
+        return rerun
+
     def _emit(self, level, text):
         """Write one log line (tests replace this to count what is logged)."""
         logger = self.get_logger()
@@ -351,7 +374,8 @@ class IdentifierNode(Node):
             for text in self.session.notices:
                 self._emit('warning', text)
             self.session.notices.clear()
-        if ev.kind == 'error' and self.context.ok():
+        rerun = self._noise_news()
+        if (ev.kind == 'error' or rerun) and self.context.ok():
             self.publish_diagnostics()
         return ev
 
@@ -437,6 +461,9 @@ class IdentifierNode(Node):
             # a choice that finished while no message arrived switches now
             self.session.poll_choice()
             self._follow_choice(diagnostics=False)
+        # so does a noise re-run
+        self.session.poll_noise()
+        self._noise_news()
         self.publish_diagnostics()
         now = time.monotonic()
         if (self.save_path and now - self._last_autosave >= AUTOSAVE_PERIOD_S

@@ -148,8 +148,11 @@ class ChosenFilter:
         self.updates = 0        # of which accepted
         self.rejected = Counter()
 
-    def feed(self, entries):
-        """Feed kept entries in order; raises ChoiceFailed where the session would reset."""
+    def feed(self, entries, what='the chosen set', on_update=None):
+        """Feed kept entries in order; raises ChoiceFailed where the session would reset.
+        what : whose filter, for the messages; on_update : called with the GuardedFilter
+        and the Update after each accepted odometry update (the noise learner reads its
+        innovations)."""
         filt = self.filter
         stream = filt.stream
         for entry in entries:
@@ -165,17 +168,19 @@ class ChosenFilter:
             try:
                 step = filt.update(t, stamp_ns, y, r, trusted)
             except FILTER_FAULTS as err:
-                raise ChoiceFailed(f'the filter of the chosen set failed on the kept data at '
+                raise ChoiceFailed(f'the filter of {what} failed on the kept data at '
                                    f'{t:.3f} s: {type(err).__name__}: {err}') from None
             if step.sustained:
                 window = filt.guard_window
-                raise ChoiceFailed(f'the filter of the chosen set diverged on the kept data: '
+                raise ChoiceFailed(f'the filter of {what} diverged on the kept data: '
                                    f'innovations inconsistent since {window.since:.3f} s '
                                    f'(guard median NIS/dof {window.median():.4g})')
             if not step.accepted:
                 self.rejected[step.code] += 1
                 continue
             self.updates += 1
+            if on_update is not None:
+                on_update(filt, step)
 
 
 def choose_and_feed(job):

@@ -13,9 +13,14 @@ updates arrive; always the session's last good estimate, IdentSession.document()
      "stamp_ns": 123450000000,              # the same stamp in integer ns (null: none)
      "steps": 2400}                         # accepted odometry updates since start-up
 
-With coefficients ['auto', ...] the identifier adds "selection" (session/auto_choice.py
-AutoChoice.document(): the state of the live choice and, once made, the offline JSON's
-selection block); warm_start reads only the keys above.
+The identifier adds "diagnosis", the live diagnosis of the estimate's error bars
+(session/live_diagnosis.py) in the offline result's layout: {"consistent": true, false or null
+(not judged yet), "messages": [first line, ...]}, and, with the noise learning on,
+"live_noise_model" (session/noise_learning.py NoiseLearner.document(): state, re-runs, the
+learnt scale and the last fit's variance factor per channel). With
+coefficients ['auto', ...] it adds "selection" (session/auto_choice.py AutoChoice.document():
+the state of the live choice and, once made, the offline JSON's selection block); warm_start
+reads only the keys above.
 """
 from collections.abc import Sequence
 import json

@@ -42,7 +42,7 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
-from auv_ident.session.auto_choice import AutoChoice, ChoiceJob
+from auv_ident.session.auto_choice import AutoChoice, ChoiceJob, failure_text, run_inline
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
 from auv_ident.session.guard import (
     Event,
@@ -65,6 +65,7 @@ from auv_ident.session.messages import (
     odometry_state,
     odometry_variances,
 )
+from auv_ident.session.noise_learning import FUSED_OK, NoiseLearner, rerun
 from auv_ident.session.screening import (
     command_problem,
     frame_of_ids,
@@ -104,12 +105,13 @@ class IdentSession:
     keep_arrays : keep every command and accepted measurement (for :func:`replay_bag`'s arrays)
     filtering : False: screen the messages (the rules of session/screening.py, a repeated
         odometry stamp rejected as 'duplicate stamp') and keep them (keep_arrays implied) without
-        filtering: no innovation gate, no guard, no resets, no 'auto' choice. A validation's
-        measured run is read so (offline/replay.py read_bag_run): its samples are what the data
-        are, none dropped because the model under test disagrees with them. Odometry then
-        gives Events of kind 'kept'.
+        filtering: no innovation gate, no guard, no resets, no 'auto' choice, no noise
+        learning. A validation's measured run is read so (offline/replay.py read_bag_run): its
+        samples are what the data are, none dropped because the model under test disagrees
+        with them. Odometry then gives Events of kind 'kept'.
     auto_runner : work -> concurrent.futures.Future that runs the coefficients ['auto', ...]
-        choice (auto_choice.py: run_inline, the default, or run_in_thread, the node's)
+        choice and the noise learning's re-runs (auto_choice.py: run_inline, the default, or
+        run_in_thread, the node's)
 
     The identified parameters (``names``) are the coefficients, then the estimated current
     components ('current_n', 'current_e'[, 'current_d']).
@@ -196,6 +198,11 @@ class IdentSession:
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
                      if auto and self.filtering else None)
         self._kept_stamps = set()   # odometry stamps kept unfiltered (filtering False)
+        # the noise model learnt from the innovations (session/noise_learning.py); not
+        # without filtering (no filter, no innovations)
+        self.noise = NoiseLearner(mask, T, settings.learn_noise and self.filtering
+                                  and settings.noise_mode == 'fixed')
+        self._runner = run_inline if auto_runner is None else auto_runner
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -241,6 +248,7 @@ class IdentSession:
         """Restart the filter from the start-up configuration (the ~/reset service): buffered
         commands, counters and the last good estimate are kept; the frame ids are forgotten."""
         self.filter.restart(self._new_stream(keep_commands_from=self.filter.stream))
+        self.noise.restarted()
         self._frame_ids = None
 
     def recover(self, reason, stamp_ns=None):
@@ -256,6 +264,7 @@ class IdentSession:
         start_from = filt.fault_start(code)
         filt.restart(self._new_stream(keep_commands_from=filt.stream, start_from=start_from),
                      fault=True)
+        self.noise.restarted()
         start = ('the last good estimate (covariance x '
                  f'{RESET_COV_INFLATION:g})' if start_from is not None
                  else 'the start-up configuration')
@@ -303,13 +312,21 @@ class IdentSession:
 
     def document(self):
         """The estimate file's dict of the best estimate (the last good one, else the prior;
-        session/estimate_file.py)."""
+        session/estimate_file.py), with the live diagnosis's verdict on its error bars and the
+        learnt noise model."""
         est, cov = self.best()
         good = self.last_good
-        return estimate_document(self.vehicle.name, self.names, est, cov,
-                                 None if good is None else good.stamp_ns,
-                                 self.counters.odom_accepted,
-                                 None if self.auto is None else self.auto.document())
+        doc = estimate_document(self.vehicle.name, self.names, est, cov,
+                                None if good is None else good.stamp_ns,
+                                self.counters.odom_accepted,
+                                None if self.auto is None else self.auto.document())
+        # the offline result's layout ({'consistent', 'messages'}), so that what reads one
+        # reads the other; the learnt noise model under a key of its own (the offline
+        # 'noise_model' is another document)
+        _, doc['diagnosis'] = self.diagnosis()
+        if self.noise.enabled:
+            doc['live_noise_model'] = self.noise.document()
+        return doc
 
     def health(self):
         """The filter's health (session/guard.py judge_health: the /diagnostics status); ERROR
@@ -327,7 +344,8 @@ class IdentSession:
         est, cov = self.best()
         prior_std = np.sqrt(np.diag(self.stream.ekf.theta_cov0))
         verdicts = live_verdicts(self.vehicle, self.names, est, cov, prior_std)
-        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts)
+        diagnosis = live_diagnosis(self.health() if health is None else health, verdicts,
+                                   self.noise)
         if self.auto is not None:
             # while choosing or after a failure the set is provisional: that comes first
             line = self.auto.diagnosis_line(self.coefficient_names)
@@ -375,6 +393,7 @@ class IdentSession:
         self.warm_cov = None
         ekf = self.filter.stream.ekf
         self.counters.new_filter(float(ekf.nis), int(ekf.dof))
+        self.noise.restarted()
         good = self.filter.last_good
         self.auto.chose(result, None if good is None else good.stamp_ns)
 
@@ -480,6 +499,7 @@ class IdentSession:
             self.stream.command_rejected(t)
             if self.auto is not None:
                 self.auto.keep_command_rejected(t)
+            self.noise.keep_command_rejected(t)
         return Event('rejected', f'{what}: {reason}', stamp_ns, code=code)
 
     def _time(self, stamp_ns):
@@ -529,6 +549,7 @@ class IdentSession:
             self.commands.append((t, u7))
         if self.auto is not None:
             self.auto.keep_command(t, u7)
+        self.noise.keep_command(t, u7)
         self.counters.cmd_accepted += 1
         return Event('command', '', stamp_ns)
 
@@ -536,6 +557,8 @@ class IdentSession:
         """add_odometry after reading: stamp_ns int, x12 a (12,) float array of our own."""
         if self.auto is not None and self.auto.running:
             self.poll_choice()
+        if self.noise.pending is not None:
+            self.poll_noise()
         zero = self._zero_stamp('odom', stamp_ns)
         if zero is not None:
             return zero
@@ -563,7 +586,8 @@ class IdentSession:
         # the faults that go on with this sample (a stuck group that changes now ends its own)
         stuck = describe_spans(self.stuck.faults_among(held))
         try:
-            step = filt.update(t, stamp_ns, y, r, trusted=not stuck)
+            step = filt.update(t, stamp_ns, y, self._learnt_variances(r),
+                               trusted=not stuck)
         except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
@@ -576,6 +600,8 @@ class IdentSession:
         self._taken(t, stamp_ns, y, r, step, before, not stuck)
         if step.sustained:
             return self._guard_reset(t, stamp_ns)
+        if self._learn(step):
+            return self._relearnt_event(stamp_ns)
         if step.good:
             if self._frame_ids is None:
                 self._frame_ids = (frame_id, child_frame_id)
@@ -629,6 +655,72 @@ class IdentSession:
         if self.keep_arrays:
             self.measurements.append((t, y))
             self.variances.append(self.noise_default if r is None else r)
+        self.noise.keep_odometry(t, stamp_ns, y, r, step.code, trusted)
         if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code,
                                                             trusted):
             self._start_choice(before)
+
+    # -- the noise model learnt from the innovations (session/noise_learning.py) --
+
+    def _learnt_variances(self, r):
+        """The variances to fuse a sample with: r (or, None, the configured ones) times the
+        learnt scale; None (the filter's own) while nothing has been learnt."""
+        scale = self.noise.scale
+        if self.noise.reruns == 0:
+            return r
+        return (self.noise_default if r is None else r) * scale
+
+    def _learn(self, step):
+        """Hand a fused update's whitened innovations to the learner; when its fit says the
+        noise model must change, start the re-run of a filter from the start-up configuration
+        over the kept record with the learnt variances, in the runner (the node's: a worker
+        thread; the messages go on meanwhile, the running filter takes them and they are
+        kept). Returns True if a re-run's filter has replaced the running one now (an inline
+        runner)."""
+        noise = self.noise
+        if (noise.pending is not None or step.code not in FUSED_OK
+                or not noise.innovations(self.stream.ekf.white)):
+            return False
+        scale = noise.fit()
+        if scale is None:
+            return False
+        # what the worker reads, taken here: a fresh stream and a snapshot of the record
+        stream, entries, guard_on = self._new_stream(), noise.entries(self.noise_default,
+                                                                      scale), self.guard_on
+        noise.start_rerun(self._runner(lambda: rerun(stream, guard_on, entries)), scale)
+        return self.poll_noise()
+
+    def poll_noise(self):
+        """Switch to the re-run filter if its job has finished: it is fed what was kept
+        meanwhile and replaces the running filter (its estimate, covariance, windows and last
+        good estimate); a failed re-run is recorded and the running filter stays. Called before
+        every odometry message; the node also calls it from its timer. Returns True if the
+        filter was replaced."""
+        noise = self.noise
+        job = noise.pending
+        if job is None or not job.future.done():
+            return False
+        noise.pending = None
+        try:
+            fed, whites = job.future.result()
+            whites += rerun(None, self.guard_on, noise.entries(self.noise_default, job.scale,
+                                                               job.taken), fed)[1]
+        except Exception as err:                 # noqa: BLE001 - the running filter stays
+            noise.rerun_failed(failure_text(err), noise.kept_odometry)
+            return False
+        self.filter = fed.filter
+        noise.rerun_done(job.scale, fed.samples, whites)
+        ekf = self.filter.stream.ekf
+        self.counters.new_filter(float(ekf.nis), int(ekf.dof))
+        return True
+
+    def _relearnt_event(self, stamp_ns):
+        """The update Event after a re-run with the learnt noise model: the re-run filter's
+        estimate, not good (the model is not yet confirmed, so the node does not publish it);
+        the reason is the learner's line (also in its news, for the caller to log)."""
+        text = self.noise.news[-1]
+        est, cov = self.estimate_now()
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        ekf = self.stream.ekf
+        return Event('update', 'odom: ' + text, stamp_ns, est, std, cov,
+                     float(ekf.nis), int(ekf.dof), 'noise model', False)

@@ -414,6 +414,12 @@ class IdentifierSettings:
                               note="fixed: Q, R as given; paper: the paper's Eqs. 16-19; "
                                    'paper_q: Eq. 16 only; matching: innovation-based '
                                    'covariance matching.')
+    learn_noise: bool = setting(True, "learn the measurement noise's level and AR(1) colour "
+                                      'from the innovations and re-run the filter with it '
+                                      "(noise_mode fixed; session/noise_learning.py)",
+                                note='The live form of the offline noise model: the estimate '
+                                     'is NOT consistent until a fit finds the noise model '
+                                     'holding (docs/ros.md).')
     tau: float = setting(10.0, 'time constant of the forgetting factor of the adaptation',
                          unit='s', check=_positive)
     lam: float = setting(2e-3, "the paper's lambda of the adaptation", unit='-',

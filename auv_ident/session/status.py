@@ -99,7 +99,8 @@ def diagnostic_values(session, health, own=()):
     internal_errors), last_error, the stuck-sensor rule's (session/stuck.py: 'repeated',
     channel-group samples not fed because they repeated exactly; 'stuck_sensor', the active
     fault or 'none'), the health window, the guard, the last update, the diagnosis, per
-    parameter its last good value, 1-sigma and verdict, the 'auto' choice's values, and the
+    parameter its last good value, 1-sigma and verdict, the 'auto' choice's values, the noise
+    learner's (session/noise_learning.py; with learn_noise on in noise mode fixed), and the
     filter's R and Q diagonals. Floats are repr, 'n/a' if not finite."""
     s = session
     c = s.counters
@@ -132,6 +133,8 @@ def diagnostic_values(session, health, own=()):
                    (name + '_verdict', verdicts[name]['verdict'])]
     if s.auto is not None:
         values += s.auto.diagnostic_values()
+    if s.noise.enabled:
+        values += s.noise.diagnostic_values()
     values += [('R_' + n, _num(v)) for n, v in zip(STATE_NAMES, np.diag(f.R))]
     values += [('Q_' + n, _num(v)) for n, v in zip(s.names, np.diag(f.Q)[12:])]
     return values

@@ -440,7 +440,12 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     assert fut.result().success, fut.result().message
     doc = json.loads(save.read_text())
     assert set(doc) == {'vehicle', 'coefficients', 'estimate', 'std', 'covariance', 'stamp',
-                        'stamp_ns', 'steps'}
+                        'stamp_ns', 'steps', 'diagnosis', 'live_noise_model'}
+    # the live diagnosis and the noise learning (white noise of the configured level: holds)
+    assert doc['diagnosis']['consistent'] is True
+    assert doc['diagnosis']['messages'][0] == kv['diagnosis']
+    assert doc['live_noise_model']['state'] == kv['noise_state'] == 'holds'
+    assert doc['live_noise_model']['reruns'] == 0 and kv['noise_scale_w'] == '1.0'
     s = ident.session
     assert doc['vehicle'] == 'nps_auv2' and doc['coefficients'] == ident.names
     assert doc['estimate'] == list(s.last_good.estimate)

@@ -13,11 +13,16 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from helpers import spawn_node, stop_process
+from helpers import (
+    probe_node,
+    read_text,
+    spawn_identifier,
+    spawn_node,
+    spin_until,
+    stop_process,
+)
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -38,28 +43,10 @@ LATCHED = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def _read(path):
-    with open(path, encoding='utf-8') as fh:
-        return fh.read()
-
-
 @pytest.fixture
 def probe(ros_env):
-    ctx = rclpy.context.Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node('probe', context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    yield node, ex
-    node.destroy_node()
-    rclpy.try_shutdown(context=ctx)
-
-
-def _spin_until(ex, cond, timeout):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        ex.spin_once(timeout_sec=0.05)
-    return cond()
+    with probe_node('probe') as probe:
+        yield probe
 
 
 def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
@@ -72,38 +59,30 @@ def test_simulator_and_identifier_processes(ros_env, probe, tmp_path):
     save = tmp_path / 'estimate.json'
     procs = []
     try:
-        ident = spawn_node('identifier', ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
+        ident = spawn_identifier(probe, ['-p', f'save_path:={save}'], ros_env, str(tmp_path))
         procs.append(ident)
-
-        def identifier_subscribed():
-            return any(i.node_name == 'identifier'
-                       for i in node.get_subscriptions_info_by_topic('/odom'))
-        # up to 40 s: a stale numba cache makes the identifier compile its EKF first (~15 s)
-        assert _spin_until(ex, lambda: identifier_subscribed() or ident.poll() is not None,
-                           timeout=40.0)
-        assert ident.poll() is None, _read(tmp_path / 'identifier.err')
         t_start = time.monotonic()
         sim = spawn_node('simulator', ['-p', f'duration:={DURATION}', '-p', f'rate_hz:={RATE}',
                                    '-p', 'real_time_factor:=10.0', '-p', 'seed:=0',
                                    '-p', "wait_for_subscribers:=['identifier']"],
                      ros_env, str(tmp_path))
         procs.append(sim)
-        assert _spin_until(ex, lambda: sim.poll() is not None, timeout=30.0), \
+        assert spin_until(ex, lambda: sim.poll() is not None, timeout=30.0), \
             'simulator did not finish'
         sim_wall = time.monotonic() - t_start
-        assert stop_process(sim) == 0, _read(tmp_path / 'simulator.err')
-        assert 'run over: 801 samples' in _read(tmp_path / 'simulator.err')
+        assert stop_process(sim) == 0, read_text(tmp_path / 'simulator.err')
+        assert 'run over: 801 samples' in read_text(tmp_path / 'simulator.err')
 
         def accepted():
             if not diags:
                 return 0
             return int({v.key: v.value for v in diags[-1].status[0].values}['accepted'])
         # the identifier drains its queue; /diagnostics (1 Hz) reports the count
-        _spin_until(ex, lambda: accepted() >= N_SAMPLES - 1, timeout=20.0)
-        assert ident.poll() is None, _read(tmp_path / 'identifier.err')
+        spin_until(ex, lambda: accepted() >= N_SAMPLES - 1, timeout=20.0)
+        assert ident.poll() is None, read_text(tmp_path / 'identifier.err')
         rc = stop_process(ident, signal.SIGINT)
-        assert rc == 0, _read(tmp_path / 'identifier.err')
-        err = _read(tmp_path / 'identifier.err')
+        assert rc == 0, read_text(tmp_path / 'identifier.err')
+        err = read_text(tmp_path / 'identifier.err')
         assert 'Traceback' not in err, err
     finally:
         for p in procs:
@@ -163,7 +142,7 @@ def test_identifier_bad_parameter_exits_nonzero(ros_env, tmp_path):
         rc = proc.wait(timeout=30.0)
     finally:
         stop_process(proc, signal.SIGKILL)
-    err = _read(tmp_path / 'identifier.err')
+    err = read_text(tmp_path / 'identifier.err')
     assert rc != 0
     assert 'Traceback' not in err, err
     lines = [ln for ln in err.splitlines() if ln.strip()]

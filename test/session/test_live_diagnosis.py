@@ -1,6 +1,7 @@
 """The live identifier's diagnosis (session/live_diagnosis.py): consistent at the configured
-noise, NOT consistent on the first line when the noise is 3x what the filter assumes, not
-judged while the window fills; per-parameter verdicts from the filter covariance."""
+noise, NOT consistent on the first line when the noise is 3x what the filter assumes (without
+the noise learning; with it, once the learnt model holds, consistent), not judged while the
+window fills; per-parameter verdicts from the filter covariance."""
 import numpy as np
 import pytest
 
@@ -10,6 +11,7 @@ from auv_ident.core.simulation.simulate import simulate
 from auv_ident.session.guard import Health, NIS_WINDOW
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.session import IdentSession
+from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 
@@ -19,8 +21,8 @@ def run():
                     noise_std=np.zeros(12))
 
 
-def _session_on(run, noise_scale, samples=None, seed=0):
-    s = IdentSession()
+def _session_on(run, noise_scale, samples=None, seed=0, learn_noise=True):
+    s = IdentSession(IdentifierSettings.from_values(learn_noise=learn_noise))
     rng = np.random.default_rng(seed)
     y = run.x + noise_scale * DEFAULT_NOISE_STD * rng.standard_normal(run.x.shape)
     for k in range(len(run.t) if samples is None else samples):
@@ -34,9 +36,16 @@ def test_the_configured_noise_is_consistent_and_3x_is_not(run):
     verdicts, d = _session_on(run, 1.0).diagnosis()
     assert d['consistent'] is True and d['messages'][0].startswith('consistent')
     assert set(verdicts) == {'Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v', 'current_n', 'current_e'}
-    _, d3 = _session_on(run, 3.0).diagnosis()
+    # without the noise learning, 3x the noise is NOT consistent by the NIS alone
+    _, d3 = _session_on(run, 3.0, learn_noise=False).diagnosis()
     assert d3['consistent'] is False
     assert d3['messages'][0].startswith('NOT consistent: the innovations are larger')
+    # with it (the default) the level is learnt (9x the variance) and the learnt model holds
+    learnt = _session_on(run, 3.0)
+    _, d3 = learnt.diagnosis()
+    assert learnt.noise.reruns >= 1
+    assert np.all((learnt.noise.scale > 5.0) & (learnt.noise.scale < 16.0)), learnt.noise.scale
+    assert d3['consistent'] is True and 'noise model learnt' in d3['messages'][0]
 
 
 def test_nothing_is_judged_while_the_window_fills(run):
