@@ -14,6 +14,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
+        (os.path.join('share', package_name, 'config', 'inputs'), glob('config/inputs/*.yaml')),
         (os.path.join('share', package_name, 'bags', 'nps_auv2_ident'),
          glob('bags/nps_auv2_ident/*')),
     ],

@@ -372,9 +372,10 @@ def cmd_import(args):
     from auv_ident.offline.importers import read_csv_run, read_hsva
     if args.format in ('slocum', 'npy'):
         from auv_ident.offline.glider_import import import_glider_files
-        if args.columns or args.start or args.vehicle:
-            raise AuvIdentError(f'--columns, --start and --vehicle are not for --format '
-                                f'{args.format}: glider logs carry their own times and layout')
+        if args.columns or args.start or args.vehicle or args.input_map:
+            raise AuvIdentError(f'--columns, --start, --vehicle and --input-map are not for '
+                                f'--format {args.format}: glider logs carry their own times '
+                                'and layout')
         print('\n'.join(import_glider_files(args.format, args.file, args.out,
                                              'python -m auv_ident ' + ' '.join(sys.argv[1:]))))
         return 0
@@ -391,7 +392,14 @@ def cmd_import(args):
                                 '"Importing measured runs")')
         run = read_csv_run(args.file, args.columns)
     write_imported_bag(run, args.out, vehicle=args.vehicle, start=args.start,
-                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
+                       command='python -m auv_ident ' + ' '.join(sys.argv[1:]),
+                       input_map=args.input_map)
+    _print_import(run, args)
+    return 0
+
+
+def _print_import(run, args):
+    from auv_ident.offline.import_bag import DEFAULT_VEHICLE, unmapped_inputs
     t = run.t
     std = ', '.join(f'{n} {s:.3g}' for n, s in zip(run.measured_names,
                                                    run.noise_std[run.measured]))
@@ -399,9 +407,19 @@ def cmd_import(args):
           f'{run.sample_time:g} s')
     print(f"measured: {' '.join(run.measured_names)}; inputs: "
           f"{' '.join(sorted(run.inputs)) or 'none'}")
+    counts = run.samples
+    if len(set(counts.values())) > 1:   # a multi-rate log
+        print('samples per channel: ' + ', '.join(f'{n} {c}' for n, c in counts.items()))
+    if run.skipped:
+        lines = ', '.join(map(str, run.skipped[:10])) + (', ...' if len(run.skipped) > 10
+                                                          else '')
+        print(f'skipped {len(run.skipped)} rows with NaN or Inf (lines {lines})')
+    missing = unmapped_inputs(run, args.vehicle or DEFAULT_VEHICLE[run.fmt])
+    if missing:
+        print(f"note: the vehicle's model uses {', '.join(missing)}, which the file does not "
+              'log: written as 0')
     print(f'noise 1-sigma estimates (SI): {std}')
     print(f'wrote {args.out}')
-    return 0
 
 
 IN_COLS = ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi', 'theta', 'psi',
@@ -684,6 +702,10 @@ def build_parser():
     sp.add_argument('--start', metavar='ISO8601',
                     help='UTC time of t = 0, e.g. 2006-05-17T10:00:00Z (default: nominal, '
                          '2006-01-01T00:00:00Z for hsva, 2024-01-01T00:00:00Z for csv)')
+    sp.add_argument('--input-map', metavar='MAP', default=None,
+                    help='write the bag in the topics and message forms of this input map '
+                         '(config/inputs/NAME.yaml or a path; docs/your_data.md) instead of '
+                         '/odom and /actuators')
     sp.set_defaults(func=cmd_import)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')

@@ -19,7 +19,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / 'auv_ident'
 SESSION_TYPED = ('messages', 'record', 'estimate_file', 'live_diagnosis', 'screening',
-                 'warning_limiter')
+                 'warning_limiter', 'input_map', 'inputs')
 TARGETS = [PKG / 'core'] + [PKG / 'session' / f'{m}.py' for m in SESSION_TYPED]
 # the numba decorators of the core: compiled_cache.cached_njit, the kernel = cached_njit(...)
 # shorthands of the model modules, numba.extending.intrinsic

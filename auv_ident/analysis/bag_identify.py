@@ -387,7 +387,8 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
 
 # what the replay that pairs a bag's arrays for the batch methods takes (bag_source)
 PAIRING_SETTINGS = frozenset({'vehicle', 'coefficients', 'noise_std', 'q_state',
-                              'velocity_reference', 'mass_inverse', 'other_vehicle'})
+                              'velocity_reference', 'mass_inverse', 'other_vehicle',
+                              'input_map'})
 
 
 def bag_source(path, settings=None, filtering=True):

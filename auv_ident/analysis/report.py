@@ -435,7 +435,7 @@ def _current_markdown(doc):
 
 # what make_report takes of its settings (the command line's report options)
 REPORT_SETTINGS = ('vehicle', 'coefficients', 'noise_mode', 'current', 'current_down',
-                   'velocity_reference', 'mass_inverse')
+                   'velocity_reference', 'mass_inverse', 'input_map')
 
 
 def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, validate_bag,

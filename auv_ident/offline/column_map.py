@@ -24,13 +24,24 @@ Quantities (:data:`QUANTITIES`) and their units (:data:`UNITS`, every entry must
 - ``rudder`` (rad, deg): the rudder angle in our sign, delta_r: positive = trailing edge to
   port, which turns the vehicle to port (negative yaw rate) as N_dr < 0 says in the vehicle
   files; a log with the opposite convention maps it with ``sign: -1``.
+- ``stern_planes``, ``bow_planes``, ``bow_plane_port``, ``bow_plane_starboard`` (rad, deg):
+  the other fins of the input vector (core/model/state.py ``Input``: delta_s, delta_b,
+  delta_bp, delta_bs), in the vehicle files' signs.
 - ``thrust`` (N, kN): the measured propeller thrust; ``shaft`` (rpm, rps, rad/s): shaft speed.
+
+Multi-rate logs (every sensor at its own rate, one row per time any of them sampled): a blank
+cell is "no sample of this quantity at this row". A state channel is then not measured at that
+row; an input holds its last value (commands are logged on change). A row with a NaN or Inf
+in a mapped cell is skipped and counted (importers.py). A decimal comma (``0,5``) is refused
+with a message that says so: a ';'-separated log writes its numbers with a decimal point.
 
 Entry fields: ``column`` (the header name, required), ``unit`` (required: a wrong guess between
 deg and rad is silent garbage otherwise), ``sign`` (1 or -1, default 1: multiplies the value in
 the file, before any frame conversion), ``frame`` (optional check, body or earth: must be the
-quantity's), ``base`` (time only). With ``world: enu`` every quantity is read in ENU/FLU (x
-east, y north, z up, yaw counterclockwise from east, body y to port) and converted as
+quantity's), ``base`` (time only), ``pwm`` (inputs logged as a pulse width, unit ``us``, as
+ArduPilot's RCOU: ``{neutral: 1500, half_range: 400, full_scale: 20, unit: deg}``, the value is
+``(us - neutral) / half_range * full_scale``). With ``world: enu`` every quantity is read
+in ENU/FLU (x east, y north, z up, yaw counterclockwise from east, body y to port) and converted as
 :mod:`auv_ident.session.messages` documents: position (y, x, -z), Euler angles
 (phi, -theta, pi/2 - psi), body vectors (x, -y, -z).
 
@@ -44,6 +55,7 @@ Every check raises :class:`ColumnMapError` naming the map (file) and the entry.
 """
 from decimal import Decimal, InvalidOperation, ROUND_HALF_EVEN
 import math
+import re
 
 import numpy as np
 import yaml
@@ -64,7 +76,9 @@ QUANTITIES = {
     'r': ('rate', 'body', State.R),
     'xdot': ('speed', 'earth', None), 'ydot': ('speed', 'earth', None),
     'zdot': ('speed', 'earth', None),
-    'rudder': ('angle', None, None),
+    'rudder': ('fin', None, None),
+    'stern_planes': ('fin', None, None), 'bow_planes': ('fin', None, None),
+    'bow_plane_port': ('fin', None, None), 'bow_plane_starboard': ('fin', None, None),
     'thrust': ('force', None, None),
     'shaft': ('shaft', None, None),
 }
@@ -74,14 +88,19 @@ UNITS = {
     'length': {'m': 1.0},
     'speed': {'m/s': 1.0, 'kn': 1852.0 / 3600.0},
     'angle': {'rad': 1.0, 'deg': math.pi / 180.0},
+    'fin': {'rad': 1.0, 'deg': math.pi / 180.0, 'us': None},
     'rate': {'rad/s': 1.0, 'deg/s': math.pi / 180.0},
     'force': {'N': 1.0, 'kN': 1000.0},
-    'shaft': {'rpm': 1.0, 'rps': 60.0, 'rad/s': 60.0 / (2.0 * math.pi)},
+    'shaft': {'rpm': 1.0, 'rps': 60.0, 'rad/s': 60.0 / (2.0 * math.pi), 'us': None},
 }
+PWM_FIELDS = ('neutral', 'half_range', 'full_scale', 'unit')
 SETTINGS = {'world': ('ned', 'enu'), 'delimiter': None}
-FIELDS = ('column', 'unit', 'sign', 'frame', 'base')
+FIELDS = ('column', 'unit', 'sign', 'frame', 'base', 'pwm')
 TIME_BASES = ('run', 'unix')
-INPUTS = ('rudder', 'thrust', 'shaft')
+# the inputs, and the actuator of core/model/state.py Input each one is
+INPUTS = ('rudder', 'stern_planes', 'bow_planes', 'bow_plane_port', 'bow_plane_starboard',
+          'shaft', 'thrust')
+INPUT_OF = dict(zip(INPUTS, range(7)))
 
 # world ENU/FLU -> NED/FRD: quantity -> (quantity it becomes, sign, offset)
 _ENU_TO_NED = {
@@ -168,13 +187,48 @@ class ColumnMap:
             hint = (f': for {kind_text} velocity use {other}' if other and kind_text else '')
             raise ColumnMapError(f'{where}: frame {val["frame"]!r}, but {name} is a '
                                  f'{frame}-frame quantity{hint}')
+        pwm = self._pwm(name, val, where)
         base = val.get('base', 'run')
         if 'base' in val and name != 'time':
             raise ColumnMapError(f'{where}: base applies to time only')
         if base not in TIME_BASES:
             raise ColumnMapError(f'{where}: base must be run or unix, got {base!r}')
         return {'column': column.strip(), 'unit': val['unit'], 'sign': int(sign),
-                'frame': frame, 'base': base}
+                'frame': frame, 'base': base, 'pwm': pwm}
+
+    def _pwm(self, name, val, where):
+        """The checked pwm field of an input in microseconds (None for other units)."""
+        if val['unit'] != 'us' or QUANTITIES[name][0] == 'time':    # time: us = microseconds
+            if 'pwm' in val:
+                raise ColumnMapError(f'{where}: pwm applies to unit us only')
+            return None
+        if name not in INPUTS:
+            raise ColumnMapError(f'{where}: unit us (a PWM pulse width) is for the inputs '
+                                 f'({", ".join(INPUTS)})')
+        kind = QUANTITIES[name][0]
+        others = [u for u in UNITS[kind] if u != 'us']
+        pwm = val.get('pwm')
+        if not isinstance(pwm, dict) or 'full_scale' not in pwm or 'unit' not in pwm:
+            raise ColumnMapError(f'{where}: unit us (a PWM pulse width) needs pwm: {{neutral: '
+                                 f'1500, half_range: 400, full_scale: VALUE, unit: '
+                                 f'{others[-1]}}}, full_scale the {name} at neutral + '
+                                 'half_range')
+        extra = [k for k in pwm if k not in PWM_FIELDS]
+        if extra:
+            raise ColumnMapError(f'{where}: pwm: unknown field(s) {", ".join(map(str, extra))}; '
+                                 f'known: {", ".join(PWM_FIELDS)}')
+        if pwm['unit'] not in others:
+            raise ColumnMapError(f'{where}: pwm unit {pwm["unit"]!r}; use one of '
+                                 f'{", ".join(others)}')
+        out = {'unit': pwm['unit']}
+        for key, default in (('neutral', 1500.0), ('half_range', 400.0), ('full_scale', None)):
+            v = pwm.get(key, default)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or (key != 'neutral' and v <= 0):
+                raise ColumnMapError(f'{where}: pwm {key} = {v!r} must be a finite'
+                                     + (' positive' if key != 'neutral' else '') + ' number')
+            out[key] = float(v)
+        return out
 
     def _check_together(self):
         e = self.entries
@@ -214,6 +268,8 @@ class ColumnMap:
                 d['sign'] = ent['sign']
             if ent['frame']:
                 d['frame'] = ent['frame']
+            if ent['pwm']:
+                d['pwm'] = dict(ent['pwm'])
             if name == 'time':
                 d['base'] = ent['base']
             out[name] = d
@@ -227,6 +283,7 @@ class ColumnMap:
         factor = UNITS['time'][ent['unit']] * ent['sign']
         out = np.empty(len(cells), dtype=np.int64)
         for i, cell in enumerate(cells):
+            refuse_decimal_comma(cell, where_cell(i))
             try:
                 d = Decimal(cell.strip())
                 if not d.is_finite():
@@ -240,17 +297,25 @@ class ColumnMap:
     def to_ned(self, values):
         """Convert the mapped quantities into our frames and units.
 
-        values : dict quantity -> (N,) float array as read (file units and signs), time
-            excluded
+        values : dict quantity -> (N,) float array as read (file units and signs; NaN: no
+            sample at that row), time excluded
         Returns ``(x (N, 12) NED/FRD SI, measured (12,) bool, inputs)``: unmeasured states are
-        0; inputs is a dict of the inputs present, 'rudder' (rad), 'thrust' (N), 'shaft' (rpm).
+        0, a measured one NaN at the rows without its sample (or without a sample of what it
+        is computed from: the heading of an earth-fixed velocity); inputs is a dict of the
+        inputs present (fins rad, 'thrust' N, 'shaft' rpm), NaN where not logged.
         """
         n = len(next(iter(values.values())))
         si = {}
         for name, arr in values.items():
             kind = QUANTITIES[name][0]
             ent = self.entries[name]
-            si[name] = np.asarray(arr, dtype=float) * (UNITS[kind][ent['unit']] * ent['sign'])
+            arr = np.asarray(arr, dtype=float)
+            if ent['pwm']:      # pulse width -> fraction of the full scale -> its unit
+                p = ent['pwm']
+                si[name] = ((arr - p['neutral']) / p['half_range']
+                            * (p['full_scale'] * UNITS[kind][p['unit']] * ent['sign']))
+            else:
+                si[name] = arr * (UNITS[kind][ent['unit']] * ent['sign'])
         if self.world == 'enu':
             ned = {}
             for name, arr in si.items():
@@ -282,6 +347,18 @@ class ColumnMap:
         x[:, State.PSI] = _wrap(x[:, State.PSI])
         inputs = {name: si[name] for name in INPUTS if name in si}
         return x, measured, inputs
+
+
+_DECIMAL_COMMA = re.compile(r'[+-]?\d*,\d+([eE][+-]?\d+)?')
+
+
+def refuse_decimal_comma(cell, where, error=ColumnMapError):
+    """`error` naming the cell if it is a number written with a decimal comma."""
+    text = cell.strip()
+    if ',' in text and _DECIMAL_COMMA.fullmatch(text):
+        raise error(f'{where}: {text!r} has a decimal comma; write numbers with a '
+                             f'decimal point ({text.replace(",", ".")}) and separate the '
+                             "fields with another character (delimiter: ';')")
 
 
 def _wrap(a):

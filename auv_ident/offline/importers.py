@@ -39,6 +39,7 @@ from auv_ident.offline.column_map import (
     HSVA_COLUMNS,
     HSVA_MAP,
     load_column_map,
+    refuse_decimal_comma,
 )
 
 NS_PER_S = 1_000_000_000
@@ -66,6 +67,11 @@ class MeasuredRun:
         (:func:`white_noise_std`; 0: no estimate), NaN for the unmeasured ones
     source : Path of the file; sha256 : its hex digest; fmt : 'hsva' or 'csv'
     column_map : dict, the map used (:meth:`ColumnMap.document`)
+    skipped : line numbers of the rows skipped for a NaN or Inf in a mapped cell
+
+    A multi-rate CSV log (blank cells: no sample at that row) has NaN in x where a measured
+    channel has no sample (:attr:`present`), and its inputs hold their last value (NaN before
+    the first).
     """
 
     t_ns: np.ndarray
@@ -78,6 +84,18 @@ class MeasuredRun:
     fmt: str
     column_map: dict
     absolute: bool = False
+    skipped: tuple = ()
+
+    @property
+    def present(self):
+        """(N, 12) bool: a sample of each measured channel at each row."""
+        return np.isfinite(self.x) & self.measured
+
+    @property
+    def samples(self):
+        """{channel name: number of samples} of the measured channels."""
+        counts = self.present.sum(axis=0)
+        return {STATE_NAMES[i]: int(counts[i]) for i in np.flatnonzero(self.measured)}
 
     @property
     def t(self):
@@ -120,6 +138,7 @@ def noise_std_estimate(x, measured):
     out = np.full(12, np.nan)
     for i in np.flatnonzero(measured):
         col = x[:, i]
+        col = col[np.isfinite(col)]     # a multi-rate log: this channel's own samples
         if i in (State.PHI, State.THETA, State.PSI):
             col = np.unwrap(col)
         out[i] = white_noise_std(col)
@@ -141,19 +160,43 @@ class _Table:
         j = self.names.index(column)
         return [cells[j] for _, cells in self.rows]
 
-    def numbers(self, column):
-        """(N,) float array of a column; a cell that is not a finite number is an error."""
+    def numbers(self, column, blank_ok=False):
+        """(N,) float array of a column; a blank cell is NaN (no sample at that row) if
+        blank_ok, any other cell that is not a finite number an error (a decimal comma named
+        as such)."""
         out = np.empty(len(self.rows))
         j = self.names.index(column)
         for i, (_, cells) in enumerate(self.rows):
+            cell = cells[j]
+            if blank_ok and not cell.strip():
+                out[i] = math.nan
+                continue
             try:
-                out[i] = float(cells[j])
+                out[i] = float(cell)
             except ValueError:
+                refuse_decimal_comma(cell, self.cell_name(column, i), RunFileError)
                 out[i] = math.nan
             if not math.isfinite(out[i]):
-                raise RunFileError(f'{self.cell_name(column, i)}: {cells[j].strip()!r} is not '
+                raise RunFileError(f'{self.cell_name(column, i)}: {cell.strip()!r} is not '
                                    'a finite number')
         return out
+
+    def without_nan_rows(self, columns):
+        """This table without the rows that hold a NaN or Inf in one of the columns, and the
+        line numbers of those rows."""
+        js = [self.names.index(c) for c in columns]
+        keep, skipped = [], []
+        for row in self.rows:
+            bad = False
+            for j in js:
+                try:
+                    bad = not math.isfinite(float(row[1][j]))
+                except ValueError:
+                    continue        # text, blank or a decimal comma: numbers() says
+                if bad:
+                    break
+            (skipped if bad else keep).append(row)
+        return _Table(self.path, self.names, keep), tuple(line for line, _ in skipped)
 
 
 def _read_text(path, encoding, label):
@@ -169,14 +212,20 @@ def _read_text(path, encoding, label):
     return path, text, hashlib.sha256(data).hexdigest()
 
 
-def _convert(table, cmap, fmt, sha256):
-    """The MeasuredRun of a table through a checked column map."""
+def _convert(table, cmap, fmt, sha256, multi_rate=False):
+    """The MeasuredRun of a table through a checked column map; multi_rate: blank cells are
+    samples not taken (NaN), rows with a NaN or Inf skipped (a CSV log)."""
     if not table.rows:
         raise RunFileError(f'{table.path}: no data rows')
     missing = [c for c in cmap.columns if c not in table.names]
     if missing:
         raise ColumnMapError(f'{cmap.where}: column(s) {", ".join(map(repr, missing))} not in '
                              f'{table.path}; its columns: {", ".join(table.names)}')
+    skipped = ()
+    if multi_rate:
+        table, skipped = table.without_nan_rows(cmap.columns)
+        if not table.rows:
+            raise RunFileError(f'{table.path}: every data row has a NaN or Inf')
     tcol = cmap.entries['time']['column']
     t_ns = cmap.time_ns(table.column_cells(tcol), lambda i: table.cell_name(tcol, i))
     steps = np.diff(t_ns)
@@ -185,13 +234,27 @@ def _convert(table, cmap, fmt, sha256):
         raise RunFileError(f'{table.cell_name(tcol, i)}: time does not increase '
                            f'({t_ns[i - 1] / NS_PER_S:.9g} s on line {table.rows[i - 1][0]}, '
                            f'then {t_ns[i] / NS_PER_S:.9g} s)')
-    values = {name: table.numbers(ent['column'])
+    values = {name: table.numbers(ent['column'], blank_ok=multi_rate)
               for name, ent in cmap.entries.items() if name != 'time'}
+    for name, arr in values.items():
+        if np.isnan(arr).all():
+            raise RunFileError(f'{table.path}: column {cmap.entries[name]["column"]!r} '
+                               f'({name}) has no value in any row')
     x, measured, inputs = cmap.to_ned(values)
+    inputs = {name: _held(arr) for name, arr in inputs.items()}
     return MeasuredRun(t_ns=t_ns, x=x, measured=measured, inputs=inputs,
                        noise_std=noise_std_estimate(x, measured), source=table.path,
                        sha256=sha256, fmt=fmt, column_map=cmap.document(),
-                       absolute=cmap.time_base == 'unix')
+                       absolute=cmap.time_base == 'unix', skipped=skipped)
+
+
+def _held(values):
+    """An input logged on change: each NaN (no entry at that row) replaced by the last value
+    before it; NaN before the first."""
+    v = np.asarray(values, dtype=float)
+    idx = np.where(np.isfinite(v), np.arange(v.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, v[np.maximum(idx, 0)], np.nan)
 
 
 def read_hsva(path):
@@ -224,6 +287,10 @@ def read_csv_run(path, column_map):
 
     path : CSV file (UTF-8, a header row of column names, then one row per sample; blank
         lines skipped); column_map : a YAML file path or a :class:`ColumnMap`
+
+    A multi-rate log: a blank cell is no sample of that quantity at that row (a state channel
+    not measured there, an input held); a row with a NaN or Inf in a mapped cell is skipped
+    and counted (MeasuredRun.skipped); a number with a decimal comma is an error saying so.
     """
     cmap = column_map if isinstance(column_map, ColumnMap) else load_column_map(column_map)
     path, text, sha = _read_text(path, 'utf-8-sig', 'UTF-8')
@@ -238,8 +305,10 @@ def read_csv_run(path, column_map):
                 header = [c.strip() for c in cells]
                 continue
             if len(cells) != len(header):
+                hint = (' (decimal commas? write numbers with a decimal point)'
+                        if len(cells) > len(header) and cmap.delimiter == ',' else '')
                 raise RunFileError(f'{path}: line {reader.line_num}: {len(cells)} fields, the '
-                                   f'header has {len(header)}')
+                                   f'header has {len(header)}{hint}')
             rows.append((reader.line_num, cells))
     except csv.Error as exc:
         raise RunFileError(f'{path}: line {reader.line_num}: {exc}') from None
@@ -249,4 +318,9 @@ def read_csv_run(path, column_map):
     if dup:
         raise RunFileError(f'{path}: header names column(s) {", ".join(map(repr, dup))} '
                            'more than once')
-    return _convert(_Table(path, header, rows), cmap, 'csv', sha)
+    if len(header) == 1 and any(c in header[0] for c in ';\t|') and len(cmap.columns) > 1:
+        sep = next(c for c in ';\t|' if c in header[0])
+        raise ColumnMapError(f'{path}: the header is one column {header[0]!r}: the fields '
+                             f'are separated by {sep!r}, not {cmap.delimiter!r} (set '
+                             f'delimiter: {sep!r} in {cmap.where})')
+    return _convert(_Table(path, header, rows), cmap, 'csv', sha, multi_rate=True)

@@ -772,6 +772,343 @@ def generate(cfg, out_dir, overwrite=False):
 
 
 # ---------------------------------------------------------------------------------------------
+# raw sensors (issue 28): IMU, DVL and pressure at their own rates, with sensor errors
+
+
+@dataclass
+class RawConfig:
+    """A raw-sensor run: the vehicle, manoeuvre, commands and current of ``data`` (its odometry
+    options unused), sensed by an IMU, a DVL and a pressure sensor at their own rates and
+    phases, each with a noise whose level factor and AR(1) correlation time are drawn per run
+    from ``noise_level`` and ``noise_tau`` (s) and disclosed only in the truth; the messages
+    declare the documented 1-sigma (DOCUMENTED_SIGMA). Sensor errors drawn per run: a constant
+    gyro bias N(0, gyro_bias_sd) per axis (rad/s), a DVL heading misalignment of U(a, b) deg
+    with a random sign (about body z, on top of the nominal mounting dvl_yaw_deg), a DVL scale
+    error U(a, b), a surface pressure off the standard atmosphere by U(a, b) Pa. Lever arms m,
+    body FRD."""
+
+    data: DataConfig = field(default_factory=DataConfig)
+    imu_rate: float = 100.0
+    dvl_rate: float = 5.0
+    dvl_dropout: float = 0.05
+    depth_rate: float = 10.0
+    gyro_bias_sd: float = 0.002
+    dvl_misalignment_deg: tuple = (1.0, 2.0)
+    dvl_scale: tuple = (-0.005, 0.005)
+    dvl_yaw_deg: float = 45.0
+    dvl_lever_arm: tuple = (-0.5, 0.0, 0.15)
+    pressure_lever_arm: tuple = (-1.0, 0.0, -0.1)
+    surface_pressure_pa: tuple = (-300.0, 300.0)
+    noise_level: tuple = (0.5, 2.0)
+    noise_tau: tuple = (0.0, 1.0)
+
+    def validate(self):
+        """ValueError naming the first bad field."""
+        self.data.validate()
+        for name in ('imu_rate', 'dvl_rate', 'depth_rate'):
+            if not 0 < getattr(self, name) <= 1000:
+                raise ValueError(f'{name} must be in (0, 1000] Hz')
+        if not 0 <= self.dvl_dropout < 1:
+            raise ValueError('dvl_dropout must be in [0, 1)')
+        for name in ('dvl_misalignment_deg', 'dvl_scale', 'surface_pressure_pa', 'noise_level',
+                     'noise_tau'):
+            a, b = getattr(self, name)
+            if not a <= b:
+                raise ValueError(f'{name}: bad interval ({a}, {b})')
+
+
+@dataclass
+class RawRun:
+    """What :func:`generate_raw` made: ``records`` (core.filter.raw.RawMeasurement, in time
+    order, commands included), ``truth`` (coefficients, sensor errors, noise: what the
+    identifier is not told), ``t`` (N,) s and ``x_true`` (N, 12) the truth at every sensor
+    stamp, ``commands`` ((M,) s, (M, 7)) the published commands."""
+
+    records: list
+    truth: dict
+    t: np.ndarray
+    x_true: np.ndarray
+    cmd_t: np.ndarray
+    cmd_values: np.ndarray
+
+
+# sensor frames of the generator: the IMU aligned with the body, the DVL turned by dvl_yaw_deg
+SG = 1025.0 * 9.80665     # rho g (Pa/m) of the generated pressure (seawater, standard gravity)
+P_ATM = 101325.0
+
+
+def _rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _exp_rot(v):
+    """Rotation matrix of the rotation vector v (Rodrigues)."""
+    a = float(np.linalg.norm(v))
+    if a < 1e-12:
+        return np.eye(3)
+    k = v / a
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(a) * K + (1.0 - math.cos(a)) * K @ K
+
+
+def _quat_of(R):
+    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s,
+                0.25 * s)
+    i = int(np.argmax(np.diag(R)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+    q = np.empty(4)
+    q[i] = 0.25 * s
+    q[j] = (R[j, i] + R[i, j]) / s
+    q[k] = (R[k, i] + R[i, k]) / s
+    q[3] = (R[k, j] - R[j, k]) / s
+    return tuple(q)
+
+
+def _ou(t, sigma, tau, rng):
+    """Stationary Ornstein-Uhlenbeck noise (len(t), len(sigma)) sampled at t (s); white for
+    tau = 0."""
+    sigma = np.asarray(sigma, dtype=float)
+    w = rng.standard_normal((len(t), len(sigma)))
+    if tau <= 0:
+        return w * sigma
+    e = np.empty_like(w)
+    e[0] = w[0]
+    a = np.exp(-np.diff(t) / tau)
+    b = np.sqrt(1.0 - a * a)
+    for k in range(1, len(t)):
+        e[k] = a[k - 1] * e[k - 1] + b[k - 1] * w[k]
+    return e * sigma
+
+
+def _sensor_stamps(rate, duration, rng, dropout=0.0):
+    """k / rate + a random phase within the period, minus independent dropouts."""
+    t = rng.uniform(0.0, 1.0 / rate) + np.arange(int(duration * rate)) / rate
+    t = np.round(t[t <= duration] * NS) / NS
+    return t[rng.random(len(t)) >= dropout]
+
+
+def _raw_errors(cfg, rng):
+    """The run's sensor errors and noise (drawn): the truth the identifier is not told."""
+    a, b = cfg.dvl_misalignment_deg
+    noise = {s: {'level': float(rng.uniform(*cfg.noise_level)),
+                 'tau_s': float(rng.uniform(*cfg.noise_tau))}
+             for s in ('attitude', 'gyro', 'dvl', 'depth')}
+    return {'gyro_bias': rng.normal(0.0, cfg.gyro_bias_sd, 3).tolist(),
+            'dvl_misalignment': math.radians(rng.choice([-1.0, 1.0]) * rng.uniform(a, b)),
+            'dvl_scale': float(rng.uniform(*cfg.dvl_scale)),
+            'surface_pressure_offset_pa': float(rng.uniform(*cfg.surface_pressure_pa)),
+            'noise': noise}
+
+
+def generate_raw(cfg):
+    """Make one raw-sensor run in memory (no bag: the input map's reader turns bags into the same
+    records). Returns a :class:`RawRun`."""
+    from auv_ident.core.filter.raw import RawMeasurement
+    cfg.validate()
+    d = cfg.data
+    seqs = np.random.SeedSequence([d.seed, 28]).spawn(6)
+    r_man, r_stamp, r_err, r_noise, _, _ = (np.random.default_rng(s) for s in seqs)
+    vehicle = load_vehicle(d.vehicle)
+    model = Model(vehicle)
+    fin_limit = float(vehicle.raw['limits']['fin_rad'])
+    targets = _targets(d, r_man, fin_limit, d.duration)
+    ticks = np.round(command_ticks(d, r_man) * NS) / NS    # stamps at 1 ns, as a bag has
+    vals = command_values(d, targets, ticks, d.rpm)
+    pub = published_commands(d, ticks, vals)
+    cmd_t, cmd_vals = ticks[pub], vals[pub]
+    stamps = {'imu': _sensor_stamps(cfg.imu_rate, d.duration, r_stamp),
+              'dvl': _sensor_stamps(cfg.dvl_rate, d.duration, r_stamp, cfg.dvl_dropout),
+              'pressure': _sensor_stamps(cfg.depth_rate, d.duration, r_stamp)}
+    t_all = np.unique(np.concatenate(list(stamps.values())))
+    y0 = np.zeros(12)
+    y0[0] = trim_speed(model, d.rpm) if d.u0 is None else float(d.u0)
+    y0[8] = d.depth0
+    y0[11] = math.radians(d.heading0_deg)
+    dyn = Dynamics(model, d.current_ned)
+    Y = integrate(dyn, y0, cmd_t, cmd_vals, t_all, d.duration, d)
+    x_true = Y.copy()
+    for k in range(len(Y)):
+        x_true[k, :6] = dyn.nu_over_ground(Y[k])
+    at = {name: np.searchsorted(t_all, ts) for name, ts in stamps.items()}
+    err = _raw_errors(cfg, r_err)
+    sig = np.asarray(DOCUMENTED_SIGMA, dtype=float)
+
+    def noise(name, t, sigma):
+        n = err['noise'][name]
+        return _ou(t, np.asarray(sigma) * n['level'], n['tau_s'], r_noise)
+
+    recs = []
+    # IMU: the body attitude turned by a small world-axes rotation, rates plus bias
+    k_imu = at['imu']
+    e_att = noise('attitude', stamps['imu'], sig[9:12])
+    e_gyr = noise('gyro', stamps['imu'], sig[3:6])
+    imu_cov = np.diag(np.concatenate([sig[9:12], sig[3:6]]) ** 2)
+    for j, k in enumerate(k_imu):
+        R = _exp_rot(e_att[j]) @ rotation(*x_true[k, 9:12])
+        w = x_true[k, 3:6] + np.asarray(err['gyro_bias']) + e_gyr[j]
+        recs.append(RawMeasurement('imu', float(t_all[k]), np.concatenate([_quat_of(R), w]),
+                                   imu_cov))
+    # DVL: bottom (or water) velocity at its lever arm, in its turned and misaligned frame
+    r_d = np.asarray(cfg.dvl_lever_arm, dtype=float)
+    R_mount = _rz(err['dvl_misalignment']) @ _rz(math.radians(cfg.dvl_yaw_deg))
+    e_dvl = noise('dvl', stamps['dvl'], sig[0:3])
+    dvl_cov = np.diag(sig[0:3] ** 2)
+    for j, k in enumerate(at['dvl']):
+        v = (Y[k, 0:3] if d.dvl == 'water' else x_true[k, 0:3])
+        v_s = v + np.cross(x_true[k, 3:6], r_d)
+        meas = (1.0 + err['dvl_scale']) * (R_mount.T @ v_s) + e_dvl[j]
+        recs.append(RawMeasurement('dvl', float(t_all[k]), meas, dvl_cov))
+    # pressure: the sensor's depth under the real surface pressure
+    r_p = np.asarray(cfg.pressure_lever_arm, dtype=float)
+    e_p = noise('depth', stamps['pressure'], sig[8:9])
+    p_cov = np.array([[(sig[8] * SG) ** 2]])
+    for j, k in enumerate(at['pressure']):
+        z_s = x_true[k, 8] + rotation(*x_true[k, 9:12])[2] @ r_p + e_p[j, 0]
+        recs.append(RawMeasurement('pressure', float(t_all[k]),
+                                   np.array([P_ATM + err['surface_pressure_offset_pa']
+                                             + SG * z_s]), p_cov))
+    for t, u in zip(cmd_t, cmd_vals):
+        recs.append(RawMeasurement('command', float(t), np.asarray(u, dtype=float)))
+    # time order; a command stamped with a sensor message goes first (it acts from its stamp)
+    recs.sort(key=lambda m: (m.t, m.kind != 'command'))
+    truth = {'generator': GENERATOR + ' raw', 'config': _jsonable(dataclasses.asdict(cfg)),
+             'coefficients': dict(zip(vehicle.names, map(float, vehicle.values))),
+             'sensor_errors': err, 'dvl_mounting_nominal_yaw_deg': cfg.dvl_yaw_deg,
+             'counts': {k: int(len(v)) for k, v in stamps.items()}}
+    return RawRun(recs, truth, t_all, x_true, cmd_t, cmd_vals)
+
+
+class NavigationFilter:
+    """A plain navigation EKF, the kind that makes a vehicle's fused odometry: state [x y z (NED),
+    u v w (body), phi theta psi, gyro bias (3)], constant body velocity (white acceleration
+    q_acc m/s^2/sqrt(Hz)), attitude driven by the gyro minus its bias; updated by the IMU
+    attitude, the DVL (its nominal mounting and lever arm, no misalignment or scale: what such a
+    filter is told) and the depth from pressure (standard atmosphere). Its odometry is
+    [u v w, gyro - bias, x y z, phi theta psi] at odom_rate, the latest estimate at each tick:
+    smoothed and lagged by its own constant-velocity model, as real fused odometry is. Shares
+    nothing with the identifier."""
+
+    def __init__(self, dvl_yaw_deg, dvl_lever_arm, pressure_lever_arm, q_acc=0.05,
+                 q_bias=1e-5):
+        self.Rd = _rz(math.radians(dvl_yaw_deg))
+        self.rd = np.asarray(dvl_lever_arm, float)
+        self.rp = np.asarray(pressure_lever_arm, float)
+        self.q_acc, self.q_bias = q_acc, q_bias
+        self.x = None
+        self.P = None
+        self.w = np.zeros(3)
+        self.t = None
+        self.seen = set()     # the kinds fused: the solution is valid once every one has been
+
+    def _predict(self, t):
+        dt = t - self.t
+        if dt <= 0:
+            return
+        x = self.x
+        phi, th, psi = x[6:9]
+        R = rotation(phi, th, psi)
+        om = self.w - x[9:12]
+        F = np.eye(12)
+        F[0:3, 3:6] = R * dt
+        ct, tt = math.cos(th), math.tan(th)
+        Tm = np.array([[1, math.sin(phi) * tt, math.cos(phi) * tt],
+                       [0, math.cos(phi), -math.sin(phi)],
+                       [0, math.sin(phi) / ct, math.cos(phi) / ct]])
+        F[6:9, 9:12] = -Tm * dt
+        x[0:3] += R @ x[3:6] * dt
+        x[6:9] += Tm @ om * dt
+        Q = np.zeros((12, 12))
+        Q[3:6, 3:6] = np.eye(3) * self.q_acc ** 2 * dt
+        Q[6:9, 6:9] = np.eye(3) * 1e-6 * dt
+        Q[9:12, 9:12] = np.eye(3) * self.q_bias ** 2 * dt
+        Q[0:3, 0:3] = np.eye(3) * 1e-4 * dt
+        self.P = F @ self.P @ F.T + Q
+        self.t = t
+
+    def _update(self, nu, H, Rm):
+        S = H @ self.P @ H.T + Rm
+        K = self.P @ H.T @ np.linalg.inv(S)
+        self.x += K @ nu
+        A = np.eye(12) - K @ H
+        self.P = A @ self.P @ A.T + K @ Rm @ K.T
+
+    def feed(self, m):
+        """Take one raw record (commands ignored)."""
+        if m.kind == 'command':
+            return
+        if self.x is None:
+            if m.kind != 'imu':
+                return
+            R = rotation_of_q(m.values[:4])
+            self.x = np.zeros(12)
+            self.x[6:9] = (math.atan2(R[2, 1], R[2, 2]), -math.asin(R[2, 0]),
+                           math.atan2(R[1, 0], R[0, 0]))
+            self.P = np.diag([100.0, 100.0, 100.0, 1.0, 1.0, 1.0, 1e-4, 1e-4, 1e-4,
+                              1e-4, 1e-4, 1e-4])
+            self.t = m.t
+        self._predict(m.t)
+        self.seen.add(m.kind)
+        x = self.x
+        if m.kind == 'imu':
+            self.w = m.values[4:7].copy()
+            R_m = rotation_of_q(m.values[:4])
+            meas = np.array([math.atan2(R_m[2, 1], R_m[2, 2]), -math.asin(R_m[2, 0]),
+                             math.atan2(R_m[1, 0], R_m[0, 0])])
+            H = np.zeros((3, 12))
+            H[:, 6:9] = np.eye(3)
+            self._update(wrap(meas - x[6:9]), H, np.diag(np.diag(m.covariance)[:3]))
+            x[6:9] = wrap(x[6:9])
+        elif m.kind == 'dvl':
+            om = self.w - x[9:12]
+            v_b = self.Rd @ m.values - np.cross(om, self.rd)
+            H = np.zeros((3, 12))
+            H[:, 3:6] = np.eye(3)
+            self._update(v_b - x[3:6], H, self.Rd @ m.covariance @ self.Rd.T)
+        elif m.kind == 'pressure':
+            R = rotation(*x[6:9])
+            z = (m.values[0] - P_ATM) / SG - R[2] @ self.rp
+            H = np.zeros((1, 12))
+            H[0, 2] = 1.0
+            self._update(np.array([z - x[2]]), H, m.covariance / SG ** 2)
+
+    def odometry(self):
+        """(12,) the current estimate as an odometry sample (u v w p q r x y z phi theta psi)."""
+        x = self.x
+        return np.concatenate([x[3:6], self.w - x[9:12], x[0:3], x[6:9]])
+
+
+def rotation_of_q(q):
+    """Rotation matrix of the quaternion q = (x, y, z, w)."""
+    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def fused_odometry(run, cfg, rate=20.0):
+    """(t (K,), Y (K, 12)): the plain navigation filter's odometry of a raw run at `rate` Hz
+    (every 1/rate s, the latest estimate after the messages up to that tick)."""
+    nav = NavigationFilter(cfg.dvl_yaw_deg, cfg.dvl_lever_arm, cfg.pressure_lever_arm)
+    ticks = np.round(np.arange(1, int(run.records[-1].t * rate) + 1) / rate * NS) / NS
+    t_out, Y = [], []
+    j = 0
+    for m in run.records:
+        while j < len(ticks) and ticks[j] < m.t:
+            if nav.seen >= {'imu', 'dvl', 'pressure'}:
+                t_out.append(ticks[j])
+                Y.append(nav.odometry())
+            j += 1
+        nav.feed(m)
+    return np.array(t_out), np.array(Y)
+
+
+# ---------------------------------------------------------------------------------------------
 # command line
 
 

@@ -15,6 +15,7 @@ from auv_ident.bags.reader import bag_topics, BagError, read_bag
 from auv_ident.bags.schema import custom_data_of, read_metadata
 from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
+from auv_ident.session.input_map import InputMapError
 from auv_ident.session.record import median_noise_std, paired
 from auv_ident.session.session import Health, IdentSession
 from auv_ident.session.settings import IdentifierSettings, ParameterError, vehicle_named
@@ -119,9 +120,11 @@ class ReplayWarnings:
                 self.log.warning(f'{topic}: {n} messages in all with problem {code!r} '
                                  f'({n - self.first} not logged)')
 
-def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actuators',
-                    warn=None):
-    """Drive an IdentSession with (topic, t_ns, msg) in the given order; other topics ignored.
+def replay_messages(messages, session, warn=None):
+    """Drive an IdentSession with (topic, t_ns, msg) in the given order: each topic of the
+    session's input map (session/input_map.py; a relative map topic is the bag's '/' + it) to
+    its input, the log time t_ns the stamp of a message without a header; other topics
+    ignored.
 
     warn : None or a callable taking every 'rejected' / 'error' Event (e.g. ReplayWarnings)
     Returns the list of (stamp_ns, estimate, std) of the accepted updates (with coefficients
@@ -129,15 +132,14 @@ def replay_messages(messages, session, odom_topic='/odom', actuator_topic='/actu
     (e.g. message covariances not usable) are logged as warnings, what an 'auto' choice says
     as info (an error if it failed)."""
     updates = []
-    for topic, _, msg in messages:
-        if topic == actuator_topic:
-            ev = session.on_actuators(msg)
-        elif topic == odom_topic:
-            ev = session.on_odom(msg)
-            if ev.kind == 'update':
-                updates.append((ev.stamp_ns, ev.estimate, ev.std))
-        else:
+    names = {e.bag_topic: e.name for e in session.input_map.inputs}
+    for topic, t_ns, msg in messages:
+        name = names.get(topic)
+        if name is None:
             continue
+        ev = session.on_input(name, msg, t_ns)
+        if ev.kind == 'update':
+            updates.append((ev.stamp_ns, ev.estimate, ev.std))
         if warn is not None and ev.kind in ('rejected', 'error'):
             warn(ev)
         if session.notices:
@@ -230,12 +232,16 @@ def _same_vehicle(given, recorded):
         return Path(str(recorded)).stem == vehicle_named(given).name
 
 
-def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuators',
-               allow_truncated=False, warn=True, filtering=True):
+class BagInputError(BagError, InputMapError):
+    """The bag does not hold what the input map names (a topic, or its type)."""
+
+
+def replay_bag(path, settings=None, allow_truncated=False, warn=True, filtering=True):
     """Identify from a bag exactly as the identifier node would have live.
 
-    Odometry and actuator messages are read in log-time order (as recorded) and fed to an
-    IdentSession in that order.
+    The input map's topics (the ``input_map`` setting, session/input_map.py; default: the
+    Odometry on /odom and the JointState on /actuators) are read in log-time order (as
+    recorded) and fed to an IdentSession in that order.
 
     Parameters
     ----------
@@ -243,7 +249,6 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
     settings : IdentifierSettings (None: the defaults); a setting it was not given
         (IdentifierSettings.given) comes from the bag's metadata where that says it
         (:func:`bag_settings`: vehicle, frame, velocity_reference, noise_std)
-    odom_topic, actuator_topic : topics to read
     allow_truncated : read the complete chunks of a bag whose writer died (bags.reader.read_bag);
         default: such a bag is a BagError naming the option
     warn : log rejected messages and filter resets (ReplayWarnings: the first 3 of each kind,
@@ -253,23 +258,22 @@ def replay_bag(path, settings=None, odom_topic='/odom', actuator_topic='/actuato
         :func:`read_bag_run`
 
     Returns a ReplayResult (its `settings`: the settings used, as a dict). Raises BagError for
-    an unreadable bag (empty, truncated, corrupted, not an MCAP bag), a missing topic or a
-    topic of another type, ParameterError for a bad setting; nothing else for bad input.
+    an unreadable bag (empty, truncated, corrupted, not an MCAP bag), BagInputError (a
+    BagError and an InputMapError) for a topic of the map the bag lacks or records with
+    another type, ParameterError for a bad setting, InputMapError for a bad map; nothing else
+    for bad input.
     """
     present = bag_topics(path, allow_truncated=allow_truncated)
-    for what, topic in (('odometry', odom_topic), ('actuator', actuator_topic)):
-        if topic not in present:
-            listing = ', '.join(f'{t} ({present[t]})' for t in sorted(present)) or 'none'
-            raise BagError(f'{path}: no {what} topic {topic!r} in the bag; topics present: '
-                           f'{listing}')
     settings = settings_for_bag(settings or IdentifierSettings(), path)
     session = IdentSession(settings, keep_arrays=True, filtering=filtering)
-    msgs = read_bag(path, {odom_topic: 'nav_msgs/msg/Odometry',
-                           actuator_topic: 'sensor_msgs/msg/JointState'},
-                    allow_truncated=allow_truncated)
+    try:
+        session.input_map.check_topics(present, path)
+    except InputMapError as err:
+        raise BagInputError(str(err)) from None
+    msgs = read_bag(path, session.input_map.topic_types, allow_truncated=allow_truncated)
     warner = ReplayWarnings() if warn and filtering else None
     try:
-        updates = replay_messages(msgs, session, odom_topic, actuator_topic, warn=warner)
+        updates = replay_messages(msgs, session, warn=warner)
         if session.poll_choice():   # an 'auto' window that filled with the last message
             _log_choice_news(session.auto)
     finally:
@@ -284,9 +288,9 @@ def read_bag_run(path, settings=None, **kwargs):
     (session/screening.py: unreadable, wrong or changed frame ids, non-finite, implausible;
     and a repeated stamp) is kept and paired with the command in force at its stamp
     (session/record.py paired); no innovation gate judges the samples against a model, so a
-    model under test cannot thin out the run it is judged on. kwargs: replay_bag's topics and
-    allow_truncated. Returns a ReplayResult (its estimate the prior: nothing was filtered;
-    :func:`rejections` says what was dropped)."""
+    model under test cannot thin out the run it is judged on (the topics: the settings'
+    input_map). kwargs: replay_bag's allow_truncated. Returns a ReplayResult (its estimate
+    the prior: nothing was filtered; :func:`rejections` says what was dropped)."""
     return replay_bag(path, settings, warn=False, filtering=False, **kwargs)
 
 

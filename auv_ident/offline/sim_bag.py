@@ -109,6 +109,26 @@ def joint_state_msg(t_ns, u7):
         velocity=np.array(velocity), effort=np.array(effort))
 
 
+def command_message(msgtype, t_ns, raw):
+    """A rosbags command message of type msgtype (sensor_msgs/msg/JointState,
+    std_msgs/msg/Float64MultiArray or std_msgs/msg/Float64) stamped t_ns (headers only) holding
+    raw: [(session.input_map.Channel, raw value)] (JointState: each channel's joint and field,
+    the joints in channel order, other entries 0; Float64MultiArray: its index, others 0)."""
+    if msgtype == 'std_msgs/msg/Float64':
+        return _T[msgtype](data=float(raw[0][1]))
+    if msgtype == 'std_msgs/msg/Float64MultiArray':
+        data = np.zeros(max(c.index for c, _ in raw) + 1)
+        for c, v in raw:
+            data[c.index] = v
+        return _T[msgtype](layout=_T['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0),
+                           data=data)
+    joints = list(dict.fromkeys(c.joint for c, _ in raw))
+    arrays = {f: np.zeros(len(joints)) for f in ('position', 'velocity', 'effort')}
+    for c, v in raw:
+        arrays[c.field][joints.index(c.joint)] = v
+    return _T['sensor_msgs/msg/JointState'](header=_header(t_ns, ''), name=joints, **arrays)
+
+
 def bag_sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=SIM_EPOCH_NS):
     """The messages of sample k as a simulated bag holds them: list of (topic, t_ns, rosbags
     msg), stamp = log time = ``epoch_ns + t_k``; the command first (a replay in log-time order

@@ -8,9 +8,15 @@ Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with 
 messages in log-time order, so a recorded run replays to the same estimates.
 
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
-is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these)
-    ``actuators`` sensor_msgs/JointState: commands (conversions.py layout). Created before
-        ``odom``, so when both are waiting the executor takes the command first.
+is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these): the
+topics of the input map (parameter ``input_map``, session/input_map.py, docs/your_data.md), each
+with the map's message type. The default map, odom_actuators:
+    ``actuators`` sensor_msgs/JointState: commands (conversions.py layout). The command inputs
+        are created before the odometry, so when both are waiting the executor takes the
+        command first. Commands of other forms (JointState with other joint names,
+        Float64MultiArray by index, one Float64 per actuator, in other units) hold each
+        actuator's last value (session/inputs.py); a message without a header is stamped
+        with its receive time (the node's clock).
     ``odom`` nav_msgs/Odometry: measured state, in the convention of ``frame``; the message
         covariances are the measurement noise (``noise_source`` 'message', the default) or
         ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
@@ -153,6 +159,7 @@ from auv_ident.ros.toolkit import (
     declare_parameters,
     DIAGNOSTICS_QOS,
     LATCHED_QOS,
+    message_class,
     optional_list,
     Param,
     run_node,
@@ -239,12 +246,7 @@ class IdentifierNode(Node):
             # the first odometry decides it
             self.pub_current = self.create_publisher(TwistWithCovarianceStamped, '~/current',
                                                      LATCHED_QOS)
-        self.sub_actuators = self.create_subscription(JointState, 'actuators',
-                                                      self.on_actuators, STREAM_QOS)
-        # raw: the odometry is read from its CDR bytes into one reused view (ros/cdr.py)
-        self._odom_view = OdometryView()
-        self.sub_odom = self.create_subscription(Odometry, 'odom', self.on_odom_payload,
-                                                 STREAM_QOS, raw=True)
+        self._subscribe_inputs()
         self.srv_reset = self.create_service(Trigger, '~/reset', self.on_reset)
         self.srv_save = self.create_service(Trigger, '~/save', self.on_save)
         self.diagnostics_timer = self.create_timer(
@@ -257,6 +259,25 @@ class IdentifierNode(Node):
             + ('' if self.session.auto is None else
                f'; coefficients [auto]: the set is chosen from the first '
                f'{self.session.auto.window_s:g} s of data, then identified instead'))
+
+    def _subscribe_inputs(self):
+        """One subscription per input of the input map (session/input_map.py), with its
+        type: the commands first, so that when a command and an odometry message are both
+        waiting the executor takes the command first; the odometry read raw, from its CDR
+        bytes into one reused view (ros/cdr.py)."""
+        imap = self.session.input_map
+        self.sub_commands = []
+        for entry in imap.commands:
+            cls = message_class(entry.type, entry.topic)
+            self.sub_commands.append(self.create_subscription(
+                cls, entry.topic, lambda msg, name=entry.name: self.on_input(name, msg),
+                STREAM_QOS))
+        self.sub_actuators = self.sub_commands[0]
+        self._command_name = imap.commands[0].name
+        self._odom_name = imap.odometry.name
+        self._odom_view = OdometryView()
+        self.sub_odom = self.create_subscription(Odometry, imap.odometry.topic,
+                                                 self.on_odom_payload, STREAM_QOS, raw=True)
 
     def _lay_out(self):
         """Names and layout of the published estimate and covariance, from the session's
@@ -348,21 +369,30 @@ class IdentifierNode(Node):
         self._report(ev)
         return ev
 
-    def on_actuators(self, msg):
-        """Buffer an actuator command; returns the session's Event."""
+    def on_input(self, name, msg, receive_ns=None):
+        """A command message of the input map's input `name`; returns the session's Event.
+        receive_ns : the stamp of a message without a header (default: the node's clock now,
+        the receive time: system time, or /clock with use_sim_time)."""
         try:
-            ev = self.session.on_actuators(msg)
+            if receive_ns is None and not self.session.input_map_entry(name).stamped:
+                receive_ns = self.get_clock().now().nanoseconds
+            ev = self.session.on_input(name, msg, receive_ns)
         except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
-            return self._internal_error('actuators', err)
+            return self._internal_error(name, err)
         if self.session.auto is not None:
             self._follow_choice()
         self._report(ev)
         return ev
 
+    def on_actuators(self, msg):
+        """A message of the map's first command input (the default map: the JointState on
+        actuators); returns the session's Event."""
+        return self.on_input(self._command_name, msg)
+
     def on_odom(self, msg):
         """Fuse an odometry measurement and publish the estimate if good; returns the Event."""
         try:
-            ev = self.session.on_odom(msg)
+            ev = self.session.on_input(self._odom_name, msg)
         except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
             ev = self._internal_error('odom', err)
         if self.session.auto is not None:
@@ -441,7 +471,8 @@ class IdentifierNode(Node):
         odometry is not dropped for an old command (unless max_command_age is set); what tells
         that the actuator topic stopped is that no publisher is left. Then warn (rate-limited)
         while odometry still arrives. Returns the number of publishers."""
-        count = self.sub_actuators.get_publisher_count()
+        # commands on several topics: the one with the fewest publishers tells
+        count = min(sub.get_publisher_count() for sub in self.sub_commands)
         accepted = self.session.counters.odom_accepted
         if count == 0 and accepted > self._odom_at_last_check:
             line = self._warn_limit(('actuators', 'no publisher'),

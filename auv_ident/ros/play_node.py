@@ -24,6 +24,9 @@ Parameters
         is then not played (one clock source).
     ``topics`` (string array, default empty = all)  topics to play; a topic not in the bag is
         an error.
+    ``input_map`` (string, default '')  an input map (config/inputs/NAME.yaml or a path,
+        docs/your_data.md): its topics are played (with ``topics``, if given); a topic of the
+        map the bag lacks, or records with another type, is an error naming the input.
     ``wait_for_subscribers`` (string array, default empty)  topics (played ones, or /clock)
         that must have a subscriber before playback starts, so nothing is lost at the start;
         then a 0.25 s settle lets the subscribers' side of the match complete as well.
@@ -76,6 +79,7 @@ from auv_ident.ros.toolkit import (
     strings,
     SubscriberWait,
 )
+from auv_ident.session.input_map import InputMapError, load_input_map
 from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'player'
@@ -87,6 +91,8 @@ _PARAMETERS = (
     Param('rate', 1.0, 'playback speed factor (> 0)', number(above=0.0)),
     Param('publish_clock', False, 'publish /clock from the log times'),
     Param('topics', Parameter.Type.STRING_ARRAY, 'topics to play; empty = all', strings()),
+    Param('input_map', '', "play the topics of this input map (config/inputs/NAME.yaml or a "
+                           "path; docs/your_data.md), with topics; '' = none"),
     Param('wait_for_subscribers', Parameter.Type.STRING_ARRAY,
           'topics that need a subscriber before playback starts', strings()),
     Param('wait_for_subscribers_s', 5.0, 'how long to wait for those subscribers [s]',
@@ -143,6 +149,12 @@ class PlayNode(Node):
         self.wait_for_subscribers_s = value['wait_for_subscribers_s']
         self.wait_for_all_acked_s = value['wait_for_all_acked_s']
         self.requested_topics = resolve_topics(self, 'topics', value['topics'])
+        self.input_map = None
+        if value['input_map'].strip():
+            try:
+                self.input_map = load_input_map(value['input_map'])
+            except InputMapError as err:
+                raise ParameterError('input_map', str(err)) from None
         self.wait_topics = resolve_topics(self, 'wait_for_subscribers',
                                           value['wait_for_subscribers'])
 
@@ -150,6 +162,13 @@ class PlayNode(Node):
 
     def _open_bag(self):
         present = bag_topics(self.bag, allow_truncated=self.allow_truncated)  # BagError
+        if self.input_map is not None:
+            try:
+                self.input_map.check_topics(present, self.bag)
+            except InputMapError as err:
+                raise ParameterError('input_map', str(err)) from None
+            self.requested_topics += [t for t in self.input_map.topic_types
+                                      if t not in self.requested_topics]
         if self.requested_topics:
             absent = [t for t in self.requested_topics if t not in present]
             if absent:

@@ -7,14 +7,18 @@ as the serialized CDR bytes DDS delivers (``raw=True``): no decode/encode on the
 Run::
 
     ros2 run auv_ident record --ros-args -p topics:=[/odom,/actuators] -p output:=bags/run1
+    ros2 run auv_ident record --ros-args -p input_map:=odom_actuators -p output:=bags/run1
     python -m auv_ident run record --ros-args -p topics:=[/odom] -p output:=run1
 
 Subscriptions
     every topic in ``topics``, with the type discovered from the graph (or given in ``types``).
 
 Parameters
-    ``topics`` (string array, required)  topics to record; relative names are resolved
-        against the node namespace (remappings apply).
+    ``topics`` (string array, required unless ``input_map`` is given)  topics to record;
+        relative names are resolved against the node namespace (remappings apply).
+    ``input_map`` (string, default '')  an input map (config/inputs/NAME.yaml or a path,
+        docs/your_data.md): its topics are recorded too, with the map's types (no discovery
+        needed, so the recorder can start before the vehicle's drivers).
     ``output`` (string, required)  bag directory to create; must not exist.
     ``compression`` ('zstd' | 'none', default 'zstd')  MCAP chunk compression.
     ``wait_for_topics_s`` (float >= 0, default 5.0)  how long to wait (one deadline for all)
@@ -77,6 +81,7 @@ from auv_ident.ros.toolkit import (
     stream_qos,
     strings,
 )
+from auv_ident.session.input_map import InputMapError, load_input_map
 from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'recorder'
@@ -84,8 +89,11 @@ DRAIN_IDLE_S = 0.1   # stop draining after this long without a new message
 DRAIN_MAX_S = 2.0    # and never drain for longer than this
 
 _PARAMETERS = (
-    Param('topics', Parameter.Type.STRING_ARRAY, 'topics to record (required)',
-          strings(required=True, example='[/odom,/actuators]')),
+    Param('topics', Parameter.Type.STRING_ARRAY,
+          'topics to record (required unless input_map is given)',
+          strings(example='[/odom,/actuators]')),
+    Param('input_map', '', 'input map whose topics are recorded, with its types (config/inputs/'
+                           "NAME.yaml or a path; docs/your_data.md); '' = none"),
     Param('output', '', 'bag directory to create; must not exist (required)',
           required_string('bags/run1')),
     Param('compression', 'zstd', "MCAP chunk compression: 'zstd' or 'none'",
@@ -116,7 +124,11 @@ class RecordNode(Node):
 
     def _read_parameters(self):
         value = declare_parameters(self, _PARAMETERS)
-        self.topics = resolve_topics(self, 'topics', value['topics'])
+        map_types = self._map_types(value['input_map'])
+        if not value['topics'] and not map_types:
+            raise ParameterError('topics', 'required unless input_map is given, e.g. -p '
+                                           'topics:=[/odom,/actuators]')
+        self.topics = resolve_topics(self, 'topics', value['topics'] + list(map_types))
         output = os.path.abspath(os.path.expanduser(value['output']))
         if os.path.lexists(output):
             raise ParameterError('output', f'{output} exists already (not overwriting a bag)')
@@ -124,7 +136,8 @@ class RecordNode(Node):
         self.compression = None if value['compression'] == 'none' else 'zstd'
         self.wait_for_topics_s = value['wait_for_topics_s']
         self.flush_period_s = value['flush_period_s']
-        self.given_types = {}
+        self.given_types = {resolve_topics(self, 'input_map', [t])[0]: typ
+                            for t, typ in map_types.items()}
         for entry in value['types']:
             topic, sep, msgtype = entry.partition('=')
             if not sep or not topic.strip() or not msgtype.strip():
@@ -138,6 +151,17 @@ class RecordNode(Node):
                 raise ParameterError('types', f'topic {topic} is not in topics {self.topics}')
             self.given_types[topic] = msgtype
         self.use_sim_time = bool(self.get_parameter('use_sim_time').value)
+
+    def _map_types(self, name):
+        """{topic: type} of the input map named (its topics as the map writes them:
+        relative ones resolve in the node's namespace); {} for ''."""
+        if not name.strip():
+            return {}
+        try:
+            imap = load_input_map(name)
+        except InputMapError as err:
+            raise ParameterError('input_map', str(err)) from None
+        return {e.topic: e.type for e in imap.inputs}
 
     # --- start: discovery, bag, subscriptions ---
 

@@ -73,6 +73,11 @@ from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.model.state import CURRENT_NAMES, FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
+# A covariance diagonal entry at or above this (state units squared: a 1-sigma of 1000 m, m/s,
+# rad or rad/s) says the message does not measure that channel (an imported log's unmeasured
+# channel, a multi-rate log's sensor without a sample at that row): with noise_source
+# 'message' the identifier then skips the channel for that message (session/session.py).
+NOT_MEASURED_VARIANCE = 1e6
 
 FRAMES = ('ned', 'enu')
 DEFAULT_FRAME_IDS = {

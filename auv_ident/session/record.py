@@ -66,7 +66,18 @@ def median_noise_std(variances: Sequence[np.ndarray], default_variances: ArrayLi
     """(12,) the measurement 1-sigma the filter used over a record, per channel: the square
     root of the median of the R diagonals of its accepted updates (the messages' covariances
     with noise_source 'message'), or of default_variances (noise_std squared) if there were
-    none."""
+    none. A NaN entry (a channel the message did not measure: a multi-rate log's sensor
+    without a sample) is left out of its channel's median; a channel never measured gets
+    default_variances'."""
+    default = np.asarray(default_variances, dtype=float)
     if len(variances) == 0:
-        return np.sqrt(np.asarray(default_variances, dtype=float))
-    return np.sqrt(np.median(np.array(variances), axis=0))
+        return np.sqrt(default)
+    v = np.array(variances)
+    if not np.isnan(v).any():
+        return np.sqrt(np.median(v, axis=0))
+    out = default.copy()
+    for i in range(v.shape[1]):
+        col = v[:, i][~np.isnan(v[:, i])]
+        if col.size:
+            out[i] = np.median(col)
+    return np.sqrt(out)

@@ -10,10 +10,15 @@ array API takes what a message says as plain arrays and stamps:
   :func:`auv_ident.session.messages.odometry_to_state` returns it) with the message's frame
   ids;
 
-and :meth:`IdentSession.on_actuators` / :meth:`IdentSession.on_odom` are thin adapters that
-read sensor_msgs/JointState and nav_msgs/Odometry objects (rclpy or rosbags, duck-typed, with
+and :meth:`IdentSession.on_input` takes a message of an input of the input map (the
+``input_map`` setting, session/input_map.py: by default the nav_msgs/Odometry ``odom`` and the
+sensor_msgs/JointState ``actuators``; commands of any form through session/inputs.py, held on
+change), :meth:`IdentSession.on_actuators` / :meth:`IdentSession.on_odom` the default layout's
+two messages. They read the messages (rclpy or rosbags, duck-typed, with
 :mod:`auv_ident.session.messages`) and call the same code, a message that cannot be read being
 rejected as ``conversion``. Each call returns an :class:`~auv_ident.session.guard.Event`.
+With noise_source 'message', a channel whose stated variance is at least
+NOT_MEASURED_VARIANCE (1e6) is not measured by that message and is skipped.
 
 Per message the session screens (rejection policy, frame-id and plausibility rules:
 session/screening.py), then hands the odometry to its running filter,
@@ -54,6 +59,8 @@ from auv_ident.session.guard import (
     RESET_COV_INFLATION,
 )
 from auv_ident.session.guarded_filter import FILTER_FAULTS, GuardedFilter
+from auv_ident.session.input_map import InputMapError, load_input_map
+from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.live_diagnosis import live_diagnosis, live_verdicts
 from auv_ident.session.messages import (
     _as_vector,
@@ -61,6 +68,7 @@ from auv_ident.session.messages import (
     header_stamp_ns,
     integer_stamp,
     joint_state_to_actuators,
+    NOT_MEASURED_VARIANCE,
     NS_PER_S,
     odometry_state,
     odometry_variances,
@@ -85,6 +93,10 @@ from auv_ident.session.stuck import describe_spans, StuckDetector
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
+
+class InputMapSettingError(ParameterError, InputMapError):
+    """The input_map setting names a map that is wrong or does not fit the vehicle."""
+
 
 # stamps from this on (~11.6 days after 1970) are wall-clock times: the session then counts
 # time from the whole second of the first stamp (IdentSession docstring)
@@ -142,6 +154,18 @@ class IdentSession:
         # a planar vehicle's held states are not measurements (core/model/planar.py): their fields
         # are neither read nor screened, whatever an odometry message holds there
         mask = mask & self.vehicle.free_states
+        # the input map (session/input_map.py): the topics, and the odometry's channels used
+        try:
+            self.input_map = load_input_map(settings.input_map)
+            self.input_map.check_vehicle(self.vehicle)
+            odom = self.input_map.odometry
+            self.frame = self._map_frame(odom.frame)
+        except InputMapError as err:
+            raise InputMapSettingError('input_map', str(err)) from None
+        mask = mask & np.isin(STATE_NAMES, odom.fields)
+        self.holder = CommandHolder.of(self.input_map, self.vehicle)
+        self._inputs = {e.name: e for e in self.input_map.inputs}
+        self._multi_command = len(self.input_map.commands) > 1
         auto, coefficients = coefficient_request(self.vehicle, settings.coefficients)
         warm_start = settings.warm_start
         if auto and warm_start:
@@ -203,6 +227,16 @@ class IdentSession:
         self.noise = NoiseLearner(mask, T, settings.learn_noise and self.filtering
                                   and settings.noise_mode == 'fixed')
         self._runner = run_inline if auto_runner is None else auto_runner
+
+    def _map_frame(self, map_frame):
+        """The odometry convention: the `frame` setting, or the map's where that is 'auto';
+        InputMapError when both name one and they differ."""
+        if map_frame == 'auto' or map_frame == self.frame:
+            return self.frame
+        if self.frame == 'auto':
+            return map_frame
+        raise InputMapError(f'{self.input_map.where}: the odometry input says frame '
+                            f'{map_frame}, the frame setting {self.frame}: give one of them')
 
     def _model_of(self, coefficients):
         """The Model identifying these coefficients with the session's current settings."""
@@ -464,8 +498,60 @@ class IdentSession:
         self.frame = frame
         self.notices.append(f'frame auto -> {frame} ({why})')
 
+    def on_input(self, name, msg, receive_ns=None):
+        """A message of the input map's input `name` (session/input_map.py). Returns an
+        Event.
+
+        receive_ns : the receive time (int ns: the node's clock live, the log time of a bag),
+            the stamp of a message without a header (Float64, Float64MultiArray)
+        Commands update the held actuators (session/inputs.py CommandHolder); once every fed
+        actuator has been heard the whole input vector is buffered at the message's stamp.
+        """
+        entry = self._inputs[name]
+        if entry.role == 'odometry':
+            if self._multi_command and self.max_command_age is not None:
+                stale = self._stale_commands(msg)
+                if stale is not None:
+                    return stale
+            return self.on_odom(msg)
+        stamp_ns = None
+        try:
+            stamp_ns = header_stamp_ns(msg) if entry.stamped else integer_stamp(receive_ns)
+            if stamp_ns is None:
+                raise ConversionError(f'{entry.type} without a readable header.stamp')
+            u7 = self.holder.update(entry, msg, stamp_ns)
+        except ConversionError as err:
+            return self._reject(name, 'conversion', str(err), stamp_ns)
+        if u7 is None:
+            return Event('command', f'{name}: holding: no value yet for '
+                                    + ', '.join(self.holder.missing()), stamp_ns,
+                         code='holding')
+        return self._command(stamp_ns, u7, name)
+
+    def input_map_entry(self, name):
+        """The input map's InputEntry called name."""
+        return self._inputs[name]
+
+    def _stale_commands(self, msg):
+        """With commands on several topics: the 'stale command' rejection of an odometry
+        message at whose stamp some actuator's last value is older than max_command_age (each
+        topic is held on its own), else None."""
+        try:
+            stamp_ns = header_stamp_ns(msg)
+        except ConversionError:
+            return None     # on_odom says what is wrong with it
+        if stamp_ns is None:
+            return None
+        stale = self.holder.stale(stamp_ns, self.max_command_age)
+        if not stale:
+            return None
+        return self._reject('odom', 'stale command', 'the last command of '
+                            + ', '.join(stale) + f' is older than max_command_age '
+                            f'({self.max_command_age:g} s)', stamp_ns)
+
     def on_actuators(self, msg):
-        """Buffer a sensor_msgs/JointState actuator command. Returns an Event."""
+        """Buffer a sensor_msgs/JointState actuator command in the default layout
+        (session/messages.py JOINT_NAMES). Returns an Event."""
         stamp_ns = None
         try:
             stamp_ns = header_stamp_ns(msg)
@@ -531,20 +617,21 @@ class IdentSession:
                                 'them (noise_source message)')
         return np.where(ok, variances, self.noise_default)
 
-    def _command(self, stamp_ns, u7):
-        """add_command after reading: stamp_ns int, u7 a (7,) float array of our own."""
+    def _command(self, stamp_ns, u7, what='actuators'):
+        """add_command after reading: stamp_ns int, u7 a (7,) float array of our own; what:
+        the input it came from (the rejections' topic)."""
         if self.auto is not None and self.auto.running:
             self.poll_choice()
-        zero = self._zero_stamp('actuators', stamp_ns)
+        zero = self._zero_stamp(what, stamp_ns)
         if zero is not None:
             return zero
         t = self._time(stamp_ns)
         problem = command_problem(u7.tolist(), t, self.fin_limit, self.shaft_limit)
         if problem is not None:
-            return self._reject('actuators', problem[0], problem[1], stamp_ns)
+            return self._reject(what, problem[0], problem[1], stamp_ns)
         out = self.stream.add_command(t, u7)
         if not out.accepted:
-            return self._reject('actuators', out.code, out.reason, stamp_ns)
+            return self._reject(what, out.code, out.reason, stamp_ns)
         if self.keep_arrays:
             self.commands.append((t, u7))
         if self.auto is not None:
@@ -567,18 +654,20 @@ class IdentSession:
                                    self._frame_ids, self._measured_states)
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
-        # the stuck-sensor rule decides what the filter takes; unfiltered, samples are kept
-        held = self._repeats(t, x12) if self.filtering else []
+        y, r = self._sample(x12, variances)
+        # the stuck-sensor rule decides what the filter takes; unfiltered, samples are kept.
+        # It judges what the message measures: a channel it says it does not (NaN in y) never
+        # repeats, so its group is not held
+        fresh = y.tolist()
+        held = self._repeats(t, fresh) if self.filtering else []
         if held and self.stuck.all_held(held):
             return self._reject('odom', 'repeated', 'every measured channel group ('
                                 + ', '.join(g.name for g in held) + ') repeats the previous '
                                 f'sample exactly at {t:.9f} s: not fed (a stuck sensor?)',
                                 stamp_ns)
-        y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
         if held:
             y = y.copy()
             y[self.stuck.channels(held)] = np.nan
-        r = None if variances is None else self._measurement_variances(variances)
         if not self.filtering:
             return self._kept(t, stamp_ns, y, r, frame_id, child_frame_id)
         filt = self.filter
@@ -592,7 +681,7 @@ class IdentSession:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
         if step.accepted:
-            self.stuck.renew(t, x12.tolist(), held)
+            self.stuck.renew(t, fresh, held)
             self._stuck_notices()
         if not step.accepted:
             ev = self._reject('odom', step.code, step.reason, stamp_ns)
@@ -622,20 +711,35 @@ class IdentSession:
         self._kept_stamps.add(stamp_ns)
         self.counters.odom_accepted += 1
         self.measurements.append((t, y))
-        self.variances.append(self.noise_default if r is None else r)
+        self.variances.append(self.noise_default if r is None
+                              else np.where(np.isnan(y) & self.measured, np.nan, r))
         if self._frame_ids is None:
             self._frame_ids = (frame_id, child_frame_id)
         return Event('kept', '', stamp_ns)
 
+    def _sample(self, x12, variances):
+        """(y (12,), r (12,) or None): the measured channels of x12 (NaN elsewhere, and where
+        the message's variance says it does not measure them, >= NOT_MEASURED_VARIANCE) and
+        the measurement variances of the message (noise_source 'message'), else None."""
+        y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
+        r = None
+        if variances is not None:
+            r = self._measurement_variances(variances)
+            unmeasured = variances >= NOT_MEASURED_VARIANCE
+            if unmeasured.any():    # the message says it does not measure these: skipped
+                y = np.where(unmeasured, np.nan, y)
+        return y, r
+
     def _repeats(self, t, x12):
-        """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s):
+        """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s),
+        x12 a list of 12 floats (NaN where not measured):
         the measured channel groups that repeat the last sample the filter took exactly
         ([] for a stamp not after it, which the stream's time rules take), their repeats
         counted and a fault started, said once in the notices."""
         prev = self.stream.t_prev
         if prev is not None and t <= prev:
             return []
-        held = self.stuck.held(x12.tolist())
+        held = self.stuck.held(x12)
         if held:
             self.stuck.repeat(t, held)
             self._stuck_notices()
@@ -654,7 +758,9 @@ class IdentSession:
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
             self.measurements.append((t, y))
-            self.variances.append(self.noise_default if r is None else r)
+            # a channel the message did not measure (NaN in y) is no sample of its noise
+            self.variances.append(self.noise_default if r is None
+                                  else np.where(np.isnan(y) & self.measured, np.nan, r))
         self.noise.keep_odometry(t, stamp_ns, y, r, step.code, trusted)
         if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code,
                                                             trusted):

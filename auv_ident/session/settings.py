@@ -444,6 +444,14 @@ class IdentifierSettings:
                               kind='strings', check=_measured,
                               note='Others are ignored, even if present in the message. Quote '
                                    'the names in YAML: a bare y is a boolean.')
+    input_map: str = setting('odom_actuators', 'input map: which topics, message types, fields, '
+                                               'units and actuators the identifier reads '
+                                               '(config/inputs/NAME.yaml or a YAML path; '
+                                               'docs/your_data.md)',
+                             note='odom_actuators is the nav_msgs/Odometry on odom and the '
+                                  'sensor_msgs/JointState on actuators with the six joint '
+                                  'names rudder, stern_planes, bow_planes, bow_plane_port, '
+                                  'bow_plane_starboard, propeller.')
     frame: str = setting('auto', 'convention of the incoming Odometry: auto = from its frame '
                                  'ids (a _ned/_frd token: NED/FRD; other names, e.g. odom and '
                                  'base_link: REP-103 ENU/FLU; none: NED), ned = NED/FRD, enu = '

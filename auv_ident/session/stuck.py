@@ -180,7 +180,9 @@ class StuckDetector:
                 g.span.active = False
                 ended.append(g.span)
                 g.span = None
-            g.values = tuple(x12[i] for i in g.channels)
+            values = tuple(x12[i] for i in g.channels)
+            # a channel the message did not measure (NaN) leaves nothing to repeat
+            g.values = values if all(v == v for v in values) else None
             g.since, g.repeats = t, 0
         if ended:
             self.notices.append(f'odom: changes again at t = {t:.3f} s after '

@@ -456,10 +456,19 @@ def test_bad_column_map_is_one_clear_error(tmp_path, doc, message):
 BAD_ROWS = [
     ([GOOD_ROWS[0], ['0.05', 'abc', '1.2', '0.5']], RunFileError,
      r"run.csv: line 3, column 'hdg': 'abc' is not a finite number"),
-    ([GOOD_ROWS[0], ['0.05', '1.0', '', '0.5']], RunFileError,
-     r"run.csv: line 3, column 'u': '' is not a finite number"),
-    ([GOOD_ROWS[0], ['0.05', 'nan', '1.2', '0.5']], RunFileError,
-     r"run.csv: line 3, column 'hdg': 'nan' is not a finite number"),
+    ([GOOD_ROWS[0], ['0.05', '1,5', '1.2', '0.5']], RunFileError,
+     r"run.csv: line 3, column 'hdg': '1,5' has a decimal comma; write numbers with a decimal "
+     r'point \(1.5\)'),
+    ([GOOD_ROWS[0], ['0,05', '1.0', '1.2', '0.5']], ColumnMapError,
+     r"run.csv: line 3, column 't': '0,05' has a decimal comma"),
+    ([GOOD_ROWS[0], ['0.05', '1.0', '-', '0.5']], RunFileError,
+     r"run.csv: line 3, column 'u': '-' is not a finite number"),
+    ([['0.0', 'nan', '1.2', '0.0'], ['0.05', '1.0', 'inf', '0.5']], RunFileError,
+     r'run.csv: every data row has a NaN or Inf'),
+    ([['0.0', '', '1.2', '0.0'], ['0.05', '', '1.2', '0.5']], RunFileError,
+     r"run.csv: column 'hdg' \(psi\) has no value in any row"),
+    ([GOOD_ROWS[0], ['', '1.0', '1.2', '0.5']], ColumnMapError,
+     r"run.csv: line 3, column 't': time '' is not a finite number"),
     ([GOOD_ROWS[0], ['x', '1.0', '1.2', '0.5']], ColumnMapError,
      r"run.csv: line 3, column 't': time 'x' is not a finite number"),
     ([GOOD_ROWS[0], GOOD_ROWS[1], ['0.05', '1.0', '1.2', '0.5']], RunFileError,
@@ -474,6 +483,104 @@ BAD_ROWS = [
 def test_bad_csv_is_one_clear_error(tmp_path, rows, error, message):
     with pytest.raises(error, match=message):
         read_csv_run(*_case(tmp_path, rows=rows))
+
+
+def test_decimal_commas_in_a_comma_separated_file_are_named(tmp_path):
+    path = tmp_path / 'dc.csv'
+    path.write_text('t,hdg,u,d\n0.0,1.0,1.2,0.0\n0.05,1,1,1.2,0.5\n', encoding='utf-8')
+    with pytest.raises(RunFileError, match=r'line 3: 5 fields, the header has 4 \(decimal '
+                                           r'commas\? write numbers with a decimal point\)'):
+        read_csv_run(path, _case(tmp_path)[1])
+    semi = _write_csv(tmp_path / 'semi.csv', ['t', 'hdg', 'u', 'd'], GOOD_ROWS, delimiter=';')
+    with pytest.raises(ColumnMapError, match=r"the fields are separated by ';', not ',' \(set "
+                                             r"delimiter: ';'"):
+        read_csv_run(semi, _case(tmp_path)[1])
+
+
+def test_blank_cells_and_nan_rows(tmp_path):
+    """A blank cell is no sample at that row; a row with a NaN is skipped and counted; an input
+    logged on change holds its value."""
+    rows = [['0.0', '1.0', '1.2', '0.0'], ['0.05', '1.1', '', ''], ['0.10', 'NaN', '1.2', ''],
+            ['0.15', '1.3', '', '1.5'], ['0.20', '1.4', '1.3', '']]
+    run = read_csv_run(*_case(tmp_path, rows=rows))
+    assert run.skipped == (4,) and len(run.t_ns) == 4
+    assert run.samples == {'u': 2, 'psi': 4}
+    assert np.isnan(run.x[1, State.U]) and run.x[3, State.U] == 1.3
+    np.testing.assert_allclose(np.degrees(run.inputs['rudder']), [0.0, 0.0, 1.5, 1.5])
+    bag = write_imported_bag(run, tmp_path / 'bag', vehicle='kvlcc2_hsva')
+    odom = [odometry_to_state(m)[1] for t, _, m in read_bag(bag) if t == '/odom']
+    var = [odometry_variances(m) for t, _, m in read_bag(bag) if t == '/odom']
+    assert [v[State.U] == UNMEASURED_VARIANCE for v in var] == [False, True, True, False]
+    assert [x[State.U] for x in odom] == [1.2, 0.0, 0.0, 1.3]
+    meta = bag_custom_data(bag)
+    assert meta['auv_ident.skipped_rows'] == '1'
+    assert meta['auv_ident.channel_samples'] == 'u:2 psi:4'
+
+
+def _multi_rate_rows(run):
+    """A log of a simulated nps_auv2 run as a vehicle writes one: the attitude and rates
+    (IMU) every 0.05 s, the DVL's u v w every 0.2 s, depth every 0.1 s, position never, the
+    six actuators only when they change (fins in deg), one isolated NaN row."""
+    header = ['time', 'roll', 'pitch', 'yaw', 'p', 'q', 'r', 'dvl_u', 'dvl_v', 'dvl_w', 'depth',
+              'rudder', 'stern', 'bow', 'bow_p', 'bow_s', 'rpm']
+    rows, last = [], None
+    for k, t in enumerate(run.t):
+        y, u = run.y[k], run.u[k]
+        row = [f'{t:.2f}'] + [repr(float(v)) for v in (y[State.PHI], y[State.THETA],
+                                                        y[State.PSI], y[State.P], y[State.Q],
+                                                        y[State.R])]
+        row += ([repr(float(y[i])) for i in (State.U, State.V, State.W)] if k % 4 == 0
+                else ['', '', ''])
+        row += [repr(float(y[State.Z]))] if k % 2 == 0 else ['']
+        cmd = [repr(math.degrees(float(v))) for v in u[:5]] + [repr(float(u[Input.N_RPM]))]
+        row += [c if last is None or c != last[i] else '' for i, c in enumerate(cmd)]
+        last = cmd
+        rows.append(row)
+    rows[501][1] = 'nan'
+    return header, rows
+
+
+MULTI_RATE_MAP = {
+    'time': {'column': 'time', 'unit': 's'},
+    'phi': {'column': 'roll', 'unit': 'rad'}, 'theta': {'column': 'pitch', 'unit': 'rad'},
+    'psi': {'column': 'yaw', 'unit': 'rad'}, 'p': {'column': 'p', 'unit': 'rad/s'},
+    'q': {'column': 'q', 'unit': 'rad/s'}, 'r': {'column': 'r', 'unit': 'rad/s'},
+    'u': {'column': 'dvl_u', 'unit': 'm/s'}, 'v': {'column': 'dvl_v', 'unit': 'm/s'},
+    'w': {'column': 'dvl_w', 'unit': 'm/s'}, 'z': {'column': 'depth', 'unit': 'm'},
+    'rudder': {'column': 'rudder', 'unit': 'deg'},
+    'stern_planes': {'column': 'stern', 'unit': 'deg'},
+    'bow_planes': {'column': 'bow', 'unit': 'deg'},
+    'bow_plane_port': {'column': 'bow_p', 'unit': 'deg'},
+    'bow_plane_starboard': {'column': 'bow_s', 'unit': 'deg'},
+    'shaft': {'column': 'rpm', 'unit': 'rpm'}}
+
+
+def test_a_multi_rate_log_with_every_actuator_is_identified(tmp_path, capsys):
+    """IMU at 20 Hz, DVL at 5 Hz, depth at 10 Hz, the stern and bow planes among the actuators
+    logged on change, one NaN row: imported, every accepted sample uses only what was sampled,
+    and the replay identifies the coefficients near the truth (blank cells taken as zeros
+    would not)."""
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
+    from auv_ident.vehicles import load_vehicle
+    run = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=120.0, seed=4)
+    header, rows = _multi_rate_rows(run)
+    csv_path = _write_csv(tmp_path / 'auv.csv', header, rows)
+    map_path = _write_map(tmp_path / 'auv.yaml', MULTI_RATE_MAP)
+    assert cli_main(['import', '--format', 'csv', str(csv_path), '--columns', str(map_path),
+                     '--vehicle', 'nps_auv2', '--out', str(tmp_path / 'bag')]) == 0
+    out = capsys.readouterr().out
+    n = len(run.t)
+    assert f'samples per channel: u {(n + 3) // 4}, v {(n + 3) // 4}' in out
+    assert 'skipped 1 rows with NaN or Inf (lines 503)' in out and 'note:' not in out
+    imported = read_csv_run(csv_path, map_path)
+    np.testing.assert_allclose(imported.inputs['stern_planes'],
+                               np.delete(run.u[:, Input.DELTA_S], 501), atol=1e-12)
+    res = replay_bag(tmp_path / 'bag', warn=False)
+    assert res.accepted == n - 1 and res.rejected == 0
+    np.testing.assert_allclose(res.U, np.delete(run.u, 501, axis=0), atol=1e-12)
+    truth = res.truth[:4]       # Z_ds Z_q Z_w M_ds
+    assert np.all(np.abs(res.estimate[:4] / truth - 1) < 0.1), res.estimate[:4]
 
 
 def test_bad_files_and_options(tmp_path, s_run):
@@ -519,3 +626,46 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     assert cli_main(argv[:4] + argv[6:]) == 2
     assert 'needs --columns' in capsys.readouterr().err
     assert not (tmp_path / 'o').exists()
+
+
+def test_the_ardusub_style_example_log_imports_with_the_documented_map(tmp_path, capsys):
+    """docs/your_data.md's ArduSub-style log (tools/ardusub_style_log.py: IMU 25 Hz, baro
+    20 Hz, DVL 5 Hz with dropouts, RCOU PWM 10 Hz) through docs/examples/ardusub_columns.yaml:
+    the PWM outputs become the fin angles and shaft speed, every row is fused."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('ardusub_style_log',
+                                                  REPO / 'tools' / 'ardusub_style_log.py')
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    log = tmp_path / 'log.csv'
+    assert tool.main(['--out', str(log), '--duration', '20']) == 0
+    columns = REPO / 'docs' / 'examples' / 'ardusub_columns.yaml'
+    run = read_csv_run(log, columns)
+    counts = run.samples
+    assert counts['phi'] == 501 and counts['z'] == 401 and 90 <= counts['u'] <= 101
+    assert 'x' not in counts and run.skipped == ()
+    rudder = run.inputs['rudder']
+    assert np.nanmax(np.abs(rudder)) == pytest.approx(math.radians(20.0))
+    bag = write_imported_bag(run, tmp_path / 'bag', vehicle='nps_auv2')
+    res = replay_bag(bag, warn=False)
+    assert res.accepted == len(run.t_ns) and res.rejected == 0
+    # the DVL rows carry u, the others do not (skipped, not fused as 0)
+    assert np.isnan(res.Y[:, State.U]).sum() == len(run.t_ns) - counts['u']
+
+
+def test_pwm_inputs_of_a_column_map():
+    doc = {'time': {'column': 't', 'unit': 'us'}, 'psi': {'column': 'y', 'unit': 'deg'},
+           'shaft': {'column': 'esc', 'unit': 'us',
+                     'pwm': {'neutral': 1000, 'half_range': 500, 'full_scale': 25, 'unit': 'rps'}}}
+    cmap = ColumnMap(doc)
+    _, _, inputs = cmap.to_ned({'psi': np.zeros(2), 'shaft': np.array([1000.0, 1250.0])})
+    np.testing.assert_allclose(inputs['shaft'], [0.0, 750.0])     # half of 25 rps, in rpm
+    for bad, message in (
+            ({'unit': 'us'}, r'shaft: unit us \(a PWM pulse width\) needs pwm'),
+            ({'unit': 'rpm', 'pwm': {}}, 'pwm applies to unit us only'),
+            ({'unit': 'us', 'pwm': {'full_scale': 1, 'unit': 'deg'}}, "pwm unit 'deg'"),
+            ({'unit': 'us', 'pwm': {'full_scale': 0, 'unit': 'rpm'}}, 'full_scale = 0')):
+        with pytest.raises(ColumnMapError, match=message):
+            ColumnMap(dict(doc, shaft={'column': 'esc', **bad}))
+    with pytest.raises(ColumnMapError, match=r"psi: unknown unit 'us'"):
+        ColumnMap(dict(doc, psi={'column': 'y', 'unit': 'us'}))

@@ -22,8 +22,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
+import yaml
 
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.writer import BagWriter
@@ -44,7 +45,7 @@ from auv_ident.ros.conversions import actuators_to_joint_state, state_to_odometr
 from auv_ident.ros.identifier_node import IdentifierNode
 from auv_ident.ros.sim_messages import sample_messages
 from auv_ident.ros.simulator_node import SimulatorNode
-from auv_ident.session.messages import stamp_to_ns
+from auv_ident.session.messages import joint_state_to_actuators, stamp_to_ns
 from auv_ident.session.session import IdentSession
 from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
@@ -675,3 +676,55 @@ def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
     doc = json.loads(save.read_text())
     assert ok and doc['coefficients'] == names and doc['selection']['state'] == 'chosen'
     assert doc['selection']['left_out'] == sel.left_out
+
+
+def test_identifier_reads_the_topics_of_an_input_map(ctx, nodes, run, tmp_path):
+    """input_map: the node subscribes to the map's topics with the map's types (renamed odometry,
+    one std_msgs/Float64 per actuator in degrees and rpm), stamps a headerless command with its
+    receive time, and publishes what the offline replay of the same messages through the same
+    map gives."""
+    fins = ('delta_r', 'delta_s', 'delta_b', 'delta_bp', 'delta_bs')
+    inputs = {'nav': {'topic': 'nav/odometry', 'type': 'nav_msgs/msg/Odometry'}}
+    for a in fins + ('n_rpm',):
+        inputs[a] = {'topic': f'cmd/{a}', 'type': 'std_msgs/msg/Float64', 'actuator': a,
+                     'unit': 'rpm' if a == 'n_rpm' else 'deg'}
+    path = tmp_path / 'floats.yaml'
+    path.write_text(yaml.safe_dump({'version': 1, 'inputs': inputs}))
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(input_map=str(path)))
+    ex, _, estimates, _, _ = _probe_identifier(ctx, nodes, ident)
+    subs = {s.topic_name: s.msg_type for s in ident.sub_commands + [ident.sub_odom]}
+    assert subs == {'/nav/odometry': Odometry,
+                    **{f'/cmd/{a}': Float64 for a in fins + ('n_rpm',)}}
+    # the receive time: the node's clock, for a message without a header
+    before = time.time_ns()
+    ev = ident.on_input('delta_r', Float64(data=1.0))
+    assert ev.code == 'holding' and before <= ev.stamp_ns <= time.time_ns()
+    ident.session.reset()
+    messages = []       # (bag topic, receive/log time, message) as a recorder would see them
+    for k in range(len(run.t)):
+        (_, t_ns, cmd), (_, _, odom) = sorted(sample_messages(run, k, 'ned')[:2],
+                                              key=lambda m: m[0] != ACTUATOR_TOPIC)
+        _, u = joint_state_to_actuators(cmd)
+        for i, a in enumerate(fins + ('n_rpm',)):
+            value = u[i] if a == 'n_rpm' else math.degrees(u[i])
+            messages.append((f'/cmd/{a}', t_ns, Float64(data=value)))
+        messages.append(('/nav/odometry', t_ns, odom))
+    node_updates = []
+    for topic, t_ns, msg in messages:
+        if topic == '/nav/odometry':
+            ev = ident.on_odom(msg)
+            node_updates.append(ev)
+            ex.spin_once(timeout_sec=0.0)
+        else:
+            ident.on_input(topic.rsplit('/', 1)[1], msg, t_ns)
+    assert all(e.kind == 'update' for e in node_updates)
+    s = IdentSession(IdentifierSettings.from_values(input_map=str(path)))
+    ups = replay_messages(messages, s)
+    assert [u[0] for u in ups] == [e.stamp_ns for e in node_updates]
+    assert max(np.max(np.abs(u[1] - e.estimate)) for u, e in zip(ups, node_updates)) == 0.0
+    last = node_updates[-1]
+    assert _spin_until(ex, lambda: estimates and list(estimates[-1].position)
+                       == list(last.estimate))
+    # the same run from today's layout: the same estimates, to the rounding of degrees
+    ref = replay_messages(_ordered_messages(run), IdentSession())
+    assert np.allclose(ref[-1][1], last.estimate, rtol=1e-6, atol=1e-9)

@@ -261,10 +261,14 @@ def test_record_play_round_trip(tmp_path, ros_env, sim_run):
     source = write_run_bag(sim_run, tmp_path / 'source')
     copy = tmp_path / 'copy'
     topics = list(TOPIC_TYPES)
+    # the odometry and actuator topics through the default input map (odom_actuators), the
+    # truth by name
     player = _spawn(_node_cmd('play', f'bag:={source}', f'rate:={PLAY_RATE}',
+                              'input_map:=odom_actuators', 'topics:=[/simulator/truth]',
                               f'wait_for_subscribers:=[{",".join(topics)}]',
                               'wait_for_subscribers_s:=20.0'), ros_env)
-    recorder = _spawn(_node_cmd('record', f'topics:=[{",".join(topics)}]', f'output:={copy}',
+    recorder = _spawn(_node_cmd('record', 'topics:=[/simulator/truth]',
+                                'input_map:=odom_actuators', f'output:={copy}',
                                 'compression:=none', 'wait_for_topics_s:=20.0'), ros_env)
     try:
         rc, _, err = _finish(player, timeout=40.0)
@@ -314,6 +318,10 @@ BAD_CASES = {
     'play_bad_rate': (('play', 'bag:={corrupt}', 'rate:=0.0'), "parameter 'rate'"),
     'play_no_bag': (('play',), "parameter 'bag'"),
     'play_bad_ros_args': (('play', 'bag:=['), 'bad --ros-args'),
+    'record_bad_input_map': (('record', 'input_map:=nope', 'output:={tmp}/z'),
+                             "parameter 'input_map': input map 'nope': no file"),
+    'play_bad_input_map': (('play', 'bag:={corrupt}', 'input_map:=nope'),
+                           "parameter 'input_map': input map 'nope': no file"),
 }
 
 
@@ -335,4 +343,4 @@ def test_bad_parameters_one_clear_line(tmp_path, ros_env):
     finally:
         _reap(*procs.values())
     assert not (tmp_path / 'new').exists() and not (tmp_path / 'x').exists()
-    assert not (tmp_path / 'y').exists()
+    assert not (tmp_path / 'y').exists() and not (tmp_path / 'z').exists()

@@ -182,3 +182,18 @@ def test_lone_measured_channels_are_judged_together():
     assert [g.name for g in d.held(moved.tolist())] == ['position', 'psi, r']
     assert [g.name for g in StuckDetector([State.Z, State.U, State.V]).groups] == [
         'linear velocity']      # a lone z is not judged
+
+
+def test_a_field_the_message_says_it_does_not_measure_is_not_stuck(run):
+    """The same identity quaternion, but the message states the attitude's variance as 'not
+    measured' (>= NOT_MEASURED_VARIANCE): skipped by that rule, so nothing repeats; no fault."""
+    from auv_ident.session.messages import NOT_MEASURED_VARIANCE
+    s = IdentSession(IdentifierSettings.from_values(noise_source='message'))
+    variances = s.noise_default.copy()
+    variances[ATTITUDE] = 10 * NOT_MEASURED_VARIANCE
+    y = run.y.copy()
+    y[:, ATTITUDE] = 0.0
+    for k, t in enumerate(run.t):
+        s.add_command(_ns(t), run.u[k])
+        s.add_odometry(_ns(t), y[k], variances=variances)
+    assert not s.stuck.spans and s.stuck.repeats == 0 and s.health().level != 'ERROR'
