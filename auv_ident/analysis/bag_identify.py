@@ -18,6 +18,7 @@ from auv_ident.analysis.results import coefficient_list, Source
 from auv_ident.bags.reader import BagError
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.diagnosis import not_consistent
 from auv_ident.core.identification.noise_fit import fit_noise
 from auv_ident.core.identification.pipeline import identify_with_diagnosis
 from auv_ident.core.identification.results import (
@@ -36,6 +37,7 @@ from auv_ident.offline.replay import (
 )
 from auv_ident.session.record import exact_hold
 from auv_ident.session.settings import coefficient_request, IdentifierSettings
+from auv_ident.session.stuck import describe_spans
 from auv_ident.vehicles import load_vehicle
 
 REPLAY_REJECT_LIMIT = 0.02     # a replay rejecting more than this fraction is made again
@@ -117,7 +119,8 @@ class Replays:
 
 def replay_bags(paths, replay, cfg_of):
     """Replay every bag (replay(path, noise_std, q_state, noise_source) -> ReplayResult); if
-    they reject more than REPLAY_REJECT_LIMIT of their odometry (a first pass whose configured
+    they reject more than REPLAY_REJECT_LIMIT of their odometry (exact repeats, a stuck
+    sensor's, not counted: no noise model takes them back; a first pass whose configured
     noise is far too small for the data throws away good samples as outliers), replay them
     again with the noise model read off the accepted samples (core/identification/noise_fit.py:
     the effective measurement noise and, for model error, the matched process noise).
@@ -130,7 +133,9 @@ def replay_bags(paths, replay, cfg_of):
                            f'(rejected: {dict(rr.reasons)})')
     first = Replays(rrs, np.median(np.array([rr.noise_std for rr in rrs]), axis=0))
     total = first.rejected + first.accepted
-    if first.rejected <= REPLAY_REJECT_LIMIT * total:
+    # exact repeats (a stuck sensor, session/stuck.py) are rejected whatever the noise
+    repeats = sum(rr.reasons.get('odom: repeated', 0) for rr in rrs)
+    if first.rejected - repeats <= REPLAY_REJECT_LIMIT * total:
         return first
     model = rrs[0].model
     pre = fit_noise(model, cfg_of(model, first.noise_std), first.records(), T=rrs[0].T)
@@ -269,8 +274,26 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
                   wall_s=time.perf_counter() - t0)
     if replays.again is not None:
         res.diagnosis.messages.append(_replayed_note(replays.again, replays.rejected))
+    res = replace(res, diagnosis=not_consistent(res.diagnosis, stuck_problems(paths, replays),
+                                                'stuck_sensor'))
     return BagIdentification(paths=list(paths), metas=metas, replays=replays, cfg=cfg,
                              result=res, auto=auto, velocity_reference=vref, settings=settings)
+
+
+def stuck_problems(paths, replays):
+    """One clause per bag whose replay found a stuck sensor (session/stuck.py): its channel
+    groups and spans (the bag named when there are several). Such a result is NOT consistent
+    (module docstring of session/stuck.py): the spans were not fed to the filter, but a sensor
+    that froze, or that a driver never filled, is a fault of the data to look at before the
+    estimate is used."""
+    out = []
+    for path, rr in zip(paths, replays.replays):
+        if rr.stuck:
+            where = f'{path}: ' if len(paths) > 1 else ''
+            out.append(f'{where}odometry {describe_spans(rr.stuck)}: a stuck sensor, or a field '
+                       'the driver never fills; those samples were not fed to the filter. Check '
+                       'the sensor, or leave the channels out (--measured)')
+    return out
 
 
 def _several_bags(settings):

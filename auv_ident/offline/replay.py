@@ -74,6 +74,9 @@ class ReplayResult:
     U_cmd: np.ndarray = None
     # the session's core.model.hydrodynamics.Model (coefficients, then current)
     model: object = None
+    # the stuck-sensor faults of the replay (session/stuck.py StuckSpan; their samples were
+    # not fed)
+    stuck: list = field(default_factory=list)
 
     def document(self, stamp_ns=None):
         """The estimate file's dict of the final estimate."""
@@ -174,7 +177,7 @@ def session_result(session, updates, settings=None):
         T=session.T, settings=dict(settings or {}),
         noise_std=median_noise_std(session.variances.array, session.noise_default),
         time_origin_ns=int(session.time_origin_ns or 0),
-        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model)
+        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model, stuck=list(session.stuck.spans))
 
 def bag_settings(path):
     """Raw identifier settings a bag's metadata custom_data carries (bag_custom_data): the

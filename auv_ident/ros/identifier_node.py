@@ -52,6 +52,9 @@ Publications
             updates; the guard's window inconsistent now (median NIS/dof of the last 20
             updates > 100); or the mean NIS/dof over the last 200 updates > 10x its band
             (rules and reset in auv_ident/session/guard.py);
+        ERROR 'stuck sensor: ...': a measured channel group repeats its values exactly for
+            10 samples and 2 s or more (session/stuck.py: the repeats are not fed, no update
+            is good until it changes);
         WARN 'waiting for data': no update since start-up or the last restart;
         WARN 'diverging': 200 updates in the window and mean NIS/dof above the two-sided
             99.9 % chi-square band of the window (sum of NIS over sum of dof);
@@ -67,6 +70,8 @@ Publications
     queue overflow), odom_lost (odometry lost before the node read it, from the gaps in the
     stamps against the observed rate: session/status.py StampGaps; a warning at 1 Hz at most
     says how many and what to do), odom_rate_hz (the rate the stamps show), last_error,
+    repeated (measured channel-group samples not fed because they repeated the previous
+    sample exactly), stuck_sensor (the active stuck-sensor fault, or 'none'),
     mean_nis_per_dof, nis_band, nis_window, guard_median_nis_per_dof, last_nis, last_dof,
     last_stamp (of the last good estimate), consistent and diagnosis[_<i>] (the live diagnosis,
     session/live_diagnosis.py: 'false' also while the noise model the filter runs with is not

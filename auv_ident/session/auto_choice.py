@@ -55,7 +55,7 @@ AUTO_WINDOW_S = 120.0   # s of accepted odometry the choice is made from (docs/r
 CHOOSING, CHOSEN, FAILED = 'choosing', 'chosen', 'failed'
 
 # kinds of the kept entries: (COMMAND, t, u7), (COMMAND_REJECTED, t),
-# (ODOMETRY, t, stamp_ns, y12, R diagonal or None)
+# (ODOMETRY, t, stamp_ns, y12, R diagonal or None, trusted: no sensor fault was active)
 COMMAND, COMMAND_REJECTED, ODOMETRY = range(3)
 
 
@@ -163,10 +163,10 @@ class ChosenFilter:
             if kind == COMMAND_REJECTED:
                 stream.command_rejected(entry[1])
                 continue
-            _, t, stamp_ns, y, r = entry
+            _, t, stamp_ns, y, r, trusted = entry
             self.samples += 1
             try:
-                step = filt.update(t, stamp_ns, y, r)
+                step = filt.update(t, stamp_ns, y, r, trusted)
             except FILTER_FAULTS as err:
                 raise ChoiceFailed(f'the filter of {what} failed on the kept data at '
                                    f'{t:.3f} s: {type(err).__name__}: {err}') from None
@@ -286,10 +286,11 @@ class AutoChoice:
         if self.kept is not None:
             self.kept.append((COMMAND_REJECTED, t))
 
-    def keep_odometry(self, t, stamp_ns, y, r, code):
+    def keep_odometry(self, t, stamp_ns, y, r, code, trusted=True):
         """Keep an accepted odometry sample; returns True when the window just filled (the
         caller starts the job). code : the stream's code ('time jump': a confirmed backward
-        jump of the time line)."""
+        jump of the time line); trusted False: a sensor fault was active (session/stuck.py),
+        so the chosen filter does not take its update as good either."""
         if self.kept is None:
             return False
         if code == 'time jump' and self.job is None:
@@ -297,7 +298,7 @@ class AutoChoice:
             # the new line's (the stream held them for the jump), later ones are the old one's
             self.kept = [e for e in self.kept if e[0] != ODOMETRY and e[1] <= t]
             self.t_first = None
-        self.kept.append((ODOMETRY, t, stamp_ns, y, r))
+        self.kept.append((ODOMETRY, t, stamp_ns, y, r, trusted))
         if self.t_first is None:
             self.t_first = t
         self.t_last = t

@@ -15,8 +15,9 @@ session/auto_choice.py), so that it exists once:
 4. the divergence guard's window takes every computed update (outliers included); a
    sustained inconsistency (guard.GuardWindow) is reported, the reset is the caller's;
 5. an accepted update enters the health window, and becomes the last good estimate when the
-   guard's window is consistent, the probation after a fault reset is over and the health
-   window is not grossly inconsistent (guard.py's module docstring).
+   guard's window is consistent, the probation after a fault reset is over, the health
+   window is not grossly inconsistent (guard.py's module docstring) and no sensor fault is
+   active (the caller's ``trusted``: session/stuck.py).
 
 The filter also keeps what the reset rule reads (the last good estimate, whether the last
 reset started from it) and answers the estimate queries (:meth:`GuardedFilter.best`,
@@ -115,10 +116,11 @@ class GuardedFilter:
         f.use_measurement_variances(r)
         self._variances_of = (f, r)
 
-    def update(self, t, stamp_ns, y, r=None):
+    def update(self, t, stamp_ns, y, r=None, trusted=True):
         """Fuse odometry y (12,) stamped t (s; stamp_ns its int ns) with measurement variances
         r (12,) or None (the filter's own); returns an :class:`Update`. Raises FILTER_FAULTS
-        (module docstring, steps 2 and 3)."""
+        (module docstring, steps 2 and 3). trusted False: a sensor fault is active (the
+        session's stuck-sensor rule), so the update cannot become the last good estimate."""
         stream = self.stream
         f = stream.ekf
         if r is not None:
@@ -141,7 +143,8 @@ class GuardedFilter:
         if (self.probation and len(window) >= GUARD_WINDOW
                 and window.median() <= GUARD_PROBATION):
             self.probation = False
-        if window.since is None and not self.probation and not self.gross_inconsistency():
+        if (trusted and window.since is None and not self.probation
+                and not self.gross_inconsistency()):
             step.good = True
             self.reset_from_good = False
             self.last_good = LastGood(stamp_ns, step.estimate, step.std, step.cov)

@@ -80,6 +80,10 @@ def live_diagnosis(health: Any, verdicts: Verdicts,
     learner (None: none)."""
     m, (lo, hi), n = health.mean_nis_per_dof, health.band, health.window
     notes = weak_notes(verdicts)
+    if health.level == 'ERROR' and health.message.startswith('stuck sensor'):
+        return {'consistent': False,
+                'messages': [f'NOT consistent: {health.message}; the estimate shown is the last '
+                             'good one, from before the fault'] + notes}
     if health.level == 'ERROR':
         return {'consistent': False,
                 'messages': [f'NOT consistent: the filter is {health.message} (a reset or '

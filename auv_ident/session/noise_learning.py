@@ -172,16 +172,18 @@ class NoiseLearner:
         if self.keeping:
             self.kept.append((COMMAND_REJECTED, t))
 
-    def keep_odometry(self, t, stamp_ns, y, r, code):
+    def keep_odometry(self, t, stamp_ns, y, r, code, trusted=True):
         """Keep an accepted odometry sample (r: its variances before the learnt scale, None:
         the configured ones); code 'time jump': a new time line, the record restarts on it
-        (commands stamped up to t may be the new line's, as auto_choice keeps them)."""
+        (commands stamped up to t may be the new line's, as auto_choice keeps them); trusted
+        False: a sensor fault was active (session/stuck.py), the re-run takes it as no good
+        estimate either."""
         if not self.keeping:
             return
         if code == 'time jump':
             self.kept = [e for e in self.kept if e[0] != ODOMETRY and e[1] <= t]
             self.kept_odometry = 0
-        self.kept.append((ODOMETRY, t, stamp_ns, y, r))
+        self.kept.append((ODOMETRY, t, stamp_ns, y, r, trusted))
         self.kept_odometry += 1
 
     def innovations(self, white):
@@ -271,7 +273,7 @@ class NoiseLearner:
         for e in self.kept[start:]:
             if e[0] == ODOMETRY:
                 r = default_variances if e[4] is None else e[4]
-                e = (ODOMETRY, e[1], e[2], e[3], r * scale)
+                e = (ODOMETRY, e[1], e[2], e[3], r * scale, e[5])
             out.append(e)
         return out
 

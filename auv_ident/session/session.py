@@ -36,6 +36,8 @@ accepted messages of the first ``auto_window`` s and switches, once, to the set 
 them (session/auto_choice.py, whose chosen filter is a GuardedFilter too; the switch:
 :meth:`IdentSession.poll_choice`).
 """
+from dataclasses import replace
+
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
@@ -91,6 +93,7 @@ from auv_ident.session.settings import (
     vehicle_named,
 )
 from auv_ident.session.status import Counters, StampGaps
+from auv_ident.session.stuck import describe_spans, StuckDetector
 
 # The records and the guard constants callers use come with the session.
 __all__ = ['Event', 'GUARD_SECONDS', 'Health', 'IdentSession', 'LastGood']
@@ -224,6 +227,8 @@ class IdentSession:
         self.counters = Counters()  # the node's /diagnostics counters (session/status.py)
         # odometry lost before it reached us, from the gaps in its stamps (status.StampGaps)
         self.odom_gaps = StampGaps(max_gap)
+        # exact repeats of a measured channel group: not fed; a stuck sensor (session/stuck.py)
+        self.stuck = StuckDetector(self._measured_states)
         self._frame_ids = None      # (frame_id, child_frame_id) of the first accepted odometry
         # coefficients ['auto', ...]: the live choice (None: the set is fixed)
         self.auto = (AutoChoice(coefficients, settings.auto_window, auto_runner)
@@ -358,7 +363,11 @@ class IdentSession:
     # -- the estimate, its file, health and diagnosis --
 
     def best(self):
-        """(estimate, covariance) to report: the last good one, else estimate_now()."""
+        """(estimate, covariance) to report: the last good one, else estimate_now(); with no
+        good estimate yet while a sensor is stuck (session/stuck.py), the start-up prior, not
+        what the filter formed during the fault."""
+        if self.last_good is None and self.stuck.active():
+            return self.theta0.copy(), self.stream.ekf.theta_cov0.copy()
         return self.filter.best()
 
     def estimate_now(self):
@@ -384,8 +393,13 @@ class IdentSession:
         return doc
 
     def health(self):
-        """The filter's health (session/guard.py judge_health: the /diagnostics status)."""
-        return self.counters.health(self.filter)
+        """The filter's health (session/guard.py judge_health: the /diagnostics status); ERROR
+        'stuck sensor: ...' while a measured channel group is stuck (session/stuck.py)."""
+        health = self.counters.health(self.filter)
+        stuck = self.stuck.describe_active()
+        if stuck:
+            return replace(health, level='ERROR', message=f'stuck sensor: {stuck}')
+        return health
 
     def diagnosis(self, health=None):
         """(verdicts, diagnosis) of the running filter (session/live_diagnosis.py): per
@@ -688,26 +702,39 @@ class IdentSession:
                                    self._frame_ids, self._measured_states)
         if problem is not None:
             return self._reject('odom', problem[0], problem[1], stamp_ns)
-        y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
-        r = None
-        if variances is not None:
-            r = self._measurement_variances(variances)
-            unmeasured = variances >= NOT_MEASURED_VARIANCE
-            if unmeasured.any():    # the message says it does not measure these: skipped
-                y = np.where(unmeasured, np.nan, y)
+        y, r = self._sample(x12, variances)
+        # the stuck-sensor rule decides what the filter takes; unfiltered, samples are kept.
+        # It judges what the message measures: a channel it says it does not (NaN in y) never
+        # repeats, so its group is not held
+        fresh = y.tolist()
+        held = self._repeats(t, fresh) if self.filtering else []
+        if held and self.stuck.all_held(held):
+            return self._reject('odom', 'repeated', 'every measured channel group ('
+                                + ', '.join(g.name for g in held) + ') repeats the previous '
+                                f'sample exactly at {t:.9f} s: not fed (a stuck sensor?)',
+                                stamp_ns)
+        if held:
+            y = y.copy()
+            y[self.stuck.channels(held)] = np.nan
         if not self.filtering:
             return self._kept(t, stamp_ns, y, r, frame_id, child_frame_id)
         filt = self.filter
         before = filt.last_good
+        # the faults that go on with this sample (a stuck group that changes now ends its own)
+        stuck = describe_spans(self.stuck.faults_among(held))
         try:
-            step = filt.update(t, stamp_ns, y, self._learnt_variances(r))
+            step = filt.update(t, stamp_ns, y, self._learnt_variances(r),
+                               trusted=not stuck)
         except FILTER_FAULTS as err:
             return self._fault_reset('core error', f'{type(err).__name__}: {err}', stamp_ns)
         self.counters.filtered(step.code)
+        if step.accepted:
+            self.stuck.renew(t, fresh, held)
+            self._stuck_notices()
         if not step.accepted:
             ev = self._reject('odom', step.code, step.reason, stamp_ns)
             return self._guard_reset(t, stamp_ns) if step.sustained else ev
-        self._taken(t, stamp_ns, y, r, step, before)
+        self._taken(t, stamp_ns, y, r, step, before, not stuck)
         if step.sustained:
             return self._guard_reset(t, stamp_ns)
         if self._learn(step):
@@ -717,7 +744,8 @@ class IdentSession:
                 self._frame_ids = (frame_id, child_frame_id)
             return Event('update', f'odom: {step.reason}' if step.reason else '', stamp_ns,
                          step.estimate, step.std, step.cov, step.nis, step.dof, step.code, True)
-        reason = ('odom: ' + (step.reason + '; ' if step.reason else '') + filt.why_not_good()
+        why = f'stuck sensor: {stuck}' if stuck else filt.why_not_good()
+        reason = ('odom: ' + (step.reason + '; ' if step.reason else '') + why
                   + ': not taken as good')
         return Event('update', reason, stamp_ns, step.estimate, step.std, step.cov, step.nis,
                      step.dof, 'guard', False)
@@ -737,17 +765,53 @@ class IdentSession:
             self._frame_ids = (frame_id, child_frame_id)
         return Event('kept', '', stamp_ns)
 
-    def _taken(self, t, stamp_ns, y, r, step, before):
-        """Count and keep an accepted odometry sample (y, its variances r or None); start the
-        'auto' choice, from the last good estimate before it, when its window fills."""
+    def _sample(self, x12, variances):
+        """(y (12,), r (12,) or None): the measured channels of x12 (NaN elsewhere, and where
+        the message's variance says it does not measure them, >= NOT_MEASURED_VARIANCE) and
+        the measurement variances of the message (noise_source 'message'), else None."""
+        y = x12 if self._all_measured else np.where(self.measured, x12, np.nan)
+        r = None
+        if variances is not None:
+            r = self._measurement_variances(variances)
+            unmeasured = variances >= NOT_MEASURED_VARIANCE
+            if unmeasured.any():    # the message says it does not measure these: skipped
+                y = np.where(unmeasured, np.nan, y)
+        return y, r
+
+    def _repeats(self, t, x12):
+        """The stuck-sensor rule (session/stuck.py) on a screened odometry sample at t (s),
+        x12 a list of 12 floats (NaN where not measured):
+        the measured channel groups that repeat the last sample the filter took exactly
+        ([] for a stamp not after it, which the stream's time rules take), their repeats
+        counted and a fault started, said once in the notices."""
+        prev = self.stream.t_prev
+        if prev is not None and t <= prev:
+            return []
+        held = self.stuck.held(x12)
+        if held:
+            self.stuck.repeat(t, held)
+            self._stuck_notices()
+        return held
+
+    def _stuck_notices(self):
+        stuck = self.stuck
+        if stuck.notices:
+            self.notices.extend(stuck.notices)
+            stuck.notices.clear()
+
+    def _taken(self, t, stamp_ns, y, r, step, before, trusted):
+        """Count and keep an accepted odometry sample (y, its variances r or None; trusted:
+        no sensor fault active); start the 'auto' choice, from the last good estimate before
+        it, when its window fills."""
         self.counters.updated(step.nis, step.dof)
         if self.keep_arrays:
             self.measurements.append(t, y)
             # a channel the message did not measure (NaN in y) is no sample of its noise
             self.variances.append(self.noise_default if r is None
                                   else np.where(np.isnan(y) & self.measured, np.nan, r))
-        self.noise.keep_odometry(t, stamp_ns, y, r, step.code)
-        if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code):
+        self.noise.keep_odometry(t, stamp_ns, y, r, step.code, trusted)
+        if self.auto is not None and self.auto.keep_odometry(t, stamp_ns, y, r, step.code,
+                                                            trusted):
             self._start_choice(before)
 
     # -- the noise model learnt from the innovations (session/noise_learning.py) --

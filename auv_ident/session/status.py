@@ -173,7 +173,9 @@ def _num(v):
 def diagnostic_values(session, health, own=()):
     """[(key, text)] of the /diagnostics status of an IdentSession with this health (its
     health()): the counters, then own (the caller's (key, text) counts, e.g. the node's
-    internal_errors), the health window, the guard, the last update, the diagnosis, per
+    internal_errors), last_error, the stuck-sensor rule's (session/stuck.py: 'repeated',
+    channel-group samples not fed because they repeated exactly; 'stuck_sensor', the active
+    fault or 'none'), the health window, the guard, the last update, the diagnosis, per
     parameter its last good value, 1-sigma and verdict, the 'auto' choice's values, the noise
     learner's (session/noise_learning.py; with learn_noise on in noise mode fixed), and the
     filter's R and Q diagonals. Floats are repr, 'n/a' if not finite."""
@@ -192,6 +194,8 @@ def diagnostic_values(session, health, own=()):
     values += [('odom_lost', str(s.odom_gaps.lost)),
                ('odom_rate_hz', _num(1.0 / s.odom_gaps.interval_s))]
     values += [('last_error', c.last_error),
+               ('repeated', str(s.stuck.repeats)),
+               ('stuck_sensor', s.stuck.describe_active() or 'none'),
                ('mean_nis_per_dof', _num(health.mean_nis_per_dof)),
                ('nis_band', f'{_num(health.band[0])} {_num(health.band[1])}'),
                ('nis_window', str(health.window)),

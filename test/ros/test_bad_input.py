@@ -335,6 +335,23 @@ def _tilted_frame(run):
     return _with_segment(run, bad)
 
 
+STUCK_SEG = (SEG[0], SEG[0] + 100)     # 5 s at 20 Hz
+
+
+def _stuck_odometry(run):
+    """A frozen driver: the odometry message of the sample before the segment repeated with
+    fresh stamps for 5 s (session/stuck.py)."""
+    held = _sample(run, SEG[0] - 1)[1][1]
+
+    def bad(k):
+        msgs = _sample(run, k)
+        odom = _sample(run, SEG[0] - 1)[1][1]
+        odom.header.stamp = msgs[1][1].header.stamp
+        assert odom.pose == held.pose and odom.twist == held.twist
+        return [msgs[0], (ODOM_TOPIC, odom)]
+    return _with_segment(run, bad, STUCK_SEG)
+
+
 def _burst(y):
     y[0] += 2.0           # surge 2 m/s off (200 sigma)
     y[11] += 1.0          # heading 1 rad off
@@ -380,6 +397,8 @@ CASES = [
          {'odom: outlier'}),
     Case('absurd_burst_3s', lambda r: _state_modified(r, _burst, (SEG[0], SEG[0] + 60)),
          {'odom: outlier'}, resets=(1, 3), tol=0.1),
+    Case('stuck_odometry_5s', _stuck_odometry, {'odom: repeated'}, seg_end=STUCK_SEG[1],
+         tol=0.1),
 ]
 
 
@@ -490,9 +509,11 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
             lines = [t for lv, t in node.log_lines
                      if lv == 'warning' and t.startswith(f'rejected {topic}: ')]
             assert lines, key
-        # (the one-time notices of unusable message covariances, one per channel, aside)
+        # (the one-time notices of unusable message covariances, one per channel, and of a
+        # stuck sensor's start and end, aside)
         warnings = [t for lv, t in node.log_lines
-                    if lv == 'warning' and 'states no usable covariance' not in t]
+                    if lv == 'warning' and 'states no usable covariance' not in t
+                    and 'repeated exactly for' not in t]
         assert len(warnings) <= len(keys) * (1 + int(wall // 5.0) + 1), warnings
         st = node.diagnostic_status()
         assert int({v.key: v.value for v in st.values}['internal_errors']) == 0
@@ -668,9 +689,11 @@ def test_every_distinct_problem_is_named_while_another_floods(run, ctx):
                 msgs[0][1].position = [math.degrees(v) for v in msgs[0][1].position]
             return msgs
         _feed_node(node, _with_segment(run, bad))
-        # (the one-time notices of unusable message covariances, one per channel, aside)
+        # (the one-time notices of unusable message covariances, one per channel, and of a
+        # stuck sensor's start and end, aside)
         warnings = [t for lv, t in node.log_lines
-                    if lv == 'warning' and 'states no usable covariance' not in t]
+                    if lv == 'warning' and 'states no usable covariance' not in t
+                    and 'repeated exactly for' not in t]
         assert len([t for t in warnings if 'non-finite' in t]) == 1
         assert len([t for t in warnings if 'implausible fin' in t]) == 1
         assert node.session.counters.reasons['odom: non-finite'] == 40

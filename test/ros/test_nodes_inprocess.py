@@ -478,6 +478,57 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     assert not ok and 'save_path' in message
 
 
+def test_a_stuck_sensor_is_error_and_never_saved_as_last_good(ctx, nodes, run, tmp_path):
+    """A frozen driver: from 10 s on the odometry message of 9.95 s is republished with fresh
+    stamps (session/stuck.py). While it lasts /diagnostics says ERROR 'stuck sensor' naming
+    it, nothing is published, and the estimate file written at shutdown holds the last good
+    estimate from before the fault, not one the repeats formed."""
+    save = tmp_path / 'est.json'
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(save_path=str(save)))
+    nodes.append(ident)
+    published = []
+    publish = ident.publish_estimate
+
+    def record(ev):
+        published.append(ev.stamp_ns)
+        publish(ev)
+    ident.publish_estimate = record
+    k0 = 200
+    frozen = [m for m in _ordered_messages(run) if m[0] == ODOM_TOPIC][k0 - 1][2]
+    last_real = stamp_to_ns(frozen.header.stamp)
+    messages, k = [], 0
+    for topic, t_ns, msg in _ordered_messages(run):
+        if topic == ODOM_TOPIC:
+            if k >= k0:
+                stuck = sample_messages(run, k0 - 1)[1][2]
+                stuck.header.stamp = msg.header.stamp
+                msg = stuck
+            k += 1
+        messages.append((topic, t_ns, msg))
+    lines = []
+    ident._emit = lambda level, text: lines.append((level, text))
+    wall = time.monotonic()
+    events = _feed(ident, messages)
+    wall = time.monotonic() - wall
+    assert [e.code for e in events[k0:]] == ['repeated'] * (len(run.t) - k0)
+    st = ident.diagnostic_status()
+    kv = {v.key: v.value for v in st.values}
+    assert st.level == DiagnosticStatus.ERROR
+    assert st.message == ('stuck sensor: position, attitude, linear velocity, angular velocity '
+                          'repeated exactly for 10.1 s from t = 9.950 s (201 samples not fed)')
+    assert kv['stuck_sensor'] == st.message[len('stuck sensor: '):]
+    assert kv['rejected'] == str(len(run.t) - k0) and kv['consistent'] == 'false'
+    assert max(published) == last_real
+    ident.shutdown_save()
+    doc = json.loads(save.read_text())
+    assert doc['stamp_ns'] == last_real == ident.session.last_good.stamp_ns
+    assert doc['estimate'] == list(ident.session.last_good.estimate)
+    # the fault said once, the repeats' warning rate-limited (one line per 5 s)
+    assert sum('Its repeats are not fed' in text for _, text in lines) == 1
+    repeats = [text for _, text in lines if text.startswith('rejected odom: every measured')]
+    assert 1 <= len(repeats) <= 1 + int(wall // 5.0) + 1
+
+
 def test_replay_bag_reads_metadata_and_names_a_missing_topic(run, tmp_path):
     """A simulated bag's custom_data gives vehicle and frame; a missing topic is a BagError."""
     bag = tmp_path / 'enu'

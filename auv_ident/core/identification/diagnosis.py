@@ -15,7 +15,9 @@ Checks, in the order a user needs them:
 2. The batch refinement converged.
 3. The noise model: the configured measurement noise against the innovations (level, AR(1)
    correlation, whiteness per channel), and what was done about it
-   (core/identification/noise_fit.py).
+   (core/identification/noise_fit.py). A channel whose correlation time exceeds the run (or
+   which is constant: lag-1 correlation 1) is not noise but a bias or a missing sensor: NOT
+   consistent, naming it (:func:`not_noise_channels`).
 4. Identifiability: per coefficient the relative 1-sigma the run supports, correlations, and a
    verdict with the excitation that would help.
 """
@@ -145,6 +147,26 @@ def inadequacy_remedy(vehicle: Vehicle, selection: Selection | None) -> str:
             + '; '.join(moves))
 
 
+def not_noise_channels(model: dict[str, dict[str, Any]]) -> list[tuple[str, str]]:
+    """[(channel, why)] of the channels of a noise model (core/identification/uncertainty.py
+    noise_model, per channel its lag-1 correlation 'ar1' over 'samples' innovations) whose
+    correlation time exceeds the run: ar1 >= exp(-1 / samples), i.e. -dt / ln(ar1) >= samples
+    x dt (a constant channel has ar1 1, time constant inf). Such innovations are not noise
+    that averages out over the run but a bias or a sensor that is not there (a field a driver
+    never fills); no error bar covers them, so the result is NOT consistent."""
+    out = []
+    for name, d in model.items():
+        n = int(d.get('samples', 0))
+        if n and d['ar1'] >= math.exp(-1.0 / n):
+            tau = d.get('tau_s', math.inf)
+            out.append((name, f'the {name} innovations are not noise: lag-1 correlation '
+                              f'{d["ar1"]:.4f} (time constant {tau:.3g} s), longer than the '
+                              f'run ({n} samples): a bias or a missing sensor (a field the '
+                              'driver never fills); check that channel, or leave it out '
+                              '(--measured)'))
+    return out
+
+
 def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = None,
              dt: float | None = None, mean_nis_per_dof: float = math.nan,
              verdicts: Verdicts | None = None, refined: bool = True,
@@ -188,6 +210,9 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
         if not fit.refine_converged:
             problems.append(f'the batch refinement did not converge ({fit.refine_message})')
     if fit is not None:
+        not_noise = not_noise_channels(fit.model)
+        checks['not_noise_channels'] = [n for n, _ in not_noise]
+        problems.extend(text for _, text in not_noise)
         checks['noise_model_used'] = bool(fit.used)
         checks['covariance'] = fit.covariance
         coloured = [n for n, d in fit.model.items() if not d['white']]
@@ -207,6 +232,28 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
             'NOT consistent: ' + problems[0])
     return {'consistent': consistent, 'messages': [head] + problems[1:] + notes,
             'checks': checks}
+
+
+def not_consistent(diagnosis: Diagnosis, problems: Sequence[str],
+                   check: str) -> Diagnosis:
+    """The diagnosis made NOT consistent by problems of the data found outside it (each a
+    clause, e.g. a stuck sensor the replay found: analysis/bag_identify.py): the consistency
+    line names the first, the others follow it (before the problems it had already), and
+    checks[check] lists them. No problems: the diagnosis unchanged."""
+    if not problems:
+        return diagnosis
+    messages = list(diagnosis.messages)
+    lines = ['NOT consistent: ' + problems[0]] + list(problems[1:])
+    at = next((i for i, m in enumerate(messages)
+               if m.startswith(('consistent: ', 'NOT consistent: '))), None)
+    if at is None:
+        messages = lines + messages
+    elif messages[at].startswith('NOT '):
+        messages[at:at + 1] = lines + [messages[at][len('NOT consistent: '):]]
+    else:
+        messages[at:at + 1] = lines
+    return replace(diagnosis, consistent=False, messages=messages,
+                   checks={**diagnosis.checks, check: list(problems)})
 
 
 def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np.ndarray,
