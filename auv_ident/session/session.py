@@ -640,7 +640,20 @@ class IdentSession:
         factor of the documented level, noise_std), noise_std's elsewhere; each channel
         noted once, naming the covariance entry and the setting that ignores them."""
         ok = np.isfinite(variances) & (variances > 0.0)
-        absurd = implausible_variances(variances, self.noise_default) & ok
+        # a variance this large is the ROS way of saying 'not measured' (robot_localization's
+        # drivers, our importer): _sample skips the channel rather than judging the value
+        unmeasured = ok & (variances >= NOT_MEASURED_VARIANCE)
+        absurd = implausible_variances(variances, self.noise_default) & ok & ~unmeasured
+        skipped = [i for i in self._measured_states
+                   if unmeasured[i] and ('unmeasured', i) not in self._fallback_noted]
+        if skipped:
+            self._fallback_noted.update(('unmeasured', i) for i in skipped)
+            self.notices.append(
+                'odom: ' + ', '.join(f'{covariance_entry(i, self.frame)} ({STATE_NAMES[i]}) = '
+                                     f'{variances[i]:.3g}' for i in skipped)
+                + f' (>= {NOT_MEASURED_VARIANCE:.0e}): the message says it does not measure '
+                f'{", ".join(STATE_NAMES[i] for i in skipped)}, so those channels are skipped '
+                'in it; set noise_source parameter to fuse them with noise_std instead')
         missing = [i for i in self._measured_states
                    if not ok[i] and ('unstated', i) not in self._fallback_noted]
         if missing:

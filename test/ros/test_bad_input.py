@@ -43,6 +43,7 @@ from sensor_msgs.msg import JointState
 from auv_ident.bags.schema import BagError
 from auv_ident.bags.writer import BagWriter
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import STATE_NAMES
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.offline.replay import replay_bag, ReplayWarnings
 from auv_ident.offline.sim_bag import ACTUATOR_TOPIC, ODOM_TOPIC, TOPIC_TYPES, write_run_bag
@@ -1087,17 +1088,21 @@ def _scaled_covariances(run, scale_all=1.0, u_variance=None):
     return out
 
 
-@pytest.mark.parametrize('kw, entries', [
-    (dict(scale_all=1e-30), ['twist.covariance[0] (u)', 'pose.covariance[35] (psi)']),
-    (dict(u_variance=1e300), ['twist.covariance[0] (u) = 1e+300']),
+@pytest.mark.parametrize('kw, entries, kind, clean_measured', [
+    (dict(scale_all=1e-30), ['twist.covariance[0] (u)', 'pose.covariance[35] (psi)'],
+     'implausible message covariance', None),
+    # 1e300 is past 1e6, the ROS drivers' "not measured": the channel is skipped, said once
+    (dict(u_variance=1e300), ['twist.covariance[0] (u) = 1e+300'], 'does not measure u',
+     tuple(n for n in STATE_NAMES if n != 'u')),
 ])
-def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw,
-                                                           entries):
+def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw, entries, kind,
+                                                           clean_measured):
     """Message covariances x 1e-30, or 1e300 on one diagonal (#27 item 7: the filter diverged,
     and the advice was 'try --noise-mode fixed' with fixed already set): one notice naming the
     topic, the covariance entries and the setting that ignores them (noise_source parameter);
-    noise_std is used for those channels, so the run identifies as a clean one (no reset, no
-    outlier), live and from a bag alike."""
+    noise_std is used for a tiny one, a huge one marks the channel not measured, so the run
+    identifies as a clean one with those channels (no reset, no outlier), live and from a bag
+    alike."""
     messages = _scaled_covariances(run, **kw)
     s = IdentSession(IdentifierSettings.from_values(noise_mode='fixed'))
     notices = []
@@ -1105,14 +1110,15 @@ def test_absurd_message_covariances_are_named_and_not_used(run, tmp_path, kw,
         (s.on_actuators if topic == ACTUATOR_TOPIC else s.on_odom)(msg)
         notices += s.notices
         s.notices.clear()
-    wild = [n for n in notices if 'implausible message covariance' in n]
+    wild = [n for n in notices if kind in n]
     assert len(wild) == 1, notices
     assert all(e in wild[0] for e in entries) and 'noise_source parameter' in wild[0]
     assert 'noise-mode' not in wild[0] and wild[0].startswith('odom: ')
     c = s.counters
     assert (c.odom_rejected, c.outliers, c.errors) == (0, 0, 0), c.reasons
+    extra = {} if clean_measured is None else {'measured': clean_measured}
     clean = IdentSession(IdentifierSettings.from_values(noise_mode='fixed',
-                                                        noise_source='parameter'))
+                                                        noise_source='parameter', **extra))
     _feed_session(clean, _clean(run, range(len(run.t))))
     np.testing.assert_allclose(s.last_good.estimate, clean.last_good.estimate, rtol=1e-9)
     bag = tmp_path / 'bag'

@@ -79,7 +79,7 @@ def test_repeated_odometry_is_not_fed_and_is_a_stuck_sensor(run):
     assert 'from t = 9.950 s' in notices[0] and 'a stuck sensor?' in notices[0]
     assert notices[1].startswith('odom: changes again at t = 15.000 s after')
     assert 'repeated exactly for 5.0 s from t = 9.950 s (100 samples not fed)' in notices[1]
-    span_ts = {round(t, 6) for t, _ in s.measurements}
+    span_ts = {round(t, 6) for t in s.measurements.array[:, 0]}
     assert not span_ts & {round(t, 6) for t in run.t[STUCK[0]:STUCK[1]]}
     kv = dict(diagnostic_values(s, s.health()))
     assert kv['repeated'] == str(4 * (STUCK[1] - STUCK[0])) and kv['stuck_sensor'] == 'none'
@@ -111,7 +111,7 @@ def test_a_stuck_twist_is_left_out_and_nothing_is_good_meanwhile(run):
     assert values['stuck_sensor'].startswith('linear velocity, angular velocity repeated '
                                              'exactly for 5.0 s from t = 9.950 s')
     assert values['consistent'] == 'false' and 'stuck sensor' in values['diagnosis']
-    Y = np.array([y for _, y in s.measurements])
+    Y = s.measurements.array[:, 1:]
     assert np.all(np.isnan(Y[STUCK[0]:STUCK[1], TWIST]))
     assert np.all(np.isfinite(Y[STUCK[0]:STUCK[1], State.X:]))
     assert np.all(np.isfinite(Y[STUCK[1]:]))

@@ -8,9 +8,10 @@ ch. 3-4), so a vehicle file holds only the hydrodynamic and control coefficients
 
 Units: SI; angles rad; shaft speed rpm at the interface. Frames: body FRD, world NED.
 """
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 import os
+from typing import Any
 
 import numpy as np
 import yaml
@@ -357,7 +358,7 @@ def _build(raw: object, path: str) -> Vehicle:
                           f'docs/vehicles.md; got {type(raw).__name__})')
     problems: list[str] = []
 
-    def checked(check, *args, default, **kwargs):
+    def checked(check: Callable[..., Any], *args: Any, default: Any, **kwargs: Any) -> Any:
         # the independent entries are all checked before any is used, each problem kept
         try:
             return check(*args, **kwargs)
