@@ -1000,8 +1000,12 @@ def test_legitimate_data_pass_untouched():
                                         ('nps_auv2', 0.005, 'ned', False, 'paper_q')]:
         r = simulate(Model(load_vehicle(vehicle)), 'zigzag', duration=20.0, T=T, seed=4,
                      process_std=DEFAULT_PROCESS_STD if pn else None)
+        # the screening rules alone: the noise learner (session/noise_learning.py, its own
+        # tests) may hold back the update at which it switches to a re-run filter (ISIMI's
+        # process noise colours its p innovations: rho 0.67), which is not a rejection
         s = IdentSession(IdentifierSettings.from_values(vehicle=vehicle, sample_time=T,
-                                                        frame=frame, noise_mode=mode))
+                                                        frame=frame, noise_mode=mode,
+                                                        learn_noise=False))
         good = 0
         for k in range(len(r.t)):
             for topic, _, m in sample_messages(r, k, frame, with_truth=False):
