@@ -11,6 +11,7 @@ import pytest
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.session.auto_choice import COMMAND, COMMAND_REJECTED, ODOMETRY
 from auv_ident.session.noise_learning import (
     HOLDS,
     LEARN_MIN_UPDATES,
@@ -100,6 +101,43 @@ def test_the_learner_keeps_the_record_and_says_when_to_fit():
     off = NoiseLearner(np.ones(12, dtype=bool), T, enabled=False)
     off.keep_odometry(0.0, 0, np.zeros(12), None, '')
     assert not off.kept and not off.innovations(np.zeros(12)) and off.state == 'off'
+
+
+def test_the_record_gives_back_what_was_kept_in_order_and_stays_compact():
+    """The kept record (KeptRecord) returns every entry as it was kept, in arrival order,
+    with the stated or default variances times the scale, and takes about 0.3 KB a sample
+    (odometry + command): the live node's memory stays flat while it keeps it (the 200 Hz load
+    test grew 21 MB in 120 s with a list of tuples)."""
+    rng = np.random.default_rng(1)
+    learner = NoiseLearner(np.ones(12, dtype=bool), T)
+    want = []
+    n = 5000
+    for k in range(n):
+        u = rng.normal(size=7)
+        learner.keep_command(k * T, u)
+        want.append(('c', k * T, u))
+        if k % 7 == 3:
+            learner.keep_command_rejected(k * T + 0.01)
+            want.append(('x', k * T + 0.01))
+        y, r = rng.normal(size=12), (None if k % 2 else rng.uniform(1, 2, 12))
+        learner.keep_odometry(k * T, 10**18 + k, y, r, '', trusted=k % 5 != 0)
+        want.append(('o', k * T, 10**18 + k, y, r, k % 5 != 0))
+    default, scale = np.full(12, 4.0), np.full(12, 0.5)
+    got = learner.entries(default, scale, start=3)
+    assert len(got) == len(want) - 3
+    for g, w in zip(got, want[3:]):
+        if w[0] == 'c':
+            assert g[0] == COMMAND and g[1] == w[1] and np.array_equal(g[2], w[2])
+        elif w[0] == 'x':
+            assert g == (COMMAND_REJECTED, w[1])
+        else:
+            r = default if w[4] is None else w[4]
+            assert g[0] == ODOMETRY and g[1:3] == w[1:3] and g[5] == w[5]
+            assert np.array_equal(g[3], w[3]) and np.array_equal(g[4], r * scale)
+    kept = learner.kept
+    size = sum(rows._a.nbytes for rows in (kept.order, kept.commands, kept.odometry,
+                                            kept.stamps))
+    assert size / n < 2 * 330        # capacity doubles: at most twice the rows' bytes
 
 
 def test_coloured_noise_is_learnt_and_the_error_bars_hold(run):
