@@ -169,3 +169,15 @@ def test_rov_restoring_from_weight_and_buoyancy(tmp_path):
     xdot = Model(vehicle_from_file(str(path))).f(np.zeros(12), np.zeros(7))
     # positively buoyant: Z = W - B < 0 (FRD, z down), the vehicle rises
     assert xdot[2] == pytest.approx((112.815 - 114.8) / (11.5 + 14.57), rel=1e-12)
+
+
+def test_vehicle_check_names_what_the_thrusters_cannot_push(tmp_path):
+    from auv_ident.analysis.vehicle_check import check_vehicle
+    # two horizontal thrusters side by side (port, starboard), pushing forward: surge and yaw
+    check = check_vehicle(_with_thrusters(tmp_path, """
+thrusters:
+  - {name: port, r: [-0.2, -0.1, 0.0], d: [1, 0, 0], command: force}
+  - {name: stbd, r: [-0.2, 0.1, 0.0], d: [1, 0, 0], command: force}
+"""))
+    assert '2 thrusters, configuration matrix of rank 2; they push alone: surge yaw' in check.facts
+    assert any('cannot push sway heave roll pitch alone' in w for w in check.warnings)
