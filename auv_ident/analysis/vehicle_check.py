@@ -2,8 +2,9 @@
 identified with? Every problem of its entries at once (the loader collects them,
 core/model/vehicle.py VehicleFileProblems), then what a model engineer looks at before the first
 run: the straight run's trim, the stability of the velocity dynamics there, the static
-stability in roll and pitch, the net buoyancy, and damping derivatives with the sign physics
-forbids (core/identification/plausibility.py).
+stability in roll and pitch, the net buoyancy, damping derivatives with the sign physics
+forbids (core/identification/plausibility.py), and for a thruster vehicle which of its degrees
+of freedom the thrusters can push alone (core/model/thrusters.py).
 
 Findings are ``error`` (the file does not load, or the vehicle has no straight run: nothing can
 be simulated) or ``warning`` (it loads and flies, but a value is unusual: read it again).
@@ -15,11 +16,15 @@ import numpy as np
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.identification.plausibility import is_self_damping
 from auv_ident.core.model.hydrodynamics import Model
-from auv_ident.core.model.state import Input, N_INPUT, NU_NAMES, State
+from auv_ident.core.model.state import DOF_STATES, Input, N_INPUT, NU_NAMES, State
+from auv_ident.core.model.thrusters import configuration_matrix
 from auv_ident.core.model.trim import initial_state, trim_speed
 from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file, VehicleFileProblems
 from auv_ident.vehicles import resolve_vehicle_path
 
+# a degree of freedom is pushed alone when its unit wrench is T a for some thrusts a: the
+# least-squares residual of T a = e_k below this (relative; T's columns are O(1) by the unit d)
+ACTUATED_TOL = 1e-9
 NET_BUOYANCY_WARN = 0.05    # |B - W| / W above this: a vehicle that surfaces or sinks hard
 DIFF_STEP = 1e-6            # relative finite-difference step of the linearisation
 
@@ -86,6 +91,25 @@ def _static_checks(vehicle, check):
                               'out of their own motion, so negative): ' + ', '.join(wrong))
 
 
+def _thruster_checks(vehicle, check):
+    T = configuration_matrix(vehicle.thrusters)
+    dofs = [d for d, (vel, _) in DOF_STATES.items() if vehicle.free_states[vel]]
+    alone = []
+    for d in dofs:
+        e = np.zeros(6)
+        e[DOF_STATES[d][0]] = 1.0
+        a = np.linalg.lstsq(T, e, rcond=None)[0]
+        if np.linalg.norm(T @ a - e) < ACTUATED_TOL:
+            alone.append(d)
+    check.facts.append(f'{len(vehicle.thrusters)} thrusters, configuration matrix of rank '
+                       f'{np.linalg.matrix_rank(T)}; they push alone: {" ".join(alone) or "none"}')
+    missing = [d for d in dofs if d not in alone]
+    if missing:
+        check.warnings.append(f'the thrusters cannot push {" ".join(missing)} alone (each '
+                              'only with other motion): check r and d of each thruster (FRD) '
+                              'if the vehicle is meant to')
+
+
 def _trim_checks(vehicle, check):
     model = Model(vehicle)
     try:
@@ -128,5 +152,7 @@ def check_vehicle(name_or_path):
         return check
     check.name = vehicle.name
     _static_checks(vehicle, check)
+    if vehicle.thrusters:
+        _thruster_checks(vehicle, check)
     _trim_checks(vehicle, check)
     return check

@@ -18,6 +18,7 @@ import yaml
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
+from auv_ident.core.model.thrusters import Thruster, thrusters_from_file
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
@@ -96,6 +97,8 @@ class Vehicle:
     # (12,) bool, the states the vehicle's degrees of freedom move (`dofs:`); the others are
     # held (core/model/planar.py). All True for a 6-DOF vehicle.
     free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
+    # the file's `thrusters:` (core/model/thrusters.py), empty for a fin or rudder vehicle
+    thrusters: tuple[Thruster, ...] = ()
 
     @property
     def held(self) -> np.ndarray:
@@ -388,6 +391,8 @@ def _build(raw: object, path: str) -> Vehicle:
     fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
                          default=float('nan')) for key in ('fin_rad', 'n_rpm'))
     free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
+    thrusters, thruster_problems = thrusters_from_file(raw.get('thrusters'), where)
+    problems.extend(thruster_problems)
     if problems:
         raise VehicleFileProblems(where, problems)
 
@@ -416,7 +421,7 @@ def _build(raw: object, path: str) -> Vehicle:
         cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
                     else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
-        free_states=free)
+        free_states=free, thrusters=tuple(thrusters))
     _check_finite_terms(v, where)
     M = v.mass_matrix()
     if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):

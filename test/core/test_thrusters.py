@@ -1,0 +1,183 @@
+"""Thrusters in the vehicle file (#29 item 1): the thrust curve (dead band, forward and reverse
+polynomial, saturation), the lag and the body wrench tau = sum [f d; r x f d], checked against
+hand-computed values; the loader reads the list and reports every bad thruster at once."""
+import math
+
+import numpy as np
+import pytest
+
+from auv_ident.core.model.thrusters import (
+    configuration_matrix,
+    lagged_thrusts,
+    steady_thrusts,
+    thrusters_from_file,
+    wrench,
+)
+from auv_ident.core.model.vehicle import vehicle_from_file, VehicleFileProblems
+from auv_ident.vehicles import resolve_vehicle_path
+
+S = math.sqrt(0.5)
+PWM = {'name': 'h1', 'r': [0.1, 0.2, 0.0], 'd': [S, S, 0.0], 'command': 'pwm_us',
+       'dead_band': 25, 'forward': [0.01, 1e-4], 'reverse': [0.02, 2e-4]}
+FORCE = {'name': 'v1', 'r': [0.0, -0.2, -0.1], 'd': [0, 0, 1], 'command': 'force',
+         'thrust_max_forward': 30.0, 'thrust_max_reverse': 20.0, 'time_constant': 0.1}
+
+
+def _two():
+    th, problems = thrusters_from_file([PWM, FORCE], 'test')
+    assert problems == []
+    return th
+
+
+@pytest.mark.parametrize('command, thrust', [
+    (1500.0, 0.0), (1520.0, 0.0), (1475.0, 0.0),        # inside the dead band
+    (1600.0, 0.01 * 75 + 1e-4 * 75 ** 2),               # e_d = 100 - 25 forward
+    (1400.0, -(0.02 * 75 + 2e-4 * 75 ** 2)),            # reverse coefficients
+    (2100.0, 0.01 * 375 + 1e-4 * 375 ** 2),             # command saturated at 1500 + 400
+])
+def test_thrust_curve(command, thrust):
+    assert _two()[0].thrust(command) == pytest.approx(thrust, rel=1e-14, abs=1e-15)
+
+
+def test_force_command_is_saturated_only():
+    v1 = _two()[1]
+    assert v1.thrust(12.5) == 12.5
+    assert v1.thrust(50.0) == 30.0
+    assert v1.thrust(-50.0) == -20.0
+
+
+def test_wrench_is_the_sum_of_force_and_moment():
+    th = _two()
+    f1 = 0.01 * 75 + 1e-4 * 75 ** 2
+    f2 = -7.0
+    # h1: d = (S, S, 0) at r = (0.1, 0.2, 0): r x d = (0, 0, 0.1 S - 0.2 S)
+    # v1: d = (0, 0, 1) at r = (0, -0.2, -0.1): r x d = (-0.2, 0, 0)
+    want = np.array([f1 * S, f1 * S, f2, -0.2 * f2, 0.0, f1 * (0.1 * S - 0.2 * S)])
+    np.testing.assert_allclose(wrench(th, [1600.0, f2]), want, rtol=0, atol=1e-14)
+    T = configuration_matrix(th)
+    assert T.shape == (6, 2)
+    np.testing.assert_allclose(T @ steady_thrusts(th, [1600.0, f2]), want, atol=1e-14)
+
+
+def test_lag_is_first_order():
+    th = _two()
+    f = lagged_thrusts(th, np.array([0.0, 0.0]), np.array([3.0, 10.0]), 0.1)
+    # h1 has no lag: its steady value; v1 (0.1 s) reaches 1 - e^-1 of the step after 0.1 s
+    np.testing.assert_allclose(f, [3.0, 10.0 * (1.0 - math.exp(-1.0))], rtol=1e-14)
+
+
+def test_every_bad_thruster_is_reported_at_once():
+    bad = [dict(PWM, d=[1.0, 1.0, 0.0]), dict(FORCE, command='volts'),
+           dict(PWM, forward=[0.01]), dict(PWM, dead_band=500)]
+    th, problems = thrusters_from_file(bad, 'test')
+    assert th == []
+    assert len(problems) == 4
+    assert 'unit vector' in problems[0]
+    assert "command = 'volts'" in problems[1]
+    assert 'forward' in problems[2]
+    assert 'dead_band = 500 is not below command_max = 400' in problems[3]
+
+
+def _with_thrusters(tmp_path, block):
+    text = open(resolve_vehicle_path('nps_auv2'), encoding='utf-8').read() + block
+    path = tmp_path / 'with_thrusters.yaml'
+    path.write_text(text, encoding='utf-8')
+    return str(path)
+
+
+def test_the_file_loads_its_thrusters(tmp_path):
+    v = vehicle_from_file(_with_thrusters(tmp_path, """
+thrusters:
+  - {name: h1, r: [0.1, 0.2, 0.0], d: [0.7071067811865476, 0.7071067811865476, 0.0],
+     command: pwm_us, dead_band: 25, forward: [0.01, 1.0e-4], reverse: [0.02, 2.0e-4]}
+  - {name: v1, r: [0.0, -0.2, -0.1], d: [0, 0, 1], command: force}
+"""))
+    assert [t.name for t in v.thrusters] == ['h1', 'v1']
+    assert v.thrusters[0].thrust(1600.0) == pytest.approx(0.01 * 75 + 1e-4 * 75 ** 2)
+    assert vehicle_from_file(resolve_vehicle_path('nps_auv2')).thrusters == ()
+
+
+def test_the_loader_collects_thruster_problems_with_the_others(tmp_path):
+    path = _with_thrusters(tmp_path, """
+thrusters:
+  - {name: h1, r: [0.1, 0.2], d: [1, 0, 0], command: pwm_us, forward: [1, 0], reverse: [1, 0]}
+  - {name: h1, r: [0, 0, 0], d: [1, 0, 0], command: rpm, forward: [1, 0], reverse: [1, 0]}
+""")
+    text = open(path, encoding='utf-8').read().replace('rho: 1000.0', 'rho: -1.0', 1)
+    open(path, 'w', encoding='utf-8').write(text)
+    with pytest.raises(VehicleFileProblems) as err:
+        vehicle_from_file(path)
+    joined = '\n'.join(err.value.problems)
+    assert 'rho' in joined
+    assert 'thrusters[0] (h1): r = [0.1, 0.2]' in joined
+
+
+# Fossen's standard ROV model (Fossen 2021, sec. 7.5; the form von Benzon et al. 2022 use for
+# the BlueROV2) in a `scaling: dimensional` file: diagonal added mass (multiplier `udot` ..),
+# linear damping (`u`) and quadratic damping (`u*|u|`), restoring from W, B, r_G, r_B
+ROV = """
+name: rov_terms
+scaling: dimensional
+rho: 1000.0
+L: 0.46
+mass: 11.5
+W: 112.815
+B: {B}
+r_G: [0.0, 0.0, 0.0]
+r_B: [0.0, 0.0, 0.0]
+inertia: {{Ix: 0.16, Iy: 0.16, Iz: 0.16}}
+limits: {{fin_rad: 0.1, n_rpm: 1.0}}
+mass_inverse: exact
+coefficients:
+  X_udot: [-5.5, X, 0, udot]
+  Y_vdot: [-12.7, Y, 0, vdot]
+  Z_wdot: [-14.57, Z, 0, wdot]
+  N_rdot: [-0.12, N, 0, rdot]
+  X_u: [-4.03, X, 0, u]
+  Y_v: [-6.22, Y, 0, v]
+  Z_w: [-5.18, Z, 0, w]
+  N_r: [-0.07, N, 0, r]
+  X_uu: [-18.18, X, 0, u*|u|]
+  Y_vv: [-21.66, Y, 0, v*|v|]
+  Z_ww: [-36.99, Z, 0, w*|w|]
+  N_rr: [-1.55, N, 0, r*|r|]
+"""
+
+
+@pytest.mark.parametrize('state, value, mass, lin, quad', [
+    (0, 0.4, 11.5 + 5.5, -4.03, -18.18), (0, -0.3, 11.5 + 5.5, -4.03, -18.18),
+    (1, 0.3, 11.5 + 12.7, -6.22, -21.66), (2, -0.2, 11.5 + 14.57, -5.18, -36.99),
+    (5, 0.5, 0.16 + 0.12, -0.07, -1.55)])
+def test_fossen_rov_model_is_terms_of_a_dimensional_file(tmp_path, state, value, mass, lin,
+                                                          quad):
+    from auv_ident.core.model.hydrodynamics import Model
+    path = tmp_path / 'rov_terms.yaml'
+    path.write_text(ROV.format(B=112.815), encoding='utf-8')
+    x = np.zeros(12)
+    x[state] = value
+    xdot = Model(vehicle_from_file(str(path))).f(x, np.zeros(7))
+    # one velocity alone: no Coriolis, (m + A) nu_dot = D_lin nu + D_quad nu |nu|
+    assert xdot[state] == pytest.approx((lin * value + quad * value * abs(value)) / mass,
+                                        rel=1e-12)
+    assert np.abs(np.delete(xdot[:6], state)).max() < 1e-12
+
+
+def test_rov_restoring_from_weight_and_buoyancy(tmp_path):
+    from auv_ident.core.model.hydrodynamics import Model
+    path = tmp_path / 'rov_terms.yaml'
+    path.write_text(ROV.format(B=114.8), encoding='utf-8')
+    xdot = Model(vehicle_from_file(str(path))).f(np.zeros(12), np.zeros(7))
+    # positively buoyant: Z = W - B < 0 (FRD, z down), the vehicle rises
+    assert xdot[2] == pytest.approx((112.815 - 114.8) / (11.5 + 14.57), rel=1e-12)
+
+
+def test_vehicle_check_names_what_the_thrusters_cannot_push(tmp_path):
+    from auv_ident.analysis.vehicle_check import check_vehicle
+    # two horizontal thrusters side by side (port, starboard), pushing forward: surge and yaw
+    check = check_vehicle(_with_thrusters(tmp_path, """
+thrusters:
+  - {name: port, r: [-0.2, -0.1, 0.0], d: [1, 0, 0], command: force}
+  - {name: stbd, r: [-0.2, 0.1, 0.0], d: [1, 0, 0], command: force}
+"""))
+    assert '2 thrusters, configuration matrix of rank 2; they push alone: surge yaw' in check.facts
+    assert any('cannot push sway heave roll pitch alone' in w for w in check.warnings)
