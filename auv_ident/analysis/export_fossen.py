@@ -15,7 +15,8 @@ and speed-scaled terms, lumped Munk moments). So:
   model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps) plus 2000 uniform
   points (seed 0) in the box of that run's velocities. The run is simulated, not the bags
   read: the identified model at the identification's speed and fin ranges.
-  The fit % per DOF, 100 (1 - |y - y_fit| / |y - mean y|), goes in the file and on the console;
+  The fit % per DOF, 100 (1 - |y - y_fit| / |y - mean y|) with y = H and y_fit the target's
+  damping plus its own added-mass Coriolis term, goes in the file and on the console;
   a DOF whose force never changes over the samples (not excited: its damping is fitted as
   nothing) is said so instead of a number.
   A file whose hydrodynamics is already of the target's form comes out exact (fit 100 %).
@@ -114,11 +115,11 @@ def fit_percent(y, y_fit):
 
 
 def least_squares(columns, y):
-    """Coefficients (ncol, 6) and fit % (6,) of y (N, 6) ~ columns (N, ncol) per DOF."""
+    """Coefficients (ncol, m) of y (N, m) ~ columns (N, ncol)."""
     coef, *_ = np.linalg.lstsq(columns, y, rcond=None)
     # exact zeros where a term does not matter to the last digit keep the files readable
     coef[np.abs(coef) < 1e-12 * max(1.0, np.abs(coef).max())] = 0.0
-    return coef, fit_percent(y, columns @ coef)
+    return coef
 
 
 def fit_lines(fit, what):
@@ -134,15 +135,25 @@ def uuv_fit(parts):
     to H + C_A(nu) nu (the plugin applies Fossen's -C_A(nu) nu itself). Returns
     L (6, 6), L_f (6, 6), Q (6,), fit % (6,)."""
     nu = parts.nu
-    y = parts.H + np.array([coriolis_vector(parts.M_A, s) for s in nu])
+    ca = np.array([coriolis_vector(parts.M_A, s) for s in nu])
+    y = parts.H + ca
     L, Lf, Q, fit = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(6), np.zeros(6)
     for i in range(6):
         cols = np.hstack([nu, nu[:, :1] * nu, (np.abs(nu[:, i]) * nu[:, i])[:, None]])
         if i == 0:
             cols[:, 6] = 0.0    # u u: the quadratic u |u| holds it (same for u > 0)
-        coef, f = least_squares(cols, y[:, i:i + 1])
-        L[i], Lf[i], Q[i], fit[i] = coef[:6, 0], coef[6:12, 0], coef[12, 0], f[0]
+        coef = least_squares(cols, y[:, i:i + 1])
+        L[i], Lf[i], Q[i] = coef[:6, 0], coef[6:12, 0], coef[12, 0]
+        fit[i] = fit_percent(parts.H[:, i:i + 1], cols @ coef - ca[:, i:i + 1])[0]
     return L, Lf, Q, fit
+
+
+def _xml_text(lines):
+    """The file's text; a header line with '--' (not allowed inside an XML comment, a
+    command-line option or a path) gets the dashes spaced."""
+    start, end = lines.index('<!--'), lines.index('-->')
+    fixed = [ln.replace('--', '- -') if start < i < end else ln for i, ln in enumerate(lines)]
+    return '\n'.join(fixed) + '\n'
 
 
 def _numbers(values):
@@ -182,7 +193,7 @@ def uuv_text(saved, parts, header):
         '    </hydrodynamic_model>',
         '  </link>',
         '</xacro:macro>']
-    return '\n'.join(lines) + '\n', fit
+    return _xml_text(lines), fit
 
 
 # ------------------------------------------------------------------------------------- gz
@@ -209,9 +220,11 @@ def gz_fit(parts, plugin_added_mass):
     (it applies +C_A(nu) nu, the wrong sign) and the fit is to H, whose added-mass Coriolis
     part is bilinear and held exactly by the non-abs quadratic terms (u factors: for u > 0)."""
     nu = parts.nu
-    y = parts.H if plugin_added_mass else (
-        parts.H + np.array([coriolis_vector(parts.M_A, s) for s in nu]))
-    coef, fit = least_squares(gz_columns(nu), y)
+    ca = (np.zeros_like(nu) if plugin_added_mass
+          else np.array([coriolis_vector(parts.M_A, s) for s in nu]))
+    cols = gz_columns(nu)
+    coef = least_squares(cols, parts.H + ca)
+    fit = fit_percent(parts.H, cols @ coef - ca)
     names = [f'{VEL[j]}' for j in range(6)] + [
         f'{VEL[j]}abs{VEL[k]}' for j in range(6) for k in range(6)]
     names += [f'{VEL[j]}{VEL[k]}' for j, k in PAIRS]
@@ -256,14 +269,14 @@ def gz_text(saved, parts, header, added_mass='link'):
     ]
     if plugin:
         lines += [
-            "Here (--gz-added-mass plugin): the added mass as the plugin's *Dot* terms, its",
+            "Here (option gz-added-mass plugin): the added mass as the plugin's *Dot* terms, its",
             'Coriolis disabled, and our added-mass Coriolis -C_A(nu) nu (bilinear) carried by',
             "the xVR-style quadratic terms. The plugin's added-mass force uses a one-step",
             'finite-difference acceleration (explicit: it can go unstable when M_A is large',
             'against the link mass).']
     else:
         lines += [
-            'Here (--gz-added-mass link, the default, Gazebo Ionic and later with DART): the',
+            'Here (option gz-added-mass link, the default; Gazebo Ionic+ with DART): the',
             'added mass as <fluid_added_mass> (21 elements of our M_A, positive, FLU, about the',
             "link origin); DART applies -M_A nu_dot - C_A(nu) nu itself (Fossen's sign, as",
             "the plugin's current correction assumes), so the plugin holds only damping.",
@@ -291,4 +304,4 @@ def gz_text(saved, parts, header, added_mass='link'):
         if value != 0.0:
             lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
     lines += ['    </plugin>', '  </model>', '</sdf>']
-    return '\n'.join(lines) + '\n', fit
+    return _xml_text(lines), fit
