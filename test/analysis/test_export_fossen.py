@@ -226,10 +226,6 @@ def _ours(vehicle, estimates, rpm=0.0):
     return v, model, f
 
 
-def _rigid(v):
-    return v.M_RB
-
-
 NU0 = np.array([1.8, 0.15, -0.1, 0.08, 0.05, -0.12])
 
 
