@@ -777,7 +777,9 @@ def build_parser():
                                       '(default: the one the model names)')
     sp.add_argument('--format', default='vehicle', help='vehicle (default), uuv (uuv_simulator '
                                                         'fossen xacro), gz (gz-sim '
-                                                        'Hydrodynamics SDF)')
+                                                        'Hydrodynamics SDF), '
+                                                        'urdf-hydrodynamics (ROS 2 '
+                                                        'hydrodynamics / auv_controllers)')
     sp.add_argument('--gz-added-mass', default='link', choices=('link', 'plugin'),
                     help='--format gz: added mass as <fluid_added_mass> (link, default, Gazebo '
                          "Ionic+) or as the plugin's *Dot* terms with its Coriolis disabled")

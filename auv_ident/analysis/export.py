@@ -13,7 +13,9 @@ Formats (docs/export.md):
 - ``uuv``: uuv_simulator's ``<hydrodynamic_model><type>fossen</type>`` xacro snippet, and
 - ``gz``: the gz-sim Hydrodynamics system's ``<plugin>`` block (with ``<fluid_added_mass>`` or
   the plugin's *Dot* terms, ``gz_added_mass``): added mass exact, damping fitted
-  (analysis/export_fossen.py), the fit % per DOF in the file's header and echoed.
+  (analysis/export_fossen.py), the fit % per DOF in the file's header and echoed;
+- ``urdf-hydrodynamics``: the ``<hydrodynamics>`` URDF block of the ROS 2 ``hydrodynamics``
+  library (auv_controllers), diagonal terms, fitted the same way.
 
 The exported vehicle text is read back with the vehicle loader before it is written, and every
 coefficient must come back as exported (identified: the estimate to the last bit; the others:
@@ -33,7 +35,7 @@ from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.safe_files import write_atomic
 
-FORMATS = ('vehicle', 'uuv', 'gz')
+FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics')
 GZ_ADDED_MASS = ('link', 'plugin')
 
 
@@ -186,8 +188,10 @@ def _fossen_text(model, fmt, gz_added_mass, echo):
     header = _fossen_header(model, parts)
     if fmt == 'uuv':
         text, fit = export_fossen.uuv_text(model, parts, header)
-    else:
+    elif fmt == 'gz':
         text, fit = export_fossen.gz_text(model, parts, header, gz_added_mass)
+    else:
+        text, fit = export_fossen.hydrodynamics_text(model, parts, header)
     if echo is not None:
         for line in export_fossen.fit_lines(fit, f'the {fmt} damping'):
             echo(line)

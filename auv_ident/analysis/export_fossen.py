@@ -305,3 +305,64 @@ def gz_text(saved, parts, header, added_mass='link'):
             lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
     lines += ['    </plugin>', '  </model>', '</sdf>']
     return _xml_text(lines), fit
+
+
+# ----------------------------------------------------------------------- urdf-hydrodynamics
+
+def hydrodynamics_fit(parts):
+    """The ROS 2 `hydrodynamics` library's damping (FRD, diagonal): tau_D = L nu + Q |nu| nu,
+    fitted to H + C_A(diag M_A)(nu) nu (the library applies Fossen's -C_A of the diagonal
+    added mass). Returns L (6,), Q (6,), fit % (6,)."""
+    nu = parts.nu
+    ca = np.array([coriolis_vector(np.diag(np.diag(parts.M_A)), s) for s in nu])
+    y = parts.H + ca
+    L, Q, fit = np.zeros(6), np.zeros(6), np.zeros(6)
+    for i in range(6):
+        cols = np.stack([nu[:, i], np.abs(nu[:, i]) * nu[:, i]], axis=1)
+        coef = least_squares(cols, y[:, i:i + 1])
+        L[i], Q[i] = coef[0, 0], coef[1, 0]
+        fit[i] = fit_percent(parts.H[:, i:i + 1], cols @ coef - ca[:, i:i + 1])[0]
+    return L, Q, fit
+
+
+def _attrs(names, values):
+    return ' '.join(f'{n}="{float(x) + 0.0!r}"' for n, x in zip(names, values))
+
+
+def hydrodynamics_text(saved, parts, header):
+    L, Q, fit = hydrodynamics_fit(parts)
+    v = saved.vehicle
+    raw = v.raw
+    inertia = raw['inertia']
+    off = [(f'{"XYZKMN"[i]}{"XYZKMN"[j]}', parts.M_A[i, j]) for i in range(6)
+           for j in range(6) if i != j and parts.M_A[i, j] != 0.0]
+    lines = ['<?xml version="1.0"?>', '<!--'] + header + fit_lines(fit, 'the damping') + [
+        'ROS 2 `hydrodynamics` library (Robotic-Decision-Making-Lab/hydrodynamics, src/',
+        'hydrodynamics.cpp), read by auv_controllers: FRD body, NED world (its restoring force',
+        'puts the weight on +z), SNAME signs, everything diagonal:',
+        '  M = diag(m, m, m) + I_moments - diag(Xdu .. Ndr)',
+        '  C = [[m S(w), 0], [0, -S(I w)]] + [[0, S(a1)], [S(a1), S(a2)]],',
+        '      a1 = (Xdu u, Ydv v, Zdw w), a2 = (Kdp p, Mdq q, Ndr r)   (= Fossen C_A)',
+        '  D = -diag(Xu .. Nr) - diag(Xuu |u| .. Nrr |r|);  M nu_dot + C nu + D nu + g = tau',
+        'Not held by the library (left out): the rigid-body coupling of a centre of gravity',
+        'away from the origin in M and C (it uses r_G only in g), and any off-diagonal',
+        'added mass' + (': ' + ', '.join(f'{n} {x:.6g}' for n, x in off) if off else
+                        ' (none here).'),
+        '-->',
+        f'<robot name="{v.name}">',
+        '  <hydrodynamics>',
+        f'    <mass>{float(raw["mass"])!r}</mass>',
+        '    <inertia ' + _attrs(('ixx', 'iyy', 'izz'),
+                                 (inertia['Ix'], inertia['Iy'], inertia['Iz'])) + ' />',
+        '    <added_mass ' + _attrs(('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr'),
+                                    -np.diag(parts.M_A)) + ' />',
+        '    <linear_damping ' + _attrs(('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr'), L) + ' />',
+        '    <quadratic_damping ' + _attrs(('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr'), Q)
+        + ' />',
+        f'    <weight>{float(raw["W"])!r}</weight>',
+        f'    <buoyancy>{float(raw["B"])!r}</buoyancy>',
+        '    <center_of_gravity ' + _attrs('xyz', raw['r_G']) + ' />',
+        '    <center_of_buoyancy ' + _attrs('xyz', raw['r_B']) + ' />',
+        '  </hydrodynamics>',
+        '</robot>']
+    return _xml_text(lines), fit

@@ -123,6 +123,43 @@ def _uuv_nudot(M_RB, Ma, DL, DLf, DQ):
     return f
 
 
+# ------------------------------------------------- ROS 2 hydrodynamics (auv_controllers)
+
+def _skew(a):
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _hyd_nudot(path):
+    """hydrodynamics.cpp: Inertia, Coriolis (rigid body from the angular velocity only, plus
+    the added-mass matrix), Damping; M nu_dot + C nu + D nu = tau (g = 0 for W = B at the
+    origin)."""
+    h = ET.parse(path).getroot().find('hydrodynamics')
+    m = float(h.findtext('mass'))
+    a = h.find('inertia').attrib
+    I = np.diag([float(a['ixx']), float(a['iyy']), float(a['izz'])])
+    am = h.find('added_mass').attrib
+    add = np.array([float(am[k]) for k in ('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr')])
+    ld, qd = h.find('linear_damping').attrib, h.find('quadratic_damping').attrib
+    lin = np.array([float(ld[k]) for k in ('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr')])
+    quad = np.array([float(qd[k]) for k in ('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr')])
+    M = np.zeros((6, 6))
+    M[:3, :3] = m * np.eye(3)
+    M[3:, 3:] = I
+    M = M - np.diag(add)
+
+    def f(nu):
+        C = np.zeros((6, 6))
+        C[:3, :3] = m * _skew(nu[3:])
+        C[3:, 3:] = -_skew(I @ nu[3:])
+        s1, s2 = _skew(add[:3] * nu[:3]), _skew(add[3:] * nu[3:])
+        C[:3, 3:] += s1
+        C[3:, :3] += s1
+        C[3:, 3:] += s2
+        D = -np.diag(lin) - np.diag(quad * np.abs(nu))
+        return np.linalg.solve(M, THRUST - C @ nu - D @ nu)
+    return f
+
+
 # ------------------------------------------------------------------ gz-sim Hydrodynamics
 
 VEL, MOM = 'UVWPQR', 'xyzkmn'
@@ -229,14 +266,14 @@ def _ours(vehicle, estimates, rpm=0.0):
 NU0 = np.array([1.8, 0.15, -0.1, 0.08, 0.05, -0.12])
 
 
-@pytest.mark.parametrize('fmt', ['uuv', 'gz-link', 'gz-plugin'])
+@pytest.mark.parametrize('fmt', ['uuv', 'gz-link', 'gz-plugin', 'urdf-hydrodynamics'])
 def test_a_fossen_form_vehicle_exports_exactly(tmp_path, fmt):
     vehicle = _fossen_vehicle(tmp_path)
     est = {'Y_v': -22.0, 'N_r': -5.5, 'Z_ww': -110.0}
     model = _model_json(tmp_path / 'm.json', vehicle, est)
     out = tmp_path / 'out.xml'
     lines = []
-    form, _, am = fmt.partition('-')
+    form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
     export_model(model, out, fmt=form, gz_added_mass=am or 'link', echo=lines.append)
     v, _, ours = _ours(vehicle, est, rpm=1500.0)
     fit = [float(x) for x in re.findall(r'[XYZKMN] (\d+\.\d+)', lines[0])]
@@ -245,6 +282,8 @@ def test_a_fossen_form_vehicle_exports_exactly(tmp_path, fmt):
     want = _rk4(ours, NU0, dt, n)
     if form == 'uuv':
         got = _rk4(_uuv_nudot(v.M_RB, *_uuv_params(out)), NU0, dt, n)
+    elif form == 'urdf-hydrodynamics':
+        got = _rk4(_hyd_nudot(out), NU0, dt, n)
     else:
         got = _rk4(_gz_nudot(v.M_RB, _gz_params(out)), FLU * NU0, dt, n) * FLU
     assert np.all(want[:, 0] > 0.0)   # forward all along (u terms are exported for u > 0)
