@@ -465,7 +465,7 @@ def cmd_export(args):
     from auv_ident.analysis.export import export_model
     _check_outputs(args, '--out')
     path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
-                        force=args.force)
+                        force=args.force, gz_added_mass=args.gz_added_mass, echo=print)
     print(f'wrote {path} ({args.format})')
     return 0
 
@@ -769,12 +769,20 @@ def build_parser():
     vp.set_defaults(func=cmd_vehicle_check)
 
     sp = sub.add_parser('export', help='write an identified model where it is used: an updated '
-                                       'vehicle file (docs/export.md)')
+                                       'vehicle file, uuv_simulator or gz-sim hydrodynamics '
+                                       '(docs/export.md)')
     sp.add_argument('model', help='result.json of identify --json or report, or the identifier '
                                   "node's estimate file (save_path)")
     sp.add_argument('--vehicle', help='the vehicle file or name the model was identified with '
                                       '(default: the one the model names)')
-    sp.add_argument('--format', default='vehicle', help='vehicle (default)')
+    sp.add_argument('--format', default='vehicle', help='vehicle (default), uuv (uuv_simulator '
+                                                        'fossen xacro), gz (gz-sim '
+                                                        'Hydrodynamics SDF), '
+                                                        'urdf-hydrodynamics (ROS 2 '
+                                                        'hydrodynamics / auv_controllers)')
+    sp.add_argument('--gz-added-mass', default='link', choices=('link', 'plugin'),
+                    help='--format gz: added mass as <fluid_added_mass> (link, default, Gazebo '
+                         "Ionic+) or as the plugin's *Dot* terms with its Coriolis disabled")
     sp.add_argument('--out', required=True, help='file to write')
     sp.add_argument('--force', action='store_true', help='replace an existing --out')
     sp.set_defaults(func=cmd_export)

@@ -10,7 +10,14 @@ Formats (docs/export.md):
   (core/identification/plausibility.py). The vehicle's ``name`` is kept: it is the same vehicle,
   so bags that record it are identified with the new file without ``--other-vehicle``.
 
-The exported text is read back with the vehicle loader before it is written, and every
+- ``uuv``: uuv_simulator's ``<hydrodynamic_model><type>fossen</type>`` xacro snippet, and
+- ``gz``: the gz-sim Hydrodynamics system's ``<plugin>`` block (with ``<fluid_added_mass>`` or
+  the plugin's *Dot* terms, ``gz_added_mass``): added mass exact, damping fitted
+  (analysis/export_fossen.py), the fit % per DOF in the file's header and echoed;
+- ``urdf-hydrodynamics``: the ``<hydrodynamics>`` URDF block of the ROS 2 ``hydrodynamics``
+  library (auv_controllers), diagonal terms, fitted the same way.
+
+The exported vehicle text is read back with the vehicle loader before it is written, and every
 coefficient must come back as exported (identified: the estimate to the last bit; the others:
 the file's value), else an ExportError: a file that loads differently is never written.
 """
@@ -28,7 +35,8 @@ from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.safe_files import write_atomic
 
-FORMATS = ('vehicle',)
+FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics')
+GZ_ADDED_MASS = ('link', 'plugin')
 
 
 class ExportError(AuvIdentError):
@@ -163,18 +171,60 @@ def _check_reads_back(path, model):
                           f'{", ".join(wrong)}')
 
 
-def export_model(model_path, out, fmt='vehicle', vehicle=None, force=False):
+def _fossen_header(model, parts):
+    day = datetime.date.today().isoformat()
+    return [f'Exported by `python -m auv_ident export` on {day} from {model.path}',
+            f'(identified from {_runs(model)}; vehicle {model.vehicle.name}).',
+            "Added mass: exactly our M_A. Damping: fitted by least squares to our model's",
+            'hydrodynamic force on the velocities (all but rigid body, added-mass inertia and',
+            'Coriolis, restoring, fins and propulsion) over ' + parts.run_name,
+            'and the box of its velocities (analysis/export_fossen.py): terms the target cannot',
+            'hold (cross-flow integrals, fin lift, speed-scaled terms) are approximated.']
+
+
+def _fossen_text(model, fmt, gz_added_mass, echo):
+    from auv_ident.analysis import export_fossen
+    parts = export_fossen.fossen_parts(model)
+    header = _fossen_header(model, parts)
+    if fmt == 'uuv':
+        text, fit = export_fossen.uuv_text(model, parts, header)
+    elif fmt == 'gz':
+        text, fit = export_fossen.gz_text(model, parts, header, gz_added_mass)
+    else:
+        text, fit = export_fossen.hydrodynamics_text(model, parts, header)
+    if echo is not None:
+        for line in export_fossen.fit_lines(fit, f'the {fmt} damping'):
+            echo(line)
+        low = [d for d, f in zip(export_fossen.DOF, fit) if not f >= 95.0]
+        if low:
+            echo(f"warning: the {fmt} damping reproduces our model's below 95 % (or the "
+                 f'runs do not excite it) in {", ".join(low)}')
+    return text
+
+
+def export_model(model_path, out, fmt='vehicle', vehicle=None, force=False,
+                 gz_added_mass='link', echo=None):
     """Write the model of ``model_path`` (an ``identify --json``/``report`` result.json or the
     identifier node's estimate file) to ``out`` in format ``fmt``. Returns the path written.
 
     ``vehicle``: the vehicle file or name the model was identified with (default: the one the
-    model file names). An existing ``out`` is refused unless ``force``."""
+    model file names). An existing ``out`` is refused unless ``force``. ``gz_added_mass``:
+    'link' or 'plugin' (format gz). ``echo``: called with each fit line (fitted formats)."""
     if fmt not in FORMATS:
         raise ExportError(f'--format {fmt!r}: use one of {", ".join(FORMATS)}')
+    if gz_added_mass not in GZ_ADDED_MASS:
+        raise ExportError(f'--gz-added-mass {gz_added_mass!r}: use one of '
+                          f'{", ".join(GZ_ADDED_MASS)}')
     out = Path(out)
     if out.exists() and not force:
         raise ExportError(f'{out} exists already; give --force to replace it')
     model = load_model(model_path, vehicle=vehicle)
+    if fmt != 'vehicle':
+        text = _fossen_text(model, fmt, gz_added_mass, echo)
+        try:
+            return write_atomic(out, text)
+        except OSError as exc:
+            raise ExportError(f'{out}: cannot write: {exc}') from None
     text = vehicle_text(model)
     try:
         fd, draft = tempfile.mkstemp(dir=out.parent, prefix=f'.{out.name}.', suffix='.yaml')

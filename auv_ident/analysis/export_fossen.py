@@ -1,0 +1,368 @@
+"""Fossen-form simulator exports (``export --format uuv|gz``, docs/export.md).
+
+Both targets hold M_RB nu_dot + M_A nu_dot + C_A(nu) nu + D(nu) nu + ... = tau with a few fixed
+damping terms; our model (core/model/hydrodynamics.py) has others (cross-flow integrals, fin
+and speed-scaled terms, lumped Munk moments). So:
+
+- added mass: our M_A = M - M_RB exactly (the vehicle file's added-mass coefficients,
+  dimensional, Fossen's positive sign);
+- damping: the target's terms fitted by least squares to our model's hydrodynamic force on the
+  velocities, H(nu) = F(nu) + g(0) - F_RB(nu) (F = M nu_dot of the model at zero attitude, fins
+  and shaft speed; g the restoring force; F_RB the rigid-body Coriolis monomials; at zero shaft
+  speed the Healey-Lienard propeller leaves the hull's axial drag -(rho/2) L^2 Cd0 u^2, which is
+  damping and stays), minus what the target's own added-
+  mass Coriolis term already applies. The samples: a noise-free 200 s zig-zag of the identified
+  model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps) plus 2000 uniform
+  points (seed 0) in the box of that run's velocities. The run is simulated, not the bags
+  read: the identified model at the identification's speed and fin ranges.
+  The fit % per DOF, 100 (1 - |y - y_fit| / |y - mean y|) with y = H and y_fit the target's
+  damping plus its own added-mass Coriolis term, goes in the file and on the console;
+  a DOF whose force never changes over the samples (not excited: its damping is fitted as
+  nothing) is said so instead of a number.
+  A file whose hydrodynamics is already of the target's form comes out exact (fit 100 %).
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.vehicle import rigid_body_terms
+from auv_ident.core.simulation.simulate import simulate
+
+DOF = 'XYZKMN'
+N_BOX = 2000
+# FRD -> FLU (x forward, y left, z up): y, z and their rotations change sign
+FLU = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
+
+
+def skew(a):
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def coriolis_vector(Ma, nu):
+    """C_A(nu) nu of Fossen (2021, eq. 6.43) for a symmetric M_A (6, 6) at nu (6,)."""
+    a = Ma @ nu
+    return np.concatenate([np.cross(a[:3], nu[3:]) * -1.0,
+                           -np.cross(a[:3], nu[:3]) - np.cross(a[3:], nu[3:])])
+
+
+@dataclass
+class FossenParts:
+    """M_A (6, 6) kg, kg m, kg m^2 FRD; nu (N, 6) the samples; H (N, 6) N, N m our model's
+    hydrodynamic force on them (see the module docstring); run_name: where nu came from."""
+
+    M_A: np.ndarray
+    nu: np.ndarray
+    H: np.ndarray
+    run_name: str
+
+
+def fossen_parts(saved, duration=200.0):
+    v = saved.vehicle
+    c = v.values.copy()
+    for n, e in zip(saved.names, saved.estimate):
+        c[v.index(n)] = e
+    model = Model(v, (), coefficient_values=c)
+    M = v.mass_matrix(c)
+    # from the file's added-mass terms, not M - M_RB: the exported values to the last bit
+    M_A = np.zeros((6, 6))
+    for (eq, col, ci), sc in zip(v.am_i, v.am_s):
+        M_A[eq, col] -= sc * c[ci]
+    run = simulate(model, 'ident', duration=duration, noise_std=np.zeros(12))
+    nu_run = run.x[:, :6]
+    lo, hi = nu_run.min(axis=0), nu_run.max(axis=0)
+    box = np.random.default_rng(0).uniform(lo, hi, size=(N_BOX, 6))
+    nu = np.vstack([nu_run, box])
+    rb = rigid_body_terms(float(v.raw['mass']), np.asarray(v.raw['r_G'], float),
+                          [float(v.raw['inertia'][k]) for k in
+                           ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz')])
+    ui = np.zeros(7)
+    x = np.zeros(12)
+    F0 = _restoring_at_rest(v.raw)
+    H = np.empty_like(nu)
+    for i, s in enumerate(nu):
+        x[:6] = s
+        F = M @ model.f(x, ui)[:6]
+        Frb = np.zeros(6)
+        for eq, k, fac in rb:
+            Frb[eq] += k * s[fac[0]] * s[fac[1]]
+        H[i] = F - F0 - Frb
+    return FossenParts(M_A=M_A, nu=nu, H=H,
+                       run_name=(f'a noise-free {duration:g} s ident manoeuvre of the '
+                                 'identified model'))
+
+
+def _restoring_at_rest(raw):
+    """-g(0) (Fossen 2021, eq. 4.6, zero roll and pitch), N and N m FRD: what F holds at rest
+    besides the (excluded) propulsion. Not F(nu = 0): the Healey-Lienard propeller is singular
+    at u = 0."""
+    W, B = float(raw['W']), float(raw['B'])
+    rg, rb = np.asarray(raw['r_G'], float), np.asarray(raw['r_B'], float)
+    return np.array([0.0, 0.0, W - B, rg[1] * W - rb[1] * B, -(rg[0] * W - rb[0] * B), 0.0])
+
+
+def fit_percent(y, y_fit):
+    """100 (1 - |y - y_fit| / |y - mean y|) per column; NaN where y does not vary (the DOF
+    is not excited by the samples: there is nothing to fit)."""
+    out = []
+    for a, b in zip(np.asarray(y).T, np.asarray(y_fit).T):
+        den = np.linalg.norm(a - a.mean())
+        scale = max(np.abs(a).max(), 1e-300)
+        out.append(math.nan if den <= 1e-12 * scale
+                   else 100.0 * (1.0 - np.linalg.norm(a - b) / den))
+    return np.array(out)
+
+
+def least_squares(columns, y):
+    """Coefficients (ncol, m) of y (N, m) ~ columns (N, ncol)."""
+    coef, *_ = np.linalg.lstsq(columns, y, rcond=None)
+    # exact zeros where a term does not matter to the last digit keep the files readable
+    coef[np.abs(coef) < 1e-12 * max(1.0, np.abs(coef).max())] = 0.0
+    return coef
+
+
+def fit_lines(fit, what):
+    return [f'fit of {what}, % per DOF: ' + ', '.join(
+        f'{d} {f:.4f}' if math.isfinite(f) else f'{d} not excited (exported as no damping)'
+        for d, f in zip(DOF, fit))]
+
+
+# ------------------------------------------------------------------------------------ uuv
+
+def uuv_fit(parts):
+    """uuv_simulator HMFossen damping (FRD): tau_D = (L + u L_f) nu + diag(Q) |nu| nu, fitted
+    to H + C_A(nu) nu (the plugin applies Fossen's -C_A(nu) nu itself). Returns
+    L (6, 6), L_f (6, 6), Q (6,), fit % (6,)."""
+    nu = parts.nu
+    ca = np.array([coriolis_vector(parts.M_A, s) for s in nu])
+    y = parts.H + ca
+    L, Lf, Q, fit = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(6), np.zeros(6)
+    for i in range(6):
+        cols = np.hstack([nu, nu[:, :1] * nu, (np.abs(nu[:, i]) * nu[:, i])[:, None]])
+        if i == 0:
+            cols[:, 6] = 0.0    # u u: the quadratic u |u| holds it (same for u > 0)
+        coef = least_squares(cols, y[:, i:i + 1])
+        L[i], Lf[i], Q[i] = coef[:6, 0], coef[6:12, 0], coef[12, 0]
+        fit[i] = fit_percent(parts.H[:, i:i + 1], cols @ coef - ca[:, i:i + 1])[0]
+    return L, Lf, Q, fit
+
+
+def _xml_text(lines):
+    """The file's text; a header line with '--' (not allowed inside an XML comment, a
+    command-line option or a path) gets the dashes spaced."""
+    start, end = lines.index('<!--'), lines.index('-->')
+    fixed = [ln.replace('--', '- -') if start < i < end else ln for i, ln in enumerate(lines)]
+    return '\n'.join(fixed) + '\n'
+
+
+def _numbers(values):
+    return ' '.join(repr(float(x) + 0.0) for x in np.ravel(values))
+
+
+def uuv_text(saved, parts, header):
+    L, Lf, Q, fit = uuv_fit(parts)
+    v = saved.vehicle
+    g = float(v.raw['W']) / float(v.raw['mass'])
+    volume = float(v.raw['B']) / (float(v.raw['rho']) * g)
+    cob = FLU[:3] * np.asarray(v.raw['r_B'], float)
+    lines = ['<?xml version="1.0"?>', '<!--'] + header + fit_lines(fit, 'the damping') + [
+        'uuv_simulator HMFossen (uuv_gazebo_plugins HydrodynamicModel.cc): it turns the link',
+        'velocity (FLU) into FRD (ToNED: y, z negated) and applies, in FRD,',
+        '  tau = -M_A a - C_A(nu) nu + (linear_damping + u linear_damping_forward_speed) nu',
+        '        + diag(quadratic_damping) |nu| nu',
+        'so added_mass is our M_A (positive, FRD, row-major 6x6), the damping values are the',
+        'SNAME derivatives (negative) and only the diagonal of a 36-value quadratic_damping is',
+        'used by the plugin (6 values here). a is a filtered finite-difference acceleration.',
+        f'volume = B / (rho g) with g = W / mass = {g:.6g} m/s^2; center_of_buoyancy is r_B in',
+        'the link frame (FLU: y, z negated). The link origin must be our body origin.',
+        "Weight, inertia and the link mass are the URDF's, not this snippet's.",
+        '-->',
+        f'<xacro:macro name="{v.name}_hydro_model" params="namespace"'
+        ' xmlns:xacro="http://www.ros.org/wiki/xacro">',
+        '  <link name="${namespace}/base_link">',
+        '    <neutrally_buoyant>0</neutrally_buoyant>',
+        f'    <volume>{volume!r}</volume>',
+        f'    <center_of_buoyancy>{_numbers(cob)}</center_of_buoyancy>',
+        '    <hydrodynamic_model>',
+        '      <type>fossen</type>',
+        f'      <added_mass>{_numbers(parts.M_A)}</added_mass>',
+        f'      <linear_damping>{_numbers(L)}</linear_damping>',
+        f'      <linear_damping_forward_speed>{_numbers(Lf)}</linear_damping_forward_speed>',
+        f'      <quadratic_damping>{_numbers(Q)}</quadratic_damping>',
+        '    </hydrodynamic_model>',
+        '  </link>',
+        '</xacro:macro>']
+    return _xml_text(lines), fit
+
+
+# ------------------------------------------------------------------------------------- gz
+
+VEL = 'UVWPQR'
+MOM = 'xyzkmn'
+# the non-abs products nu_j nu_k; not with u, whose nu_j |u| terms hold them for u > 0
+PAIRS = [(j, k) for j in range(1, 6) for k in range(j, 6)]
+
+
+def gz_columns(nu):
+    """Regressors of gz-sim's damping: nu_j (xU..), nu_j |nu_k| (xUabsU..) and nu_j nu_k for
+    1 <= j <= k (xVV..: the bilinear terms, v r, w q, ..., that the abs terms cannot hold
+    when both factors change sign; the torpedo files' X_vr, X_wq need them)."""
+    cols = [nu] + [nu[:, [j]] * np.abs(nu[:, [k]]) for j in range(6) for k in range(6)]
+    cols += [nu[:, [j]] * nu[:, [k]] for j, k in PAIRS]
+    return np.hstack(cols)
+
+
+def gz_fit(parts, plugin_added_mass):
+    """Damping parameters in FRD as {name: value} (SNAME signs, the plugin's names) and the
+    fit % (6,). With <fluid_added_mass> the physics engine applies -M_A nu_dot - C_A(nu) nu,
+    so the fit is to H + C_A(nu) nu; with the plugin's *Dot* terms its Coriolis is disabled
+    (it applies +C_A(nu) nu, the wrong sign) and the fit is to H, whose added-mass Coriolis
+    part is bilinear and held exactly by the non-abs quadratic terms (u factors: for u > 0)."""
+    nu = parts.nu
+    ca = (np.zeros_like(nu) if plugin_added_mass
+          else np.array([coriolis_vector(parts.M_A, s) for s in nu]))
+    cols = gz_columns(nu)
+    coef = least_squares(cols, parts.H + ca)
+    fit = fit_percent(parts.H, cols @ coef - ca)
+    names = [f'{VEL[j]}' for j in range(6)] + [
+        f'{VEL[j]}abs{VEL[k]}' for j in range(6) for k in range(6)]
+    names += [f'{VEL[j]}{VEL[k]}' for j, k in PAIRS]
+    return {MOM[i] + n: coef[c, i] for i in range(6) for c, n in enumerate(names)}, fit
+
+
+def to_flu(name, value):
+    """The FRD value of a gz parameter name in the link's FLU frame: each velocity factor
+    of y, z, q, r and the force row of Y, Z, M, N change sign (an |.| factor does not)."""
+    sign = FLU[MOM.index(name[0])]
+    body = name[1:]
+    if body.startswith('Dot'):
+        return sign * FLU[VEL.index(body[3])] * value
+    first, rest = body[0], body[1:]
+    sign *= FLU[VEL.index(first)]
+    if rest and not rest.startswith('abs'):
+        sign *= FLU[VEL.index(rest)]
+    return sign * value + 0.0     # + 0.0: no -0.0 in the file
+
+
+def gz_text(saved, parts, header, added_mass='link'):
+    plugin = added_mass == 'plugin'
+    params, fit = gz_fit(parts, plugin)
+    Ma = parts.M_A * np.outer(FLU, FLU)   # FLU
+    if plugin:
+        params.update({f'{MOM[i]}Dot{VEL[j]}': -parts.M_A[i, j]
+                       for i in range(6) for j in range(6)})
+    v = saved.vehicle
+    lines = ['<?xml version="1.0"?>', '<!--'] + header + fit_lines(fit, 'the damping') + [
+        'gz-sim Hydrodynamics system (src/systems/hydrodynamics/Hydrodynamics.cc). Frame: the',
+        'link frame, FLU (x forward, y left, z up); our FRD values were turned into it here',
+        '(T = diag(1, -1, -1) on the linear and the angular parts). The link origin must be our',
+        'body origin. Signs: SNAME (xU = X_u < 0). The plugin applies to the link',
+        '  tau = -Ma nu_dot + C(nu) nu + sum_j (xU_ij + sum_k xUabsU_ijk |nu_k|',
+        '        + sum_k xUU_ijk nu_k) nu_j            (Ma = its *Dot* terms, negative)',
+        'where C(nu) (HydrodynamicsUtils.hh buildCoriolisMatrix, diagonal Ma only) equals',
+        "Fossen's C_A(nu) with M_A = -Ma: the plugin applies +C_A(nu) nu, not -C_A(nu) nu.",
+        'C_A is skew, so this does no work, but it flips every Munk moment (the pitch Munk',
+        'moment (Z_wdot - X_udot) u w becomes stabilising).',
+        'The non-abs quadratic terms (xVR, ...) hold our bilinear terms (X_vr v r, ...);',
+        'gz-sim warns that they "may cause instabilities" (they are not dissipative).',
+    ]
+    if plugin:
+        lines += [
+            "Here (option gz-added-mass plugin): the added mass as the plugin's *Dot* terms, its",
+            'Coriolis disabled, and our added-mass Coriolis -C_A(nu) nu (bilinear) carried by',
+            "the xVR-style quadratic terms. The plugin's added-mass force uses a one-step",
+            'finite-difference acceleration (explicit: it can go unstable when M_A is large',
+            'against the link mass).']
+    else:
+        lines += [
+            'Here (option gz-added-mass link, the default; Gazebo Ionic+ with DART): the',
+            'added mass as <fluid_added_mass> (21 elements of our M_A, positive, FLU, about the',
+            "link origin); DART applies -M_A nu_dot - C_A(nu) nu itself (Fossen's sign, as",
+            "the plugin's current correction assumes), so the plugin holds only damping.",
+            'Why this is the default: the engine integrates the added mass implicitly (no',
+            "finite-difference acceleration) with Fossen's Coriolis; the damping fit is the",
+            'same either way.']
+    lines += ["Weight, buoyancy (gz Buoyancy system), mass and inertia are the SDF's, not",
+              "this snippet's.", '-->',
+              '<sdf version="1.11">', f'  <model name="{v.name}">',
+              '    <link name="base_link">']
+    if not plugin:
+        el = [(a + b, i, j) for i, a in enumerate('xyzpqr') for j, b in enumerate('xyzpqr')
+              if j >= i]
+        lines += ['      <inertial>', '        <fluid_added_mass>']
+        lines += [f'          <{n}>{float(Ma[i, j]) + 0.0!r}</{n}>' for n, i, j in el]
+        lines += ['        </fluid_added_mass>', '      </inertial>']
+    lines += ['    </link>',
+              '    <plugin filename="gz-sim-hydrodynamics-system"'
+              ' name="gz::sim::systems::Hydrodynamics">',
+              '      <link_name>base_link</link_name>',
+              f'      <water_density>{float(v.raw["rho"])!r}</water_density>']
+    if plugin:
+        lines.append('      <disable_coriolis>true</disable_coriolis>')
+    for name, value in params.items():
+        if value != 0.0:
+            lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
+    lines += ['    </plugin>', '  </model>', '</sdf>']
+    return _xml_text(lines), fit
+
+
+# ----------------------------------------------------------------------- urdf-hydrodynamics
+
+def hydrodynamics_fit(parts):
+    """The ROS 2 `hydrodynamics` library's damping (FRD, diagonal): tau_D = L nu + Q |nu| nu,
+    fitted to H + C_A(diag M_A)(nu) nu (the library applies Fossen's -C_A of the diagonal
+    added mass). Returns L (6,), Q (6,), fit % (6,)."""
+    nu = parts.nu
+    ca = np.array([coriolis_vector(np.diag(np.diag(parts.M_A)), s) for s in nu])
+    y = parts.H + ca
+    L, Q, fit = np.zeros(6), np.zeros(6), np.zeros(6)
+    for i in range(6):
+        cols = np.stack([nu[:, i], np.abs(nu[:, i]) * nu[:, i]], axis=1)
+        coef = least_squares(cols, y[:, i:i + 1])
+        L[i], Q[i] = coef[0, 0], coef[1, 0]
+        fit[i] = fit_percent(parts.H[:, i:i + 1], cols @ coef - ca[:, i:i + 1])[0]
+    return L, Q, fit
+
+
+def _attrs(names, values):
+    return ' '.join(f'{n}="{float(x) + 0.0!r}"' for n, x in zip(names, values))
+
+
+def hydrodynamics_text(saved, parts, header):
+    L, Q, fit = hydrodynamics_fit(parts)
+    v = saved.vehicle
+    raw = v.raw
+    inertia = raw['inertia']
+    off = [(f'{"XYZKMN"[i]}{"XYZKMN"[j]}', parts.M_A[i, j]) for i in range(6)
+           for j in range(6) if i != j and parts.M_A[i, j] != 0.0]
+    lines = ['<?xml version="1.0"?>', '<!--'] + header + fit_lines(fit, 'the damping') + [
+        'ROS 2 `hydrodynamics` library (Robotic-Decision-Making-Lab/hydrodynamics, src/',
+        'hydrodynamics.cpp), read by auv_controllers: FRD body, NED world (its restoring force',
+        'puts the weight on +z), SNAME signs, everything diagonal:',
+        '  M = diag(m, m, m) + I_moments - diag(Xdu .. Ndr)',
+        '  C = [[m S(w), 0], [0, -S(I w)]] + [[0, S(a1)], [S(a1), S(a2)]],',
+        '      a1 = (Xdu u, Ydv v, Zdw w), a2 = (Kdp p, Mdq q, Ndr r)   (= Fossen C_A)',
+        '  D = -diag(Xu .. Nr) - diag(Xuu |u| .. Nrr |r|);  M nu_dot + C nu + D nu + g = tau',
+        'Not held by the library (left out): the rigid-body coupling of a centre of gravity',
+        'away from the origin in M and C (it uses r_G only in g), and any off-diagonal',
+        'added mass' + (': ' + ', '.join(f'{n} {x:.6g}' for n, x in off) if off else
+                        ' (none here).'),
+        '-->',
+        f'<robot name="{v.name}">',
+        '  <hydrodynamics>',
+        f'    <mass>{float(raw["mass"])!r}</mass>',
+        '    <inertia ' + _attrs(('ixx', 'iyy', 'izz'),
+                                 (inertia['Ix'], inertia['Iy'], inertia['Iz'])) + ' />',
+        '    <added_mass ' + _attrs(('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr'),
+                                    -np.diag(parts.M_A)) + ' />',
+        '    <linear_damping ' + _attrs(('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr'), L) + ' />',
+        '    <quadratic_damping ' + _attrs(('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr'), Q)
+        + ' />',
+        f'    <weight>{float(raw["W"])!r}</weight>',
+        f'    <buoyancy>{float(raw["B"])!r}</buoyancy>',
+        '    <center_of_gravity ' + _attrs('xyz', raw['r_G']) + ' />',
+        '    <center_of_buoyancy ' + _attrs('xyz', raw['r_B']) + ' />',
+        '  </hydrodynamics>',
+        '</robot>']
+    return _xml_text(lines), fit
