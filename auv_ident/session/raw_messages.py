@@ -66,8 +66,8 @@ def raw_record(entry: InputEntry, msg: Any, t: float) -> RawMeasurement:
         return RawMeasurement('dvl', t, vel, cov, entry.name)
     if entry.type == PRESSURE:
         var = float(msg.variance)
-        return RawMeasurement('pressure', t, [float(msg.fluid_pressure)],
-                              [[var]] if var > 0 else None, entry.name)
+        return RawMeasurement('pressure', t, np.array([float(msg.fluid_pressure)]),
+                              np.array([[var]]) if var > 0 else None, entry.name)
     if entry.type == POSE:
         p = msg.pose.pose.position
         pos = np.array([p.x, p.y, p.z], dtype=float)
