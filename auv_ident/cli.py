@@ -131,6 +131,12 @@ def cmd_identify(args):
     elif {'noise_std', 'q_state'} & settings.given:
         raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
                             '--bag B ...)')
+    elif args.bag and settings.input_map and _raw_map(settings.input_map):
+        from auv_ident.analysis.raw_identify import identify_raw_bag
+        if args.estimate_out:
+            raise AuvIdentError('--estimate-out: not written for a raw-sensor map yet')
+        doc, table = identify_raw_bag(args.bag[0], settings)
+        print(table)
     elif args.bag:
         from auv_ident.analysis.bag_identify import identify_bag
         doc, table = identify_bag(args.bag[0], settings, refine_pass=not args.no_refine)
@@ -149,6 +155,12 @@ def cmd_identify(args):
         results.write_json(args.json, doc)
         print(f'wrote {args.json}')
     return _trust_status(doc)
+
+
+def _raw_map(input_map):
+    """True if the input map has raw-sensor inputs (identified offline, analysis/raw_identify)."""
+    from auv_ident.analysis.raw_identify import has_raw_sensors
+    return has_raw_sensors(input_map)
 
 
 def _identify_simulated(args, settings):

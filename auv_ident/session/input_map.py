@@ -280,9 +280,9 @@ class InputMap:
         for e in self.inputs:
             if e.type not in FUSED_TYPES:
                 raise InputMapError(
-                    f'{self.where}: input {e.name!r} ({e.type}): parsed and checked, but the '
-                    'filter does not fuse this message type yet (raw sensors: docs/'
-                    'your_data.md); feed it a nav_msgs/msg/Odometry instead')
+                    f'{self.where}: input {e.name!r} ({e.type}): raw sensors are identified '
+                    'offline: identify --bag BAG --input-map MAP (docs/your_data.md); the live '
+                    'node fuses a nav_msgs/msg/Odometry')
         fed = self.fed()
         missing = [ACTUATORS[i] for i in vehicle_actuators(vehicle) if i not in fed]
         if missing:
