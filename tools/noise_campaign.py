@@ -53,6 +53,8 @@ def _case(vehicle, level, tau, seed, out, reuse, coefficients):
                       'ekf_z': (c['ekf_estimate'] - tv) / c['ekf_std']}
     return {'level': level, 'tau': tau, 'seed': seed, 'wall_s': wall, 'rows': rows,
             'consistent': doc['diagnosis']['consistent'],
+            'plausible': doc['diagnosis'].get('plausible', True),
+            'implausible': doc['diagnosis'].get('implausible', []),
             'noise_model_used': doc['noise_model']['used'],
             'covariance': doc['noise_model']['covariance']}
 
@@ -60,6 +62,15 @@ def _case(vehicle, level, tau, seed, out, reuse, coefficients):
 def _summary(cases, key_z):
     z = np.abs([r[key_z] for c in cases for r in c['rows'].values()])
     return float(np.mean(z <= 3.0)), float(np.median(z))
+
+
+def false_alarm_line(cases):
+    """The summary line of the trust verdicts: with the correct vehicle file every run
+    judged NOT plausible is a false alarm (#26), each NOT consistent one is worth a look."""
+    n = len(cases)
+    bad = sum(1 for c in cases if not c.get('plausible', True))
+    inc = sum(1 for c in cases if not c['consistent'])
+    return f'NOT plausible in {bad} of {n} runs; NOT consistent in {inc} of {n}'
 
 
 def main(argv=None):
@@ -81,7 +92,8 @@ def main(argv=None):
                 c = _case(a.vehicle, level, tau, seed, a.out, a.reuse, a.coefficients)
                 cases.append(c)
                 print(f'level {level:g} tau {tau:g} s seed {seed}: consistent '
-                      f'{c["consistent"]}, noise model used {c["noise_model_used"]}, '
+                      f'{c["consistent"]}, plausible {c["plausible"]}, '
+                      f'noise model used {c["noise_model_used"]}, '
                       f'covariance {c["covariance"]}, ' + ', '.join(
                           f'{n} {r["err_pct"]:+.2f} % ({r["z"]:+.1f} sd; EKF {r["ekf_z"]:+.1f})'
                           for n, r in c['rows'].items()) + f', {c["wall_s"]:.1f} s',
@@ -105,6 +117,7 @@ def main(argv=None):
           f'{100 * cov_r:.1f} % refined, {100 * cov_e:.1f} % EKF pass; median |error|/sigma '
           f'{mz_r:.2f} refined, {mz_e:.2f} EKF pass; '
           f'{sum(1 for c in cases if c["consistent"])} of {len(cases)} called consistent')
+    print(false_alarm_line(cases))
     if a.json:
         with open(a.json, 'w', encoding='utf-8') as fh:
             json.dump(cases, fh, indent=1)

@@ -134,6 +134,7 @@ def _mc_case(args):
             'ekf_z': ((res.ekf_estimate - res.truth) / res.ekf_std).tolist(),
             'mean_nis_per_dof': res.mean_nis_per_dof, 'wall_s': res.wall_s,
             'consistent': res.diagnosis.consistent,
+            'plausible': res.diagnosis.plausible,
             'noise_model_used': bool(res.noise.used)}
 
 
@@ -204,6 +205,8 @@ def montecarlo(vehicle, names, seeds=20, offsets=(0.5, -0.5), noise_mode=DEFAULT
         stats['median_abs_z'] = float(np.median(Z))
         stats['ekf_median_abs_z'] = float(np.median(EZ))
         stats['consistent'] = int(sum(1 for r in ok if r['consistent']))
+        # a false alarm with the correct vehicle file: NOT plausible (#26 done-when)
+        stats['not_plausible'] = int(sum(1 for r in ok if not r.get('plausible', True)))
         stats['ekf_within_3sigma_all'] = float(np.mean(EZ <= 3.0))
         nees = np.array([r['nees'] for r in ok])
         stats['mean_nees'] = float(np.nanmean(nees))
@@ -234,6 +237,9 @@ def montecarlo_table(stats):
                      f'EKF pass within 3-sigma in {100 * stats["ekf_within_3sigma_all"]:.1f} %; '
                      f'diagnosis consistent in {stats["consistent"]} of '
                      f'{len(stats["runs"]) - stats["diverged"]}')
+        n_ok = len(stats['runs']) - stats['diverged']
+        lines.append(f'NOT plausible in {stats["not_plausible"]} of {n_ok} runs; '
+                     f'NOT consistent in {n_ok - stats["consistent"]} of {n_ok}')
     return '\n'.join(lines)
 
 
