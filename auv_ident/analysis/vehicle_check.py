@@ -26,7 +26,6 @@ from auv_ident.vehicles import resolve_vehicle_path
 # least-squares residual of T a = e_k below this (relative; T's columns are O(1) by the unit d)
 ACTUATED_TOL = 1e-9
 NET_BUOYANCY_WARN = 0.05    # |B - W| / W above this: a vehicle that surfaces or sinks hard
-DIFF_STEP = 1e-6            # relative finite-difference step of the linearisation
 
 
 @dataclass
@@ -55,18 +54,6 @@ class VehicleCheck:
         out += [f'  warning: {w}' for w in self.warnings]
         out += [f'  {f}' for f in self.facts]
         return out
-
-
-def _velocity_jacobian(model, x, u):
-    """d(nu_dot)/d(nu) (6x6) at (x, u), central differences."""
-    J = np.zeros((6, 6))
-    for j in range(6):
-        h = DIFF_STEP * max(1.0, abs(x[j]))
-        xp, xm = x.copy(), x.copy()
-        xp[j] += h
-        xm[j] -= h
-        J[:, j] = (model.f(xp, u)[:6] - model.f(xm, u)[:6]) / (2 * h)
-    return J
 
 
 def _static_checks(vehicle, check):
@@ -123,7 +110,7 @@ def _trim_checks(vehicle, check):
     u[Input.N_RPM] = vehicle.cruise_rpm
     u[Input.THRUST] = vehicle.cruise_thrust
     free = [i for i in range(6) if vehicle.free_states[i]]
-    J = _velocity_jacobian(model, x, u)[np.ix_(free, free)]
+    J = model.jacobians(x, u)[1][np.ix_(free, free)]   # d(nu_dot)/d(nu), analytic
     eig = np.linalg.eigvals(J)
     text = ', '.join(f'{e.real:.3g}' + (f'{e.imag:+.3g}j' if abs(e.imag) > 1e-9 else '')
                      for e in sorted(eig, key=lambda e: e.real))
