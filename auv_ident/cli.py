@@ -477,7 +477,7 @@ def cmd_export(args):
     from auv_ident.analysis.export import export_model
     _check_outputs(args, '--out')
     path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
-                        force=args.force, gz_added_mass=args.gz_added_mass, echo=print)
+                        gz_added_mass=args.gz_added_mass, echo=print)
     print(f'wrote {path} ({args.format})')
     return 0
 

@@ -202,13 +202,14 @@ def _fossen_text(model, fmt, gz_added_mass, echo):
     return text
 
 
-def export_model(model_path, out, fmt='vehicle', vehicle=None, force=False,
-                 gz_added_mass='link', echo=None):
+def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='link',
+                 echo=None):
     """Write the model of ``model_path`` (an ``identify --json``/``report`` result.json or the
     identifier node's estimate file) to ``out`` in format ``fmt``. Returns the path written.
 
     ``vehicle``: the vehicle file or name the model was identified with (default: the one the
-    model file names). An existing ``out`` is refused unless ``force``. ``gz_added_mass``:
+    model file names). ``out`` is replaced if it exists (the command refuses that without
+    --force, cli._check_outputs, as for every output). ``gz_added_mass``:
     'link' or 'plugin' (format gz). ``echo``: called with each fit line (fitted formats)."""
     if fmt not in FORMATS:
         raise ExportError(f'--format {fmt!r}: use one of {", ".join(FORMATS)}')
@@ -216,8 +217,6 @@ def export_model(model_path, out, fmt='vehicle', vehicle=None, force=False,
         raise ExportError(f'--gz-added-mass {gz_added_mass!r}: use one of '
                           f'{", ".join(GZ_ADDED_MASS)}')
     out = Path(out)
-    if out.exists() and not force:
-        raise ExportError(f'{out} exists already; give --force to replace it')
     model = load_model(model_path, vehicle=vehicle)
     if fmt != 'vehicle':
         text = _fossen_text(model, fmt, gz_added_mass, echo)
