@@ -34,7 +34,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.signal import savgol_filter
 
 from auv_ident.core.errors import ConfigError, DataError
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
@@ -110,6 +109,7 @@ def smoothed_runs(t: np.ndarray, Y: np.ndarray, U: np.ndarray, T: float, win: in
     """Per run of measured samples, on a uniform grid (step T) over it: the smoothed states
     (n, 12: u..r, phi, theta filled, the rest 0), their smoothed rates nu_dot (n, 6) and the
     inputs held at the grid times (n, 6); runs shorter than two windows are left out."""
+    from scipy.signal import savgol_filter  # here: scipy.signal loads scipy.stats (bounded memory)
     ok = np.all(np.isfinite(Y[:, list(NEEDED)]), axis=1)
     out = []
     for run in _runs(t, ok, max_bridge):
@@ -185,6 +185,7 @@ def equation_error(model: Model, t: ArrayLike, Y: np.ndarray, U: np.ndarray,
         # the same smoothing on the right-hand side as on nu_dot: the relation is linear in c,
         # so it survives, and a fin step (a jump of the regressor that the smoothed nu_dot
         # spreads over the window) is spread the same way on both sides
+        from scipy.signal import savgol_filter  # not at the top: see smoothed_runs
         known = savgol_filter(known, win, POLYORDER, axis=0)
         reg = savgol_filter(reg, win, POLYORDER, axis=0)
         keep = slice(win // 2, n - win // 2)   # the polynomial is extrapolated at the ends

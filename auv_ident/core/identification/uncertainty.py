@@ -39,10 +39,10 @@ CORRELATION_WEAK = 0.95         # |correlation| with another coefficient above t
 LJUNG_BOX_LAGS = 20             # lags of the whiteness test
 WHITENESS_P = 1e-3              # p-value below which a channel's residuals are not white
 MAX_BANDWIDTH_FRACTION = 0.1    # the sandwich's lag window is at most this fraction of N
+SANDWICH_BLOCK = 4096           # samples of the Jacobian masked at once (sandwich_covariance)
 
 # per coefficient name, its verdict (identifiability(): the 1-sigma, correlations, ...)
 Verdicts = dict[str, dict[str, Any]]
-
 
 def _finite_channels(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N, m) residuals with NaN where missing -> same array with NaN set to 0, and mask."""
@@ -223,9 +223,15 @@ def sandwich_covariance(J: np.ndarray, white: np.ndarray, lags: int | None = Non
     n, m = white.shape
     p = J.shape[1]
     r, ok = _finite_channels(white)
-    Jk = np.asarray(J, dtype=float).reshape(n, m, p) * ok[:, :, None]
-    g = np.einsum('kmp,km->kp', Jk, r)              # (N, p) scores
-    A = np.einsum('kmp,kmq->pq', Jk, Jk)
+    J3 = np.asarray(J, dtype=float).reshape(n, m, p)
+    g = np.empty((n, p))                            # (N, p) scores
+    A = np.zeros((p, p))
+    # in blocks of samples: a masked copy of the whole Jacobian would be as large as J
+    # (35 MB for an hour at 20 Hz; docs/reliability.md, bounded memory)
+    for k in range(0, n, SANDWICH_BLOCK):
+        Jk = J3[k:k + SANDWICH_BLOCK] * ok[k:k + SANDWICH_BLOCK, :, None]
+        g[k:k + SANDWICH_BLOCK] = np.einsum('kmp,km->kp', Jk, r[k:k + SANDWICH_BLOCK])
+        A += np.einsum('kmp,kmq->pq', Jk, Jk)
     bounds = [0, n] if bounds is None else [int(b) for b in bounds]
     if bounds[0] != 0 or bounds[-1] != n or np.any(np.diff(bounds) < 0):
         raise ValueError(f'bounds {bounds} must rise from 0 to the {n} samples')
