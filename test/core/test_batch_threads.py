@@ -137,3 +137,31 @@ def test_forward_jacobian_is_scipys_two_point_rule():
     assert np.array_equal(jac(z + 1.0),
                           approx_derivative(residuals, z + 1.0, method='2-point',
                                             rel_step=1e-5))
+
+
+def test_forward_jacobian_writes_columns_in_place():
+    """With residuals_into, each column's r(z + h_i e_i) is written into the Jacobian's own
+    row, not returned as a new (M,) vector (one per difference thread at the refinement's
+    peak, docs/reliability.md bounded memory): the same numbers, less than one vector traced."""
+    m = 200_000
+    A = np.random.default_rng(1).standard_normal((m, 3))
+
+    def residuals(z):
+        return np.sin(A @ z)
+
+    def residuals_into(z, out):
+        np.matmul(A, z, out=out)
+        np.sin(out, out=out)
+
+    z = np.array([0.7, -1.3, 0.0])
+    ref = ForwardJacobian(residuals, m, 3).rows(z).copy()
+    jac = ForwardJacobian(residuals, m, 3, residuals_into=residuals_into)
+    jac.fun(z)                          # r(z), which the columns start from
+    tracemalloc.start()
+    try:
+        rows = jac.rows(z)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert np.array_equal(rows, ref)
+    assert peak < 8 * m, peak / (8 * m)

@@ -291,13 +291,18 @@ class ForwardJacobian:
     where that adds nothing to z_i), column i = (r(z + h_i e_i) - r(z)) / ((z_i + h_i) - z_i).
 
     residuals : z -> (M,) new array; mapper : map-like evaluating the p columns (a thread
-    pool's map). :meth:`fun` is the residual function to fit (it remembers its last point and
-    value, the r(z) a Jacobian at that point starts from, as scipy's does); :meth:`rows` gives
-    the Jacobian as (p, M) rows, a call as (M, p) (a Fortran-ordered view, as scipy's); both
-    are the buffer, overwritten by the next evaluation at another point."""
+    pool's map); residuals_into : None, or (z, out) -> None writing r(z) into out (M,), the
+    same numbers without a new (M,) array per column (one fewer vector of 12 N values per
+    thread at the refinement's peak, docs/reliability.md bounded memory). :meth:`fun` is the
+    residual function to fit (it remembers its last point and value, the r(z) a Jacobian at
+    that point starts from, as scipy's does); :meth:`rows` gives the Jacobian as (p, M) rows,
+    a call as (M, p) (a Fortran-ordered view, as scipy's); both are the buffer, overwritten by
+    the next evaluation at another point."""
 
-    def __init__(self, residuals, m, p, rel_step=RELATIVE_STEP, mapper=map):
+    def __init__(self, residuals, m, p, rel_step=RELATIVE_STEP, mapper=map,
+                 residuals_into=None):
         self.residuals = residuals
+        self.residuals_into = residuals_into
         self.rel_step = rel_step
         self.mapper = mapper
         self._rows = np.empty((p, m))    # row i: column i of the Jacobian
@@ -330,7 +335,11 @@ class ForwardJacobian:
         def column(i):
             z1 = z.copy()
             z1[i] = z[i] + h[i]
-            np.subtract(self.residuals(z1), r0, out=out[i])
+            if self.residuals_into is None:
+                np.subtract(self.residuals(z1), r0, out=out[i])
+            else:
+                self.residuals_into(z1, out[i])
+                out[i] -= r0
             out[i] /= (z[i] + h[i]) - z[i]
 
         for _ in self.mapper(column, range(z.size)):
@@ -405,10 +414,24 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
         r = fer.vector(z * scale)
         return np.full(white.size, 1e3) if r is None else r
 
+    def residuals_into(z, out):
+        # residuals(z) written into out (a row of the Jacobian's buffer): the same numbers
+        # (fer.vector is nan_to_num of the thread's innovations) without a new vector
+        if progress is not None:
+            with lock:
+                progress()
+        ok, w = fer(z * scale)
+        if ok:
+            np.copyto(out, w.reshape(-1))
+            np.nan_to_num(out, copy=False)
+        else:
+            out[:] = 1e3
+
     z0 = theta_start / scale
     with ThreadPoolExecutor(difference_threads()) as pool:
         # the Jacobian's columns on the pool's threads, whatever scipy's version
-        jac = ForwardJacobian(residuals, white.size, p, mapper=pool.map)
+        jac = ForwardJacobian(residuals, white.size, p, mapper=pool.map,
+                              residuals_into=residuals_into)
         sol = levenberg_marquardt(jac, z0, max_nfev * p)
     J = sol.jac         # the Jacobian's own buffer, scaled in place (not another copy)
     J /= scale[None, :]
