@@ -205,7 +205,8 @@ class VehicleFileProblems(ConfigError):
         super().__init__(f'{where}: {count}: ' + '; '.join(problems))
 
 
-def _num(d: dict, key: str, where: str, positive: bool = False) -> float:
+def number(d: dict, key: str, where: str, positive: bool = False) -> float:
+    """d[key] as a finite (positive) float, or ConfigError naming the key."""
     if key not in d:
         meaning = KEY_MEANING.get(key)
         raise ConfigError(f'{where}: missing key {key!r}'
@@ -330,13 +331,24 @@ def vehicle_from_file(path: str) -> Vehicle:
     except OSError as err:
         raise ConfigError(f'no vehicle file {path}') from err
     if key not in _CACHE:
-        with open(path, encoding='utf-8') as fh:
-            try:
-                raw = yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
-            except yaml.YAMLError as err:
-                raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
-        _CACHE[key] = _build(raw, path)
+        _CACHE[key] = _build(read_yaml_file(path), path)
     return _CACHE[key]
+
+
+def read_yaml_file(path: str) -> Any:
+    """The parsed YAML of a vehicle file (any kind), a duplicate key or a syntax error a
+    ConfigError naming the file and the line."""
+    with open(path, encoding='utf-8') as fh:
+        try:
+            return yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
+        except yaml.YAMLError as err:
+            raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
+
+
+def file_kind(raw: object) -> str:
+    """'glider' for a glider's file (``kind: glider``, read by
+    :func:`auv_ident.core.glider.vehicle.glider_from_file`), else '6dof' (this module's)."""
+    return 'glider' if isinstance(raw, dict) and raw.get('kind') == 'glider' else '6dof'
 
 
 _CACHE: dict[tuple[str, float], Vehicle] = {}
@@ -359,6 +371,11 @@ def _build(raw: object, path: str) -> Vehicle:
     if not isinstance(raw, dict):
         raise ConfigError(f'{where}: not a vehicle file (a YAML mapping of keys, '
                           f'docs/vehicles.md; got {type(raw).__name__})')
+    if file_kind(raw) == 'glider':
+        # a glider flies by buoyancy, lift and drag in its glide plane, not by manoeuvring
+        # derivatives: the 6-DOF model has nothing to fly it with
+        raise ConfigError(f'{where}: a glider file (kind: glider): its flight model is '
+                          'core/glider (docs/glider.md), not the 6-DOF model this command uses')
     problems: list[str] = []
 
     def checked(check: Callable[..., Any], *args: Any, default: Any, **kwargs: Any) -> Any:
@@ -375,7 +392,7 @@ def _build(raw: object, path: str) -> Vehicle:
     scaling = raw.get('scaling', 'nondimensional')
     if scaling not in ('nondimensional', 'dimensional'):
         problems.append(f'scaling = {scaling!r}; use nondimensional or dimensional')
-    rho, L, mass, W, B = (checked(_num, raw, key, where, positive=True, default=float('nan'))
+    rho, L, mass, W, B = (checked(number, raw, key, where, positive=True, default=float('nan'))
                           for key in ('rho', 'L', 'mass', 'W', 'B'))
     if np.isfinite(mass) and np.isfinite(W) and not G_RANGE[0] <= W / mass <= G_RANGE[1]:
         problems.append(f'mass = {mass!r} kg and W = {W!r} N give W / mass = '
@@ -383,12 +400,12 @@ def _build(raw: object, path: str) -> Vehicle:
                         'm/s^2): check the units of mass and W')
     r_G, r_B = (checked(_vec3, raw, key, where, default=np.zeros(3)) for key in ('r_G', 'r_B'))
     inertia = raw.get('inertia') or {}
-    I = tuple(checked(_num, inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'),
+    I = tuple(checked(number, inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'),
                       default=float('nan'))
               if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
               for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
     limits = raw.get('limits') or {}
-    fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
+    fin, nmax = (checked(number, limits, key, where + ' limits', positive=True,
                          default=float('nan')) for key in ('fin_rad', 'n_rpm'))
     free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     thrusters, thruster_problems = thrusters_from_file(raw.get('thrusters'), where)
@@ -418,9 +435,9 @@ def _build(raw: object, path: str) -> Vehicle:
         M_RB=_held_rigid_body_mass(mass, r_G, I, free), Minv_literal=Minv_literal,
         mass_inverse=mass_inverse,
         identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
-        cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
+        cruise_rpm=(number(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
                     else 500.0),
-        cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
+        cruise_thrust=(number(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
         free_states=free, thrusters=tuple(thrusters))
     _check_finite_terms(v, where)
     M = v.mass_matrix()
@@ -463,13 +480,13 @@ def _propulsion(prop: dict, where: str, par: np.ndarray) -> None:
                           + ', '.join(PROPULSION_MODELS))
     par[P_PROP] = PROPULSION_MODELS[pm]
     if pm == 'healey_lienard':
-        par[P_PROP_A] = _num(prop, 'Cd0', where + ' propulsion')
-        par[P_PROP_B] = _num(prop, 'eta_gain', where + ' propulsion')
-        par[P_PROP_C] = _num(prop, 'Ct_gain', where + ' propulsion')
+        par[P_PROP_A] = number(prop, 'Cd0', where + ' propulsion')
+        par[P_PROP_B] = number(prop, 'eta_gain', where + ' propulsion')
+        par[P_PROP_C] = number(prop, 'Ct_gain', where + ' propulsion')
     elif pm == 'quadratic_thrust':
-        par[P_PROP_A] = _num(prop, 'X_prop', where + ' propulsion')
-        par[P_PROP_B] = _num(prop, 'K_prop', where + ' propulsion')
-        par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
+        par[P_PROP_A] = number(prop, 'X_prop', where + ' propulsion')
+        par[P_PROP_B] = number(prop, 'K_prop', where + ' propulsion')
+        par[P_PROP_C] = number(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
 
 
 def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
@@ -480,13 +497,13 @@ def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
                           + ', '.join(CROSSFLOW_MODELS))
     par[P_CF] = CROSSFLOW_MODELS[cm]
     if cm == 'mss_classic_strip':
-        ns = _num(cf, 'stations', where + ' crossflow', positive=True)
+        ns = number(cf, 'stations', where + ' crossflow', positive=True)
         if ns != int(ns) or not 2 <= ns <= MAX_STATIONS:
             raise ConfigError(f'{where} crossflow: stations = {cf["stations"]!r} must be a '
                               f'whole number from 2 to {MAX_STATIONS}')
         par[P_CF_N] = ns
-        par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
-        par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
+        par[P_CF_CY] = number(cf, 'Cy', where + ' crossflow')
+        par[P_CF_CZ] = number(cf, 'Cz', where + ' crossflow')
 
 
 def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
