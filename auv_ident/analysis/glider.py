@@ -52,11 +52,16 @@ EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
 
 
 def _scores(cal, record, kept_times):
-    flight = FLIGHT_MODELS[cal.model](cal.params, record)
+    return judge(FLIGHT_MODELS[cal.model](cal.params, record), record, kept_times, cal.window)
+
+
+def judge(flight, record, kept_times, window=DEPTH_WINDOW):
+    """{'all': Scores dict over every DVL sample, 'consistent': over the samples at
+    kept_times (s since 1970; the dives that passed the consistency check)} of a Flight."""
     keep = np.isin(record.t, kept_times)
     every = np.isfinite(record.speed_through_water)
-    return {'all': score(flight, record, every, cal.window).__dict__,
-            'consistent': score(flight, record, keep, cal.window).__dict__}
+    return {'all': score(flight, record, every, window).__dict__,
+            'consistent': score(flight, record, keep, window).__dict__}
 
 
 def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
@@ -111,21 +116,31 @@ def _cm(v):
     return f'{100.0 * v:+.2f}' if np.isfinite(v) else 'n/a'
 
 
+SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
+                'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
+                'dz/dt RMS cm/s | fit s (wall) |',
+                '|---|---|---|---|---|---|---|---|---|---|---|']
+
+
+def score_row(label, run):
+    """The table line of one calibration judged on the half it did not see: ``run`` holds
+    fitted_on, validated_on, seconds and validation = {'all': Scores dict, 'consistent': ...}
+    (run_campaign's runs; tools/gliderflight_peer.py's)."""
+    v = run['validation']
+    return (f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
+            f"{_cm(v['all']['speed_bias'])} | {100 * v['all']['speed_rms']:.2f} | "
+            f"{v['all']['speed_fit']:.1f} | {_cm(v['consistent']['speed_bias'])} | "
+            f"{100 * v['consistent']['speed_rms']:.2f} | "
+            f"{v['consistent']['speed_fit']:.1f} | "
+            f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
+
+
 def format_campaign(result):
     """Markdown lines of the campaign's table (module docstring)."""
-    L = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
-         'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
-         'dz/dt RMS cm/s | fit s (wall) |',
-         '|---|---|---|---|---|---|---|---|---|---|---|']
+    L = list(SCORE_HEADER)
     for label, model in result['models'].items():
         for run in model['runs'].values():
-            v = run['validation']
-            L.append(f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
-                     f"{_cm(v['all']['speed_bias'])} | {100 * v['all']['speed_rms']:.2f} | "
-                     f"{v['all']['speed_fit']:.1f} | {_cm(v['consistent']['speed_bias'])} | "
-                     f"{100 * v['consistent']['speed_rms']:.2f} | "
-                     f"{v['consistent']['speed_fit']:.1f} | "
-                     f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
+            L.append(score_row(label, run))
     L += ['', '| model | parameter | first half (1-sigma) | second half (1-sigma) | '
           'difference / combined sigma |', '|---|---|---|---|---|']
     for label, model in result['models'].items():
