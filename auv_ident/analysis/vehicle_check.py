@@ -25,14 +25,8 @@ from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import DOF_STATES, Input, N_INPUT, NU_NAMES, State
 from auv_ident.core.model.thrusters import configuration_matrix
 from auv_ident.core.model.trim import initial_state, trim_speed
-from auv_ident.core.model.vehicle import (
-    file_kind,
-    P_ZB,
-    P_ZG,
-    read_yaml_file,
-    vehicle_from_file,
-    VehicleFileProblems,
-)
+from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file
+from auv_ident.core.vehicle_files import file_kind, read_yaml_file, VehicleFileProblems
 from auv_ident.vehicles import resolve_vehicle_path
 
 # a degree of freedom is pushed alone when its unit wrench is T a for some thrusts a: the

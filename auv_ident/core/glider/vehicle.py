@@ -1,7 +1,7 @@
 """A glider's vehicle file (``kind: glider``, config/slocum_comet.yaml): its flight model's
 parameters with the prior they come from, validated as the 6-DOF vehicle files are
-(:mod:`auv_ident.core.model.vehicle`: every problem at once, each naming its key, in one
-:class:`~auv_ident.core.model.vehicle.VehicleFileProblems`).
+(:mod:`auv_ident.core.vehicle_files`: every problem at once, each naming its key, in one
+:class:`~auv_ident.core.vehicle_files.VehicleFileProblems`).
 
 Keys (SI): ``kind: glider``, ``name``, ``prior`` (the published source of the values, a text),
 ``pitch_source`` (``measured``: the flight model reads the pitch, :mod:`.flight` says why),
@@ -15,9 +15,9 @@ from typing import Any
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.glider.flight import GliderParameters
-from auv_ident.core.model.vehicle import (
+from auv_ident.core.vehicle_files import (
     file_kind,
-    number,
+    finite_number,
     read_yaml_file,
     VehicleFileProblems,
 )
@@ -61,7 +61,7 @@ def _numbers(raw: dict[str, Any], where: str, problems: list[str]) -> dict[str, 
             problems.append(f'missing key {key!r} ({meaning})')
             continue
         try:
-            v = number(raw, key, where, positive=positive)
+            v = finite_number(raw, key, where, positive=positive)
         except ConfigError as err:
             problems.append(str(err).removeprefix(f'{where}: '))
             continue

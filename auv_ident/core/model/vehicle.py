@@ -14,11 +14,16 @@ import os
 from typing import Any
 
 import numpy as np
-import yaml
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
 from auv_ident.core.model.thrusters import Thruster, thrusters_from_file
+from auv_ident.core.vehicle_files import (
+    file_kind,
+    finite_number,
+    read_yaml_file,
+    VehicleFileProblems,
+)
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
@@ -194,31 +199,8 @@ KEY_MEANING = {
 }
 
 
-class VehicleFileProblems(ConfigError):
-    """Every problem found in a vehicle file's entries at once (``problems``: one text each),
-    so that a new file is put right in one round, not one run per missing key."""
-
-    def __init__(self, where: str, problems: list[str]):
-        self.where = where
-        self.problems = list(problems)
-        count = f'{len(problems)} problems' if len(problems) > 1 else 'problem'
-        super().__init__(f'{where}: {count}: ' + '; '.join(problems))
-
-
-def number(d: dict, key: str, where: str, positive: bool = False) -> float:
-    """d[key] as a finite (positive) float, or ConfigError naming the key."""
-    if key not in d:
-        meaning = KEY_MEANING.get(key)
-        raise ConfigError(f'{where}: missing key {key!r}'
-                          + (f' ({meaning})' if meaning else ''))
-    try:
-        v = float(d[key])
-    except (TypeError, ValueError):
-        raise ConfigError(f'{where}: {key} = {d[key]!r} is not a number') from None
-    if not np.isfinite(v) or (positive and v <= 0):
-        raise ConfigError(f'{where}: {key} = {v!r} must be a finite'
-                          + (' positive' if positive else '') + ' number')
-    return v
+def _num(d: dict, key: str, where: str, positive: bool = False) -> float:
+    return finite_number(d, key, where, positive, KEY_MEANING.get(key))
 
 
 def _vec3(d: dict, key: str, where: str) -> np.ndarray:
@@ -302,25 +284,6 @@ def rigid_body_mass_matrix(mass: float, r_G: np.ndarray, I: Sequence[float]) -> 
     return M
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that refuses a mapping holding one key twice (PyYAML keeps the last
-    silently, so a coefficient written twice would take whichever came last)."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        seen: dict = {}
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            try:
-                first = seen.setdefault(key, key_node.start_mark.line + 1)
-            except TypeError:       # an unhashable key: the base class says so
-                break
-            if first != key_node.start_mark.line + 1:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key!r} (first on line {first})',
-                    key_node.start_mark)
-        return super().construct_mapping(node, deep=deep)
-
-
 def vehicle_from_file(path: str) -> Vehicle:
     """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
     parsed once, never in a hot path). Looking a vehicle up by name is
@@ -335,32 +298,7 @@ def vehicle_from_file(path: str) -> Vehicle:
     return _CACHE[key]
 
 
-def read_yaml_file(path: str) -> Any:
-    """The parsed YAML of a vehicle file (any kind), a duplicate key or a syntax error a
-    ConfigError naming the file and the line."""
-    with open(path, encoding='utf-8') as fh:
-        try:
-            return yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
-        except yaml.YAMLError as err:
-            raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
-
-
-def file_kind(raw: object) -> str:
-    """'glider' for a glider's file (``kind: glider``, read by
-    :func:`auv_ident.core.glider.vehicle.glider_from_file`), else '6dof' (this module's)."""
-    return 'glider' if isinstance(raw, dict) and raw.get('kind') == 'glider' else '6dof'
-
-
 _CACHE: dict[tuple[str, float], Vehicle] = {}
-
-
-def _yaml_problem(err: yaml.YAMLError) -> str:
-    """A YAML error on one line: its problem and where (PyYAML's text spans several lines)."""
-    problem = getattr(err, 'problem', None)
-    mark = getattr(err, 'problem_mark', None)
-    if problem is None or mark is None:
-        return ' '.join(str(err).split())
-    return f'{problem} (line {mark.line + 1}, column {mark.column + 1})'
 
 
 def _build(raw: object, path: str) -> Vehicle:
@@ -392,7 +330,7 @@ def _build(raw: object, path: str) -> Vehicle:
     scaling = raw.get('scaling', 'nondimensional')
     if scaling not in ('nondimensional', 'dimensional'):
         problems.append(f'scaling = {scaling!r}; use nondimensional or dimensional')
-    rho, L, mass, W, B = (checked(number, raw, key, where, positive=True, default=float('nan'))
+    rho, L, mass, W, B = (checked(_num, raw, key, where, positive=True, default=float('nan'))
                           for key in ('rho', 'L', 'mass', 'W', 'B'))
     if np.isfinite(mass) and np.isfinite(W) and not G_RANGE[0] <= W / mass <= G_RANGE[1]:
         problems.append(f'mass = {mass!r} kg and W = {W!r} N give W / mass = '
@@ -400,12 +338,12 @@ def _build(raw: object, path: str) -> Vehicle:
                         'm/s^2): check the units of mass and W')
     r_G, r_B = (checked(_vec3, raw, key, where, default=np.zeros(3)) for key in ('r_G', 'r_B'))
     inertia = raw.get('inertia') or {}
-    I = tuple(checked(number, inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'),
+    I = tuple(checked(_num, inertia, k, where + ' inertia', positive=k in ('Ix', 'Iy', 'Iz'),
                       default=float('nan'))
               if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
               for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
     limits = raw.get('limits') or {}
-    fin, nmax = (checked(number, limits, key, where + ' limits', positive=True,
+    fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
                          default=float('nan')) for key in ('fin_rad', 'n_rpm'))
     free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     thrusters, thruster_problems = thrusters_from_file(raw.get('thrusters'), where)
@@ -435,9 +373,9 @@ def _build(raw: object, path: str) -> Vehicle:
         M_RB=_held_rigid_body_mass(mass, r_G, I, free), Minv_literal=Minv_literal,
         mass_inverse=mass_inverse,
         identify_default=list(raw.get('identify_default', [])), paper=raw.get('paper') or {},
-        cruise_rpm=(number(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
+        cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
                     else 500.0),
-        cruise_thrust=(number(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
+        cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
         free_states=free, thrusters=tuple(thrusters))
     _check_finite_terms(v, where)
     M = v.mass_matrix()
@@ -480,13 +418,13 @@ def _propulsion(prop: dict, where: str, par: np.ndarray) -> None:
                           + ', '.join(PROPULSION_MODELS))
     par[P_PROP] = PROPULSION_MODELS[pm]
     if pm == 'healey_lienard':
-        par[P_PROP_A] = number(prop, 'Cd0', where + ' propulsion')
-        par[P_PROP_B] = number(prop, 'eta_gain', where + ' propulsion')
-        par[P_PROP_C] = number(prop, 'Ct_gain', where + ' propulsion')
+        par[P_PROP_A] = _num(prop, 'Cd0', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'eta_gain', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'Ct_gain', where + ' propulsion')
     elif pm == 'quadratic_thrust':
-        par[P_PROP_A] = number(prop, 'X_prop', where + ' propulsion')
-        par[P_PROP_B] = number(prop, 'K_prop', where + ' propulsion')
-        par[P_PROP_C] = number(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
+        par[P_PROP_A] = _num(prop, 'X_prop', where + ' propulsion')
+        par[P_PROP_B] = _num(prop, 'K_prop', where + ' propulsion')
+        par[P_PROP_C] = _num(prop, 'n_nominal_rpm', where + ' propulsion', positive=True)
 
 
 def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
@@ -497,13 +435,13 @@ def _crossflow(cf: dict, where: str, par: np.ndarray) -> None:
                           + ', '.join(CROSSFLOW_MODELS))
     par[P_CF] = CROSSFLOW_MODELS[cm]
     if cm == 'mss_classic_strip':
-        ns = number(cf, 'stations', where + ' crossflow', positive=True)
+        ns = _num(cf, 'stations', where + ' crossflow', positive=True)
         if ns != int(ns) or not 2 <= ns <= MAX_STATIONS:
             raise ConfigError(f'{where} crossflow: stations = {cf["stations"]!r} must be a '
                               f'whole number from 2 to {MAX_STATIONS}')
         par[P_CF_N] = ns
-        par[P_CF_CY] = number(cf, 'Cy', where + ' crossflow')
-        par[P_CF_CZ] = number(cf, 'Cz', where + ' crossflow')
+        par[P_CF_CY] = _num(cf, 'Cy', where + ' crossflow')
+        par[P_CF_CZ] = _num(cf, 'Cz', where + ' crossflow')
 
 
 def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
