@@ -134,17 +134,8 @@ def _trim_checks(vehicle, check):
             'AUVs (then steer in closed loop); elsewhere, check the damping signs')
 
 
-def _glider_checks(path, check):
-    """The glider file at path (module docstring), into check."""
-    try:
-        glider = glider_from_file(path)
-    except VehicleFileProblems as err:
-        check.errors.extend(err.problems)
-        return check
-    except ConfigError as err:
-        check.errors.append(str(err))
-        return check
-    check.name = glider.name
+def _glider_checks(glider, check):
+    """A GliderVehicle's checks (module docstring), into check."""
     p = glider.params
     check.facts.append('a glider file (kind: glider): its flight model is core/glider '
                        '(docs/glider.md); the 6-DOF checks (trim, eigenvalues, thrusters) do '
@@ -174,9 +165,8 @@ def check_vehicle(name_or_path):
     path = resolve_vehicle_path(name_or_path)
     check = VehicleCheck(path=str(name_or_path))
     try:
-        if file_kind(read_yaml_file(path)) == 'glider':
-            return _glider_checks(path, check)
-        vehicle = vehicle_from_file(path)
+        glider = file_kind(read_yaml_file(path)) == 'glider'
+        vehicle = glider_from_file(path) if glider else vehicle_from_file(path)
     except VehicleFileProblems as err:
         check.errors.extend(err.problems)
         return check
@@ -184,6 +174,8 @@ def check_vehicle(name_or_path):
         check.errors.append(str(err))
         return check
     check.name = vehicle.name
+    if glider:
+        return _glider_checks(vehicle, check)
     _static_checks(vehicle, check)
     if vehicle.thrusters:
         _thruster_checks(vehicle, check)
