@@ -45,7 +45,8 @@ def test_gliderflight_steady_calibration_on_the_comet_split(peer, tmp_path):
     assert cli_main(['import', '--format', 'npy', str(data / slocum_data.NPY_NAME),
                      '--out', str(bag)]) == 0
     from auv_ident.offline.glider_import import read_glider_bag
-    runs = peer.run_peer(gf, read_glider_bag(bag), ('steady',))['models']
+    # the baseline: Cd0, mg and Vg, the steady model
+    runs = peer.run_peer(gf, read_glider_bag(bag), ('steady',), ('Cd0', 'mg', 'Vg'))['models']
     runs = runs['gliderflight steady (its own code)']
     for fitted in ('first', 'second'):
         assert 0.14 < runs[fitted]['values']['Cd0'] < 0.16
