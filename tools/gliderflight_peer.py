@@ -93,7 +93,7 @@ def calibrate(gf, kind, record, free=FREE):
 def fly(gf, kind, values, record):
     """Our Flight of gliderflight's model with the calibrated values over a record."""
     m = _model(gf, kind, calibrate=False)
-    m.define(**EXAMPLE, **values)
+    m.define(**EXAMPLE, **{**START, **values})     # the parameters not calibrated: START
     r = m.solve(_data(record))
     U = np.asarray(r.U, dtype=float)
     gamma = record.pitch + np.asarray(r.alpha, dtype=float)

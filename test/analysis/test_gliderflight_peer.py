@@ -46,7 +46,8 @@ def test_gliderflight_steady_calibration_on_the_comet_split(peer, tmp_path):
                      '--out', str(bag)]) == 0
     from auv_ident.offline.glider_import import read_glider_bag
     # the baseline: Cd0, mg and Vg, the steady model
-    runs = peer.run_peer(gf, read_glider_bag(bag), ('steady',), ('Cd0', 'mg', 'Vg'))['models']
+    record = read_glider_bag(bag)
+    runs = peer.run_peer(gf, record, ('steady',), ('Cd0', 'mg', 'Vg'))['models']
     runs = runs['gliderflight steady (its own code)']
     for fitted in ('first', 'second'):
         assert 0.14 < runs[fitted]['values']['Cd0'] < 0.16
@@ -55,3 +56,8 @@ def test_gliderflight_steady_calibration_on_the_comet_split(peer, tmp_path):
         assert 0.03 < v['speed_rms'] < 0.05 and abs(v['speed_bias']) < 0.01
     # mg and Vg are one parameter to the depth rate: the halves put them 14 kg apart
     assert abs(runs['first']['values']['mg'] - runs['second']['values']['mg']) > 5.0
+    # the example's two (Vg held at its start): mg then is one number for both halves
+    example = peer.run_peer(gf, record, ('steady',))['models']
+    example = example['gliderflight steady (its own code)']
+    masses = [example[h]['values']['mg'] for h in ('first', 'second')]
+    assert set(example['first']['values']) == {'Cd0', 'mg'} and abs(masses[0] - masses[1]) < 1.0
