@@ -6,7 +6,9 @@ steady-state calibration in gliderflight's style on the same split; prints the m
     python -m auv_ident import --format npy \\
         ../shared/realdata/slocum_comet/gliderflight_data.npy --out /tmp/comet
     PYTHONPATH=. .venv/bin/python tools/glider_campaign.py /tmp/comet [--json OUT.json] \\
-        [--plot PNG]
+        [--plot PNG] [--vehicle slocum_comet]
+
+The prior is the glider file's (--vehicle, a name in config/ or a path; config/slocum_comet.yaml).
 """
 import argparse
 import json
@@ -22,7 +24,9 @@ from auv_ident.analysis.glider import (  # noqa: E402
     run_campaign,
 )
 from auv_ident.core.errors import AuvIdentError  # noqa: E402
+from auv_ident.core.glider.vehicle import glider_from_file  # noqa: E402
 from auv_ident.offline.glider_import import read_glider_bag  # noqa: E402
+from auv_ident.vehicles import resolve_vehicle_path  # noqa: E402
 
 
 def main(argv=None):
@@ -30,10 +34,13 @@ def main(argv=None):
     ap.add_argument('bag', help='a glider bag written by import --format npy')
     ap.add_argument('--json', help='write the campaign here')
     ap.add_argument('--plot', metavar='PNG', help='draw the campaign here')
+    ap.add_argument('--vehicle', default='slocum_comet',
+                    help='the glider file of the prior (a name in config/ or a path)')
     a = ap.parse_args(argv)
     try:
+        glider = glider_from_file(resolve_vehicle_path(a.vehicle))
         record = read_glider_bag(a.bag)
-        result = run_campaign(record)
+        result = run_campaign(record, glider.params)
     except AuvIdentError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2

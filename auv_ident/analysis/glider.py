@@ -16,10 +16,14 @@ Models (:mod:`auv_ident.core.glider`):
   ours with the hull's thermal expansion at its prior, and with it fitted. Ours leaves it out
   (docs/glider.md says why).
 
+Every model starts from the glider file's prior (config/slocum_comet.yaml,
+:func:`auv_ident.core.glider.vehicle.glider_from_file`).
+
 Scores on the half not fitted: speed through water against the DVL (bias, RMS, fit %) over
-every DVL sample and over the dives where the DVL agrees with the pressure and pitch
-(:func:`auv_ident.core.glider.validation.consistent_dvl`), and the depth rate (RMS over the
-fit window). Agreement of the halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
+the dives that pass the instruments' consistency check (run once over the whole record before
+the split, :func:`auv_ident.core.glider.validation.consistent_dvl`; reported dive by dive)
+and over every DVL sample, and the depth rate (RMS over the fit window). Agreement of the
+halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
 """
 from dataclasses import asdict, replace
 
@@ -27,6 +31,7 @@ import numpy as np
 
 from auv_ident.core.glider.calibration import calibrate, DEPTH_WINDOW, identifiability
 from auv_ident.core.glider.flight import FLIGHT_MODELS, GliderParameters
+from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.glider.validation import consistent_dvl, dvl_dives, score
 
 # label: (model, free parameters, depth-rate density (None: local), water temperature used)
@@ -46,23 +51,34 @@ THERMAL_MODELS = {
 EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
 
 
-def _scores(cal, record):
-    flight = FLIGHT_MODELS[cal.model](cal.params, record)
-    keep, _ = consistent_dvl(record)
+def _scores(cal, record, kept_times):
+    return judge(FLIGHT_MODELS[cal.model](cal.params, record), record, kept_times, cal.window)
+
+
+def judge(flight, record, kept_times, window=DEPTH_WINDOW):
+    """{'all': Scores dict over every DVL sample, 'consistent': over the samples at
+    kept_times (s since 1970; the dives that passed the consistency check)} of a Flight."""
+    keep = np.isin(record.t, kept_times)
     every = np.isfinite(record.speed_through_water)
-    return {'all': score(flight, record, every, cal.window).__dict__,
-            'consistent': score(flight, record, keep, cal.window).__dict__}
+    return {'all': score(flight, record, every, window).__dict__,
+            'consistent': score(flight, record, keep, window).__dict__}
 
 
-def run_campaign(record, split=None, window=DEPTH_WINDOW):
-    """The campaign on a GliderRecord, split at time ``split`` (s since 1970; default the
-    middle of the record). Returns a dict (JSON-ready): per model and direction the estimates,
-    1-sigma, fit seconds, scores on both halves; per model the halves' agreement; the
-    identifiability of the extra parameters; the DVL dives judged."""
+def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
+                 window=DEPTH_WINDOW):
+    """The campaign on a GliderRecord from the prior (a glider file's params), split at time
+    ``split`` (s since 1970; default the middle of the record). Returns a dict (JSON-ready):
+    per model and direction the estimates, 1-sigma, fit seconds, scores on both halves; per
+    model the halves' agreement; the identifiability of the extra parameters; the
+    instruments' consistency check, dive by dive."""
     t_split = 0.5 * (record.t[0] + record.t[-1]) if split is None else float(split)
     with_temperature = dict(zip(('first', 'second'), record.split(t_split)))
     halves = {name: replace(h, temperature=None) for name, h in with_temperature.items()}
     out = {'split': t_split, 'window': list(window), 'models': {}}
+    # the instruments' check, on every dive of the record (more dives, a firmer spread), before
+    # any model: its verdict is the same whichever half a model was fitted on
+    check = consistent_dvl(record)
+    kept_times = record.t[check.keep]
     models = dict(MODELS)
     if record.temperature is not None:
         models.update(THERMAL_MODELS)
@@ -70,15 +86,15 @@ def run_campaign(record, split=None, window=DEPTH_WINDOW):
         runs = {}
         data = with_temperature if thermal else halves
         for fit_name, val_name in (('first', 'second'), ('second', 'first')):
-            cal = calibrate(data[fit_name], model, free, window=window,
+            cal = calibrate(data[fit_name], prior, model, free, window=window,
                             depth_rate_density=density)
             runs[fit_name] = {
                 'fitted_on': fit_name, 'validated_on': val_name,
                 'estimates': {n: list(v) for n, v in cal.estimates().items()},
                 'verdicts': {n: v['verdict'] for n, v in cal.verdicts.items()},
                 'seconds': cal.seconds, 'lags': cal.lags, 'depth_rate_rms_fit': cal.rms,
-                'validation': _scores(cal, data[val_name]),
-                'fit': _scores(cal, data[fit_name]),
+                'validation': _scores(cal, data[val_name], kept_times),
+                'fit': _scores(cal, data[fit_name], kept_times),
                 'params': asdict(cal.params), 'calibration': cal}
         a, b = runs['first']['estimates'], runs['second']['estimates']
         agreement = {n: abs(a[n][0] - b[n][0]) / np.hypot(a[n][1], b[n][1]) for n in free}
@@ -89,9 +105,7 @@ def run_campaign(record, split=None, window=DEPTH_WINDOW):
         fit: {name: identifiability(halves[fit], ours[fit]['calibration'], (name,))[name]
               for name in EXTRA}
         for fit in ('first', 'second')}
-    _, dives = consistent_dvl(record)
-    out['dvl_dives'] = [{'start': d[0], 'samples': d[1], 'implied_aoa_deg': d[2], 'kept': d[3]}
-                        for d in dives]
+    out['dvl_check'] = check.as_dict()
     for model in out['models'].values():
         for run in model['runs'].values():
             run.pop('calibration')
@@ -102,21 +116,31 @@ def _cm(v):
     return f'{100.0 * v:+.2f}' if np.isfinite(v) else 'n/a'
 
 
+SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
+                'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
+                'dz/dt RMS cm/s | fit s (wall) |',
+                '|---|---|---|---|---|---|---|---|---|---|---|']
+
+
+def score_row(label, run):
+    """The table line of one calibration judged on the half it did not see: ``run`` holds
+    fitted_on, validated_on, seconds and validation = {'all': Scores dict, 'consistent': ...}
+    (run_campaign's runs; tools/gliderflight_peer.py's)."""
+    v = run['validation']
+    return (f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
+            f"{_cm(v['all']['speed_bias'])} | {100 * v['all']['speed_rms']:.2f} | "
+            f"{v['all']['speed_fit']:.1f} | {_cm(v['consistent']['speed_bias'])} | "
+            f"{100 * v['consistent']['speed_rms']:.2f} | "
+            f"{v['consistent']['speed_fit']:.1f} | "
+            f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
+
+
 def format_campaign(result):
     """Markdown lines of the campaign's table (module docstring)."""
-    L = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
-         'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
-         'dz/dt RMS cm/s | fit s (wall) |',
-         '|---|---|---|---|---|---|---|---|---|---|---|']
+    L = list(SCORE_HEADER)
     for label, model in result['models'].items():
         for run in model['runs'].values():
-            v = run['validation']
-            L.append(f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
-                     f"{_cm(v['all']['speed_bias'])} | {100 * v['all']['speed_rms']:.2f} | "
-                     f"{v['all']['speed_fit']:.1f} | {_cm(v['consistent']['speed_bias'])} | "
-                     f"{100 * v['consistent']['speed_rms']:.2f} | "
-                     f"{v['consistent']['speed_fit']:.1f} | "
-                     f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
+            L.append(score_row(label, run))
     L += ['', '| model | parameter | first half (1-sigma) | second half (1-sigma) | '
           'difference / combined sigma |', '|---|---|---|---|---|']
     for label, model in result['models'].items():
@@ -132,12 +156,24 @@ def format_campaign(result):
         for name, v in verdicts.items():
             L.append(f"| {fit} half | {name} | {v['crb_std']:.3g} | "
                      f"{v['max_correlation']:.3f} ({v['correlated_with']}) | {v['verdict']} |")
-    dropped = [d for d in result['dvl_dives'] if not d['kept']]
-    L += ['', f"DVL dives: {len(result['dvl_dives'])}, median implied angle of attack "
-          f"{np.median([d['implied_aoa_deg'] for d in result['dvl_dives']]):.1f} deg; "
-          f'inconsistent (scored apart): '
-          + (', '.join(f"{np.datetime64(int(d['start']), 's')} UTC ({d['samples']} samples, "
-                       f"{d['implied_aoa_deg']:.1f} deg)" for d in dropped) or 'none')]
+    return L + format_dvl_check(result['dvl_check'])
+
+
+def format_dvl_check(check):
+    """Markdown lines of the instruments' consistency check (core/glider/validation.py)."""
+    dives = check['dives']
+    failed = [d for d in dives if not d['kept']]
+    L = ['', f"The DVL against the pressure and the pitch, dive by dive: {len(dives)} dives, "
+         f"median implied angle of attack {check['centre_deg']:.2f} deg, dive-to-dive spread "
+         f"(1.4826 MAD) {check['spread_deg']:.2f} deg; a dive fails at |z| > "
+         f"{check['z_limit']:.2f} ({100 * check['false_rejection']:g} % chance of failing any "
+         f"of {len(dives)} consistent dives); failed: {len(failed)}", '',
+         '| dive start (UTC) | DVL samples | median implied angle of attack deg (s.e.) | z | '
+         'passes |', '|---|---|---|---|---|']
+    for d in dives:
+        L.append(f"| {np.datetime64(int(d['start']), 's')} | {d['samples']} | "
+                 f"{d['median_aoa_deg']:.2f} ({d['stderr_deg']:.2f}) | {d['z']:+.1f} | "
+                 f"{'yes' if d['kept'] else 'no'} |")
     return L
 
 
@@ -182,7 +218,7 @@ def plot_campaign(record, result, path):
                 xs.append((rec.t[idx[0]] - record.t[0]) / 3600)
                 ys.append(100 * np.mean(flight.speed[idx] - rec.speed_through_water[idx]))
         bottom.plot(xs, ys, 'o', color=colours[label], ms=4, label=label)
-    for d in result['dvl_dives']:
+    for d in result['dvl_check']['dives']:
         if not d['kept']:
             bottom.axvspan((d['start'] - record.t[0]) / 3600 - 0.03,
                            (d['start'] - record.t[0]) / 3600 + 0.08, color='0.85',

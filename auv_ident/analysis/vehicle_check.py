@@ -6,26 +6,36 @@ stability in roll and pitch, the net buoyancy, damping derivatives with the sign
 forbids (core/identification/plausibility.py), and for a thruster vehicle which of its degrees
 of freedom the thrusters can push alone (core/model/thrusters.py).
 
+A glider's file (``kind: glider``, config/slocum_comet.yaml) is checked as what it is: its keys
+(core/glider/vehicle.py), the water density it is neutral in and its best glide; the 6-DOF
+checks (trim, eigenvalues, thrusters) do not apply to it and are said not to.
+
 Findings are ``error`` (the file does not load, or the vehicle has no straight run: nothing can
 be simulated) or ``warning`` (it loads and flies, but a value is unusual: read it again).
 """
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
 from auv_ident.core.errors import ConfigError, DomainError
+from auv_ident.core.glider.vehicle import glider_from_file
 from auv_ident.core.identification.plausibility import is_self_damping
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import DOF_STATES, Input, N_INPUT, NU_NAMES, State
 from auv_ident.core.model.thrusters import configuration_matrix
 from auv_ident.core.model.trim import initial_state, trim_speed
-from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file, VehicleFileProblems
+from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file
+from auv_ident.core.vehicle_files import file_kind, read_yaml_file, VehicleFileProblems
 from auv_ident.vehicles import resolve_vehicle_path
 
 # a degree of freedom is pushed alone when its unit wrench is T a for some thrusts a: the
 # least-squares residual of T a = e_k below this (relative; T's columns are O(1) by the unit d)
 ACTUATED_TOL = 1e-9
 NET_BUOYANCY_WARN = 0.05    # |B - W| / W above this: a vehicle that surfaces or sinks hard
+# kg/m^3: the water a glider can be ballasted for, from fresh water to the densest ocean water
+# at depth; a glider neutral outside it has its mass or its volume in the wrong unit
+GLIDER_NEUTRAL_DENSITY = (995.0, 1060.0)
 
 
 @dataclass
@@ -124,13 +134,39 @@ def _trim_checks(vehicle, check):
             'AUVs (then steer in closed loop); elsewhere, check the damping signs')
 
 
+def _glider_checks(glider, check):
+    """A GliderVehicle's checks (module docstring), into check."""
+    p = glider.params
+    check.facts.append('a glider file (kind: glider): its flight model is core/glider '
+                       '(docs/glider.md); the 6-DOF checks (trim, eigenvalues, thrusters) do '
+                       'not apply')
+    check.facts.append(f'prior: {glider.prior}; pitch: {glider.pitch_source}')
+    neutral = p.mass / p.hull_volume
+    check.facts.append(f'neutral with nothing pumped in water of m / V_g = {neutral:.1f} kg/m^3')
+    lo, hi = GLIDER_NEUTRAL_DENSITY
+    if not lo <= neutral <= hi:
+        check.warnings.append(f'mass / hull_volume = {neutral:.4g} kg/m^3 is outside the '
+                              f'waters a glider is ballasted for ({lo:g}-{hi:g}): check the '
+                              'units of mass (kg) and hull_volume (m^3)')
+    if p.induced_drag > 0:
+        # the best glide ratio: alpha* = sqrt(C_D0 / C_D1), tan(gamma*) = 2 sqrt(C_D0 C_D1) /
+        # C_La; flatter pitches have no steady glide (core/glider/flight.py angle_of_attack)
+        alpha = math.sqrt(p.drag_zero_lift / p.induced_drag)
+        gamma = math.atan(2.0 * math.sqrt(p.drag_zero_lift * p.induced_drag) / p.lift_slope)
+        check.facts.append(f'best glide: glide angle {math.degrees(gamma):.1f} deg at an angle '
+                           f'of attack of {math.degrees(alpha):.1f} deg (pitch '
+                           f'{math.degrees(gamma - alpha):.1f} deg); flatter, no steady glide')
+    return check
+
+
 def check_vehicle(name_or_path):
     """A VehicleCheck of a vehicle name (config/) or YAML path; raises nothing for a bad file
     (its problems are the check's errors) but ConfigError for a path that does not exist."""
     path = resolve_vehicle_path(name_or_path)
     check = VehicleCheck(path=str(name_or_path))
     try:
-        vehicle = vehicle_from_file(path)
+        glider = file_kind(read_yaml_file(path)) == 'glider'
+        vehicle = glider_from_file(path) if glider else vehicle_from_file(path)
     except VehicleFileProblems as err:
         check.errors.extend(err.problems)
         return check
@@ -138,6 +174,8 @@ def check_vehicle(name_or_path):
         check.errors.append(str(err))
         return check
     check.name = vehicle.name
+    if glider:
+        return _glider_checks(vehicle, check)
     _static_checks(vehicle, check)
     if vehicle.thrusters:
         _thruster_checks(vehicle, check)

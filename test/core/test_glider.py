@@ -3,7 +3,9 @@ settling on it, and calibrations on synthetic dives with known parameters (flown
 dynamic model itself, with white pressure noise and a coloured vertical water velocity): the
 known values recovered within the sandwich error bars, the unidentifiable terms said so; bad
 input named."""
+from dataclasses import replace
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,13 +15,16 @@ from auv_ident.core.glider.calibration import calibrate, identifiability
 from auv_ident.core.glider.flight import (
     angle_of_attack,
     dynamic_flight,
-    GliderParameters,
     steady_flight,
 )
 from auv_ident.core.glider.record import G, GliderRecord
 from auv_ident.core.glider.validation import consistent_dvl, score
+from auv_ident.core.glider.vehicle import glider_from_file
 
-TRUE = GliderParameters(hull_volume=0.05966, drag_zero_lift=0.17, compressibility=5e-10)
+# the published prior, the glider file's
+PRIOR = glider_from_file(str(Path(__file__).resolve().parents[2] / 'config'
+                             / 'slocum_comet.yaml')).params
+TRUE = replace(PRIOR, hull_volume=0.05966, drag_zero_lift=0.17, compressibility=5e-10)
 
 
 def _density(depth):
@@ -59,7 +64,7 @@ def synthetic_dives(params, seed, n_cycles=6, half_period=300.0, dt=1.0, heave_s
 
 
 def test_steady_glide_balances_the_forces():
-    params = GliderParameters()
+    params = PRIOR
     pitch = np.array([-0.6, -0.38, -0.33, 0.33, 0.38, 0.6])
     alpha = angle_of_attack(pitch, params.drag_zero_lift, params.induced_drag,
                             params.lift_slope)
@@ -96,7 +101,7 @@ def test_steady_glide_balances_the_forces():
 
 
 def test_dynamic_flight_settles_on_the_steady_glide():
-    params = GliderParameters()
+    params = PRIOR
     t = np.arange(0.0, 400.0)
     rec = GliderRecord(t=t, pressure=np.full(len(t), 2e5), pitch=np.full(len(t), -0.4),
                        pumped_volume=np.full(len(t), -200e-6), density=np.full(len(t), 1005.0))
@@ -109,9 +114,8 @@ def test_dynamic_flight_settles_on_the_steady_glide():
 @pytest.mark.parametrize('seed', [1, 2, 3])
 def test_calibration_recovers_known_parameters_within_its_error_bars(seed):
     rec = synthetic_dives(TRUE, seed)
-    start = GliderParameters()          # the published values: Cd0 0.15, V_g 60/1005
-    cal = calibrate(rec, 'dynamic', ('hull_volume', 'drag_zero_lift', 'compressibility'),
-                    start=start)
+    # from the published values: Cd0 0.15, V_g 60/1005
+    cal = calibrate(rec, PRIOR, 'dynamic', ('hull_volume', 'drag_zero_lift', 'compressibility'))
     for name, (value, std) in cal.estimates().items():
         truth = getattr(TRUE, name)
         assert abs(value - truth) < 3.0 * std, (name, value, truth, std)
@@ -120,15 +124,15 @@ def test_calibration_recovers_known_parameters_within_its_error_bars(seed):
     assert s < 0.01 and cal.estimates()['hull_volume'][1] < 3e-5
     assert cal.lags > 1 and cal.seconds < 60.0
     # the flown speed (a perfect "DVL"): the parameters' errors leave well under 1 cm/s
-    keep, dives = consistent_dvl(rec)
-    assert keep.any() and all(d[3] for d in dives)
-    s = score(dynamic_flight(cal.params, rec), rec, keep, cal.window)
+    check = consistent_dvl(rec)
+    assert check.keep.any() and all(d.kept for d in check.dives)
+    s = score(dynamic_flight(cal.params, rec), rec, check.keep, cal.window)
     assert abs(s.speed_bias) < 0.01 and s.speed_rms < 0.01 and s.speed_fit > 75.0
 
 
 def test_what_constant_pitch_dives_cannot_identify():
     rec = synthetic_dives(TRUE, 4)
-    cal = calibrate(rec, 'dynamic', ('hull_volume', 'drag_zero_lift'))
+    cal = calibrate(rec, PRIOR, 'dynamic', ('hull_volume', 'drag_zero_lift'))
     verdicts = identifiability(rec, cal, extra=('lift_slope', 'induced_drag', 'mass'))
     assert cal.verdicts['hull_volume']['verdict'] == 'identifiable'
     # at one pitch the angle of attack is one number: lift and induced drag trade with C_D0,
@@ -139,11 +143,39 @@ def test_what_constant_pitch_dives_cannot_identify():
     assert verdicts['mass']['max_correlation'] > 0.99
 
 
+def _dvl_on_descents(rec):
+    """The record with its DVL speed only where a glider's DVL is valid: descending, deeper
+    than 12 m (the comet's processed file)."""
+    valid = (rec.pitch < -0.3) & (rec.depth > 12.0)
+    return replace(rec, speed_through_water=np.where(valid, rec.speed_through_water, np.nan))
+
+
+def test_the_dvl_consistency_check_fails_the_dive_where_the_instruments_disagree():
+    rec = _dvl_on_descents(synthetic_dives(TRUE, 6))
+    check = consistent_dvl(rec)
+    assert len(check.dives) == 6 and all(d.kept for d in check.dives)
+    assert abs(check.centre_deg) < 6.0 and 3.0 < check.z_limit < 4.0
+    # the DVL reads 25 % slow on one dive (as the comet's last): the pressure and the pitch
+    # then need an angle of attack near 10 deg more there, far outside the others' spread
+    start = np.searchsorted(rec.t, check.dives[3].start)
+    stop = np.searchsorted(rec.t, check.dives[4].start)
+    slow = rec.speed_through_water.copy()
+    slow[start:stop] *= 0.75
+    check = consistent_dvl(replace(rec, speed_through_water=slow))
+    assert [d.kept for d in check.dives] == [i != 3 for i in range(6)]
+    assert check.dives[3].z > check.z_limit + 1.0 and check.dives[3].median_aoa_deg > 10.0
+    assert not check.keep[start:stop].any() and check.keep[stop:].any()
+    # too few dives for a spread: none judged, every one kept
+    few = consistent_dvl(replace(rec, speed_through_water=np.where(
+        rec.t < check.dives[3].start, slow, np.nan)))
+    assert len(few.dives) == 3 and np.isnan(few.z_limit) and all(d.kept for d in few.dives)
+
+
 def test_bad_input_is_named():
     with pytest.raises(ConfigError, match='drag_zero_lift'):
-        GliderParameters(drag_zero_lift=-0.1)
+        replace(PRIOR, drag_zero_lift=-0.1)
     with pytest.raises(ConfigError, match='wing_span'):
-        calibrate(synthetic_dives(TRUE, 5, n_cycles=1), 'dynamic', ('wing_span',))
+        calibrate(synthetic_dives(TRUE, 5, n_cycles=1), PRIOR, 'dynamic', ('wing_span',))
     with pytest.raises(DataError, match='pitch'):
         GliderRecord(t=np.arange(3.0), pressure=np.zeros(3), pitch=[0.0, np.nan, 0.0],
                      pumped_volume=np.zeros(3), density=np.full(3, 1000.0))
@@ -152,4 +184,4 @@ def test_bad_input_is_named():
                      pumped_volume=np.zeros(3), density=np.full(3, 1000.0))
     shallow = synthetic_dives(TRUE, 5, n_cycles=1)
     with pytest.raises(DataError, match='depth window'):
-        calibrate(shallow, window=(100.0, 200.0))
+        calibrate(shallow, PRIOR, window=(100.0, 200.0))

@@ -22,14 +22,17 @@ only the angle of attack, which at the near-constant pitch of these dives is a c
 factor on the speed that C_D0 takes up as well: :func:`identifiability` reports their
 correlation with C_D0 from the same sandwich with them added, at the solution.
 """
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import time
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from auv_ident.core.errors import ConfigError, DataError
 from auv_ident.core.glider.flight import FLIGHT_MODELS, GliderParameters
+from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.identification.uncertainty import (
     sandwich_covariance,
     verdicts_from_covariance,
@@ -60,34 +63,35 @@ class Calibration:
 
     model: str
     params: GliderParameters
-    free: tuple
+    free: tuple[str, ...]
     std: np.ndarray
     cov: np.ndarray
-    verdicts: dict
+    verdicts: dict[str, dict[str, Any]]
     rms: float
     samples: int
     lags: int
     inflation: np.ndarray
     seconds: float
-    window: tuple = DEPTH_WINDOW
-    depth_rate_density: float = None
+    window: tuple[float, float] = DEPTH_WINDOW
+    depth_rate_density: float | None = None
 
-    def value(self, name):
-        return getattr(self.params, name)
+    def value(self, name: str) -> float:
+        return float(getattr(self.params, name))
 
-    def estimates(self):
+    def estimates(self) -> dict[str, tuple[float, float]]:
         """name -> (value, 1-sigma) of the identified parameters."""
         return {n: (self.value(n), float(s)) for n, s in zip(self.free, self.std)}
 
 
-def fit_window(record, window=DEPTH_WINDOW):
+def fit_window(record: GliderRecord,
+               window: tuple[float, float] = DEPTH_WINDOW) -> np.ndarray:
     """(N,) bool: the samples the fit uses (depth inside the window)."""
     lo, hi = window
     depth = record.depth
     return (depth > lo) & (depth < hi) & ~record.at_surface()
 
 
-def measured_depth_rate(record, density=None):
+def measured_depth_rate(record: GliderRecord, density: float | None = None) -> np.ndarray:
     """(N,) m/s: the record's depth rate, with its local density, or with one constant density
     (kg/m^3; gliderflight's convention: -dP/dt / (rho_0 g))."""
     if density is None:
@@ -95,7 +99,7 @@ def measured_depth_rate(record, density=None):
     return record.depth_rate() * record.density / float(density)
 
 
-def _check_names(names):
+def _check_names(names: Sequence[str]) -> None:
     known = set(GliderParameters.__dataclass_fields__)
     for n in names:
         if n not in known or n not in SCALES:
@@ -103,7 +107,12 @@ def _check_names(names):
                               f'{", ".join(sorted(SCALES))}')
 
 
-def residual_function(record, start, names, model, window, density=None):
+Residuals = Callable[[np.ndarray], np.ndarray]
+
+
+def residual_function(record: GliderRecord, start: GliderParameters, names: Sequence[str],
+                      model: str, window: tuple[float, float], density: float | None = None
+                      ) -> tuple[Residuals, np.ndarray, np.ndarray, np.ndarray]:
     """(f, mask, x0, scale): f(x) -> (N,) model minus measured depth rate (NaN outside the
     window, mask) at the parameters ``start`` with names[i] = x0[i] + x[i] * scale[i] (x0 the
     start's values, scale from SCALES)."""
@@ -113,7 +122,7 @@ def residual_function(record, start, names, model, window, density=None):
     x0 = np.array([getattr(start, n) for n in names])
     scale = np.array([SCALES[n] for n in names])
 
-    def f(x):
+    def f(x: np.ndarray) -> np.ndarray:
         params = start.with_values(names, x0 + np.asarray(x) * scale)
         r = flight(params, record).depth_rate - measured
         return np.where(mask, r, np.nan)
@@ -121,7 +130,7 @@ def residual_function(record, start, names, model, window, density=None):
     return f, mask, x0, scale
 
 
-def _jacobian(f, x, step=DIFF_STEP):
+def _jacobian(f: Residuals, x: np.ndarray, step: float = DIFF_STEP) -> np.ndarray:
     """(N, p) central differences of f at x (NaN rows where f is NaN)."""
     cols = []
     for i in range(len(x)):
@@ -131,13 +140,15 @@ def _jacobian(f, x, step=DIFF_STEP):
     return np.column_stack(cols)
 
 
-def calibrate(record, model='dynamic', free=IDENTIFIED, start=None, window=DEPTH_WINDOW,
-              depth_rate_density=None):
+def calibrate(record: GliderRecord, start: GliderParameters, model: str = 'dynamic',
+              free: Sequence[str] = IDENTIFIED, window: tuple[float, float] = DEPTH_WINDOW,
+              depth_rate_density: float | None = None) -> 'Calibration':
     """Calibrate the flight model on a record's dives (module docstring).
 
-    record : GliderRecord; model : 'steady' or 'dynamic'; free : the parameters to identify
-    (names of GliderParameters with a scale in SCALES); start : GliderParameters (default the
-    published values, which the other parameters keep); window : depth range (m) of the fit;
+    record : GliderRecord; start : GliderParameters, the prior (a glider file's,
+    core/glider/vehicle.py), which the parameters not freed keep; model : 'steady' or
+    'dynamic'; free : the parameters to identify (names of GliderParameters with a scale in
+    SCALES); window : depth range (m) of the fit;
     depth_rate_density : None (the depth rate from the local density) or a constant (kg/m^3)
     Returns a :class:`Calibration`.
     """
@@ -145,7 +156,6 @@ def calibrate(record, model='dynamic', free=IDENTIFIED, start=None, window=DEPTH
         raise ConfigError(f'glider model {model!r}: one of {", ".join(FLIGHT_MODELS)}')
     free = tuple(free)
     _check_names(free)
-    start = start or GliderParameters()
     t0 = time.perf_counter()
     f, mask, x0, scale = residual_function(record, start, free, model, window,
                                            depth_rate_density)
@@ -171,11 +181,14 @@ def calibrate(record, model='dynamic', free=IDENTIFIED, start=None, window=DEPTH
     return Calibration(model=model, params=params, free=free, std=std, cov=cov,
                        verdicts=verdicts, rms=float(np.sqrt(np.nanmean(r ** 2))),
                        samples=n_fit, lags=int(info['lags']), inflation=info['inflation'],
-                       seconds=time.perf_counter() - t0, window=tuple(window),
+                       seconds=time.perf_counter() - t0,
+                       window=(float(window[0]), float(window[1])),
                        depth_rate_density=depth_rate_density)
 
 
-def identifiability(record, calibration, extra=('lift_slope', 'induced_drag')):
+def identifiability(record: GliderRecord, calibration: Calibration,
+                    extra: Sequence[str] = ('lift_slope', 'induced_drag')
+                    ) -> dict[str, dict[str, Any]]:
     """name -> verdict dict (uncertainty.verdicts_from_covariance) of the calibration's free
     parameters together with ``extra`` ones, from the sandwich at the solution: what the
     dives could say about the extra parameters had they been freed (module docstring). A

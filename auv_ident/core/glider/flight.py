@@ -31,6 +31,7 @@ obey ``M(theta) d/dt [u_h, w_up] = F`` with the mass matrix of the glider plus i
 sample times from rest at the surface (shallower than :data:`~.record.SURFACE_PRESSURE`, the
 glider is held at rest: it drifts there with its antenna up).
 """
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 import math
 
@@ -38,7 +39,7 @@ import numpy as np
 
 from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.glider.record import G
+from auv_ident.core.glider.record import G, GliderRecord
 
 MAX_ANGLE_OF_ATTACK = 0.35     # rad (20 deg): beyond, a Slocum's wings have stalled
 ANGLE_GRID = 41                 # grid points on the search interval (at most 0.009 rad apart)
@@ -47,39 +48,31 @@ BISECTION_STEPS = 40            # then the root to 0.009 / 2^40 rad
 
 @dataclass(frozen=True)
 class GliderParameters:
-    """The flight model's parameters (SI), with the published Slocum values as defaults.
+    """The flight model's parameters (SI). No defaults: a glider's values are its vehicle
+    file's (config/slocum_comet.yaml, read by :func:`auv_ident.core.glider.vehicle.
+    glider_from_file`, which cites the published prior).
 
-    mass : kg, 60 (a Slocum G2 shallow glider weighs 50-60 kg in air; not weighed for this
-        deployment: only ``rho V_g - m`` matters to the steady flight, so V_g takes up the
-        difference; the dynamic model's inertia changes by 1.7 % per kg)
-    hull_volume : V_g m^3 at p = 0 and T_0; 60 / 1005 (neutral at V_bp = 0 in Baltic water)
-    drag_zero_lift : C_D0, 0.15 (gliderflight's starting value; Merckelbach et al. 2019 find
-        0.14-0.2 for Slocums)
-    induced_drag : C_D1 1/rad^2, 10.5 (gliderflight's example: the wings' a_w^2 / (pi e AR),
-        e = 0.8, AR = 7, plus the hull's 9.7)
-    lift_slope : C_La 1/rad, 7.53 = the hull's a_h 3.8 + the wings' a_w 3.73 (the swept-wing
-        formula 2 pi AR / (2 + sqrt(AR^2 (1 + tan^2 Omega) + 4)), AR = 7, Omega = 43 deg)
-    wing_area : S m^2, 0.1 (the reference area these coefficients go with)
-    compressibility : epsilon 1/Pa, 5e-10 (Merckelbach et al. 2019, gliderflight)
-    thermal_expansion : alpha_T 1/K, 6.9e-5 (the aluminium hull's volumetric expansion,
-        3 x 23e-6), about T_0 = reference_temperature 10 degC
-    added_mass_axial, added_mass_normal : k1, k2 = 0.2, 0.92 (fractions of m; gliderflight's
-        dynamic model, from Merckelbach et al. 2019)
+    mass : kg, in air; hull_volume : V_g m^3 at p = 0 and T_0
+    drag_zero_lift : C_D0; induced_drag : C_D1 1/rad^2; lift_slope : C_La 1/rad (hull and wings)
+    wing_area : S m^2, the reference area of these coefficients
+    compressibility : epsilon 1/Pa; thermal_expansion : alpha_T 1/K, about
+    reference_temperature T_0 degC
+    added_mass_axial, added_mass_normal : k1, k2, fractions of the mass
     """
 
-    mass: float = 60.0
-    hull_volume: float = 60.0 / 1005.0
-    drag_zero_lift: float = 0.15
-    induced_drag: float = 10.5
-    lift_slope: float = 7.53
-    wing_area: float = 0.1
-    compressibility: float = 5e-10
-    thermal_expansion: float = 6.9e-5
-    reference_temperature: float = 10.0
-    added_mass_axial: float = 0.2
-    added_mass_normal: float = 0.92
+    mass: float
+    hull_volume: float
+    drag_zero_lift: float
+    induced_drag: float
+    lift_slope: float
+    wing_area: float
+    compressibility: float
+    thermal_expansion: float
+    reference_temperature: float
+    added_mass_axial: float
+    added_mass_normal: float
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, value in asdict(self).items():
             if not math.isfinite(value):
                 raise ConfigError(f'glider parameter {name} = {value!r}: not a finite number')
@@ -88,7 +81,8 @@ class GliderParameters:
                 raise ConfigError(f'glider parameter {name} = {getattr(self, name)!r}: must be '
                                   'positive')
 
-    def with_values(self, names, values):
+    def with_values(self, names: Sequence[str], values: Sequence[float] | np.ndarray
+                    ) -> 'GliderParameters':
         return replace(self, **{n: float(v) for n, v in zip(names, values)})
 
 
@@ -109,7 +103,7 @@ class Flight:
     buoyancy: np.ndarray
 
 
-def net_buoyancy(params, record):
+def net_buoyancy(params: GliderParameters, record: GliderRecord) -> np.ndarray:
     """(N,) B (N, positive up), module docstring."""
     dilation = 1.0 - params.compressibility * record.pressure
     if record.temperature is not None:
@@ -119,7 +113,8 @@ def net_buoyancy(params, record):
                 - params.mass)
 
 
-def angle_of_attack(pitch, drag_zero_lift, induced_drag, lift_slope):
+def angle_of_attack(pitch: np.ndarray, drag_zero_lift: float, induced_drag: float,
+                    lift_slope: float) -> np.ndarray:
     """(N,) alpha (rad) of steady flight at pitch theta (rad), sign opposite to theta; NaN
     where there is none.
 
@@ -151,7 +146,7 @@ def angle_of_attack(pitch, drag_zero_lift, induced_drag, lift_slope):
     return np.where(found, -np.sign(pitch) * 0.5 * (lo + hi), np.nan)
 
 
-def steady_flight(params, record):
+def steady_flight(params: GliderParameters, record: GliderRecord) -> Flight:
     """The steady glide at every sample (module docstring): a :class:`Flight`."""
     B = net_buoyancy(params, record)
     theta = record.pitch
@@ -170,7 +165,8 @@ def steady_flight(params, record):
 
 
 @cached_njit()
-def _forces(u, w, rho, theta, B, S, cd0, cd1, cla):
+def _forces(u: float, w: float, rho: float, theta: float, B: float, S: float, cd0: float,
+            cd1: float, cla: float) -> tuple[float, float]:
     """(F_h, F_up) N on the glider moving at (u, w) (horizontal, up) m/s."""
     speed2 = u * u + w * w
     if speed2 == 0.0:
@@ -185,7 +181,8 @@ def _forces(u, w, rho, theta, B, S, cd0, cd1, cla):
 
 
 @cached_njit()
-def _accel(u, w, rho, theta, B, m, k1, k2, S, cd0, cd1, cla):
+def _accel(u: float, w: float, rho: float, theta: float, B: float, m: float, k1: float,
+           k2: float, S: float, cd0: float, cd1: float, cla: float) -> tuple[float, float]:
     fh, fv = _forces(u, w, rho, theta, B, S, cd0, cd1, cla)
     # body axes: x along the hull (cos theta, sin theta), z normal (-sin theta, cos theta)
     c, s = math.cos(theta), math.sin(theta)
@@ -197,7 +194,9 @@ def _accel(u, w, rho, theta, B, m, k1, k2, S, cd0, cd1, cla):
 
 
 @cached_njit()
-def _integrate(t, rho, theta, B, surface, m, k1, k2, S, cd0, cd1, cla):
+def _integrate(t: np.ndarray, rho: np.ndarray, theta: np.ndarray, B: np.ndarray,
+               surface: np.ndarray, m: float, k1: float, k2: float, S: float, cd0: float,
+               cd1: float, cla: float) -> tuple[np.ndarray, np.ndarray]:
     n = t.shape[0]
     u = np.zeros(n)
     w = np.zeros(n)
@@ -220,7 +219,7 @@ def _integrate(t, rho, theta, B, surface, m, k1, k2, S, cd0, cd1, cla):
     return u, w
 
 
-def dynamic_flight(params, record):
+def dynamic_flight(params: GliderParameters, record: GliderRecord) -> Flight:
     """The flight integrated in time with inertia and added mass (module docstring): a
     :class:`Flight`. The sample steps (1 s) are far below the glider's time constant
     (m (1 + k1) / (rho S C_D U) ~ 30 s), so RK4 on them is exact to the data's precision."""
@@ -235,4 +234,5 @@ def dynamic_flight(params, record):
                   depth_rate=-w, horizontal_speed=u, buoyancy=B)
 
 
-FLIGHT_MODELS = {'steady': steady_flight, 'dynamic': dynamic_flight}
+FLIGHT_MODELS: dict[str, Callable[[GliderParameters, GliderRecord], Flight]] = {
+    'steady': steady_flight, 'dynamic': dynamic_flight}

@@ -1,5 +1,6 @@
 """A glider's record of dives as the flight model reads it: arrays on one time base."""
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -29,10 +30,10 @@ class GliderRecord:
     pitch: np.ndarray
     pumped_volume: np.ndarray
     density: np.ndarray
-    temperature: np.ndarray = None
-    speed_through_water: np.ndarray = field(default=None)
+    temperature: np.ndarray | None = None
+    speed_through_water: np.ndarray = field(default=None)  # type: ignore[arg-type]  # NaN after init
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = len(self.t)
         for name in ('t', 'pressure', 'pitch', 'pumped_volume', 'density', 'temperature',
                      'speed_through_water'):
@@ -51,30 +52,31 @@ class GliderRecord:
         if n < 3 or np.any(np.diff(self.t) <= 0):
             raise DataError('glider record: t must rise strictly over at least 3 samples')
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.t)
 
-    def depth_rate(self):
+    def depth_rate(self) -> np.ndarray:
         """(N,) m/s, the measured depth rate dz/dt (positive down): the centred difference of
         the pressure over the local density times g."""
         return np.gradient(self.pressure, self.t) / (self.density * G)
 
     @property
-    def depth(self):
+    def depth(self) -> np.ndarray:
         """(N,) m, pressure over the local density times g (hydrostatic)."""
         return self.pressure / (self.density * G)
 
-    def at_surface(self):
+    def at_surface(self) -> np.ndarray:
         return self.pressure < SURFACE_PRESSURE
 
-    def select(self, keep):
+    def select(self, keep: np.ndarray) -> 'GliderRecord':
         """The record of the samples where keep (N,) bool is True."""
         keep = np.asarray(keep, dtype=bool)
-        return replace(self, **{name: None if getattr(self, name) is None
-                                else getattr(self, name)[keep]
-                                for name in ('t', 'pressure', 'pitch', 'pumped_volume',
-                                             'density', 'temperature', 'speed_through_water')})
+        columns: dict[str, Any] = {
+            name: None if getattr(self, name) is None else getattr(self, name)[keep]
+            for name in ('t', 'pressure', 'pitch', 'pumped_volume', 'density', 'temperature',
+                         'speed_through_water')}
+        return replace(self, **columns)
 
-    def split(self, t_split):
+    def split(self, t_split: float) -> tuple['GliderRecord', 'GliderRecord']:
         """(first, second): the samples before and from t_split (s since 1970)."""
         return self.select(self.t < t_split), self.select(self.t >= t_split)

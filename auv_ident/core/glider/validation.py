@@ -4,24 +4,34 @@ DVL's, its depth rate against the pressure's.
 The DVL is another instrument than the one the model is fitted to (pressure), so it is an
 honest judge, but it is judged too, without any model: on a dive, the depth rate (pressure),
 the pitch (inclinometer) and the DVL's speed fix the angle of attack,
-``alpha = asin(|dz/dt| / U_DVL) - |theta|``. A Slocum flies at 2-5 deg (Merckelbach et al.
-2019); a dive whose median implied angle is above :data:`MAX_IMPLIED_AOA_DEG` is one where the
-three instruments disagree (the comet record's last dive: 17.5 deg, the DVL speed 0.2 m/s where
-the depth rate alone needs 0.3 m/s at the measured pitch), and it is scored apart: every model
-is given both figures, with and without such dives.
+``alpha = asin(|dz/dt| / U_DVL) - |theta|``. A glider flies its dives at one angle of attack
+to within the instruments' noise (a Slocum at 2-5 deg, Merckelbach et al. 2019), so a dive
+whose median implied angle stands out from the other dives' by more than their spread and its
+own sampling error explain is one where the three instruments disagree
+(:func:`consistent_dvl`, a test with a stated false-rejection rate; the comet record's last
+dive: 17.5 deg against 3.6 +- 0.7 deg, z = 9 for a limit of 3.45). Such a dive cannot judge
+a flight model: the validation scores the dives that pass, and gives every model the figures
+over every DVL sample too.
 """
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
+from scipy.stats import norm
 
 from auv_ident.core.glider.calibration import fit_window
+from auv_ident.core.glider.flight import Flight
+from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.simulation.prediction import fit_percent
 
-MAX_IMPLIED_AOA_DEG = 10.0
+# the probability that the check wrongly rejects any of a record's dives (1 %), and the fewest
+# dives with which the dive-to-dive spread means anything
+FALSE_REJECTION = 0.01
+MIN_DIVES = 5
 DIVE_GAP = 5        # samples: valid DVL samples further apart belong to different dives
 
 
-def dvl_dives(record, gap=DIVE_GAP):
+def dvl_dives(record: GliderRecord, gap: int = DIVE_GAP) -> list[np.ndarray]:
     """Index arrays of the runs of valid DVL samples (one per dive)."""
     idx = np.flatnonzero(np.isfinite(record.speed_through_water))
     if not len(idx):
@@ -29,26 +39,93 @@ def dvl_dives(record, gap=DIVE_GAP):
     return np.split(idx, np.flatnonzero(np.diff(idx) > gap) + 1)
 
 
-def implied_angle_of_attack(record):
+def implied_angle_of_attack(record: GliderRecord) -> np.ndarray:
     """(N,) rad: asin(|dz/dt| / U_DVL) - |theta| (module docstring); NaN without a DVL speed."""
     with np.errstate(invalid='ignore', divide='ignore'):
         ratio = np.clip(np.abs(record.depth_rate()) / record.speed_through_water, -1.0, 1.0)
     return np.arcsin(ratio) - np.abs(record.pitch)
 
 
-def consistent_dvl(record, max_aoa_deg=MAX_IMPLIED_AOA_DEG):
-    """(keep, dives): keep (N,) bool, the DVL samples on dives whose median implied angle of
-    attack is at most max_aoa_deg; dives: list of (start time s, samples, median implied
-    angle deg, kept) per dive."""
+@dataclass
+class DiveCheck:
+    """One DVL dive judged (:func:`consistent_dvl`): its start (s since 1970), DVL samples,
+    median implied angle of attack and that median's standard error (deg), its distance from
+    the dives' centre in combined sigma, and whether it passed."""
+
+    start: float
+    samples: int
+    median_aoa_deg: float
+    stderr_deg: float
+    z: float
+    kept: bool
+
+
+@dataclass
+class DvlConsistency:
+    """The instruments' consistency check over a record's DVL dives (:func:`consistent_dvl`).
+
+    keep : (N,) bool, the DVL samples of the dives that passed; dives : a DiveCheck each;
+    centre_deg, spread_deg : the dives' median implied angle of attack and its dive-to-dive
+    robust standard deviation (1.4826 MAD); z_limit : the limit on |z| (NaN: too few dives to
+    judge, every dive kept)."""
+
+    keep: np.ndarray
+    dives: list[DiveCheck]
+    centre_deg: float
+    spread_deg: float
+    z_limit: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {'centre_deg': self.centre_deg, 'spread_deg': self.spread_deg,
+                'z_limit': self.z_limit, 'false_rejection': FALSE_REJECTION,
+                'dives': [asdict(d) for d in self.dives]}
+
+
+def _median_stderr(values: np.ndarray) -> float:
+    """deg: the standard error of a median, 1.2533 sigma / sqrt(n), sigma from the IQR (robust
+    to the stall-side tail). The samples of a dive are correlated over seconds, so this is a
+    lower bound: a dive is, if anything, judged more strictly."""
+    q25, q75 = np.percentile(values, [25.0, 75.0])
+    return float(1.2533 * (q75 - q25) / 1.349 / np.sqrt(len(values)))
+
+
+def consistent_dvl(record: GliderRecord,
+                   false_rejection: float = FALSE_REJECTION) -> DvlConsistency:
+    """The consistency check of the DVL with the pressure and the pitch, dive by dive (module
+    docstring): a :class:`DvlConsistency`.
+
+    Each dive's median implied angle of attack m_i (standard error s_i) is compared with the
+    dives' centre c (the median of the m_i) and their robust spread d (1.4826 MAD):
+    ``z_i = (m_i - c) / sqrt(d^2 + s_i^2)``, the dive-to-dive spread plus the dive's own
+    sampling error. A dive fails when |z_i| is above the two-sided normal limit at which all
+    n dives together are wrongly rejected with probability ``false_rejection`` (Bonferroni:
+    Phi^-1(1 - false_rejection / 2n), 3.45 for 18 dives at 1 %). The limit comes from the
+    dives themselves, not from the models: no flight model is used. With fewer than
+    :data:`MIN_DIVES` dives there is no spread to judge by, and every dive is kept."""
     aoa = np.degrees(implied_angle_of_attack(record))
+    runs = dvl_dives(record)
+    medians = np.array([float(np.median(aoa[idx])) for idx in runs])
+    errors = np.array([_median_stderr(aoa[idx]) for idx in runs])
+    if len(runs) >= MIN_DIVES:
+        centre = float(np.median(medians))
+        spread = float(1.4826 * np.median(np.abs(medians - centre)))
+        z_limit = float(norm.ppf(1.0 - false_rejection / (2.0 * len(runs))))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            z = (medians - centre) / np.hypot(spread, errors)
+    else:
+        centre = float(np.median(medians)) if len(runs) else np.nan
+        spread = z_limit = np.nan
+        z = np.full(len(runs), np.nan)
     keep = np.zeros(len(record), dtype=bool)
     dives = []
-    for idx in dvl_dives(record):
-        med = float(np.median(aoa[idx]))
-        ok = med <= max_aoa_deg
+    for idx, med, err, zi in zip(runs, medians, errors, z):
+        ok = not abs(zi) > z_limit          # NaN (too few dives): kept
         keep[idx] = ok
-        dives.append((float(record.t[idx[0]]), len(idx), med, ok))
-    return keep, dives
+        dives.append(DiveCheck(start=float(record.t[idx[0]]), samples=len(idx),
+                               median_aoa_deg=float(med), stderr_deg=float(err), z=float(zi),
+                               kept=bool(ok)))
+    return DvlConsistency(keep=keep, dives=dives, centre_deg=centre, spread_deg=spread,
+                          z_limit=z_limit)
 
 
 @dataclass
@@ -65,7 +142,8 @@ class Scores:
     depth_rate_rms: float
 
 
-def score(flight, record, dvl_mask, window):
+def score(flight: Flight, record: GliderRecord, dvl_mask: np.ndarray,
+          window: tuple[float, float]) -> Scores:
     """:class:`Scores` of a Flight over a record; dvl_mask (N,) bool selects the DVL samples
     judged (finite ones only)."""
     dvl = record.speed_through_water

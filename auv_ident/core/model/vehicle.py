@@ -14,11 +14,16 @@ import os
 from typing import Any
 
 import numpy as np
-import yaml
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
 from auv_ident.core.model.thrusters import Thruster, thrusters_from_file
+from auv_ident.core.vehicle_files import (
+    file_kind,
+    finite_number,
+    read_yaml_file,
+    VehicleFileProblems,
+)
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
@@ -194,30 +199,8 @@ KEY_MEANING = {
 }
 
 
-class VehicleFileProblems(ConfigError):
-    """Every problem found in a vehicle file's entries at once (``problems``: one text each),
-    so that a new file is put right in one round, not one run per missing key."""
-
-    def __init__(self, where: str, problems: list[str]):
-        self.where = where
-        self.problems = list(problems)
-        count = f'{len(problems)} problems' if len(problems) > 1 else 'problem'
-        super().__init__(f'{where}: {count}: ' + '; '.join(problems))
-
-
 def _num(d: dict, key: str, where: str, positive: bool = False) -> float:
-    if key not in d:
-        meaning = KEY_MEANING.get(key)
-        raise ConfigError(f'{where}: missing key {key!r}'
-                          + (f' ({meaning})' if meaning else ''))
-    try:
-        v = float(d[key])
-    except (TypeError, ValueError):
-        raise ConfigError(f'{where}: {key} = {d[key]!r} is not a number') from None
-    if not np.isfinite(v) or (positive and v <= 0):
-        raise ConfigError(f'{where}: {key} = {v!r} must be a finite'
-                          + (' positive' if positive else '') + ' number')
-    return v
+    return finite_number(d, key, where, positive, KEY_MEANING.get(key))
 
 
 def _vec3(d: dict, key: str, where: str) -> np.ndarray:
@@ -301,25 +284,6 @@ def rigid_body_mass_matrix(mass: float, r_G: np.ndarray, I: Sequence[float]) -> 
     return M
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that refuses a mapping holding one key twice (PyYAML keeps the last
-    silently, so a coefficient written twice would take whichever came last)."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        seen: dict = {}
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            try:
-                first = seen.setdefault(key, key_node.start_mark.line + 1)
-            except TypeError:       # an unhashable key: the base class says so
-                break
-            if first != key_node.start_mark.line + 1:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key!r} (first on line {first})',
-                    key_node.start_mark)
-        return super().construct_mapping(node, deep=deep)
-
-
 def vehicle_from_file(path: str) -> Vehicle:
     """Load and validate a vehicle YAML file given by its path (cached per path and mtime:
     parsed once, never in a hot path). Looking a vehicle up by name is
@@ -330,25 +294,11 @@ def vehicle_from_file(path: str) -> Vehicle:
     except OSError as err:
         raise ConfigError(f'no vehicle file {path}') from err
     if key not in _CACHE:
-        with open(path, encoding='utf-8') as fh:
-            try:
-                raw = yaml.load(fh, Loader=_UniqueKeyLoader)   # noqa: S506 (a SafeLoader)
-            except yaml.YAMLError as err:
-                raise ConfigError(f'{path}: not valid YAML: {_yaml_problem(err)}') from None
-        _CACHE[key] = _build(raw, path)
+        _CACHE[key] = _build(read_yaml_file(path), path)
     return _CACHE[key]
 
 
 _CACHE: dict[tuple[str, float], Vehicle] = {}
-
-
-def _yaml_problem(err: yaml.YAMLError) -> str:
-    """A YAML error on one line: its problem and where (PyYAML's text spans several lines)."""
-    problem = getattr(err, 'problem', None)
-    mark = getattr(err, 'problem_mark', None)
-    if problem is None or mark is None:
-        return ' '.join(str(err).split())
-    return f'{problem} (line {mark.line + 1}, column {mark.column + 1})'
 
 
 def _build(raw: object, path: str) -> Vehicle:
@@ -359,6 +309,11 @@ def _build(raw: object, path: str) -> Vehicle:
     if not isinstance(raw, dict):
         raise ConfigError(f'{where}: not a vehicle file (a YAML mapping of keys, '
                           f'docs/vehicles.md; got {type(raw).__name__})')
+    if file_kind(raw) == 'glider':
+        # a glider flies by buoyancy, lift and drag in its glide plane, not by manoeuvring
+        # derivatives: the 6-DOF model has nothing to fly it with
+        raise ConfigError(f'{where}: a glider file (kind: glider): its flight model is '
+                          'core/glider (docs/glider.md), not the 6-DOF model this command uses')
     problems: list[str] = []
 
     def checked(check: Callable[..., Any], *args: Any, default: Any, **kwargs: Any) -> Any:
