@@ -443,7 +443,9 @@ class IdentifierNode(Node):
             return
         sec, nanosec = divmod(int(ev.stamp_ns), NS_PER_S)
         est_t, cov_t = self._template('estimate'), self._template('covariance')
-        if est_t is not None and cov_t is not None:
+        # the templates hold len(self.names) values (_lay_out); another length would make
+        # fill raise, so such an estimate goes out as messages
+        if est_t is not None and cov_t is not None and len(estimate) == len(self.names):
             self.pub_estimate.publish(est_t.fill(sec, nanosec, estimate, ev.std))
             self.pub_covariance.publish(cov_t.fill(sec, nanosec, cov))
         else:
