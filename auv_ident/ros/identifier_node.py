@@ -143,6 +143,7 @@ covariance messages are built once and refilled per update. docs/latency.md has 
 path publish(odom) -> estimate received and the command that measures it.
 """
 from array import array
+import copy
 import math
 import sys
 import time
@@ -155,12 +156,12 @@ from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.ros.cdr import OdometryView, UndecodableMessage
+from auv_ident.ros.cdr import OdometryView, PayloadTemplate, UndecodableMessage
 from auv_ident.ros.toolkit import (
     declare_parameters,
     DIAGNOSTICS_QOS,
@@ -303,6 +304,7 @@ class IdentifierNode(Node):
             MultiArrayDimension(label='row:' + joined, size=p, stride=p * p),
             MultiArrayDimension(label='col:' + joined, size=p, stride=p)]
         self._current_index = current_indices(self.names)
+        self._templates = {}       # serialized estimate/covariance/current (_template)
 
     def _follow_choice(self, diagnostics=True):
         """After a session call: log what the 'auto' choice has to say (it started, switched
@@ -439,30 +441,69 @@ class IdentifierNode(Node):
             return
         if not self.context.ok():   # shutting down
             return
+        sec, nanosec = divmod(int(ev.stamp_ns), NS_PER_S)
+        est_t, cov_t = self._template('estimate'), self._template('covariance')
+        # the templates hold len(self.names) values (_lay_out); another length would make
+        # fill raise, so such an estimate goes out as messages
+        if est_t is not None and cov_t is not None and len(estimate) == len(self.names):
+            self.pub_estimate.publish(est_t.fill(sec, nanosec, estimate, ev.std))
+            self.pub_covariance.publish(cov_t.fill(sec, nanosec, cov))
+        else:
+            self._publish_messages(sec, nanosec, estimate, ev.std, cov)
+        if self.pub_current is not None:
+            self.publish_current(sec, nanosec, estimate, cov)
+
+    def _template(self, kind):
+        """The PayloadTemplate (ros/cdr.py) of ~/estimate, ~/covariance or ~/current (kind;
+        the current's per world frame id), built at the first publication after _lay_out;
+        None where the bytes path is not available (the messages are published instead)."""
+        if kind in self._templates:
+            return self._templates[kind]
+        p = len(self.names)
+        if kind == 'estimate':
+            msg, arrays = copy.deepcopy(self._estimate), [
+                (lambda m, v: setattr(m, 'position', v.tolist()), p),
+                (lambda m, v: setattr(m, 'velocity', v.tolist()), p)]
+        elif kind == 'covariance':
+            msg, arrays = copy.deepcopy(self._covariance), [
+                (lambda m, v: setattr(m, 'data', v.tolist()), p * p)]
+        else:
+            msg = copy.deepcopy(self._current)
+            msg.header.frame_id = kind
+            arrays = [(_set_linear, 3), (lambda m, v: setattr(m.twist, 'covariance', v), 36)]
+        template = PayloadTemplate.build(msg, arrays, serialize_message,
+                                         stamped=kind != 'covariance')
+        self._templates[kind] = template
+        return template
+
+    def _publish_messages(self, sec, nanosec, estimate, std, cov):
+        """~/estimate and ~/covariance as messages, refilled (the path without templates)."""
         est = self._estimate
         stamp = est.header.stamp
-        stamp.sec, stamp.nanosec = divmod(int(ev.stamp_ns), NS_PER_S)
+        stamp.sec, stamp.nanosec = sec, nanosec
         # array('d', bytes) is a plain copy; rclpy would convert a list or ndarray element by
         # element (measured 23 us for both messages built afresh, 3 us refilled this way)
         est.position = array('d', np.ascontiguousarray(estimate, dtype=float).tobytes())
-        est.velocity = array('d', np.ascontiguousarray(ev.std, dtype=float).tobytes())
+        est.velocity = array('d', np.ascontiguousarray(std, dtype=float).tobytes())
         self.pub_estimate.publish(est)
         self._covariance.data = array('d', np.ascontiguousarray(cov, dtype=float).tobytes())
         self.pub_covariance.publish(self._covariance)
-        if self.pub_current is not None:
-            self.publish_current(est.header.stamp, estimate, cov)
 
-    def publish_current(self, stamp, estimate, cov):
+    def publish_current(self, sec, nanosec, estimate, cov):
         """~/current: the estimated water current in the world frame of ``frame``, with its
         covariance (session/messages.py current_twist_fields: the frame algebra)."""
         linear, covariance = current_twist_fields(estimate, cov, self._current_index,
                                                   self.session.frame)
+        frame_id = DEFAULT_FRAME_IDS[self.session.frame][0]
+        template = self._template(frame_id)
+        if template is not None:
+            self.pub_current.publish(template.fill(sec, nanosec, linear, covariance))
+            return
         msg = self._current
-        msg.header.stamp = stamp
-        msg.header.frame_id = DEFAULT_FRAME_IDS[self.session.frame][0]
-        lin = msg.twist.twist.linear
-        lin.x, lin.y, lin.z = (float(v) for v in linear)
-        msg.twist.covariance = array('d', covariance.tobytes())
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+        msg.header.frame_id = frame_id
+        _set_linear(msg, linear)
+        msg.twist.covariance = array('d', np.ascontiguousarray(covariance).tobytes())
         self.pub_current.publish(msg)
 
     # -- diagnostics --
@@ -610,6 +651,12 @@ class IdentifierNode(Node):
                 self.get_logger().error(message)
         else:
             print(f'[{level}] [{self.get_name()}]: {message}', file=sys.stderr, flush=True)
+
+
+def _set_linear(msg, linear):
+    """twist.twist.linear of a TwistWithCovarianceStamped from 3 values (m/s)."""
+    lin = msg.twist.twist.linear
+    lin.x, lin.y, lin.z = (float(v) for v in linear)
 
 
 def main(args=None):

@@ -38,6 +38,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from auv_ident.bags.schema import BagError
@@ -407,20 +408,24 @@ CASES = [
 
 
 class _Recorder:
-    """Stands in for a publisher: keeps what would have been published."""
+    """Stands in for a publisher: keeps what would have been published (serialized payloads
+    as the message a subscriber would read)."""
 
-    def __init__(self):
+    def __init__(self, msg_type=None):
+        self.msg_type = msg_type
         self.msgs = []
 
     def publish(self, msg):
+        if isinstance(msg, bytes):
+            msg = deserialize_message(msg, self.msg_type)
         self.msgs.append(msg)
 
 
 def _node(ctx, **params):
     node = IdentifierNode(context=ctx, parameter_overrides=[Parameter(k, value=v)
                                                             for k, v in params.items()])
-    node.pub_estimate = _Recorder()
-    node.pub_covariance = _Recorder()
+    node.pub_estimate = _Recorder(node.pub_estimate.msg_type)
+    node.pub_covariance = _Recorder(node.pub_covariance.msg_type)
     node.log_lines = []
     node._emit = lambda level, text: node.log_lines.append((level, text))
     return node

@@ -512,3 +512,41 @@ def test_raw_odometry_view_reads_big_endian_and_refuses_what_it_cannot_read():
     struct.pack_into('<I', long_string, 12, 10_000)
     assert not view.read(bytes(long_string))
     _assert_view_equals(view, msg)          # a refused payload leaves the view as it was
+
+
+def test_payload_template_gives_rclpy_bytes():
+    """PayloadTemplate's refilled bytes are rclpy's serialization of the refilled message, for
+    the three messages the identifier publishes this way (odd lengths, strings before)."""
+
+    from geometry_msgs.msg import TwistWithCovarianceStamped
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    from auv_ident.ros.cdr import PayloadTemplate
+
+    rng = np.random.default_rng(3)
+    js = JointState(name=['X_uu', 'Z_w', 'c'])
+    js.header.frame_id = 'abc'
+    cov = Float64MultiArray()
+    cov.layout.dim = [MultiArrayDimension(label='row:a,b,c', size=3, stride=9)]
+    tw = TwistWithCovarianceStamped()
+    tw.header.frame_id = 'map'
+    cases = [
+        (js, [(lambda m, v: setattr(m, 'position', v.tolist()), 3),
+              (lambda m, v: setattr(m, 'velocity', v.tolist()), 3)], True),
+        (cov, [(lambda m, v: setattr(m, 'data', v.tolist()), 9)], False),
+        (tw, [(lambda m, v: setattr(m.twist, 'covariance', v), 36)], True)]
+    for msg, arrays, stamped in cases:
+        t = PayloadTemplate.build(msg, arrays, serialize_message, stamped=stamped)
+        assert t is not None
+        for _ in range(3):
+            sec, nsec = int(rng.integers(0, 2**31)), int(rng.integers(0, 10**9))
+            values = [rng.normal(size=n) for _, n in arrays]
+            if stamped:
+                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
+            for (setter, _), v in zip(arrays, values):
+                setter(msg, v)
+            assert t.fill(sec, nsec, *values) == serialize_message(msg)
+    with pytest.raises(ValueError):     # another length: an error, never a resized payload
+        t.fill(0, 0, np.zeros(35))
+    assert PayloadTemplate.build(Float64MultiArray(), [], serialize_message) is None  # no header

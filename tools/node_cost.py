@@ -1,0 +1,117 @@
+"""Per-message CPU of the identifier node's callbacks in one process, part by part.
+
+    PYTHONPATH=. ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST .venv/bin/python tools/node_cost.py \
+        [--rate 200] [--seconds 60] [--profile]
+
+One simulated NPS AUV II run ('ident' manoeuvre) at --rate Hz is serialized as the load test
+publishes it (auv_ident/ros/loadtest.py). An IdentifierNode (sample_time = 1/rate) gets, sample
+by sample, what its subscriptions hand it: the command's bytes turned into a JointState by
+rclpy (deserialize_message, what a typed subscription does) and passed to its callback, then
+the odometry's bytes passed to the raw odometry callback (on_odom_payload). No DDS and no
+executor: this is the node's own work per message (the load test's identifier CPU adds the
+executor's take and the middleware). Figures are us per sample (command + odometry), the
+mean over the samples after the first 10 % (warm-up), with process CPU time (thread_time).
+
+Parts, each timed alone: rclpy's JointState deserialization; the command callback; the
+odometry callback; of that, the session's on_input (IdentSession) and publish_estimate.
+``--profile`` prints a cProfile of the whole loop (cumulative, top 35).
+"""
+import argparse
+import cProfile
+import os
+import pstats
+import sys
+import time
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--rate', type=float, default=200.0, help='Hz (default 200)')
+    ap.add_argument('--seconds', type=float, default=60.0, help='simulated s (default 60)')
+    ap.add_argument('--profile', action='store_true')
+    a = ap.parse_args(argv)
+
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import JointState
+
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.core.simulation.simulate import simulate
+    from auv_ident.ros.identifier_node import IdentifierNode
+    from auv_ident.ros.sim_messages import sample_messages
+    from auv_ident.vehicles import load_vehicle
+
+    T = 1.0 / a.rate
+    run = simulate(Model(load_vehicle('nps_auv2')), 'ident', duration=a.seconds, T=T, seed=0)
+    payloads = []
+    for k in range(len(run.t)):
+        msgs = {tp: m for tp, _, m in sample_messages(run, k, with_truth=False)}
+        payloads.append((serialize_message(msgs['/actuators']),
+                         serialize_message(msgs['/odom'])))
+    n = len(payloads)
+    warm = n // 10
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = IdentifierNode(context=ctx, parameter_overrides=[Parameter('sample_time', value=T)])
+    session_on_input = node.session.on_input
+    publish_estimate = node.publish_estimate
+    parts = {'deserialize': 0.0, 'session': 0.0, 'publish': 0.0}
+    clock = time.thread_time
+
+    def timed_session(*args):
+        t0 = clock()
+        try:
+            return session_on_input(*args)
+        finally:
+            parts['session'] += clock() - t0
+
+    def timed_publish(ev):
+        t0 = clock()
+        publish_estimate(ev)
+        parts['publish'] += clock() - t0
+
+    node.session.on_input = timed_session
+    node.publish_estimate = timed_publish
+    cmd_t = odom_t = 0.0
+    prof = cProfile.Profile() if a.profile else None
+    for k, (cmd, odom) in enumerate(payloads):
+        if k == warm:
+            cmd_t = odom_t = 0.0
+            parts = dict.fromkeys(parts, 0.0)
+            if prof is not None:
+                prof.enable()
+        t0 = clock()
+        msg = deserialize_message(cmd, JointState)
+        t1 = clock()
+        node.on_actuators(msg)
+        t2 = clock()
+        node.on_odom_payload(odom)
+        t3 = clock()
+        parts['deserialize'] += t1 - t0
+        cmd_t += t2 - t1
+        odom_t += t3 - t2
+    if prof is not None:
+        prof.disable()
+    m = n - warm
+    us = 1e6 / m
+    total = (parts['deserialize'] + cmd_t + odom_t) * us
+    print(f'{n} samples at {a.rate:g} Hz, {m} timed; us per sample (command + odometry), CPU:')
+    print(f'  total                            {total:7.1f}')
+    print(f'  command: rclpy deserialize       {parts["deserialize"] * us:7.1f}')
+    print(f'  command: callback                {cmd_t * us:7.1f}')
+    print(f'  odometry: raw callback           {odom_t * us:7.1f}')
+    print(f'  of the callbacks: session        {parts["session"] * us:7.1f}')
+    print(f'  of the callbacks: publish        {parts["publish"] * us:7.1f}')
+    if prof is not None:
+        pstats.Stats(prof).sort_stats('cumulative').print_stats(35)
+    node.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+if __name__ == '__main__':
+    main()
