@@ -1,5 +1,6 @@
 """identify --bag with a raw-sensor input map (analysis/raw_identify.py) on a run of the
 independent generator (offline/independent_data.py generate_raw) written as a bag."""
+import dataclasses
 import json
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 import yaml
 
 from auv_ident.analysis.raw_comparison import sensors_of
+from auv_ident.analysis.raw_identify import drop_repeats
 from auv_ident.cli import main
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.raw import identify_raw
@@ -86,7 +88,24 @@ def raw_bag(tmp_path_factory):
     for key, drop in (('good', ()), ('no_dvl', ('dvl',))):
         maps[key] = d / f'{key}.yaml'
         maps[key].write_text(yaml.safe_dump(_map(cfg, drop)))
+    # the same bag read with the other frame convention (REP-103 ENU for NED data)
+    enu = _map(cfg)
+    for k in ('imu', 'dvl'):
+        enu['inputs'][k]['frame'] = 'enu'
+    maps['enu'] = d / 'enu.yaml'
+    maps['enu'].write_text(yaml.safe_dump(enu))
     return cfg, run, bag, maps
+
+
+def _stuck_imu(records, since=8.0, until=12.0):
+    """records with the IMU's message at `since` (s) republished unchanged until `until`."""
+    held, out = None, []
+    for r in records:
+        if r.kind == 'imu' and since <= r.t <= until:
+            held = held or r
+            r = dataclasses.replace(held, t=r.t)
+        out.append(r)
+    return out
 
 
 @pytest.mark.slow
@@ -97,6 +116,7 @@ def test_identify_bag_with_a_raw_map_is_identify_raw_on_the_records(raw_bag, tmp
                  '--coefficients', ','.join(NAMES), '--json', str(out)])
     assert code == 0
     text = capsys.readouterr().out
+    assert text.startswith('consistent: ')
     assert 'dvl_misalignment (sensor)' in text
     doc = json.loads(out.read_text())
     est = np.array([doc['coefficients'][n]['estimate'] for n in NAMES])
@@ -114,3 +134,34 @@ def test_a_raw_map_topic_the_bag_lacks_is_exit_2(raw_bag, capsys):
     code = main(['identify', '--bag', str(bag), '--input-map', str(maps['no_dvl'])])
     assert code == 2
     assert '/not_recorded' in capsys.readouterr().err
+
+
+def test_a_raw_bag_read_in_the_wrong_frame_is_not_consistent_exit_3(raw_bag, capsys):
+    _, _, bag, maps = raw_bag
+    code = main(['identify', '--bag', str(bag), '--input-map', str(maps['enu']),
+                 '--coefficients', ','.join(NAMES)])
+    assert code == 3
+    out = capsys.readouterr().out
+    assert out.startswith('NOT consistent: ') and 'frame' in out.splitlines()[0]
+
+
+def test_a_stuck_imu_is_not_consistent_exit_3(raw_bag, tmp_path, capsys):
+    cfg, run, _, maps = raw_bag
+    bag = write_message_bag(tmp_path / 'stuck', TOPICS, {},
+                            (_message(r) for r in _stuck_imu(run.records)), None)
+    code = main(['identify', '--bag', str(bag), '--input-map', str(maps['good']),
+                 '--coefficients', ','.join(NAMES)])
+    assert code == 3
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith('NOT consistent: imu repeated exactly for 4.0 s'), first
+
+
+def test_drop_repeats_keeps_each_sensors_new_values_and_names_a_stuck_one(raw_bag):
+    _, run, _, _ = raw_bag
+    kept, spans = drop_repeats(_stuck_imu(run.records))
+    assert [s.group for s in spans] == ['imu']
+    assert spans[0].since == pytest.approx(8.0, abs=0.02) and spans[0].seconds >= 3.9
+    assert len(run.records) - len(kept) == spans[0].repeats
+    # a good run: nothing dropped, no fault (no false alarm)
+    kept, spans = drop_repeats(run.records)
+    assert spans == [] and len(kept) == len(run.records)
