@@ -23,6 +23,7 @@ trusted (cli.EXIT_UNTRUSTED). Each sensor is its own channel (raw_verdict):
 import numpy as np
 
 from auv_ident.analysis import results
+from auv_ident.analysis.bag_identify import _meta_truth
 from auv_ident.core.errors import DivergenceError, DomainError
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.diagnosis import judge_plausibility, not_consistent
@@ -30,6 +31,7 @@ from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.identification.results import Diagnosis
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
+from auv_ident.offline.replay import bag_custom_data
 from auv_ident.session.input_map import load_input_map
 from auv_ident.session.stuck import describe_spans, STUCK_SAMPLES, STUCK_SECONDS, StuckSpan
 from auv_ident.vehicles import load_vehicle
@@ -129,16 +131,20 @@ def identify_raw_bag(path, settings, passes=2):
              'mean NIS/dof: ' + ', '.join(f'{k} {x:.2f}' for k, x in sorted(res.mean_nis.items()))
              + '; long-run factors: ' + ', '.join(f'{k} {x:.2f}'
                                                    for k, x in sorted(res.long_run.items())),
-             f'{"parameter":<22}{"estimate":>14}{"1-sigma":>12}']
-    for n, e, s in zip(res.names, res.estimate, res.std):
-        lines.append(f'{n:<22}{e:>14.6g}{s:>12.3g}')
+             f'{"parameter":<26}{"truth":>12}{"estimate":>14}{"1-sigma":>12}{"error %":>10}']
+    truth = _meta_truth(bag_custom_data(path), model)
+    coefs = _coefficients(res, truth)
+    for n, c in coefs.items():
+        err = c['error_pct']
+        lines.append(f'{n:<26}{results._fmt(c["truth"])}{c["estimate"]:>14.6g}{c["std"]:>12.3g}'
+                     + (f'{"-":>10}' if err is None else f'{err:>+10.2f}'))
     for n, (e, s) in res.errors.items():
-        lines.append(f'{n + " (sensor)":<22}{e:>14.6g}{s:>12.3g}')
+        lines.append(f'{n + " (sensor)":<26}{"-":>12}{e:>14.6g}{s:>12.3g}')
     lines += ['- ' + m for m in diagnosis.messages[1:]]
     doc = {'vehicle': v.name, 'bag': str(path), 'method': 'raw sensors (identify_raw)',
            'time_origin_ns': int(t0),
-           'coefficients': {n: {'estimate': float(e), 'std': float(s)}
-                            for n, e, s in zip(res.names, res.estimate, res.std)},
+           'coefficients': coefs, 'truth_source': None if truth is None else
+           "the vehicle file (the bag's metadata says auv_ident simulated it)",
            'covariance': res.covariance.tolist(),
            'sensor_errors': {n: {'estimate': float(e), 'std': float(s)}
                              for n, (e, s) in res.errors.items()},
@@ -146,6 +152,17 @@ def identify_raw_bag(path, settings, passes=2):
            'mean_nis': dict(res.mean_nis), 'long_run': dict(res.long_run),
            'passes': res.passes, 'diagnosis': diagnosis.document()}
     return doc, '\n'.join(lines)
+
+
+def _coefficients(res, truth):
+    """name -> {estimate, std, truth, error_pct} of the identified parameters; truth (the
+    coefficients', first in res.names) None when the bag does not record it."""
+    out = {}
+    for i, (n, e, s) in enumerate(zip(res.names, res.estimate, res.std)):
+        t = None if truth is None or i >= len(truth) else float(truth[i])
+        out[n] = {'estimate': float(e), 'std': float(s), 'truth': t,
+                  'error_pct': None if not t else 100.0 * (float(e) - t) / abs(t)}
+    return out
 
 
 def _left_domain(path, v, names, error, spans, t0):

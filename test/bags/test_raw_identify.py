@@ -83,7 +83,9 @@ def raw_bag(tmp_path_factory):
                     noise_level=(0.01, 0.01), noise_tau=(0.0, 0.0))
     run = generate_raw(cfg)
     d = tmp_path_factory.mktemp('raw')
-    bag = write_message_bag(d / 'bag', TOPICS, {}, (_message(r) for r in run.records), None)
+    # the metadata our simulators write: the truth is the vehicle file's values
+    bag = write_message_bag(d / 'bag', TOPICS, {'auv_ident.simulated': 'true'},
+                            (_message(r) for r in run.records), None)
     maps = {}
     for key, drop in (('good', ()), ('no_dvl', ('dvl',))):
         maps[key] = d / f'{key}.yaml'
@@ -118,7 +120,10 @@ def test_identify_bag_with_a_raw_map_is_identify_raw_on_the_records(raw_bag, tmp
     text = capsys.readouterr().out
     assert text.startswith('consistent: ')
     assert 'dvl_misalignment (sensor)' in text
+    assert 'truth' in text.splitlines()[4]
     doc = json.loads(out.read_text())
+    for n in NAMES:
+        assert doc['coefficients'][n]['truth'] == pytest.approx(run.truth['coefficients'][n])
     est = np.array([doc['coefficients'][n]['estimate'] for n in NAMES])
     std = np.array([doc['coefficients'][n]['std'] for n in NAMES])
     truth = np.array([run.truth['coefficients'][n] for n in NAMES])
@@ -149,11 +154,16 @@ def test_a_stuck_imu_is_not_consistent_exit_3(raw_bag, tmp_path, capsys):
     cfg, run, _, maps = raw_bag
     bag = write_message_bag(tmp_path / 'stuck', TOPICS, {},
                             (_message(r) for r in _stuck_imu(run.records)), None)
+    out = tmp_path / 'r.json'
     code = main(['identify', '--bag', str(bag), '--input-map', str(maps['good']),
-                 '--coefficients', ','.join(NAMES)])
+                 '--coefficients', ','.join(NAMES), '--json', str(out)])
     assert code == 3
     first = capsys.readouterr().out.splitlines()[0]
     assert first.startswith('NOT consistent: imu repeated exactly for 4.0 s'), first
+    # a bag without our simulator's metadata has no known truth
+    doc = json.loads(out.read_text())
+    assert all(c['truth'] is None and c['error_pct'] is None
+               for c in doc['coefficients'].values())
 
 
 def test_drop_repeats_keeps_each_sensors_new_values_and_names_a_stuck_one(raw_bag):
