@@ -50,10 +50,11 @@ Per type (:data:`TYPES`; ``pkg/Type`` and ``pkg/msg/Type`` are both accepted):
   ``density`` kg/m^3, default 1025; ``gravity`` m/s^2, default 9.80665; ``surface_pressure``
   Pa, default 101325), ``geometry_msgs/msg/PoseWithCovarianceStamped`` (``measures`` depth |
   position), ``sensor_msgs/msg/NavSatFix`` (``datum: {latitude, longitude}`` deg, the world
-  origin). Each takes ``frame`` (auto | ned | enu: the convention of its world frame and
-  axes) and ``mounting: {lever_arm: [x, y, z] m, rotation: [roll, pitch, yaw], unit: deg |
-  rad}``: the sensor's origin in the body frame and the rotation sensor -> body (ZYX), both
-  in the ``body_frame`` axes; held in FRD (:class:`Mounting`).
+  origin; without it the first fix is). Each takes ``frame`` (auto | ned | enu: the
+  convention of its world frame and axes) and ``mounting: {lever_arm: [x, y, z] m, rotation:
+  [roll, pitch, yaw], unit: deg | rad}``: the sensor's origin in the body frame and the
+  rotation sensor -> body (ZYX), both in the ``body_frame`` axes; held in FRD
+  (:class:`Mounting`).
 
 Every check raises one :class:`InputMapError` naming the map and the entry; the checks that
 need the vehicle (every actuator the vehicle's model uses is fed, none that it does not have)
@@ -534,6 +535,9 @@ class _Parser:
                 self.fail(f'{what}: give measures: depth or position')
             return (), (('measures', self.choice(d, 'measures', what, POSE_MEASURES)),)
         datum = d.get('datum')
+        if datum is None:
+            # no datum: the first fix is the origin (session/raw_messages.py navsat_ned)
+            return (), (('datum', None),)
         if not isinstance(datum, dict) or set(datum) != {'latitude', 'longitude'}:
             self.fail(f'{what}: give datum: {{latitude: deg, longitude: deg}}, the world '
                       'origin the fixes are measured from')

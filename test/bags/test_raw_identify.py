@@ -14,7 +14,9 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConfig
+from auv_ident.offline.raw_bag import raw_bag_records
 from auv_ident.offline.sim_bag import _header, _STORE, joint_state_msg, write_message_bag
+from auv_ident.session.input_map import parse_input_map
 from auv_ident.vehicles import load_vehicle
 
 T = _STORE.types
@@ -175,3 +177,35 @@ def test_drop_repeats_keeps_each_sensors_new_values_and_names_a_stuck_one(raw_ba
     # a good run: nothing dropped, no fault (no false alarm)
     kept, spans = drop_repeats(run.records)
     assert spans == [] and len(kept) == len(run.records)
+
+
+def _navsat(ns, lat, lon, status=0):
+    return T['sensor_msgs/msg/NavSatFix'](
+        header=_header(ns, 'gps'), status=T['sensor_msgs/msg/NavSatStatus'](status=status,
+                                                                            service=1),
+        latitude=lat, longitude=lon, altitude=0.0, position_covariance=np.diag([4.0, 9.0, 1.0])
+        .ravel(), position_covariance_type=2)
+
+
+def test_navsatfix_in_a_bag_is_a_position_fix_about_the_first_fix(raw_bag, tmp_path):
+    cfg, run, _, _ = raw_bag
+    fixes = [(1.0, 0.0, 0.0, -1), (2.0, 36.6, -121.9, 0), (3.0, 36.601, -121.9, 0),
+             (4.0, 36.6, -121.899, 0)]
+    msgs = [_message(r) for r in run.records if r.kind == 'command' and r.t < 5.0]
+    msgs += [('/fix', EPOCH + int(t * 1e9), _navsat(EPOCH + int(t * 1e9), la, lo, st))
+             for t, la, lo, st in fixes]
+    msgs.sort(key=lambda m: m[1])
+    bag = write_message_bag(tmp_path / 'gps', {'/fix': 'sensor_msgs/msg/NavSatFix',
+                                               '/actuators': TOPICS['/actuators']}, {}, msgs,
+                            None)
+    imap = parse_input_map({'version': 1, 'inputs': {
+        'gps': {'topic': '/fix', 'type': 'sensor_msgs/msg/NavSatFix',
+                'mounting': {'lever_arm': [0.0, 0.0, -0.3]}},
+        'actuators': _map(cfg)['inputs']['actuators']}})
+    records, _ = raw_bag_records(bag, imap, load_vehicle('nps_auv2'))
+    pos = [r for r in records if r.kind == 'position']
+    assert len(pos) == 4 and np.all(np.isnan(pos[0].values))     # no fix yet: not fused
+    np.testing.assert_allclose(pos[1].values, [0.0, 0.0])         # the first fix: the origin
+    np.testing.assert_allclose(pos[2].values, [110.98, 0.0], atol=0.05)
+    np.testing.assert_allclose(pos[3].values, [0.0, 89.51], atol=0.05)
+    np.testing.assert_allclose(pos[2].covariance, np.diag([9.0, 4.0]))
