@@ -32,6 +32,7 @@ from auv_ident.core.identification.results import Diagnosis
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.replay import bag_custom_data
+from auv_ident.offline.tf_static import tf_mountings
 from auv_ident.session.input_map import load_input_map
 from auv_ident.session.stuck import describe_spans, STUCK_SAMPLES, STUCK_SECONDS, StuckSpan
 from auv_ident.vehicles import load_vehicle
@@ -117,8 +118,8 @@ def identify_raw_bag(path, settings, passes=2):
     records, spans = drop_repeats(records)
     model = Model(v, names)
     try:
-        res = identify_raw(model, FilterConfig(), records, raw_sensor_config(imap),
-                           passes=passes)
+        res = identify_raw(model, FilterConfig(), records,
+                           raw_sensor_config(imap, tf_mountings(path, imap)), passes=passes)
     except (DomainError, DivergenceError) as e:
         return _left_domain(path, v, names, e, spans, t0)
     diagnosis = raw_verdict(v, res, spans, model.p_coef)

@@ -16,19 +16,22 @@ import numpy as np
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
 from auv_ident.core.model import raw_sensors as rs
+from auv_ident.offline.tf_static import merged_mountings
 from auv_ident.session.input_map import DVL, InputMapError, NAVSAT, PRESSURE
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import header_stamp_ns
 from auv_ident.session.raw_messages import navsat_origin, raw_record, RAW_TYPES
 
 
-def raw_sensor_config(input_map):
-    """RawSensorConfig of the map's sensors: each one's mounting (by input name), the DVL's
-    reference, the pressure sensor's density (kg/m^3), gravity (m/s^2) and surface pressure
-    (Pa)."""
+def raw_sensor_config(input_map, tf=None):
+    """RawSensorConfig of the map's sensors: each one's mounting (by input name; with ``tf``,
+    input name -> Mounting read from a bag's /tf_static, merged by offline/tf_static.py's
+    precedence), the DVL's reference, the pressure sensor's density (kg/m^3), gravity (m/s^2)
+    and surface pressure (Pa)."""
+    mountings = merged_mountings(input_map, tf or {})
     cfg = RawSensorConfig(mountings={
-        e.name: rs.Mounting(np.array(e.mounting.lever_arm, dtype=float), e.mounting.matrix)
-        for e in input_map.sensors})
+        name: rs.Mounting(np.array(m.lever_arm, dtype=float), m.matrix)
+        for name, m in mountings.items()})
     for e in input_map.sensors:
         if e.type == DVL:
             cfg = replace(cfg, dvl_reference=e.option('reference'))

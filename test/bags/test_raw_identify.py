@@ -2,9 +2,11 @@
 independent generator (offline/independent_data.py generate_raw) written as a bag."""
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 import yaml
 
 from auv_ident.analysis.raw_comparison import sensors_of
@@ -14,9 +16,10 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConfig
-from auv_ident.offline.raw_bag import raw_bag_records
+from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.sim_bag import _header, _STORE, joint_state_msg, write_message_bag
-from auv_ident.session.input_map import parse_input_map
+from auv_ident.offline.tf_static import tf_mountings
+from auv_ident.session.input_map import InputMapError, parse_input_map
 from auv_ident.vehicles import load_vehicle
 
 T = _STORE.types
@@ -209,3 +212,67 @@ def test_navsatfix_in_a_bag_is_a_position_fix_about_the_first_fix(raw_bag, tmp_p
     np.testing.assert_allclose(pos[2].values, [110.98, 0.0], atol=0.05)
     np.testing.assert_allclose(pos[3].values, [0.0, 89.51], atol=0.05)
     np.testing.assert_allclose(pos[2].covariance, np.diag([9.0, 4.0]))
+
+
+def _tf(parent, child, xyz, rpy):
+    q = Rotation.from_euler('xyz', rpy).as_quat()
+    return T['geometry_msgs/msg/TransformStamped'](
+        header=_header(EPOCH, parent), child_frame_id=child,
+        transform=T['geometry_msgs/msg/Transform'](
+            translation=_v3(xyz), rotation=T['geometry_msgs/msg/Quaternion'](
+                x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))))
+
+
+def _tf_bag(run, path, dvl_frame='dvl_link'):
+    """The run's first 3 s with the DVL messages in frame dvl_frame and /tf_static chaining
+    dvl_link -> sensors_link (0.1 m forward) -> base_link (yaw 2 deg, 0.4 m back, 0.2 m up:
+    REP-103 FLU)."""
+    tf = T['tf2_msgs/msg/TFMessage'](transforms=[
+        _tf('base_link', 'sensors_link', [-0.4, 0.0, 0.2], [0.0, 0.0, math.radians(2.0)]),
+        _tf('sensors_link', 'dvl_link', [0.1, 0.0, 0.0], [0.0, 0.0, 0.0])])
+    msgs = [('/tf_static', EPOCH, tf)]
+    for r in run.records:
+        if r.t < 3.0:
+            topic, ns, m = _message(r)
+            if topic == '/dvl':
+                m.header.frame_id = dvl_frame
+            msgs.append((topic, ns, m))
+    msgs.sort(key=lambda m: m[1])
+    return write_message_bag(path, dict(TOPICS, **{'/tf_static': 'tf2_msgs/msg/TFMessage'}),
+                             {}, msgs, None)
+
+
+def test_tf_static_gives_a_sensors_mounting_and_a_disagreeing_map_is_an_error(
+        raw_bag, tmp_path, monkeypatch):
+    cfg, run, _, _ = raw_bag
+    # the bag writer embeds each type's .msg text; tf2_msgs is not installed here, so its
+    # one-line definition is given as a package share of its own
+    share = tmp_path / 'prefix' / 'share' / 'tf2_msgs' / 'msg'
+    share.mkdir(parents=True)
+    (share / 'TFMessage.msg').write_text('geometry_msgs/TransformStamped[] transforms\n')
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'prefix'))
+    bag = _tf_bag(run, tmp_path / 'tf')
+    doc = _map(cfg)
+    del doc['inputs']['dvl']['mounting']
+    doc['body_frame'] = 'flu'         # REP-103, as the tf tree
+    imap = parse_input_map(doc)
+    tf = tf_mountings(bag, imap)
+    # FLU: 0.1 m along sensors_link's x, turned 2 deg left, plus (-0.4, 0, 0.2); in FRD y and
+    # z change sign, and 2 deg left (FLU) is 2 deg right (FRD)
+    c, s = math.cos(math.radians(2.0)), math.sin(math.radians(2.0))
+    arm = [-0.4 + 0.1 * c, -0.1 * s, -0.2]
+    np.testing.assert_allclose(tf['dvl'].lever_arm, arm, atol=1e-12)
+    yaw = math.degrees(math.atan2(tf['dvl'].matrix[1, 0], tf['dvl'].matrix[0, 0]))
+    assert yaw == pytest.approx(-2.0, abs=1e-9)
+    assert 'imu' not in tf                            # its frame id is empty: the map's
+    cfg_raw = raw_sensor_config(imap, tf)
+    np.testing.assert_allclose(cfg_raw.mountings['dvl'].lever_arm, arm)
+    # the map's own mounting, where it agrees, stays; where it does not, one clear error
+    flu = [-0.4 + 0.1 * c, 0.1 * s, 0.2]
+    doc['inputs']['dvl']['mounting'] = {'lever_arm': flu, 'rotation': [0, 0, 2]}
+    raw_sensor_config(parse_input_map(doc), tf)
+    doc['inputs']['dvl']['mounting'] = {'lever_arm': flu, 'rotation': [0, 0, 0]}
+    with pytest.raises(InputMapError, match="'dvl'.*tf_static.*2.00 deg apart"):
+        raw_sensor_config(parse_input_map(doc), tf)
+    # a frame /tf_static does not reach keeps the map's mounting
+    assert tf_mountings(_tf_bag(run, tmp_path / 'tf2', 'elsewhere'), imap) == {}
