@@ -6,7 +6,8 @@ Sensor messages are stamped with their header stamp, headerless commands with th
 time (as the live node does); commands go through session/inputs.py CommandHolder (held on
 change) and become one 'command' record each once every fed actuator has been heard. Times are
 s from the earliest stamp read (``time_origin_ns``), so the filter's float times keep their
-resolution.
+resolution. A NavSatFix input without a datum in the map is measured from its first fix
+(session/raw_messages.py navsat_ned).
 """
 from dataclasses import replace
 
@@ -15,19 +16,22 @@ import numpy as np
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
 from auv_ident.core.model import raw_sensors as rs
-from auv_ident.session.input_map import DVL, InputMapError, PRESSURE
+from auv_ident.offline.tf_static import merged_mountings
+from auv_ident.session.input_map import DVL, InputMapError, NAVSAT, PRESSURE
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import header_stamp_ns
-from auv_ident.session.raw_messages import raw_record, RAW_TYPES
+from auv_ident.session.raw_messages import navsat_origin, raw_record, RAW_TYPES
 
 
-def raw_sensor_config(input_map):
-    """RawSensorConfig of the map's sensors: each one's mounting (by input name), the DVL's
-    reference, the pressure sensor's density (kg/m^3), gravity (m/s^2) and surface pressure
-    (Pa)."""
+def raw_sensor_config(input_map, tf=None):
+    """RawSensorConfig of the map's sensors: each one's mounting (by input name; with ``tf``,
+    input name -> Mounting read from a bag's /tf_static, merged by offline/tf_static.py's
+    precedence), the DVL's reference, the pressure sensor's density (kg/m^3), gravity (m/s^2)
+    and surface pressure (Pa)."""
+    mountings = merged_mountings(input_map, tf or {})
     cfg = RawSensorConfig(mountings={
-        e.name: rs.Mounting(np.array(e.mounting.lever_arm, dtype=float), e.mounting.matrix)
-        for e in input_map.sensors})
+        name: rs.Mounting(np.array(m.lever_arm, dtype=float), m.matrix)
+        for name, m in mountings.items()})
     for e in input_map.sensors:
         if e.type == DVL:
             cfg = replace(cfg, dvl_reference=e.option('reference'))
@@ -65,6 +69,15 @@ def raw_bag_records(path, input_map, vehicle, allow_truncated=False):
         return [], 0
     raw.sort(key=lambda r: (r[0], r[1]))
     t0 = raw[0][0]
-    records = [RawMeasurement('command', (s - t0) * 1e-9, m) if e is None
-               else raw_record(e, m, (s - t0) * 1e-9) for s, _, e, m in raw]
+    origins = {}                                   # NavSatFix input -> its first fix
+    records = []
+    for s, _, e, m in raw:
+        if e is None:
+            records.append(RawMeasurement('command', (s - t0) * 1e-9, m))
+            continue
+        if e.type == NAVSAT and e.name not in origins:
+            origin = navsat_origin(e, m)
+            if origin is not None:
+                origins[e.name] = origin
+        records.append(raw_record(e, m, (s - t0) * 1e-9, origins.get(e.name)))
     return records, t0

@@ -10,6 +10,7 @@ Schema, version 1::
 
     version: 1
     body_frame: flu          # the axes the mountings are given in: flu (REP-103, default) or frd
+    tf_body_frame: base_link # the body's frame id in a bag's /tf_static (mountings read there)
     inputs:
       NAME:                  # any name; it names the input in every message
         topic: odom          # relative names resolve in the node's namespace; in a bag, '/' + it
@@ -50,10 +51,11 @@ Per type (:data:`TYPES`; ``pkg/Type`` and ``pkg/msg/Type`` are both accepted):
   ``density`` kg/m^3, default 1025; ``gravity`` m/s^2, default 9.80665; ``surface_pressure``
   Pa, default 101325), ``geometry_msgs/msg/PoseWithCovarianceStamped`` (``measures`` depth |
   position), ``sensor_msgs/msg/NavSatFix`` (``datum: {latitude, longitude}`` deg, the world
-  origin). Each takes ``frame`` (auto | ned | enu: the convention of its world frame and
-  axes) and ``mounting: {lever_arm: [x, y, z] m, rotation: [roll, pitch, yaw], unit: deg |
-  rad}``: the sensor's origin in the body frame and the rotation sensor -> body (ZYX), both
-  in the ``body_frame`` axes; held in FRD (:class:`Mounting`).
+  origin; without it the first fix is). Each takes ``frame`` (auto | ned | enu: the
+  convention of its world frame and axes) and ``mounting: {lever_arm: [x, y, z] m, rotation:
+  [roll, pitch, yaw], unit: deg | rad}``: the sensor's origin in the body frame and the
+  rotation sensor -> body (ZYX), both in the ``body_frame`` axes; held in FRD
+  (:class:`Mounting`).
 
 Every check raises one :class:`InputMapError` naming the map and the entry; the checks that
 need the vehicle (every actuator the vehicle's model uses is fed, none that it does not have)
@@ -202,6 +204,19 @@ class Mounting:
         return np.array(self.rotation, dtype=float)
 
 
+def mounting_in_frd(lever_arm: Any, rotation: Any, body_frame: str) -> Mounting:
+    """The Mounting (held in FRD) of a lever arm (3,) m and a rotation (3, 3) sensor -> body
+    given in the ``body_frame`` axes ('flu' or 'frd')."""
+    arm = np.asarray(lever_arm, dtype=float)
+    R = np.asarray(rotation, dtype=float)
+    if body_frame == 'flu':     # FLU -> FRD: (x, -y, -z); R_frd = F R_flu F
+        F = np.diag([1.0, -1.0, -1.0])
+        arm = F @ arm
+        R = F @ R @ F
+    return Mounting(tuple(float(v) for v in arm), tuple(tuple(float(v) for v in row)
+                                                          for row in R))
+
+
 @dataclass(frozen=True)
 class InputEntry:
     """One input of the map (module docstring).
@@ -210,7 +225,8 @@ class InputEntry:
     frame : 'auto', 'ned' or 'enu' (odometry and sensors)
     fields : the odometry's state channels or the IMU's fields used
     channels : tuple of Channel (commands)
-    mounting : Mounting (sensors)
+    mounting : Mounting (sensors); mounting_given : whether the map gave it (else a bag's
+        /tf_static may: offline/tf_static.py)
     options : the type's own settings (reference, measures, density, gravity,
         surface_pressure, datum), checked
     """
@@ -223,6 +239,7 @@ class InputEntry:
     fields: tuple = ()
     channels: tuple = ()
     mounting: Mounting = field(default_factory=Mounting)
+    mounting_given: bool = False
     options: tuple = ()
 
     @property
@@ -242,11 +259,13 @@ class InputEntry:
 @dataclass(frozen=True)
 class InputMap:
     """A checked input map: ``inputs`` (tuple of InputEntry, the file's order), ``where`` (the
-    file, for messages), ``body_frame``."""
+    file, for messages), ``body_frame``, ``tf_body_frame`` (the body's frame id in a bag's
+    /tf_static, default base_link: offline/tf_static.py)."""
 
     inputs: tuple
     where: str = 'input map'
     body_frame: str = 'flu'
+    tf_body_frame: str = 'base_link'
 
     @property
     def odometry(self) -> 'InputEntry | None':
@@ -400,6 +419,7 @@ class _Parser:
         else:
             out['frame'] = self.choice(d, 'frame', what, FRAMES, 'auto')
             out['mounting'] = self.mounting(d.get('mounting', {}), what, body_frame)
+            out['mounting_given'] = 'mounting' in d
             out['fields'], out['options'] = self.sensor(typ, d, what)
         return InputEntry(**out)
 
@@ -499,13 +519,7 @@ class _Parser:
         rot = self.vector3(m, 'rotation', f'{what} mounting')
         if unit == 'deg':
             rot = np.radians(rot)
-        R = euler_to_rotation_matrix(*rot)
-        if body_frame == 'flu':     # FLU -> FRD: (x, -y, -z); R_frd = F R_flu F
-            F = np.diag([1.0, -1.0, -1.0])
-            arm = F @ arm
-            R = F @ R @ F
-        return Mounting(tuple(float(v) for v in arm), tuple(tuple(float(v) for v in row)
-                                                              for row in R))
+        return mounting_in_frd(arm, euler_to_rotation_matrix(*rot), body_frame)
 
     def vector3(self, m: dict, key: str, what: str) -> np.ndarray:
         v = m.get(key, [0.0, 0.0, 0.0])
@@ -534,6 +548,9 @@ class _Parser:
                 self.fail(f'{what}: give measures: depth or position')
             return (), (('measures', self.choice(d, 'measures', what, POSE_MEASURES)),)
         datum = d.get('datum')
+        if datum is None:
+            # no datum: the first fix is the origin (session/raw_messages.py navsat_ned)
+            return (), (('datum', None),)
         if not isinstance(datum, dict) or set(datum) != {'latitude', 'longitude'}:
             self.fail(f'{what}: give datum: {{latitude: deg, longitude: deg}}, the world '
                       'origin the fixes are measured from')
@@ -550,7 +567,7 @@ def parse_input_map(doc: object, where: object = 'input map') -> InputMap:
     p = _Parser(str(where))
     if not isinstance(doc, dict):
         p.fail(f'must be a mapping with version: {VERSION} and inputs:, got {type(doc).__name__}')
-    p.keys(doc, ('version', 'body_frame', 'inputs'), 'the map')
+    p.keys(doc, ('version', 'body_frame', 'tf_body_frame', 'inputs'), 'the map')
     if doc.get('version') != VERSION:
         p.fail(f'version = {doc.get("version")!r}: this auv_ident reads input maps of version '
                f'{VERSION} (say version: {VERSION})')
@@ -568,7 +585,11 @@ def parse_input_map(doc: object, where: object = 'input map') -> InputMap:
     if not any(e.role == 'command' for e in entries):
         p.fail('no command input (JointState, Float64MultiArray, Float64 or WrenchStamped): '
                'the model needs the actuators')
-    return InputMap(entries, str(where), body_frame)
+    tf_body = doc.get('tf_body_frame', 'base_link')
+    if not isinstance(tf_body, str) or not tf_body.strip():
+        p.fail(f"tf_body_frame = {tf_body!r}: give the body's frame id in /tf_static, e.g. "
+               'base_link')
+    return InputMap(entries, str(where), body_frame, tf_body.strip().lstrip('/'))
 
 
 def input_maps_dir() -> str:

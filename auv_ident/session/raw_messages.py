@@ -7,18 +7,38 @@ ends in 'ned' or 'frd' is NED/FRD, any other ENU/FLU (REP-103 is the ROS default
 vector (IMU rate, DVL velocity) stays in the sensor's own axes, flipped FLU -> FRD where the
 map says ENU, because the mounting (lever arm, rotation sensor -> body) is held in FRD.
 
+A NavSatFix (a GNSS fix at the surface) is a horizontal position fix: latitude and longitude
+turned into north and east metres about the origin (the map's ``datum``, else the run's first
+fix) on the flat earth (navsat_ned: the WGS-84 meridian and prime-vertical radii at the
+origin; within 1e-4 relative over 10 km, more than any GNSS fix needs), altitude not used (a
+submerged vehicle has no fix; depth comes from its own sensor). A message without a fix
+(status < 0) or with a NaN coordinate becomes a position record of NaN values, which the filter
+counts as non-finite and does not fuse. Its ``position_covariance`` (ENU, m^2) is read when
+its type is not 0 (unknown).
+
 Covariances: a ROS covariance whose first entry is -1 ("not provided") or that is all zero is
 passed as None, so the filter uses its default noise for that channel group.
 """
+import math
 from typing import Any
 
 import numpy as np
 
 from auv_ident.core.filter.raw import RawMeasurement
-from auv_ident.session.input_map import DVL, IMU, InputEntry, InputMapError, POSE, PRESSURE
+from auv_ident.session.input_map import (
+    DVL,
+    IMU,
+    InputEntry,
+    InputMapError,
+    NAVSAT,
+    POSE,
+    PRESSURE,
+)
 from auv_ident.session.messages import _Q_FRD_FLU, _Q_NED_ENU, quat_multiply
 
-RAW_TYPES = (IMU, DVL, PRESSURE, POSE)
+RAW_TYPES = (IMU, DVL, PRESSURE, POSE, NAVSAT)
+WGS84_A = 6378137.0                 # m, the WGS-84 semi-major axis
+WGS84_E2 = 6.69437999014e-3         # its first eccentricity squared
 # FLU <-> FRD on a body/sensor vector, ENU <-> NED on a world position (their own inverses)
 _FLIP = np.array([1.0, -1.0, -1.0])
 _POS_PERM, _POS_SIGN = [1, 0, 2], np.array([1.0, 1.0, -1.0])
@@ -40,9 +60,59 @@ def _cov(values: Any, n: int, sign: np.ndarray | None = None) -> np.ndarray | No
     return c if sign is None else c * np.outer(sign, sign)
 
 
-def raw_record(entry: InputEntry, msg: Any, t: float) -> RawMeasurement:
+def navsat_ned(lat: float, lon: float, lat0: float, lon0: float) -> np.ndarray:
+    """(2,) north, east (m) of latitude, longitude (deg) about the origin (lat0, lon0) deg on
+    the flat earth (module docstring): the WGS-84 meridian radius M and prime-vertical radius N
+    at lat0, north = M dlat, east = N cos(lat0) dlon (dlat, dlon in rad; dlon wrapped to
+    [-180, 180) deg)."""
+    phi0 = np.radians(lat0)
+    s2 = np.sin(phi0) ** 2
+    n_radius = WGS84_A / np.sqrt(1.0 - WGS84_E2 * s2)
+    m_radius = n_radius * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * s2)
+    dlon = (lon - lon0 + 180.0) % 360.0 - 180.0
+    return np.array([m_radius * np.radians(lat - lat0),
+                     n_radius * np.cos(phi0) * np.radians(dlon)])
+
+
+def navsat_origin(entry: InputEntry, msg: Any) -> tuple[float, float] | None:
+    """The (lat, lon) deg origin a NavSatFix of ``entry`` is measured from: the map's datum,
+    else this message's own fix if it has one (the caller keeps the first), else None."""
+    datum = entry.option('datum')
+    if datum is not None:
+        return (float(datum[0]), float(datum[1]))
+    if _has_fix(msg):
+        return (float(msg.latitude), float(msg.longitude))
+    return None
+
+
+def _has_fix(msg: Any) -> bool:
+    return (int(msg.status.status) >= 0 and math.isfinite(float(msg.latitude))
+            and math.isfinite(float(msg.longitude)))
+
+
+def _navsat(entry: InputEntry, msg: Any, t: float,
+            origin: tuple[float, float] | None) -> RawMeasurement:
+    """A NavSatFix as a horizontal position record (module docstring)."""
+    origin = navsat_origin(entry, msg) if entry.option('datum') is not None else origin
+    if origin is None or not _has_fix(msg):
+        return RawMeasurement('position', t, np.full(2, np.nan), None, entry.name)
+    ne = navsat_ned(float(msg.latitude), float(msg.longitude), *origin)
+    cov = None
+    if int(msg.position_covariance_type) != 0:
+        c = np.asarray(msg.position_covariance, dtype=float).reshape(3, 3)
+        # ENU (east, north, up) -> (north, east)
+        cov = _cov(c[np.ix_([1, 0], [1, 0])], 2)
+    return RawMeasurement('position', t, ne, cov, entry.name)
+
+
+def raw_record(entry: InputEntry, msg: Any, t: float,
+               origin: tuple[float, float] | None = None) -> RawMeasurement:
     """One raw-sensor message of ``entry`` at ``t`` s as a RawMeasurement (sensor: the entry's
-    name). InputMapError for a type this reader does not convert."""
+    name). origin: a NavSatFix entry's (lat, lon) deg origin where the map gives no datum (the
+    caller's first fix: navsat_origin); unused by the other types. InputMapError for a type
+    this reader does not convert."""
+    if entry.type == NAVSAT:
+        return _navsat(entry, msg, t, origin)
     ned = is_ned(entry, msg)
     if entry.type == IMU:
         o, w = msg.orientation, msg.angular_velocity

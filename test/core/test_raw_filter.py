@@ -133,3 +133,32 @@ def test_bottom_and_water_track_with_a_current(dvl):
         np.testing.assert_allclose(res.estimate[5:], [0.2, -0.1], atol=0.01)
     else:
         assert np.all(res.std[5:] > 0.1)
+
+
+def test_process_many_is_process_one_by_one_bit_for_bit(quiet_run, model):
+    """The compiled IMU runs (raw_update.imu_run) do what process does message by message, the
+    messages it leaves to Python included: a gap to restart after, a non-finite IMU rate, an
+    IMU message stamped before the estimate, a covariance array changing mid-run."""
+    cfg, run = quiet_run
+    recs = [r for r in run.records if not 5.0 < r.t < 5.5]          # a 0.5 s silence
+    k = next(i for i, r in enumerate(recs) if r.kind == 'imu' and r.t > 8.0)
+    recs[k] = RawMeasurement('imu', recs[k].t, np.r_[recs[k].values[:4], np.nan, 0.0, 0.0])
+    k2 = next(i for i, r in enumerate(recs) if r.kind == 'imu' and r.t > 9.0)
+    recs.insert(k2 + 2, RawMeasurement('imu', recs[k2].t - 0.005, recs[k2].values))
+    for i, r in enumerate(recs):
+        if r.kind == 'imu' and r.t > 12.0:
+            recs[i] = RawMeasurement('imu', r.t, r.values, np.diag([1e-4] * 3 + [1e-5] * 3))
+    one, many = (RawSensorFilter(model, FilterConfig(), sensors_of(cfg)) for _ in range(2))
+    for r in recs:
+        one.process(r)
+    many.process_many(recs)
+    assert one.restarts == many.restarts == 1
+    assert one.skipped == many.skipped and one.skipped['out of order'] == 1
+    assert one.fused == many.fused
+    np.testing.assert_array_equal(one.xf, many.xf)
+    np.testing.assert_array_equal(one.P, many.P)
+    assert one.nis_sum == many.nis_sum and one.dof_sum == many.dof_sum
+    for g in one.white:
+        np.testing.assert_array_equal(np.array(one.white[g]), np.array(many.white[g]))
+    for g in one.info:
+        np.testing.assert_array_equal(one.info[g], many.info[g])

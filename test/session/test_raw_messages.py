@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from auv_ident.session.input_map import DVL, IMU, InputEntry, InputMapError, NAVSAT, POSE, PRESSURE
+from auv_ident.session.input_map import DVL, IMU, InputEntry, NAVSAT, POSE, PRESSURE
 from auv_ident.session.messages import euler_to_quat
-from auv_ident.session.raw_messages import raw_record
+from auv_ident.session.raw_messages import navsat_origin, raw_record
 
 _P = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])   # NED -> ENU
 _E = np.diag([1.0, -1.0, -1.0])                                      # FRD -> FLU
@@ -72,6 +72,30 @@ def test_dvl_pressure_pose():
     assert depth.kind == 'depth' and depth.values[0] == 5.0 and depth.covariance[0, 0] == 3.0
 
 
-def test_unconverted_type_names_the_input():
-    with pytest.raises(InputMapError, match="'s'.*NavSatFix"):
-        raw_record(_entry(NAVSAT, 'enu'), NS(header=NS(frame_id='')), 0.0)
+def _fix(lat, lon, status=0, cov_type=2, cov=(4.0, 0.0, 0.0, 0.0, 9.0, 0.0, 0.0, 0.0, 1.0)):
+    return NS(header=NS(frame_id='gps'), status=NS(status=status), latitude=lat, longitude=lon,
+              altitude=0.0, position_covariance=list(cov), position_covariance_type=cov_type)
+
+
+def test_navsatfix_is_north_east_about_the_datum_on_the_flat_earth():
+    e = _entry(NAVSAT, 'enu', datum=(36.6, -121.9))
+    # 0.01 deg of latitude is 1109.8 m there, 0.01 deg of longitude 895.1 m (WGS-84 radii)
+    rec = raw_record(e, _fix(36.61, -121.89), 2.0)
+    assert rec.kind == 'position' and rec.t == 2.0 and rec.sensor == 's'
+    np.testing.assert_allclose(rec.values, [1109.8, 895.1], atol=0.5)
+    np.testing.assert_allclose(rec.covariance, [[9.0, 0.0], [0.0, 4.0]])   # ENU -> (N, E)
+    assert raw_record(e, _fix(36.61, -121.89, cov_type=0), 2.0).covariance is None
+
+
+def test_navsatfix_without_a_datum_is_measured_from_the_origin_given():
+    e = _entry(NAVSAT, 'enu', datum=None)
+    first = _fix(10.0, 20.0)
+    assert navsat_origin(e, first) == (10.0, 20.0)
+    np.testing.assert_allclose(raw_record(e, first, 0.0, (10.0, 20.0)).values, [0.0, 0.0])
+    assert raw_record(e, _fix(10.0, 20.001), 1.0, (10.0, 20.0)).values[1] > 100.0
+
+
+def test_navsatfix_without_a_fix_is_not_finite():
+    e = _entry(NAVSAT, 'enu', datum=(0.0, 0.0))
+    assert np.all(np.isnan(raw_record(e, _fix(1.0, 1.0, status=-1), 0.0).values))
+    assert navsat_origin(_entry(NAVSAT, 'enu', datum=None), _fix(1.0, 1.0, status=-1)) is None

@@ -40,6 +40,7 @@ Each update records its whitened innovations per channel group (``white``) and t
 it gave each parameter (``info``: 1/P_post - 1/P_prior of its variance), from which
 core/identification/raw.py corrects the error bars for coloured noise.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 from typing import Any
@@ -49,7 +50,12 @@ import numpy as np
 from auv_ident.core.errors import ConfigError, DataError, DivergenceError, DomainError
 from auv_ident.core.filter import ekf
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
-from auv_ident.core.filter.raw_update import imu_update, joseph_update, propagate_steps
+from auv_ident.core.filter.raw_update import (
+    imu_run,
+    imu_update,
+    joseph_update,
+    propagate_steps,
+)
 from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, interval, time_step
 from auv_ident.core.model import raw_sensors as rs
 from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
@@ -265,6 +271,67 @@ class RawSensorFilter:
         getattr(self, '_update_' + m.kind)(m)
         self.fused[m.kind] = self.fused.get(m.kind, 0) + 1
         return 'fused'
+
+    def process_many(self, records: Sequence[RawMeasurement]) -> None:
+        """Every record in turn, as :meth:`process` one by one (the same arithmetic, the same
+        counts and figures), with each run of consecutive IMU messages of one mounting and
+        one covariance array while the filter is running passed to the compiled
+        raw_update.imu_run in one call: a 100 Hz IMU is most of a run's messages, and its
+        per-message Python overhead was most of the pass's time."""
+        i, N = 0, len(records)
+        while i < N:
+            m = records[i]
+            if m.kind != 'imu' or self.xf is None or self.need_restart:
+                self.process(m)
+                i += 1
+                continue
+            j = i + 1
+            while (j < N and records[j].kind == 'imu' and records[j].sensor == m.sensor
+                   and records[j].covariance is m.covariance):
+                j += 1
+            done = self._imu_run(records[i:j])
+            if done == 0:
+                # the first one is Python's (out of order, non-finite, a gap)
+                self.process(m)
+                done = 1
+            i += done
+
+    def _imu_run(self, run: Sequence[RawMeasurement]) -> int:
+        """raw_update.imu_run over IMU messages of one mounting and covariance; the number
+        done (the rest: process_many goes on with them)."""
+        assert self.xf is not None and self.P is not None and self.t is not None
+        m0 = run[0]
+        mount = self.sensors.mount(m0.sensor or 'imu')
+        if m0.covariance is not self._imu_cov_of:
+            self._imu_R = self._imu_noise(m0.covariance)
+            self._imu_cov_of = m0.covariance
+        K = len(run)
+        ts = np.fromiter((m.t for m in run), float, K)
+        V = np.stack([m.values for m in run])
+        W = np.empty((K, 6))
+        info = self.info.get('attitude+gyro')
+        info = np.zeros(self.p) if info is None else info.copy()
+        nis = np.array([self.nis_sum.get('imu', 0.0)])
+        done, st, t = imu_run(self.xf, self.P, self.u, self.model.compiled, self.t, ts,
+                              np.ascontiguousarray(V[:, :4]), np.ascontiguousarray(V[:, 4:]),
+                              mount.rotation, self._imu_R, self.bias_idx, self.q_rate,
+                              self.sensors.max_step, self.sensors.max_bridge, self.xb,
+                              self.F12, self.M, self.O, self.P_out, self.ws, W,
+                              self.gain, info, nis)
+        self.t = t
+        if st != ekf.OK:
+            if st == -1:
+                raise DivergenceError(f'imu update at t = {self.t} s: the estimate or its '
+                                      'covariance became unusable')
+            self._check(st, 'time update')
+        if done:
+            self.info['attitude+gyro'] = info
+            self.nis_sum['imu'] = float(nis[0])
+            self.dof_sum['imu'] = self.dof_sum.get('imu', 0) + 6 * done
+            self.fused['imu'] = self.fused.get('imu', 0) + done
+            self.white.setdefault('attitude', []).extend(W[:done, :3])
+            self.white.setdefault('gyro', []).extend(W[:done, 3:])
+        return int(done)
 
     def _skip(self, reason: str) -> str:
         self.skipped[reason] = self.skipped.get(reason, 0) + 1

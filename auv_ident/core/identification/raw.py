@@ -159,8 +159,7 @@ def identify_raw(model: Model, cfg: FilterConfig, records: Sequence[RawMeasureme
     sd0 = np.sqrt(np.diag(f.base.theta_cov0)[:pc])
     target, done = passes, 0
     while True:
-        for m in records:
-            f.process(m)
+        f.process_many(records)
         done += 1
         if done >= MAX_EXTRA_PASSES + passes:
             break
