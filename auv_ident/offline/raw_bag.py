@@ -8,33 +8,14 @@ change) and become one 'command' record each once every fed actuator has been he
 s from the earliest stamp read (``time_origin_ns``), so the filter's float times keep their
 resolution.
 """
-from dataclasses import replace
-
-import numpy as np
-
 from auv_ident.bags.reader import bag_topics, read_bag
-from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
-from auv_ident.core.model import raw_sensors as rs
-from auv_ident.session.input_map import DVL, InputMapError, PRESSURE
+from auv_ident.core.filter.raw import RawMeasurement
+from auv_ident.session.input_map import InputMapError
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import header_stamp_ns
-from auv_ident.session.raw_messages import raw_record, RAW_TYPES
 
-
-def raw_sensor_config(input_map):
-    """RawSensorConfig of the map's sensors: each one's mounting (by input name), the DVL's
-    reference, the pressure sensor's density (kg/m^3), gravity (m/s^2) and surface pressure
-    (Pa)."""
-    cfg = RawSensorConfig(mountings={
-        e.name: rs.Mounting(np.array(e.mounting.lever_arm, dtype=float), e.mounting.matrix)
-        for e in input_map.sensors})
-    for e in input_map.sensors:
-        if e.type == DVL:
-            cfg = replace(cfg, dvl_reference=e.option('reference'))
-        elif e.type == PRESSURE:
-            cfg = replace(cfg, rho=float(e.option('density')), g=float(e.option('gravity')),
-                          p_surface=float(e.option('surface_pressure')))
-    return cfg
+# raw_sensor_config lives with the message conversion (the live node's session uses it too)
+from auv_ident.session.raw_messages import raw_record, raw_sensor_config, RAW_TYPES  # noqa: F401
 
 
 def raw_bag_records(path, input_map, vehicle, allow_truncated=False):

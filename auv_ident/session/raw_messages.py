@@ -10,12 +10,22 @@ map says ENU, because the mounting (lever arm, rotation sensor -> body) is held 
 Covariances: a ROS covariance whose first entry is -1 ("not provided") or that is all zero is
 passed as None, so the filter uses its default noise for that channel group.
 """
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from auv_ident.core.filter.raw import RawMeasurement
-from auv_ident.session.input_map import DVL, IMU, InputEntry, InputMapError, POSE, PRESSURE
+from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
+from auv_ident.core.model import raw_sensors as rs
+from auv_ident.session.input_map import (
+    DVL,
+    IMU,
+    InputEntry,
+    InputMap,
+    InputMapError,
+    POSE,
+    PRESSURE,
+)
 from auv_ident.session.messages import _Q_FRD_FLU, _Q_NED_ENU, quat_multiply
 
 RAW_TYPES = (IMU, DVL, PRESSURE, POSE)
@@ -80,3 +90,19 @@ def raw_record(entry: InputEntry, msg: Any, t: float) -> RawMeasurement:
         return RawMeasurement('position', t, pos, _cov(c, 3), entry.name)
     raise InputMapError(f'input {entry.name!r} ({entry.type}): not a raw-sensor type this '
                         'reader converts (' + ', '.join(RAW_TYPES) + ')')
+
+
+def raw_sensor_config(input_map: InputMap) -> RawSensorConfig:
+    """RawSensorConfig of the map's sensors: each one's mounting (by input name), the DVL's
+    reference, the pressure sensor's density (kg/m^3), gravity (m/s^2) and surface pressure
+    (Pa)."""
+    cfg = RawSensorConfig(mountings={
+        e.name: rs.Mounting(np.array(e.mounting.lever_arm, dtype=float), e.mounting.matrix)
+        for e in input_map.sensors})
+    for e in input_map.sensors:
+        if e.type == DVL:
+            cfg = replace(cfg, dvl_reference=e.option('reference'))
+        elif e.type == PRESSURE:
+            cfg = replace(cfg, rho=float(e.option('density')), g=float(e.option('gravity')),
+                          p_surface=float(e.option('surface_pressure')))
+    return cfg
