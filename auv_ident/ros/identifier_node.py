@@ -595,7 +595,11 @@ class IdentifierNode(Node):
         no success)."""
         if self.raw is not None:
             self._final_log('INFO', self.raw.final_line())
-            return True
+            if not self.save_path:
+                return True
+            ok, message = self.raw.save()
+            self._final_log('INFO' if ok else 'ERROR', message)
+            return ok
         est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         counters = self.session.counters

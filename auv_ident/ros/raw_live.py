@@ -7,8 +7,8 @@ odometry path's), the commands first. Publications as the odometry path's: ``~/e
 (JointState: names, estimates, 1-sigma) and ``~/covariance`` (Float64MultiArray, p x p) after
 every fused sensor message, latched; ``/diagnostics`` every 1 s and at once on a filter
 restart (RawSession.health and diagnostic_values). The services ``~/reset`` (restart the
-filter) and ``~/save`` (answers that raw-sensor estimates are not saved yet) exist as on the
-odometry path.
+filter) and ``~/save`` (write ``save_path``: the estimate file with 'input_mode' 'raw sensors'
+and the sensor errors; also at shutdown) as on the odometry path.
 """
 from array import array
 
@@ -20,6 +20,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
+from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.raw_session import RawSession
 
@@ -109,10 +110,20 @@ class RawLive:
         response.message = 'raw-sensor filter restarted from the start-up configuration'
         return response
 
+    def save(self):
+        """Write the node's save_path (session RawSession.document); returns (ok, message)."""
+        path = self.node.save_path
+        if not path:
+            return False, 'save_path parameter is empty: nothing written'
+        doc = self.session.document()
+        try:
+            out = write_estimate_json(path, doc)
+        except (OSError, ValueError) as err:
+            return False, f'cannot write {path}: {err}'
+        return True, f'wrote {out} ({doc["steps"]} updates)'
+
     def on_save(self, request, response):
-        response.success = False
-        response.message = ('raw sensors: the estimate is published on ~/estimate and '
-                            '~/covariance; an estimate file is not written yet')
+        response.success, response.message = self.save()
         return response
 
     def final_line(self):

@@ -26,6 +26,7 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorFilter
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import COEFFICIENTS, Input, N_INPUT
+from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.guard import Event, Health
 from auv_ident.session.input_map import InputMap, InputMapError, load_input_map
 from auv_ident.session.inputs import CommandHolder
@@ -195,6 +196,25 @@ class RawSession:
     def _reject(self, name: str, code: str, reason: str, stamp_ns: int | None) -> Event:
         self.counters.rejected += 1
         return Event('rejected', f'{name}: {reason}', stamp_ns, code=code)
+
+    def document(self) -> dict:
+        """The estimate file's document (session/estimate_file.py) of the last good estimate
+        (the start-up guesses before any), with 'input_mode' 'raw sensors', the sensor errors
+        and the counts."""
+        ev = self.last_good
+        if ev is None:
+            base = self.filter.base
+            doc = estimate_document(self.vehicle.name, self.names, base.theta0,
+                                    base.theta_cov0, None, 0)
+        else:
+            doc = estimate_document(self.vehicle.name, self.names, ev.estimate, ev.cov,
+                                    ev.stamp_ns, sum(self.counters.fused.values()))
+        doc['input_mode'] = 'raw sensors'
+        doc['sensor_errors'] = {n: {'estimate': v, 'std': s}
+                                for n, (v, s) in self.sensor_errors().items()}
+        doc['fused'] = dict(self.counters.fused)
+        doc['not_fused'] = dict(self.counters.skipped)
+        return doc
 
     def sensor_errors(self) -> dict[str, tuple[float, float]]:
         """name -> (estimate, 1-sigma) of each estimated sensor error (filter's own)."""

@@ -98,3 +98,15 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
     finally:
         probe.destroy_node()
         node.destroy_node()
+
+
+def test_raw_session_document_before_and_after_data(raw_example, tmp_path):
+    bag, map_path = raw_example
+    s = RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES))
+    doc = s.document()
+    assert doc['steps'] == 0 and doc['stamp_ns'] is None and doc['coefficients'] == NAMES
+    assert s.health().message == 'waiting for data'
+    _feed(s.on_input, bag, map_path)
+    doc = s.document()
+    assert doc['input_mode'] == 'raw sensors' and doc['estimate'] == list(s.last_good.estimate)
+    assert set(doc['sensor_errors']) >= {'gyro_bias_p', 'dvl_misalignment'}
