@@ -18,7 +18,7 @@ from auv_ident.offline.raw_example import write_raw_example
 from auv_ident.session.input_map import load_input_map
 from auv_ident.vehicles import load_vehicle
 
-pytestmark = pytest.mark.slow     # identifier and player processes over DDS
+# not marked slow: about 11 s on the 2-core machine (identifier + player over DDS)
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
 
 
@@ -70,3 +70,11 @@ def test_player_fed_raw_node_publishes_the_offline_pass(tmp_path, ros_env):
     assert doc['not_fused'] == {}
     np.testing.assert_allclose(doc['estimate'], ref.estimate, rtol=1e-9, atol=0)
     np.testing.assert_allclose(doc['covariance'], ref.filter_covariance, rtol=1e-6, atol=1e-18)
+
+
+@pytest.mark.slow     # a 10 s bag played in real time, plus start-up: about 25 s
+def test_raw_load_400_hz_imu_every_message_processed(tmp_path, ros_env):
+    from auv_ident.ros.raw_loadtest import run_raw_loadtest
+    d = run_raw_loadtest(seconds=10.0, imu_rate=400.0, rate=1.0, folder=tmp_path)
+    assert d['fused']['imu'] == 4000 and d['every_message_processed'], d
+    assert d['cpu_ms_per_message'] > 0
