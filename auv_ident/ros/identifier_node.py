@@ -7,6 +7,11 @@ the node builds the messages and publishes them; what they hold comes from the s
 Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's
 messages in log-time order, so a recorded run replays to the same estimates.
 
+An input map with raw sensors (IMU, DVL, pressure, pose) hands the node to ros/raw_live.py
+RawLive (session/raw_session.py: each message one step of the raw-sensor filter; its topics,
+~/estimate, ~/covariance, /diagnostics, ~/reset, ~/save: docs/raw_sensors.md#live); what follows
+is the odometry path.
+
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these): the
 topics of the input map (parameter ``input_map``, session/input_map.py, docs/your_data.md), each
