@@ -4,7 +4,6 @@ at shutdown) is identify --bag's first EKF pass over that bag with that map."""
 import json
 import signal
 import subprocess
-import sys
 
 from conftest import require_loopback_dds
 import numpy as np
@@ -15,18 +14,12 @@ from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.raw_example import write_raw_example
+from auv_ident.ros.raw_loadtest import _cmd as _node_cmd
 from auv_ident.session.input_map import load_input_map
 from auv_ident.vehicles import load_vehicle
 
 # not marked slow: about 11 s on the 2-core machine (identifier + player over DDS)
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
-
-
-def _node_cmd(node, *params):
-    cmd = [sys.executable, '-m', 'auv_ident', 'run', node, '--ros-args']
-    for p in params:
-        cmd += ['-p', p]
-    return cmd
 
 
 def _spawn(cmd, env):
