@@ -158,7 +158,7 @@ def cmd_identify(args):
 
 
 def _raw_map(input_map):
-    """True if the input map has raw-sensor inputs (identified offline, analysis/raw_identify)."""
+    """True if the input map has raw-sensor inputs (identified by analysis/raw_identify)."""
     from auv_ident.analysis.raw_identify import has_raw_sensors
     return has_raw_sensors(input_map)
 

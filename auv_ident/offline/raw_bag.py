@@ -9,36 +9,21 @@ s from the earliest stamp read (``time_origin_ns``), so the filter's float times
 resolution. A NavSatFix input without a datum in the map is measured from its first fix
 (session/raw_messages.py navsat_ned).
 """
-from dataclasses import replace
-
-import numpy as np
-
 from auv_ident.bags.reader import bag_topics, read_bag
-from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
-from auv_ident.core.model import raw_sensors as rs
+from auv_ident.core.filter.raw import RawMeasurement
 from auv_ident.offline.tf_static import merged_mountings
-from auv_ident.session.input_map import DVL, InputMapError, NAVSAT, PRESSURE
+from auv_ident.session.input_map import InputMapError, NAVSAT
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import header_stamp_ns
 from auv_ident.session.raw_messages import navsat_origin, raw_record, RAW_TYPES
+from auv_ident.session import raw_messages
 
 
 def raw_sensor_config(input_map, tf=None):
-    """RawSensorConfig of the map's sensors: each one's mounting (by input name; with ``tf``,
-    input name -> Mounting read from a bag's /tf_static, merged by offline/tf_static.py's
-    precedence), the DVL's reference, the pressure sensor's density (kg/m^3), gravity (m/s^2)
-    and surface pressure (Pa)."""
-    mountings = merged_mountings(input_map, tf or {})
-    cfg = RawSensorConfig(mountings={
-        name: rs.Mounting(np.array(m.lever_arm, dtype=float), m.matrix)
-        for name, m in mountings.items()})
-    for e in input_map.sensors:
-        if e.type == DVL:
-            cfg = replace(cfg, dvl_reference=e.option('reference'))
-        elif e.type == PRESSURE:
-            cfg = replace(cfg, rho=float(e.option('density')), g=float(e.option('gravity')),
-                          p_surface=float(e.option('surface_pressure')))
-    return cfg
+    """RawSensorConfig of the map's sensors (session/raw_messages.py raw_sensor_config), with
+    ``tf`` (input name -> Mounting read from a bag's /tf_static) merged into the map's
+    mountings by offline/tf_static.py's precedence."""
+    return raw_messages.raw_sensor_config(input_map, merged_mountings(input_map, tf or {}))
 
 
 def raw_bag_records(path, input_map, vehicle, allow_truncated=False):

@@ -7,6 +7,11 @@ the node builds the messages and publishes them; what they hold comes from the s
 Offline, :func:`auv_ident.offline.replay.replay_bag` drives the same class with a bag's
 messages in log-time order, so a recorded run replays to the same estimates.
 
+An input map with raw sensors (IMU, DVL, pressure, pose) hands the node to ros/raw_live.py
+RawLive (session/raw_session.py: each message one step of the raw-sensor filter; its topics,
+~/estimate, ~/covariance, /diagnostics, ~/reset, ~/save: docs/raw_sensors.md#live); what follows
+is the odometry path.
+
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these): the
 topics of the input map (parameter ``input_map``, session/input_map.py, docs/your_data.md), each
@@ -162,6 +167,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from auv_ident.ros.cdr import OdometryView, PayloadTemplate, UndecodableMessage
+from auv_ident.ros.raw_live import RawLive
 from auv_ident.ros.toolkit import (
     declare_parameters,
     DIAGNOSTICS_QOS,
@@ -181,6 +187,7 @@ from auv_ident.session.messages import (
     DEFAULT_FRAME_IDS,
     NS_PER_S,
 )
+from auv_ident.session.raw_session import has_raw_sensors
 from auv_ident.session.session import Event, IdentSession
 from auv_ident.session.settings import help_text, IdentifierSettings, settings_fields
 from auv_ident.session.settings_text import SAVE_PATH
@@ -222,11 +229,16 @@ class IdentifierNode(Node):
         values = declare_parameters(self, _PARAMETERS)
         self.save_path = values.pop('save_path')
         check_save_path(self.save_path)     # a bad folder: exit 2 now, not at shutdown
+        settings = IdentifierSettings.from_values(**values)
+        # an input map with raw sensors: each message a step of the raw-sensor filter
+        # (ros/raw_live.py, session/raw_session.py); the rest of this class is the odometry path
+        self.raw = RawLive(self, settings) if has_raw_sensors(settings) else None
+        if self.raw is not None:
+            return
         # ParameterError names a bad parameter; an 'auto' choice and the noise learning's
         # re-runs run in worker threads, so that the callbacks go on taking (and keeping)
         # messages while they run
-        self.session = IdentSession(IdentifierSettings.from_values(**values),
-                                    auto_runner=run_in_thread)
+        self.session = IdentSession(settings, auto_runner=run_in_thread)
         self._reruns_seen = 0      # noise re-runs already announced (_noise_news)
         self._warn_limit = WarningLimiter(WARN_THROTTLE_S, time.monotonic)
         self._error_limit = WarningLimiter(ERROR_THROTTLE_S, time.monotonic)
@@ -627,6 +639,13 @@ class IdentifierNode(Node):
         """On shutdown: write save_path if set, and log the final estimate. False when the
         file could not be written (the process then exits 2: a mission's estimate lost is
         no success)."""
+        if self.raw is not None:
+            self._final_log('INFO', self.raw.final_line())
+            if not self.save_path:
+                return True
+            ok, message = self.raw.save()
+            self._final_log('INFO' if ok else 'ERROR', message)
+            return ok
         est, cov = self.session.best()
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         counters = self.session.counters

@@ -300,8 +300,9 @@ class InputMap:
             if e.type not in FUSED_TYPES:
                 raise InputMapError(
                     f'{self.where}: input {e.name!r} ({e.type}): raw sensors are identified '
-                    'offline: identify --bag BAG --input-map MAP (docs/your_data.md); the live '
-                    'node fuses a nav_msgs/msg/Odometry')
+                    'by the raw-sensor filter (the identifier node with this map, identify '
+                    '--bag BAG --input-map MAP: docs/raw_sensors.md), not by the odometry '
+                    'session, which fuses a nav_msgs/msg/Odometry')
         fed = self.fed()
         missing = [ACTUATORS[i] for i in vehicle_actuators(vehicle) if i not in fed]
         if missing:

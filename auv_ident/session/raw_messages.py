@@ -20,15 +20,18 @@ Covariances: a ROS covariance whose first entry is -1 ("not provided") or that i
 passed as None, so the filter uses its default noise for that channel group.
 """
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from auv_ident.core.filter.raw import RawMeasurement
+from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig
+from auv_ident.core.model import raw_sensors as rs
 from auv_ident.session.input_map import (
     DVL,
     IMU,
     InputEntry,
+    InputMap,
     InputMapError,
     NAVSAT,
     POSE,
@@ -150,3 +153,22 @@ def raw_record(entry: InputEntry, msg: Any, t: float,
         return RawMeasurement('position', t, pos, _cov(c, 3), entry.name)
     raise InputMapError(f'input {entry.name!r} ({entry.type}): not a raw-sensor type this '
                         'reader converts (' + ', '.join(RAW_TYPES) + ')')
+
+
+def raw_sensor_config(input_map: InputMap,
+                      mountings: dict[str, Any] | None = None) -> RawSensorConfig:
+    """RawSensorConfig of the map's sensors: each one's mounting (by input name; the map's own,
+    or ``mountings``, input name -> the map's Mounting type, where a bag's /tf_static was merged
+    in by offline/tf_static.py), the DVL's reference, the pressure sensor's density (kg/m^3),
+    gravity (m/s^2) and surface pressure (Pa)."""
+    given = mountings if mountings is not None else {e.name: e.mounting for e in input_map.sensors}
+    cfg = RawSensorConfig(mountings={
+        name: rs.Mounting(np.array(m.lever_arm, dtype=float), m.matrix)
+        for name, m in given.items()})
+    for e in input_map.sensors:
+        if e.type == DVL:
+            cfg = replace(cfg, dvl_reference=e.option('reference'))
+        elif e.type == PRESSURE:
+            cfg = replace(cfg, rho=float(e.option('density')), g=float(e.option('gravity')),
+                          p_surface=float(e.option('surface_pressure')))
+    return cfg

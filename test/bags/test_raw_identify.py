@@ -16,8 +16,10 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConfig
+# the example bag's message writer (python -m auv_ident.offline.raw_example)
+from auv_ident.offline.raw_example import record_message as _message
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
-from auv_ident.offline.sim_bag import _header, _STORE, joint_state_msg, write_message_bag
+from auv_ident.offline.sim_bag import _header, _STORE, write_message_bag
 from auv_ident.offline.tf_static import tf_mountings
 from auv_ident.session.input_map import InputMapError, parse_input_map
 from auv_ident.vehicles import load_vehicle
@@ -27,43 +29,6 @@ NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
 EPOCH = 1_700_000_000 * 10**9
 TOPICS = {'/imu': 'sensor_msgs/msg/Imu', '/dvl': 'geometry_msgs/msg/TwistWithCovarianceStamped',
           '/pressure': 'sensor_msgs/msg/FluidPressure', '/actuators': 'sensor_msgs/msg/JointState'}
-
-
-def _v3(v):
-    return T['geometry_msgs/msg/Vector3'](x=float(v[0]), y=float(v[1]), z=float(v[2]))
-
-
-def _cov(c, n, m=None):
-    out = np.zeros((m or n) ** 2)
-    if c is not None:
-        full = np.zeros((m or n, m or n))
-        full[:n, :n] = np.asarray(c, dtype=float).reshape(n, n)
-        out = full.ravel()
-    return out
-
-
-def _message(r):
-    ns = EPOCH + int(round(r.t * 1e9))
-    h = _header(ns, '')
-    if r.kind == 'command':
-        return '/actuators', ns, joint_state_msg(ns, r.values)
-    if r.kind == 'imu':
-        c = np.zeros((6, 6)) if r.covariance is None else r.covariance
-        q = r.values[:4]
-        return '/imu', ns, T['sensor_msgs/msg/Imu'](
-            header=h, orientation=T['geometry_msgs/msg/Quaternion'](
-                x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
-            orientation_covariance=c[:3, :3].ravel().copy(), angular_velocity=_v3(r.values[4:]),
-            angular_velocity_covariance=c[3:, 3:].ravel().copy(),
-            linear_acceleration=_v3([0, 0, 0]), linear_acceleration_covariance=np.zeros(9))
-    if r.kind == 'dvl':
-        return '/dvl', ns, T['geometry_msgs/msg/TwistWithCovarianceStamped'](
-            header=h, twist=T['geometry_msgs/msg/TwistWithCovariance'](
-                twist=T['geometry_msgs/msg/Twist'](linear=_v3(r.values), angular=_v3([0, 0, 0])),
-                covariance=_cov(r.covariance, 3, 6)))
-    return '/pressure', ns, T['sensor_msgs/msg/FluidPressure'](
-        header=h, fluid_pressure=float(r.values[0]),
-        variance=0.0 if r.covariance is None else float(r.covariance[0, 0]))
 
 
 def _map(cfg, drop=()):

@@ -157,7 +157,7 @@ def test_a_map_that_does_not_fit_the_vehicle_is_refused(tmp_path):
     assert imu.mounting.lever_arm == (0.5, -0.1, 0.2)
     R = imu.mounting.matrix
     assert np.allclose(R @ [1, 0, 0], [0, -1, 0])    # sensor x = body left = FRD -y
-    with pytest.raises(InputMapError, match="input 'imu' .*identified offline"):
+    with pytest.raises(InputMapError, match="input 'imu' .*raw-sensor filter"):
         IdentSession(IdentifierSettings.from_values(input_map=str(path)))
     with pytest.raises(InputMapError, match="input map 'nope': no file"):
         IdentSession(IdentifierSettings.from_values(input_map='nope'))
@@ -275,7 +275,7 @@ def test_the_documented_example_maps():
     assert set(maps) == {'joint_names', 'per_fin_topics', 'raw_sensors', 'stonefish_setpoints'}
     for name, m in maps.items():
         if name == 'raw_sensors':
-            with pytest.raises(InputMapError, match="input 'imu' .*identified offline"):
+            with pytest.raises(InputMapError, match="input 'imu' .*raw-sensor filter"):
                 m.check_vehicle(nps)
             assert {e.type for e in m.sensors} == {
                 'sensor_msgs/msg/Imu', 'geometry_msgs/msg/TwistWithCovarianceStamped',

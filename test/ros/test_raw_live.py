@@ -1,0 +1,112 @@
+"""The live identifier node with a raw-sensor input map (ros/raw_live.py, session/raw_session.py):
+fed a raw bag's messages in the bag's order, it publishes the estimates of identify --bag's
+first EKF pass (identify_raw with passes=1 over offline/raw_bag.py's records of that bag)."""
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure, Imu, JointState
+
+from auv_ident.bags.reader import read_bag
+from auv_ident.core.filter.augmented import FilterConfig
+from auv_ident.core.identification.raw import identify_raw
+from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
+from auv_ident.offline.raw_example import write_raw_example
+from auv_ident.ros.identifier_node import IdentifierNode
+from auv_ident.session.input_map import load_input_map
+from auv_ident.session.raw_session import RawSession
+from auv_ident.session.settings import IdentifierSettings
+from auv_ident.vehicles import load_vehicle
+
+NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
+LATCHED = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+@pytest.fixture(scope='module')
+def raw_example(tmp_path_factory):
+    d = tmp_path_factory.mktemp('rawlive')
+    return write_raw_example(d, duration=10.0, seed=5)
+
+
+def _offline_first_pass(bag, map_path):
+    imap = load_input_map(str(map_path))
+    v = load_vehicle('nps_auv2')
+    records, _ = raw_bag_records(bag, imap, v)
+    return identify_raw(Model(v, NAMES), FilterConfig(), records, raw_sensor_config(imap),
+                        passes=1), records
+
+
+def _feed(on_input, bag, map_path):
+    imap = load_input_map(str(map_path))
+    by_topic = {e.bag_topic: e.name for e in imap.inputs}
+    events = []
+    for topic, log_ns, msg in read_bag(bag, imap.topic_types):
+        events.append(on_input(by_topic[topic], msg, log_ns))
+    return events
+
+
+def test_raw_session_is_the_offline_first_pass(raw_example):
+    bag, map_path = raw_example
+    ref, records = _offline_first_pass(bag, map_path)
+    s = RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES))
+    events = _feed(s.on_input, bag, map_path)
+    updates = [e for e in events if e.kind == 'update']
+    assert updates and not [e for e in events if e.kind in ('rejected', 'error')]
+    assert len(updates) == sum(n for k, n in ref.fused.items() if k != 'command')
+    np.testing.assert_allclose(updates[-1].estimate, ref.estimate, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(updates[-1].cov, ref.filter_covariance, rtol=1e-7, atol=1e-18)
+    assert s.health().level == 'OK'
+    keys = dict(s.diagnostic_values())
+    assert int(keys['fused_imu']) == ref.fused['imu'] and 'dvl_misalignment' in keys
+
+
+def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_example):
+    bag, map_path = raw_example
+    ref, _ = _offline_first_pass(bag, map_path)
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)), Parameter('coefficients', value=NAMES)])
+    probe = rclpy.create_node('probe', context=ctx)
+    try:
+        subs = {s.topic_name: s.msg_type for s in node.raw.subscriptions}
+        assert subs['/imu'] is Imu and subs['/pressure'] is FluidPressure
+        assert subs['/actuators'] is JointState and len(subs) == 4
+        estimates, diags = [], []
+        probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+        probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        events = _feed(node.raw.on_input, bag, map_path)
+        last = [e for e in events if e.kind == 'update'][-1]
+        np.testing.assert_allclose(last.estimate, ref.estimate, rtol=1e-12, atol=0)
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and not (
+                estimates and list(estimates[-1].position) == list(last.estimate) and diags):
+            ex.spin_once(timeout_sec=0.05)
+        assert list(estimates[-1].name) == NAMES
+        assert list(estimates[-1].position) == list(last.estimate)
+        st = diags[-1].status[0]
+        assert st.name == 'auv_ident identifier' and st.message in ('converging', 'converged')
+        assert node.shutdown_save()
+    finally:
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_raw_session_document_before_and_after_data(raw_example, tmp_path):
+    bag, map_path = raw_example
+    s = RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES))
+    doc = s.document()
+    assert doc['steps'] == 0 and doc['stamp_ns'] is None and doc['coefficients'] == NAMES
+    assert s.health().message == 'waiting for data'
+    _feed(s.on_input, bag, map_path)
+    doc = s.document()
+    assert doc['input_mode'] == 'raw sensors' and doc['estimate'] == list(s.last_good.estimate)
+    assert set(doc['sensor_errors']) >= {'gyro_bias_p', 'dvl_misalignment'}
