@@ -90,6 +90,31 @@ class Thruster:
         return min(max(f, -self.thrust_max_reverse), self.thrust_max_forward)
 
 
+# Columns of the thruster table the compiled model reads (one row per thruster, the file's
+# order; hydrodynamics._thrusters): its configuration column [d; r x d], whether it follows a
+# thrust curve (1) or takes the force itself (0), and the curve's constants
+T_COL = 0               # 0..5
+T_CURVE, T_NEUTRAL, T_CMAX, T_DEAD = 6, 7, 8, 9
+T_FWD1, T_FWD2, T_REV1, T_REV2, T_FMAX_FWD, T_FMAX_REV = 10, 11, 12, 13, 14, 15
+THR_COLS = 16
+
+
+def thruster_table(thrusters: Sequence[Thruster]) -> np.ndarray:
+    """(n, THR_COLS) float: the thrusters as the compiled model reads them (T_* columns)."""
+    out = np.zeros((len(thrusters), THR_COLS))
+    for i, t in enumerate(thrusters):
+        out[i, T_COL:T_COL + 6] = t.column
+        out[i, T_CURVE] = 0.0 if t.command == 'force' else 1.0
+        out[i, T_NEUTRAL] = t.neutral
+        out[i, T_CMAX] = t.command_max
+        out[i, T_DEAD] = t.dead_band
+        out[i, T_FWD1], out[i, T_FWD2] = t.forward
+        out[i, T_REV1], out[i, T_REV2] = t.reverse
+        out[i, T_FMAX_FWD] = t.thrust_max_forward
+        out[i, T_FMAX_REV] = t.thrust_max_reverse
+    return out
+
+
 def configuration_matrix(thrusters: Sequence[Thruster]) -> np.ndarray:
     """(6, n) thrust configuration matrix T (module docstring): tau = T f."""
     if not thrusters:

@@ -17,8 +17,22 @@ import numpy as np
 import yaml
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
-from auv_ident.core.model.thrusters import Thruster, thrusters_from_file
+from auv_ident.core.model.state import (
+    ANGULAR,
+    DOF_STATES,
+    LINEAR,
+    N_INPUT,
+    N_NU,
+    N_STATE,
+    NU_NAMES,
+    State,
+)
+from auv_ident.core.model.thrusters import (
+    THR_COLS,
+    Thruster,
+    thruster_table,
+    thrusters_from_file,
+)
 
 EQUATIONS = ('X', 'Y', 'Z', 'K', 'M', 'N')
 
@@ -67,10 +81,23 @@ class Coefficient:
     factors: tuple      # factor indices into FACTORS, or ('dot', column) for added mass
     scale: float        # (rho/2) L^k, or 1 for dimensional files
     added_mass_col: int = -1   # 0..5 when this is an added-mass coefficient
+    # the equations (0..5) whose thruster force this coefficient scales (multiplier
+    # `thrusters`: a thrust gain, core/model/thrusters.py); empty for every other coefficient
+    gain_rows: tuple = ()
 
     @property
     def is_added_mass(self) -> bool:
         return self.added_mass_col >= 0
+
+    @property
+    def is_thrust_gain(self) -> bool:
+        return bool(self.gain_rows)
+
+    @property
+    def has_monomial(self) -> bool:
+        """Whether the coefficient is a term of the monomial table (not added mass, not a
+        thrust gain)."""
+        return not (self.is_added_mass or self.is_thrust_gain)
 
 
 @dataclass
@@ -99,6 +126,23 @@ class Vehicle:
     free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
     # the file's `thrusters:` (core/model/thrusters.py), empty for a fin or rudder vehicle
     thrusters: tuple[Thruster, ...] = ()
+    # (n, THR_COLS) the thrusters as the compiled model reads them (thrusters.thruster_table)
+    thr: np.ndarray = field(default_factory=lambda: np.zeros((0, THR_COLS)))
+    # (6,) int, per equation X..N the index of the coefficient scaling its thruster force
+    # (a thrust gain, multiplier `thrusters`), or -1 (gain 1)
+    gain_idx: np.ndarray = field(default_factory=lambda: -np.ones(N_NU, dtype=np.int64))
+
+    @property
+    def hovers(self) -> bool:
+        """A thruster vehicle with no main propeller (ROV, hovering AUV): it has no cruise, its
+        runs start at rest and its trim is hovering (thrusters at neutral)."""
+        return bool(self.thrusters) and self.par[P_PROP] == PROPULSION_MODELS['none']
+
+    @property
+    def n_inputs(self) -> int:
+        """Length of this vehicle's input vector: the N_INPUT channels of state.Input, then one
+        command per thruster in the file's order (docs/vehicles.md, Thrusters)."""
+        return N_INPUT + len(self.thrusters)
 
     @property
     def held(self) -> np.ndarray:
@@ -152,6 +196,8 @@ class Vehicle:
         """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
         value is scale * prime value."""
         c = self.coefficients[self.index(name)]
+        if c.is_thrust_gain:
+            return 1.0          # a ratio to the file's thrust curves in either scaling
         return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
 
 
@@ -388,11 +434,15 @@ def _build(raw: object, path: str) -> Vehicle:
               if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
               for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
     limits = raw.get('limits') or {}
-    fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
-                         default=float('nan')) for key in ('fin_rad', 'n_rpm'))
-    free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     thrusters, thruster_problems = thrusters_from_file(raw.get('thrusters'), where)
     problems.extend(thruster_problems)
+    # a thruster vehicle has no fins and no main propeller: its limits are 0 unless given
+    # (the fin and shaft-speed channels then saturate to 0 and push nothing)
+    fin, nmax = ((checked(_num, limits, key, where + ' limits', positive=True,
+                          default=float('nan'))
+                  if key in limits or not raw.get('thrusters') else 0.0)
+                 for key in ('fin_rad', 'n_rpm'))
+    free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     if problems:
         raise VehicleFileProblems(where, problems)
 
@@ -421,7 +471,11 @@ def _build(raw: object, path: str) -> Vehicle:
         cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
                     else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
-        free_states=free, thrusters=tuple(thrusters))
+        free_states=free, thrusters=tuple(thrusters), thr=thruster_table(thrusters),
+        gain_idx=_gain_index(coefs, where))
+    if v.gain_idx.max() >= 0 and not thrusters:
+        raise ConfigError(f'{where}: a thrust gain (multiplier `thrusters`) without a '
+                          '`thrusters:` list scales nothing')
     _check_finite_terms(v, where)
     M = v.mass_matrix()
     if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):
@@ -500,6 +554,29 @@ def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
             for name, entry in craw.items()]
 
 
+def _gain_index(coefs: list[Coefficient], where: str) -> np.ndarray:
+    """(6,) int: per equation the thrust gain coefficient scaling its thruster force, or -1."""
+    gain = -np.ones(N_NU, dtype=np.int64)
+    for ci, c in enumerate(coefs):
+        for e in c.gain_rows:
+            if gain[e] >= 0:
+                raise ConfigError(f'{where}: thrust gains {coefs[gain[e]].name} and {c.name} '
+                                  f'both scale the thruster force of {EQUATIONS[e]}')
+            gain[e] = ci
+    return gain
+
+
+def _thrust_gain(name: str, value: float, eq: object, cw: str) -> Coefficient:
+    """A thrust gain `NAME: [value, EQUATIONS, 0, thrusters]`: value (dimensionless, 1 = the
+    file's thrust curves) times the thrusters' force in each equation named (e.g. XYZKMN for
+    one gain of all, XY for the horizontal thrusters' plane)."""
+    rows = tuple(EQUATIONS.index(a) for a in str(eq) if a in EQUATIONS)
+    if not rows or len(set(rows)) != len(str(eq)):
+        raise ConfigError(f'{cw}: a thrust gain names the equations it scales, letters of '
+                          f'{"".join(EQUATIONS)} each once (XYZKMN: all), got {eq!r}')
+    return Coefficient(name, value, rows[0], 0, (), 1.0, gain_rows=rows)
+
+
 def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scaling: str,
                  free: np.ndarray, dofs: object) -> Coefficient:
     """One `name: [value, equation, k, multiplier]` entry (cw: where, for the messages)."""
@@ -512,6 +589,8 @@ def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scalin
         raise ConfigError(f'{cw}: value {value!r} is not a number') from None
     if not np.isfinite(value):
         raise ConfigError(f'{cw}: value {value!r} is not finite')
+    if str(mult).strip() == 'thrusters':
+        return _thrust_gain(name, value, eq, cw)
     if eq not in EQUATIONS:
         raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
     if not isinstance(k, int) or not 0 <= k <= 6:
@@ -536,6 +615,8 @@ def _term_tables(
         if c.is_added_mass:
             am_i.append((c.equation, c.added_mass_col, ci))
             am_s.append(c.scale)
+        elif c.is_thrust_gain:
+            continue            # applied by the thruster kernel (hydrodynamics._thrusters)
         else:
             f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))
             terms_i.append([c.equation, ci] + f)
