@@ -43,7 +43,7 @@ from auv_ident.core.identification.uncertainty import (
     with_gaps,
 )
 from auv_ident.core.model.current import MAX_CURRENT_STD
-from auv_ident.core.model.state import INPUT_NAMES, State, STATE_NAMES
+from auv_ident.core.model.state import State, STATE_NAMES
 from auv_ident.core.model.vehicle import EQUATIONS, Vehicle
 
 XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
@@ -288,7 +288,7 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
             gap = 4 * max(lags, LJUNG_BOX_LAGS) + 1
             white = with_gaps(split_rows(white, fit.bounds), gap)
             U = with_gaps(split_rows(U, fit.bounds), gap)
-        xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
+        xcorr = input_correlation(white, U, lags, STATE_NAMES, vehicle.input_names)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
                                         cov if information_cov is None else information_cov)
     diagnosis = Diagnosis(identifiability=verdicts,

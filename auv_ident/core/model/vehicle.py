@@ -20,6 +20,7 @@ from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import (
     ANGULAR,
     DOF_STATES,
+    INPUT_NAMES,
     LINEAR,
     N_INPUT,
     N_NU,
@@ -131,6 +132,11 @@ class Vehicle:
     # (6,) int, per equation X..N the index of the coefficient scaling its thruster force
     # (a thrust gain, multiplier `thrusters`), or -1 (gain 1)
     gain_idx: np.ndarray = field(default_factory=lambda: -np.ones(N_NU, dtype=np.int64))
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """Names of the input vector's entries: state.INPUT_NAMES, then the thrusters'."""
+        return INPUT_NAMES + tuple(t.name for t in self.thrusters)
 
     @property
     def hovers(self) -> bool:

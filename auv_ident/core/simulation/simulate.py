@@ -147,7 +147,7 @@ def simulate(model: Model, maneuver: str = 'zigzag', duration: float = 200.0, T:
     return Run(model.vehicle.name, str(maneuver), T, seed, t, x, y, u, noise_std,
                np.zeros(6) if process_std is None else np.asarray(process_std, float),
                None if vc is None else vc.copy(), velocity_reference,
-               INPUT_NAMES + tuple(th.name for th in model.vehicle.thrusters))
+               model.vehicle.input_names)
 
 
 def save_run_csv(run: Run, path: str) -> None:
