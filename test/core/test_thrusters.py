@@ -228,18 +228,23 @@ def test_dead_band_and_saturation_in_the_model():
     assert tau[2] == pytest.approx(4 * 51.4, rel=1e-12)
 
 
-def test_thrust_gain_scales_the_wrench_and_its_jacobian_is_analytic():
-    m = _rov_model(['thrust_gain', 'X_udot', 'Z_ww'])
+def test_thrust_gains_scale_each_side_of_the_curves_and_their_jacobian_is_analytic():
+    m = _rov_model(['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Z_ww'])
     x = np.array([0.2, -0.1, 0.15, 0.05, -0.02, 0.3, 0, 0, 2, 0.05, -0.03, 1.0])
     ui = _pwm([1700, 1350, 1620, 1440], [1560, 1380, 1900, 1100])
     th = m.theta_file
     xd, A, Bt = m.jacobians(x, ui, th)
     M = m.vehicle.mass_matrix()
+    rest = m.f(x, _pwm([1500] * 4, [1500] * 4), th)[:6]
+    # the forward side 10 % stronger: M nu_dot grows by 0.1 times the forward thrusts' wrench
+    from auv_ident.core.model.thrusters import configuration_matrix, steady_thrusts
+    f = steady_thrusts(m.vehicle.thrusters, ui[7:])
+    T = configuration_matrix(m.vehicle.thrusters)
     th2 = th.copy()
     th2[0] = 1.1
-    # 10 % more thrust: M nu_dot grows by 0.1 tau
-    tau = M @ (xd[:6] - m.f(x, _pwm([1500] * 4, [1500] * 4), th)[:6])
-    assert M @ (m.f(x, ui, th2)[:6] - xd[:6]) == pytest.approx(0.1 * tau, rel=1e-9, abs=1e-9)
+    assert M @ (m.f(x, ui, th2)[:6] - xd[:6]) == pytest.approx(
+        0.1 * T @ np.where(f > 0, f, 0.0), rel=1e-9, abs=1e-9)
+    assert M @ (xd[:6] - rest) == pytest.approx(T @ f, rel=1e-9, abs=1e-9)
     for j in range(m.p):
         h = 1e-6 * max(1.0, abs(th[j]))
         tp, tm = th.copy(), th.copy()
@@ -266,9 +271,16 @@ def test_thruster_vehicle_needs_its_thruster_commands():
 def test_a_thrust_gain_names_its_equations(tmp_path):
     from auv_ident.core.errors import ConfigError
     text = open(resolve_vehicle_path('bluerov2_heavy'), encoding='utf-8').read()
-    bad = text.replace('thrust_gain: [1.0, XYZKMN, 0, thrusters]',
-                       'thrust_gain: [1.0, XXY, 0, thrusters]')
+    bad = text.replace('thrust_gain_fwd: [1.0, XYZKMN, 0, thrusters_forward]',
+                       'thrust_gain_fwd: [1.0, XXY, 0, thrusters_forward]')
     p = tmp_path / 'rov.yaml'
     p.write_text(bad)
     with pytest.raises(ConfigError, match='each once'):
+        vehicle_from_file(str(p))
+    # a gain of both sides on top of the forward one: two gains of one force
+    both = text.replace('  thrust_gain_rev: [1.0, XYZKMN, 0, thrusters_reverse]',
+                        '  thrust_gain_rev: [1.0, XYZKMN, 0, thrusters_reverse]\n'
+                        '  thrust_gain: [1.0, Z, 0, thrusters]')
+    p.write_text(both)
+    with pytest.raises(ConfigError, match='both scale the forward thrust in Z'):
         vehicle_from_file(str(p))

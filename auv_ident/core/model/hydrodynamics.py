@@ -157,7 +157,8 @@ n_coef : int, number of vehicle coefficients (the current's place in c0)
 held : (h,) int, the states the vehicle holds (core/model/planar.py; empty for 6 DOF)
 thr : (n, thrusters.THR_COLS) the thrusters (empty for a fin vehicle); their commands are
     u_in[N_INPUT:N_INPUT + n]
-gain_idx : (6,) int, per equation the index in c0 of its thrust gain, or -1 (gain 1)
+gain_idx : (2, 6) int, per curve side (forward, reverse) and equation the index in c0 of
+    its thrust gain, or -1 (gain 1)
 """
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
@@ -243,25 +244,33 @@ def _thrust(thr, i, cmd):
 
 @kernel
 def _thrusters(ui, c, cm, want_jac, xdot, Bt):
-    """The thrusters' wrench tau = T f(commands) (thrusters.py) into xdot[0:6], each equation's
-    row times its thrust gain (cm.gain_idx; 1 where none), and d/d(gain) = tau_row into Bt for
-    a gain in theta. The commands are inputs, so there is no df/dx."""
+    """The thrusters' wrench tau = T f(commands) (thrusters.py) into xdot[0:6]: per equation
+    the forward thrusts' part times its gain and the reverse thrusts' part times its gain
+    (cm.gain_idx; 1 where none), and d/d(gain) = that part into Bt for a gain in theta. The
+    commands are inputs, so there is no df/dx."""
     thr = cm.thr
     n = thr.shape[0]
     for e in range(N_NU):
-        tau = 0.0
+        tau_f = 0.0
+        tau_r = 0.0
         for i in range(n):
             col = thr[i, e]
             if col != 0.0:
-                tau += col * _thrust(thr, i, ui[N_INPUT + i])
-        gi = cm.gain_idx[e]
-        if gi < 0:
-            xdot[e] += tau
-        else:
-            xdot[e] += c[gi] * tau
-            j = cm.theta_pos[gi]
-            if want_jac and j >= 0:
-                Bt[e, j] += tau
+                f = _thrust(thr, i, ui[N_INPUT + i])
+                if f > 0.0:
+                    tau_f += col * f
+                else:
+                    tau_r += col * f
+        for side in range(2):
+            tau = tau_f if side == 0 else tau_r
+            gi = cm.gain_idx[side, e]
+            if gi < 0:
+                xdot[e] += tau
+            else:
+                xdot[e] += c[gi] * tau
+                j = cm.theta_pos[gi]
+                if want_jac and j >= 0:
+                    Bt[e, j] += tau
 
 
 @kernel

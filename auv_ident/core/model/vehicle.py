@@ -83,8 +83,10 @@ class Coefficient:
     scale: float        # (rho/2) L^k, or 1 for dimensional files
     added_mass_col: int = -1   # 0..5 when this is an added-mass coefficient
     # the equations (0..5) whose thruster force this coefficient scales (multiplier
-    # `thrusters`: a thrust gain, core/model/thrusters.py); empty for every other coefficient
+    # `thrusters`, `thrusters_forward` or `thrusters_reverse`: a thrust gain,
+    # core/model/thrusters.py); empty for every other coefficient
     gain_rows: tuple = ()
+    gain_sides: tuple = ()      # the curve sides it scales: 0 forward, 1 reverse
 
     @property
     def is_added_mass(self) -> bool:
@@ -129,9 +131,9 @@ class Vehicle:
     thrusters: tuple[Thruster, ...] = ()
     # (n, THR_COLS) the thrusters as the compiled model reads them (thrusters.thruster_table)
     thr: np.ndarray = field(default_factory=lambda: np.zeros((0, THR_COLS)))
-    # (6,) int, per equation X..N the index of the coefficient scaling its thruster force
-    # (a thrust gain, multiplier `thrusters`), or -1 (gain 1)
-    gain_idx: np.ndarray = field(default_factory=lambda: -np.ones(N_NU, dtype=np.int64))
+    # (2, 6) int, per curve side (forward, reverse) and equation X..N the index of the
+    # coefficient scaling that side's thruster force in that equation (a thrust gain), or -1
+    gain_idx: np.ndarray = field(default_factory=lambda: -np.ones((2, N_NU), dtype=np.int64))
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -561,26 +563,35 @@ def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
 
 
 def _gain_index(coefs: list[Coefficient], where: str) -> np.ndarray:
-    """(6,) int: per equation the thrust gain coefficient scaling its thruster force, or -1."""
-    gain = -np.ones(N_NU, dtype=np.int64)
+    """(2, 6) int: per curve side and equation the thrust gain coefficient scaling that
+    thruster force, or -1."""
+    gain = -np.ones((2, N_NU), dtype=np.int64)
     for ci, c in enumerate(coefs):
-        for e in c.gain_rows:
-            if gain[e] >= 0:
-                raise ConfigError(f'{where}: thrust gains {coefs[gain[e]].name} and {c.name} '
-                                  f'both scale the thruster force of {EQUATIONS[e]}')
-            gain[e] = ci
+        for side in c.gain_sides:
+            for e in c.gain_rows:
+                if gain[side, e] >= 0:
+                    raise ConfigError(f'{where}: thrust gains {coefs[gain[side, e]].name} and '
+                                      f'{c.name} both scale the {GAIN_SIDES[side]} thrust in '
+                                      f'{EQUATIONS[e]}')
+                gain[side, e] = ci
     return gain
 
 
-def _thrust_gain(name: str, value: float, eq: object, cw: str) -> Coefficient:
+GAIN_SIDES = ('forward', 'reverse')
+# a thrust gain's multiplier -> the curve sides it scales
+GAIN_MULTIPLIERS = {'thrusters': (0, 1), 'thrusters_forward': (0,), 'thrusters_reverse': (1,)}
+
+
+def _thrust_gain(name: str, value: float, eq: object, sides: tuple, cw: str) -> Coefficient:
     """A thrust gain `NAME: [value, EQUATIONS, 0, thrusters]`: value (dimensionless, 1 = the
     file's thrust curves) times the thrusters' force in each equation named (e.g. XYZKMN for
-    one gain of all, XY for the horizontal thrusters' plane)."""
+    one gain of all, XY for the horizontal thrusters' plane); `thrusters_forward` and
+    `thrusters_reverse` scale one side of the curves (f > 0, f < 0) only."""
     rows = tuple(EQUATIONS.index(a) for a in str(eq) if a in EQUATIONS)
     if not rows or len(set(rows)) != len(str(eq)):
         raise ConfigError(f'{cw}: a thrust gain names the equations it scales, letters of '
                           f'{"".join(EQUATIONS)} each once (XYZKMN: all), got {eq!r}')
-    return Coefficient(name, value, rows[0], 0, (), 1.0, gain_rows=rows)
+    return Coefficient(name, value, rows[0], 0, (), 1.0, gain_rows=rows, gain_sides=sides)
 
 
 def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scaling: str,
@@ -595,8 +606,8 @@ def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scalin
         raise ConfigError(f'{cw}: value {value!r} is not a number') from None
     if not np.isfinite(value):
         raise ConfigError(f'{cw}: value {value!r} is not finite')
-    if str(mult).strip() == 'thrusters':
-        return _thrust_gain(name, value, eq, cw)
+    if str(mult).strip() in GAIN_MULTIPLIERS:
+        return _thrust_gain(name, value, eq, GAIN_MULTIPLIERS[str(mult).strip()], cw)
     if eq not in EQUATIONS:
         raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
     if not isinstance(k, int) or not 0 <= k <= 6:
