@@ -181,7 +181,8 @@ def session_result(session, updates, settings=None):
 
 def bag_settings(path):
     """Raw identifier settings a bag's metadata custom_data carries (bag_custom_data): the
-    vehicle and frame ('auv_ident.vehicle', 'auv_ident.frame'), the velocity reference and the
+    vehicle, frame and input map ('auv_ident.vehicle', 'auv_ident.frame',
+    'auv_ident.input_map': a thruster vehicle's), the velocity reference and the
     sensor noise 1-sigma of a bag our simulator wrote ('auv_ident.velocity_reference',
     'auv_ident.noise_std': 12 positive numbers, else not taken). The defaults under what a
     caller gives (IdentifierSettings.over)."""
@@ -192,6 +193,7 @@ def metadata_settings(meta):
     """bag_settings of custom data already read (bag_custom_data)."""
     raw = {name: meta[key] for name, key in (('vehicle', 'auv_ident.vehicle'),
                                              ('frame', 'auv_ident.frame'),
+                                             ('input_map', 'auv_ident.input_map'),
                                              ('velocity_reference',
                                               'auv_ident.velocity_reference'))
            if meta.get(key)}
