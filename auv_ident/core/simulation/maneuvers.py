@@ -29,6 +29,8 @@ PWM_i = 1500 + 400 sum_k F_ik s_k, saturated), and sent on change:
 - `surge`, `sway`, `heave`, `yaw`: that stick alone: steps of seeded amplitude (held 4-9 s, a
   rest of 3-6 s after each, either sign) for about 100 s, then a sweep (a chirp 0.05 -> 0.5 Hz
   over 60 s) and a rest;
+- `steps` (the validation manoeuvre of `report`): steps of each stick in turn, 50 s each,
+  no sweeps, repeated;
 - `tank` (and `ident` for such a vehicle): a tank session, each of the four above in turn,
   then combined steps of two sticks at once (surge with yaw or sway, sway with yaw, heave with
   yaw), seeded;
@@ -51,7 +53,7 @@ if TYPE_CHECKING:
 
 DEG = np.pi / 180.0
 MANEUVERS = ('ident', 'zigzag', 'steps', 'prbs', 'roll')
-THRUSTER_MANEUVERS = ('tank', 'surge', 'sway', 'heave', 'yaw')
+THRUSTER_MANEUVERS = ('tank', 'surge', 'sway', 'heave', 'yaw', 'steps')
 STICKS = {'surge': 0, 'sway': 1, 'heave': 2, 'yaw': 5}     # stick -> equation X Y Z K M N
 # stick amplitudes a pilot uses in a tank (fraction of full stick): up to about 0.5 m/s in
 # surge and 0.4 m/s in sway. Not faster: the BlueROV2 Heavy's added-mass (Munk) moments
@@ -215,6 +217,11 @@ def sticks(name: str, t: np.ndarray, seed: int = 0) -> np.ndarray:
     if name in STICKS:
         for k in range(int(np.ceil((t[-1] + 1e-9) / 180.0)) if len(t) else 0):
             s[:, STICKS[name]] += _one_stick(name, t, 180.0 * k, rng)
+    elif name == 'steps':
+        for k in range(int(np.ceil((t[-1] + 1e-9) / 50.0)) if len(t) else 0):
+            stick = tuple(STICKS)[k % len(STICKS)]
+            s[:, STICKS[stick]] += _stick_steps(rng, t, 50.0 * k, 50.0 * (k + 1),
+                                                STICK_LEVELS[stick])
     elif name in ('tank', 'ident'):
         block = 110.0 + SWEEP[2]                       # steps + rest + sweep
         t_one = 0.0
