@@ -17,6 +17,7 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.model.state import INPUT_NAMES, N_INPUT
 from auv_ident.core.model.vehicle import Vehicle
@@ -161,7 +162,7 @@ class CommandHolder:
     """
 
     def __init__(self, fed: Iterable[int], limits: tuple[float, float],
-                 rest: Sequence[float] | None = None,
+                 rest: ArrayLike | None = None,
                  names: Sequence[str] = INPUT_NAMES) -> None:
         self.fed = tuple(sorted(fed))
         self.fin_limit, self.shaft_limit = limits
