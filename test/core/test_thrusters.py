@@ -284,3 +284,13 @@ def test_a_thrust_gain_names_its_equations(tmp_path):
     p.write_text(both)
     with pytest.raises(ConfigError, match='both scale the forward thrust in Z'):
         vehicle_from_file(str(p))
+
+
+def test_a_hovering_vehicle_gets_a_pilots_advice():
+    from auv_ident.core.identification.diagnosis import excitation_advice
+    from auv_ident.vehicles import load_vehicle
+    rov, auv = load_vehicle('bluerov2_heavy'), load_vehicle('remus100')
+    assert excitation_advice(rov, 'X_uu').startswith('surge stick steps')
+    assert excitation_advice(rov, 'Z_wdot').startswith('quick stick reversals')
+    assert 'forward and the reverse side' in excitation_advice(rov, 'thrust_gain_rev')
+    assert excitation_advice(auv, 'X_uu').startswith('speed changes')   # a fin AUV's as before
