@@ -16,8 +16,8 @@ Thrust curve of one thruster, from its command c in the unit its `command:` name
   command's distance from neutral e = c - c0 (c0 = `neutral`: 1500 us for pwm_us, 0 otherwise)
   is saturated to +-`command_max` (the ESC's range), a dead band of half width `dead_band` around
   neutral gives no thrust (the ESC's or the blades' stall zone: T200 at 16 V, 1472-1528 us
-  in Blue Robotics' table), and beyond it e_d = e - sign(e) dead_band drives a polynomial with separate forward and reverse
-  coefficients (the propeller is not symmetric):
+  in Blue Robotics' table), and beyond it e_d = e - sign(e) dead_band drives a polynomial
+  with separate forward and reverse coefficients (the propeller is not symmetric):
 
       f = a1 e_d + a2 e_d^2          (e_d > 0, `forward: [a1, a2]`)
       f = a1 e_d - a2 e_d^2          (e_d < 0, `reverse: [a1, a2]`, so f < 0 for a1, a2 > 0)
