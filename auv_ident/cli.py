@@ -557,7 +557,9 @@ def build_parser():
 
     sp = sub.add_parser('simulate', help='simulate a manoeuvre and print a summary')
     vehicle_arg(sp)
-    sp.add_argument('--maneuver', default='zigzag', help='zigzag, steps, prbs, roll or a CSV')
+    sp.add_argument('--maneuver', default='zigzag',
+                    help='zigzag, steps, prbs, roll or a CSV; a thruster vehicle (ROV): tank, '
+                         'surge, sway, heave, yaw, steps')
     sp.add_argument('--duration', type=float, default=200.0, help='s')
     sp.add_argument('--dt', type=float, default=0.05, help='sample time T, s')
     sp.add_argument('--rpm', type=float, default=None, help="shaft speed (vehicle's cruise rpm)")

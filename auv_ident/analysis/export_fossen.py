@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.trim import rest_inputs
 from auv_ident.core.model.vehicle import rigid_body_terms
 from auv_ident.core.simulation.simulate import simulate
 
@@ -77,7 +78,7 @@ def fossen_parts(saved, duration=200.0):
     rb = rigid_body_terms(float(v.raw['mass']), np.asarray(v.raw['r_G'], float),
                           [float(v.raw['inertia'][k]) for k in
                            ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz')])
-    ui = np.zeros(7)
+    ui = rest_inputs(model)     # fins, shaft at 0; a thruster vehicle's thrusters at neutral
     x = np.zeros(12)
     F0 = _restoring_at_rest(v.raw)
     H = np.empty_like(nu)

@@ -22,9 +22,9 @@ from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.glider.vehicle import glider_from_file
 from auv_ident.core.identification.plausibility import is_self_damping
 from auv_ident.core.model.hydrodynamics import Model
-from auv_ident.core.model.state import DOF_STATES, Input, N_INPUT, NU_NAMES, State
+from auv_ident.core.model.state import DOF_STATES, Input, NU_NAMES, State
 from auv_ident.core.model.thrusters import configuration_matrix
-from auv_ident.core.model.trim import initial_state, trim_speed
+from auv_ident.core.model.trim import initial_state, rest_inputs, trim_speed
 from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file
 from auv_ident.core.vehicle_files import file_kind, read_yaml_file, VehicleFileProblems
 from auv_ident.vehicles import resolve_vehicle_path
@@ -107,7 +107,46 @@ def _thruster_checks(vehicle, check):
                               'if the vehicle is meant to')
 
 
+def _eigen_text(eig):
+    return ', '.join(f'{e.real:.3g}' + (f'{e.imag:+.3g}j' if abs(e.imag) > 1e-9 else '')
+                     for e in sorted(eig, key=lambda e: e.real))
+
+
+def _hover_checks(vehicle, check):
+    """A thruster vehicle has no straight run: its trim is hovering at rest, thrusters at
+    neutral; the net weight is what the vertical thrusters hold, and the dynamics at rest
+    (velocities and roll, pitch: their restoring) are linearised there."""
+    model = Model(vehicle)
+    x = initial_state(model, 0.0)
+    u = rest_inputs(model)
+    xdot, A, _ = model.jacobians(x, u)
+    force = np.asarray(model.vehicle.mass_matrix() @ xdot[:6])
+    T = configuration_matrix(vehicle.thrusters)
+    f_max = np.array([min(t.thrust_max_forward, t.thrust(t.neutral + t.command_max))
+                      for t in vehicle.thrusters])
+    reach = np.abs(T[:3]) @ f_max
+    check.facts.append(f'at rest, thrusters neutral: net force X Y Z = {force[0]:+.3g} '
+                       f'{force[1]:+.3g} {force[2]:+.3g} N (the thrusters reach '
+                       f'{reach[0]:.3g} {reach[1]:.3g} {reach[2]:.3g} N)')
+    if np.any(np.abs(force[:3]) > 0.5 * reach):
+        check.errors.append('the thrusters cannot hold the vehicle at rest (its net weight is '
+                            'more than half their reach): check W, B and the thrust curves')
+    keep = [i for i in range(6) if vehicle.free_states[i]]
+    keep += [i for i in (State.PHI, State.THETA) if vehicle.free_states[i]]
+    eig = np.linalg.eigvals(A[np.ix_(keep, keep)])
+    names = ' '.join(NU_NAMES[i] if i < 6 else ('phi', 'theta')[i - State.PHI] for i in keep)
+    check.facts.append(f'eigenvalues at rest ({names}), 1/s: {_eigen_text(eig)}')
+    unstable = [e for e in eig if e.real > 1e-9]
+    if unstable:
+        check.warnings.append(f'{len(unstable)} unstable mode(s) at rest (largest real part '
+                              f'{max(e.real for e in unstable):.3g} 1/s): check the damping '
+                              'signs and BG')
+
+
 def _trim_checks(vehicle, check):
+    if vehicle.hovers:
+        _hover_checks(vehicle, check)
+        return
     model = Model(vehicle)
     try:
         speed = trim_speed(model, vehicle.cruise_rpm)
@@ -116,14 +155,13 @@ def _trim_checks(vehicle, check):
         return
     check.facts.append(f'straight run at cruise_rpm {vehicle.cruise_rpm:g}: u = {speed:.3f} m/s')
     x = initial_state(model, vehicle.cruise_rpm)
-    u = np.zeros(N_INPUT)
+    u = rest_inputs(model)
     u[Input.N_RPM] = vehicle.cruise_rpm
     u[Input.THRUST] = vehicle.cruise_thrust
     free = [i for i in range(6) if vehicle.free_states[i]]
     J = model.jacobians(x, u)[1][np.ix_(free, free)]   # d(nu_dot)/d(nu), analytic
     eig = np.linalg.eigvals(J)
-    text = ', '.join(f'{e.real:.3g}' + (f'{e.imag:+.3g}j' if abs(e.imag) > 1e-9 else '')
-                     for e in sorted(eig, key=lambda e: e.real))
+    text = _eigen_text(eig)
     states = ' '.join(NU_NAMES[i] for i in free)
     check.facts.append(f'eigenvalues of the velocity dynamics ({states}) there, 1/s: {text}')
     unstable = [e for e in eig if e.real > 0]

@@ -12,11 +12,11 @@ resolution. A NavSatFix input without a datum in the map is measured from its fi
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.core.filter.raw import RawMeasurement
 from auv_ident.offline.tf_static import merged_mountings
+from auv_ident.session import raw_messages
 from auv_ident.session.input_map import InputMapError, NAVSAT
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import header_stamp_ns
 from auv_ident.session.raw_messages import navsat_origin, raw_record, RAW_TYPES
-from auv_ident.session import raw_messages
 
 
 def raw_sensor_config(input_map, tf=None):

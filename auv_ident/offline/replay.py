@@ -7,6 +7,7 @@ so the same message sequence gives identical estimates online and offline.
 from collections import Counter
 from dataclasses import dataclass, field
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from auv_ident.bags.reader import bag_topics, BagError, read_bag
 from auv_ident.bags.schema import custom_data_of, read_metadata
 from auv_ident.core.model.state import N_STATE
 from auv_ident.session.estimate_file import estimate_document
-from auv_ident.session.input_map import InputMapError
+from auv_ident.session.input_map import input_maps_dir, InputMapError
 from auv_ident.session.record import median_noise_std, paired, UpdateLog
 from auv_ident.session.session import Health, IdentSession
 from auv_ident.session.settings import IdentifierSettings, ParameterError, vehicle_named
@@ -181,7 +182,9 @@ def session_result(session, updates, settings=None):
 
 def bag_settings(path):
     """Raw identifier settings a bag's metadata custom_data carries (bag_custom_data): the
-    vehicle and frame ('auv_ident.vehicle', 'auv_ident.frame'), the velocity reference and the
+    vehicle, frame and input map ('auv_ident.vehicle', 'auv_ident.frame',
+    'auv_ident.input_map' when it names a map of config/inputs/: a thruster vehicle's), the
+    velocity reference and the
     sensor noise 1-sigma of a bag our simulator wrote ('auv_ident.velocity_reference',
     'auv_ident.noise_std': 12 positive numbers, else not taken). The defaults under what a
     caller gives (IdentifierSettings.over)."""
@@ -201,6 +204,12 @@ def metadata_settings(meta):
         noise = np.zeros(0)
     if noise.shape == (N_STATE,) and np.all(noise > 0):
         raw['noise_std'] = noise
+    shipped = meta.get('auv_ident.input_map', '')
+    if shipped and os.path.sep not in shipped and not shipped.endswith(('.yaml', '.yml')) \
+            and os.path.isfile(os.path.join(input_maps_dir(), shipped + '.yaml')):
+        # a map shipped in config/inputs/ (a thruster vehicle's bag of our simulator); a
+        # path an import recorded may not exist here: the user gives it
+        raw['input_map'] = shipped
     return raw
 
 

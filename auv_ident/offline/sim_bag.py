@@ -8,6 +8,12 @@ Topics (absolute names as they appear in the root namespace and in bags):
   ``effort`` the thrust on the propeller joint, zeros elsewhere (see :func:`joint_state_msg`).
 - ``/simulator/truth`` nav_msgs/Odometry: the true state x_k (zero covariance), for evaluation.
 
+A thruster vehicle's run (an ROV: run.u wider than state.Input) has ``/thrusters``
+std_msgs/Float64MultiArray instead of ``/actuators``: its thrusters' commands in the vehicle
+file's order and their own units (PWM in us), written when they change (and at t = 0), as a
+pilot's console sends them; its metadata names the input map that reads it
+(``auv_ident.input_map``: config/inputs/<vehicle>.yaml, e.g. bluerov2_heavy).
+
 Messages are built as rosbags message objects (rosbags' Jazzy types) with the frame algebra of
 :mod:`auv_ident.session.messages`, and serialized by rosbags: the strict CDR form every reader
 decodes. The same messages as rclpy objects (what the live simulator node publishes) are
@@ -24,6 +30,7 @@ import numpy as np
 from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.bags.writer import BagWriter
+from auv_ident.core.model.state import N_INPUT
 from auv_ident.session.messages import (
     actuator_joint_fields,
     ConversionError,
@@ -35,10 +42,24 @@ from auv_ident.session.messages import (
 
 ODOM_TOPIC = '/odom'
 ACTUATOR_TOPIC = '/actuators'
+THRUSTER_TOPIC = '/thrusters'
 TRUTH_TOPIC = '/simulator/truth'
 TOPIC_TYPES = {ODOM_TOPIC: 'nav_msgs/msg/Odometry',
                ACTUATOR_TOPIC: 'sensor_msgs/msg/JointState',
                TRUTH_TOPIC: 'nav_msgs/msg/Odometry'}
+THRUSTER_TOPIC_TYPES = {ODOM_TOPIC: 'nav_msgs/msg/Odometry',
+                        THRUSTER_TOPIC: 'std_msgs/msg/Float64MultiArray',
+                        TRUTH_TOPIC: 'nav_msgs/msg/Odometry'}
+
+
+def has_thrusters(run):
+    """Whether a run's inputs hold thruster commands (after state.Input's channels)."""
+    return np.shape(run.u)[1] > N_INPUT
+
+
+def run_topic_types(run):
+    """{topic: type} of a run's bag: /actuators, or /thrusters for a thruster vehicle."""
+    return THRUSTER_TOPIC_TYPES if has_thrusters(run) else TOPIC_TYPES
 
 SIM_EPOCH = '2024-01-01T00:00:00Z'
 SIM_EPOCH_NS = 1_704_067_200 * NS_PER_S
@@ -129,14 +150,27 @@ def command_message(msgtype, t_ns, raw):
     return _T['sensor_msgs/msg/JointState'](header=_header(t_ns, ''), name=joints, **arrays)
 
 
+def thruster_msg(commands):
+    """A rosbags std_msgs/Float64MultiArray of thruster commands (their units, file order)."""
+    return _T['std_msgs/msg/Float64MultiArray'](
+        layout=_T['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0),
+        data=np.array(commands, dtype=np.float64))
+
+
 def bag_sample_messages(run, k, frame='ned', with_truth=True, epoch_ns=SIM_EPOCH_NS):
     """The messages of sample k as a simulated bag holds them: list of (topic, t_ns, rosbags
     msg), stamp = log time = ``epoch_ns + t_k``; the command first (a replay in log-time order
-    then pairs the first odometry with it)."""
+    then pairs the first odometry with it). A thruster vehicle's commands only when they
+    change (and at k = 0)."""
     t_ns = int(epoch_ns) + sec_to_ns(float(run.t[k]))
     pose_cov, twist_cov = noise_covariances(run.noise_std)
-    out = [(ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, run.u[k])),
-           (ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.y[k], frame, pose_cov, twist_cov))]
+    if not has_thrusters(run):
+        out = [(ACTUATOR_TOPIC, t_ns, joint_state_msg(t_ns, run.u[k]))]
+    elif k == 0 or np.any(run.u[k] != run.u[k - 1]):
+        out = [(THRUSTER_TOPIC, t_ns, thruster_msg(run.u[k, N_INPUT:]))]
+    else:
+        out = []
+    out.append((ODOM_TOPIC, t_ns, odometry_msg(t_ns, run.y[k], frame, pose_cov, twist_cov)))
     if with_truth:
         out.append((TRUTH_TOPIC, t_ns, odometry_msg(t_ns, run.x[k], frame)))
     return out
@@ -156,6 +190,8 @@ def run_metadata(run, frame='ned', command='', epoch_ns=SIM_EPOCH_NS):
         meta['auv_ident.velocity_reference'] = run.velocity_reference
     if int(epoch_ns) == SIM_EPOCH_NS:
         meta['auv_ident.stamp_epoch'] = SIM_EPOCH
+    if has_thrusters(run):
+        meta['auv_ident.input_map'] = run.vehicle    # config/inputs/<vehicle>.yaml
     return meta
 
 
@@ -187,5 +223,5 @@ def write_run_bag(run, path, frame='ned', compression='zstd', command='',
     """
     messages = (m for k in range(len(run.t))
                 for m in bag_sample_messages(run, k, frame, epoch_ns=epoch_ns))
-    return write_message_bag(path, TOPIC_TYPES, run_metadata(run, frame, command, epoch_ns),
-                             messages, compression)
+    return write_message_bag(path, run_topic_types(run),
+                             run_metadata(run, frame, command, epoch_ns), messages, compression)

@@ -70,15 +70,22 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
 from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD, DEFAULT_PROCESS_STD
-from auv_ident.core.simulation.maneuvers import MANEUVERS
+from auv_ident.core.simulation.maneuvers import MANEUVERS, THRUSTER_MANEUVERS
 from auv_ident.core.simulation.simulate import simulate
-from auv_ident.offline.sim_bag import SIM_EPOCH_NS
+from auv_ident.offline.sim_bag import has_thrusters, SIM_EPOCH_NS
 from auv_ident.ros.conversions import ns_to_stamp
-from auv_ident.ros.sim_messages import ACTUATOR_TOPIC, ODOM_TOPIC, sample_messages, TRUTH_TOPIC
+from auv_ident.ros.sim_messages import (
+    ACTUATOR_TOPIC,
+    ODOM_TOPIC,
+    sample_messages,
+    THRUSTER_TOPIC,
+    TRUTH_TOPIC,
+)
 from auv_ident.ros.toolkit import (
     choice,
     CLOCK_QOS,
@@ -110,8 +117,11 @@ def _vehicle(name, value):
 
 
 def _maneuver(name, value):
-    if value not in MANEUVERS and not os.path.isfile(value):
-        raise ParameterError(name, f'{value!r} is neither one of {", ".join(MANEUVERS)} nor an '
+    # the vehicle decides which of them fly (a thruster vehicle: THRUSTER_MANEUVERS); simulate
+    # names the choices when the other kind is asked for
+    if value not in MANEUVERS + THRUSTER_MANEUVERS and not os.path.isfile(value):
+        raise ParameterError(name, f'{value!r} is neither one of '
+                                   f'{", ".join(MANEUVERS + THRUSTER_MANEUVERS)} nor an '
                                    'existing CSV file')
     return value
 
@@ -134,7 +144,8 @@ def _current(name, value):
 _PARAMETERS = (
     Param('vehicle', 'nps_auv2', 'vehicle name (config/<name>.yaml) or vehicle YAML path',
           _vehicle),
-    Param('maneuver', 'ident', 'manoeuvre: ' + ', '.join(MANEUVERS) + ', or a CSV path',
+    Param('maneuver', 'ident', 'manoeuvre: ' + ', '.join(MANEUVERS) + ', or a CSV path; a '
+          'thruster vehicle (ROV): ' + ', '.join(THRUSTER_MANEUVERS) + ' (ident: tank)',
           _maneuver),
     Param('duration', 600.0, 'length of the run [s]', number(above=0.0)),
     Param('rate_hz', 20.0, 'sample rate [Hz]; sample time = 1/rate_hz', number(above=0.0)),
@@ -182,13 +193,17 @@ class SimulatorNode(Node):
         self.k = 0
         self.finished = Future()
         self.exit_code = None
-        self.pub_actuators = self.create_publisher(JointState, 'actuators', STREAM_QOS)
+        # a thruster vehicle's PWM commands on 'thrusters' (config/inputs/<vehicle>.yaml),
+        # the fin and propeller commands of the others on 'actuators'
+        self.pub_actuators = (self.create_publisher(Float64MultiArray, 'thrusters', STREAM_QOS)
+                              if has_thrusters(self.run)
+                              else self.create_publisher(JointState, 'actuators', STREAM_QOS))
         self.pub_odom = self.create_publisher(Odometry, 'odom', STREAM_QOS)
         self.pub_truth = self.create_publisher(Odometry, '~/truth', STREAM_QOS)
         self.pub_clock = (self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
                           if self.publish_clock else None)
-        self._routes = {ACTUATOR_TOPIC: self.pub_actuators, ODOM_TOPIC: self.pub_odom,
-                        TRUTH_TOPIC: self.pub_truth}
+        self._routes = {ACTUATOR_TOPIC: self.pub_actuators, THRUSTER_TOPIC: self.pub_actuators,
+                        ODOM_TOPIC: self.pub_odom, TRUTH_TOPIC: self.pub_truth}
         self._stream_pubs = (self.pub_actuators, self.pub_odom, self.pub_truth)
         # every subscription on our topics (/clock included) must be matched before sample 0
         self._wait = (SubscriberWait(self, self._stream_pubs + ((self.pub_clock,)
@@ -240,7 +255,7 @@ class SimulatorNode(Node):
                 SIM_EPOCH_NS + sec_to_ns(float(self.run.t[k])))))
         msgs = sample_messages(self.run, k, self.frame, epoch_ns=SIM_EPOCH_NS)
         # the command first: a subscriber then has u_k before y_k of the same stamp
-        msgs.sort(key=lambda m: m[0] != ACTUATOR_TOPIC)
+        msgs.sort(key=lambda m: m[0] not in (ACTUATOR_TOPIC, THRUSTER_TOPIC))
         for topic, _, msg in msgs:
             self._routes[topic].publish(msg)
 

@@ -34,7 +34,12 @@ Per type (:data:`TYPES`; ``pkg/Type`` and ``pkg/msg/Type`` are both accepted):
   - ``geometry_msgs/msg/WrenchStamped`` (commanded body wrench): ``channels`` of ``{field:
     force.x .. torque.z, actuator: A, unit}``.
 
-  A is an actuator of the input vector (core/model/state.py ``Input``): :data:`ACTUATORS`.
+  A is an actuator of the input vector (core/model/state.py ``Input``): :data:`ACTUATORS`, or
+  the name of one of the vehicle file's thrusters (its ``thrusters:`` list, docs/vehicles.md):
+  the value is then that thruster's command in its own unit, which ``unit`` names
+  (:data:`THRUSTER_UNITS`: us for pwm_us, setpoint, rpm, N for force; raw * scale + offset,
+  no other conversion: the thrust curve takes the command as the file gives it). Which
+  thruster a name is, is checked against the vehicle (:meth:`InputMap.check_vehicle`).
   value = unit(raw * scale + offset) (scale default 1, -1 flips a sign; offset default 0, in
   the message's unit); units (:data:`UNITS`): fins rad | deg | normalized (x the vehicle's fin
   limit) | us (PWM: ``pwm: {neutral: 1500, half_range: 400}`` -> normalized); n_rpm rpm |
@@ -62,7 +67,7 @@ need the vehicle (every actuator the vehicle's model uses is fed, none that it d
 are :meth:`InputMap.check_vehicle`, those that need the bag :meth:`InputMap.check_topics`.
 """
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import os
 from typing import Any, NoReturn
@@ -71,7 +76,7 @@ import numpy as np
 import yaml
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model.state import Input, INPUT_NAMES, N_FINS, STATE_NAMES
+from auv_ident.core.model.state import Input, INPUT_NAMES, N_FINS, N_INPUT, STATE_NAMES
 from auv_ident.core.model.vehicle import (
     FACTOR_INDEX,
     P_FIN,
@@ -128,6 +133,8 @@ UNITS: dict[str, dict[str, float | None]] = {
     'force': {'N': 1.0, 'kN': 1000.0},
 }
 PWM_DEFAULT = (1500.0, 400.0)   # us: neutral and half range (ArduSub's 1100..1900)
+# a thruster channel's unit -> the thruster command type (core/model/thrusters.py) it is
+THRUSTER_UNITS = {'us': 'pwm_us', 'setpoint': 'setpoint', 'rpm': 'rpm', 'N': 'force'}
 
 _COMMON = ('topic', 'type')
 _KEYS = {
@@ -160,7 +167,10 @@ def actuator_kind(index: int) -> str:
 class Channel:
     """One actuator value read from a command message.
 
-    actuator : index into the input vector u (core/model/state.py Input)
+    actuator : index into the input vector u (core/model/state.py Input; N_INPUT + i for the
+        vehicle's thruster i, once resolved: InputMap.for_vehicle), -1 for a thruster channel
+        not resolved yet
+    thruster : the thruster's name (vehicle file) for a thruster channel, else ''
     joint, field : JointState joint name and field; index : Float64MultiArray index;
         field : WrenchStamped 'force.x' .. 'torque.z'
     unit, scale, offset : value = unit(raw * scale + offset) (module docstring)
@@ -177,14 +187,18 @@ class Channel:
     joint: str = ''
     field: str = ''
     index: int = -1
+    thruster: str = ''
 
     @property
     def name(self) -> str:
-        return ACTUATORS[self.actuator]
+        return self.thruster or ACTUATORS[self.actuator]
 
     def factor(self, fin_limit: float, shaft_limit: float) -> float:
         """Multiplier of (raw * scale + offset) into the input unit; for 'us' applied after
-        (x - neutral) / half_range. fin_limit rad, shaft_limit rpm: the vehicle's."""
+        (x - neutral) / half_range. fin_limit rad, shaft_limit rpm: the vehicle's. 1 for a
+        thruster channel (its command in its own unit)."""
+        if self.thruster:
+            return 1.0
         f = UNITS[actuator_kind(self.actuator)][self.unit]
         if f is not None:
             return f
@@ -286,16 +300,46 @@ class InputMap:
         return {e.bag_topic: e.type for e in self.inputs}
 
     def fed(self) -> dict[int, list[str]]:
-        """{actuator index: [input names feeding it]}."""
+        """{actuator index: [input names feeding it]} (thruster channels once resolved:
+        for_vehicle)."""
         out: dict[int, list[str]] = {}
         for e in self.commands:
             for c in e.channels:
                 out.setdefault(c.actuator, []).append(e.name)
         return out
 
+    def for_vehicle(self, vehicle: Vehicle) -> 'InputMap':
+        """This map with its thruster channels resolved to the vehicle's input vector
+        (actuator N_INPUT + the thruster's place in the file); InputMapError for a thruster
+        the vehicle has not, or a unit that is not its command's."""
+        names = [t.name for t in vehicle.thrusters]
+        entries = []
+        for e in self.inputs:
+            chans = []
+            for c in e.channels:
+                if c.thruster:
+                    if c.thruster not in names:
+                        raise InputMapError(
+                            f'{self.where}: input {e.name!r}: vehicle {vehicle.name!r} has no '
+                            f'thruster or actuator {c.thruster!r}; its thrusters: '
+                            f'{", ".join(names) or "none"}; its actuators: '
+                            + ', '.join(ACTUATORS))
+                    th = vehicle.thrusters[names.index(c.thruster)]
+                    if THRUSTER_UNITS[c.unit] != th.command:
+                        raise InputMapError(
+                            f'{self.where}: input {e.name!r}: thruster {c.thruster} takes '
+                            f'command {th.command} (vehicle file), the map gives unit '
+                            f'{c.unit}: use unit '
+                            + next(u for u, k in THRUSTER_UNITS.items() if k == th.command))
+                    c = replace(c, actuator=N_INPUT + names.index(c.thruster))
+                chans.append(c)
+            entries.append(replace(e, channels=tuple(chans)))
+        return replace(self, inputs=tuple(entries))
+
     def check_vehicle(self, vehicle: Vehicle) -> None:
-        """InputMapError unless every actuator the vehicle's model uses is fed by a command
-        input (the others are held at 0), and the filter fuses every input."""
+        """InputMapError unless every actuator the vehicle's model uses (its thrusters too) is
+        fed by a command input (the others are held at 0), and the filter fuses every input."""
+        resolved = self.for_vehicle(vehicle)
         for e in self.inputs:
             if e.type not in FUSED_TYPES:
                 raise InputMapError(
@@ -303,12 +347,12 @@ class InputMap:
                     'by the raw-sensor filter (the identifier node with this map, identify '
                     '--bag BAG --input-map MAP: docs/raw_sensors.md), not by the odometry '
                     'session, which fuses a nav_msgs/msg/Odometry')
-        fed = self.fed()
-        missing = [ACTUATORS[i] for i in vehicle_actuators(vehicle) if i not in fed]
+        fed = resolved.fed()
+        missing = [vehicle.input_names[i] for i in vehicle_actuators(vehicle) if i not in fed]
         if missing:
             raise InputMapError(
                 f'{self.where}: vehicle {vehicle.name!r} is driven by '
-                + ', '.join(f'{a} ({ACTUATOR_TEXT[a]})' for a in missing)
+                + ', '.join(f'{a} ({ACTUATOR_TEXT.get(a, "thruster")})' for a in missing)
                 + ', which no command input feeds: add a channel with actuator: '
                 + missing[0])
         if self.odometry is None:
@@ -348,6 +392,7 @@ def vehicle_actuators(vehicle: Vehicle) -> list[int]:
         used.add(Input.N_RPM)
     if prop == PROPULSION_MODELS['measured_thrust'] or FACTOR_INDEX['thrust'] in factors:
         used.add(Input.THRUST)
+    used |= set(range(N_INPUT, vehicle.n_inputs))      # every thruster's command
     return sorted(int(i) for i in used)
 
 
@@ -454,8 +499,8 @@ class _Parser:
                 self.fail(f'{cw}: ' + ' '.join(f'{k} {v}' for k, v in key) + ' is read twice')
             seen.add(key)
             out.append(self.channel(typ, c, cw, sel))
-        actuators = [ch.actuator for ch in out]
-        dup = sorted({ACTUATORS[a] for a in actuators if actuators.count(a) > 1})
+        actuators = [ch.name for ch in out]
+        dup = sorted({a for a in actuators if actuators.count(a) > 1})
         if dup:
             self.fail(f'{what}: actuator {dup[0]} is fed by two channels')
         return tuple(out)
@@ -475,13 +520,36 @@ class _Parser:
             return {'index': i}
         return {'field': self.choice(c, 'field', cw, WRENCH_FIELDS)}
 
+    def thruster_channel(self, c: dict, cw: str, sel: dict[str, Any]) -> Channel:
+        """A channel feeding a thruster of the vehicle file by name (resolved by
+        InputMap.for_vehicle): its command in the unit the thruster takes."""
+        name = str(c['actuator'])
+        unit = c.get('unit')
+        if unit not in THRUSTER_UNITS:
+            self.fail(f'{cw}: {name!r} is no actuator of state.Input ('
+                      + ', '.join(ACTUATORS) + '), so a thruster of the vehicle file: give '
+                      f'the unit of its command, one of {", ".join(THRUSTER_UNITS)} (us: PWM)')
+        if 'pwm' in c:
+            self.fail(f'{cw}: a thruster takes its PWM in us as it is (its curve is in us): '
+                      'leave pwm out')
+        scale = self.number(c, 'scale', cw, 1.0)
+        if scale == 0.0:
+            self.fail(f'{cw}: scale 0 would hold {name} at the offset')
+        default = c.get('default')
+        if default is not None:
+            default = self.number(c, 'default', cw, 0.0)
+        return Channel(actuator=-1, unit=str(unit), scale=scale,
+                       offset=self.number(c, 'offset', cw, 0.0), default=default,
+                       thruster=name, **sel)
+
     def channel(self, typ: str, c: dict, cw: str, sel: dict[str, Any]) -> Channel:
         name = c.get('actuator')
-        if name not in ACTUATORS:
-            self.fail(f'{cw}: the vehicles have no actuator {name!r}; their actuators: '
+        if not isinstance(name, str) or not name:
+            self.fail(f'{cw}: actuator = {name!r}; give one of '
                       + ', '.join(f'{a} ({ACTUATOR_TEXT[a]})' for a in ACTUATORS)
-                      + ' (thrusters and commanded wrenches need a vehicle file with such '
-                        'inputs, which none has yet)')
+                      + ', or a thruster name of the vehicle file')
+        if name not in ACTUATORS:
+            return self.thruster_channel(c, cw, sel)
         index = ACTUATORS.index(name)
         units = UNITS[actuator_kind(index)]
         default_unit = (JOINT_FIELDS[sel['field']] if typ == JOINT_STATE else None)

@@ -17,6 +17,7 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auv_ident.core.model.state import INPUT_NAMES, N_INPUT
 from auv_ident.core.model.vehicle import Vehicle
@@ -116,6 +117,8 @@ def convert(channel: Channel, raw: Any, fin_limit: float,
         raise ConversionError(f'the {channel.name} value {raw!r} is not a number') from None
     if channel.scale != 1.0 or channel.offset != 0.0:
         x = x * channel.scale + channel.offset
+    if channel.thruster:        # a thruster's command in its own unit (its curve takes it)
+        return x
     unit = channel.unit
     if unit == 'rad/s':
         return x / RPM_TO_RAD_S     # as session/messages.py reads a shaft speed, to the bit
@@ -130,7 +133,9 @@ def unconvert(channel: Channel, value: float, fin_limit: float, shaft_limit: flo
     """The raw message value of a channel that :func:`convert` reads as `value` (input unit):
     what a writer in the map's layout puts into the message (import --input-map)."""
     unit = channel.unit
-    if unit == 'rad/s':
+    if channel.thruster:
+        x = value
+    elif unit == 'rad/s':
         x = value * RPM_TO_RAD_S
     elif unit == 'us':
         neutral, half = channel.pwm
@@ -156,21 +161,31 @@ class CommandHolder:
     fed : input-vector indices some input feeds; limits : (fin rad, shaft rpm) of the vehicle
     """
 
-    def __init__(self, fed: Iterable[int], limits: tuple[float, float]) -> None:
+    def __init__(self, fed: Iterable[int], limits: tuple[float, float],
+                 rest: ArrayLike | None = None,
+                 names: Sequence[str] = INPUT_NAMES) -> None:
         self.fed = tuple(sorted(fed))
         self.fin_limit, self.shaft_limit = limits
-        self.u = np.zeros(N_INPUT)
-        self.heard = np.zeros(N_INPUT, dtype=bool)
-        self.stamp_ns = np.zeros(N_INPUT, dtype=np.int64)     # of each actuator's last value
-        self._all = np.zeros(N_INPUT, dtype=bool)
+        # the inputs before any message: 0, a thruster at its neutral command (rest)
+        self.u = np.zeros(N_INPUT) if rest is None else np.array(rest, dtype=float)
+        n = len(self.u)
+        self.names = tuple(names)
+        self.heard = np.zeros(n, dtype=bool)
+        self.stamp_ns = np.zeros(n, dtype=np.int64)     # of each actuator's last value
+        self._all = np.zeros(n, dtype=bool)
         self._all[list(self.fed)] = True
 
     @classmethod
     def of(cls, input_map: InputMap, vehicle: Vehicle) -> 'CommandHolder':
-        return cls(input_map.fed(), command_limits(vehicle))
+        """The holder of a vehicle's input vector (its thrusters' commands after state.Input's
+        channels) fed by input_map (its thruster channels resolved to the vehicle)."""
+        rest = np.zeros(vehicle.n_inputs)
+        rest[N_INPUT:] = [t.neutral for t in vehicle.thrusters]
+        return cls(input_map.for_vehicle(vehicle).fed(), command_limits(vehicle), rest,
+                   vehicle.input_names)
 
     def update(self, entry: InputEntry, msg: Any, stamp_ns: int) -> np.ndarray | None:
-        """Read a command message stamped stamp_ns (int ns); returns the whole u (7,) copy once
+        """Read a command message stamped stamp_ns (int ns); returns the whole u copy once
         every fed actuator has been heard, else None (what is still missing: :meth:`missing`).
         ConversionError for an unreadable message (nothing is updated then)."""
         values = read_channels(entry, msg, self.fin_limit, self.shaft_limit)
@@ -184,12 +199,12 @@ class CommandHolder:
 
     def missing(self) -> list[str]:
         """Names of the fed actuators not heard yet."""
-        return [INPUT_NAMES[i] for i in self.fed if not self.heard[i]]
+        return [self.names[i] for i in self.fed if not self.heard[i]]
 
     def stale(self, stamp_ns: int, limit_s: float | None) -> list[str]:
         """Names of the fed actuators whose last value is older than limit_s at stamp_ns."""
         if limit_s is None:
             return []
         limit_ns = int(math.ceil(limit_s * 1e9))
-        return [INPUT_NAMES[i] for i in self.fed
+        return [self.names[i] for i in self.fed
                 if self.heard[i] and stamp_ns - int(self.stamp_ns[i]) > limit_ns]

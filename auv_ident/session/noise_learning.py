@@ -71,9 +71,10 @@ class KeptRecord:
 
     _ODOM_WIDTH = 1 + N_STATE + N_STATE + 2    # t, y, r, r given (1/0), trusted (1/0)
 
-    def __init__(self):
+    def __init__(self, n_inputs=N_INPUT):
+        self.n_inputs = n_inputs                           # the vehicle's input vector length
         self.order = Rows(1, dtype=np.int8)                # COMMAND, COMMAND_REJECTED, ODOMETRY
-        self.commands = Rows(1 + N_INPUT)                  # t, u (NaN for a rejected one)
+        self.commands = Rows(1 + n_inputs)                 # t, u (NaN for a rejected one)
         self.odometry = Rows(self._ODOM_WIDTH)
         self.stamps = Rows(1, dtype=np.int64)              # stamp_ns of each odometry row
 
@@ -86,7 +87,7 @@ class KeptRecord:
 
     def add_rejected(self, t):
         self.order.append(KIND_CODE[COMMAND_REJECTED])
-        self.commands.append(t, np.full(N_INPUT, np.nan))
+        self.commands.append(t, np.full(self.n_inputs, np.nan))
 
     def add_odometry(self, t, stamp_ns, y, r, trusted):
         self.order.append(KIND_CODE[ODOMETRY])
@@ -213,13 +214,13 @@ class NoiseLearner:
     factors (12,) and model of the last fit; news, lines for the caller to log (then clear).
     """
 
-    def __init__(self, measured, T, enabled=True):
+    def __init__(self, measured, T, enabled=True, n_inputs=N_INPUT):
         self.measured = np.asarray(measured, dtype=bool)
         self.T = float(T)
         self.enabled = bool(enabled)
         self.state = LEARNING if enabled else OFF
         self.scale = np.ones(N_STATE)
-        self.kept = KeptRecord()                # the record (entries() as auto_choice's)
+        self.kept = KeptRecord(n_inputs)        # the record (entries() as auto_choice's)
         self.kept_odometry = 0                  # odometry entries in it
         self.rerun_at = LEARN_MIN_UPDATES       # kept odometry samples the next re-run needs
         self.white = deque(maxlen=LEARN_WINDOW)

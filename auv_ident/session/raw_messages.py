@@ -19,8 +19,8 @@ its type is not 0 (unknown).
 Covariances: a ROS covariance whose first entry is -1 ("not provided") or that is all zero is
 passed as None, so the filter uses its default noise for that channel group.
 """
-import math
 from dataclasses import replace
+import math
 from typing import Any
 
 import numpy as np

@@ -106,7 +106,7 @@ def paired(
     Returns t (N,) increasing, Y (N, 12) (NaN: unmeasured channel), U (N, 7) the command in
     force at t[k] (latest stamp <= t[k]; NaN rows where there is none yet), and the commands
     by stamp, t_cmd (M,), U_cmd (M, 7), where a later message with the same stamp wins."""
-    cmd = _rows(commands, N_INPUT)
+    cmd = _rows(commands, _width(commands))
     meas = _rows(measurements, N_STATE)
     order = np.argsort(cmd[:, 0], kind='stable')    # a later same-stamp one last
     cmd = cmd[order]
@@ -115,13 +115,23 @@ def paired(
     meas = meas[np.argsort(meas[:, 0], kind='stable')]
     t = meas[:, 0].copy()
     Y = meas[:, 1:].copy()
-    U = np.full((len(t), N_INPUT), np.nan)
+    U = np.full((len(t), cmd.shape[1] - 1), np.nan)
     i = np.searchsorted(cmd_t, t, side='right')
     U[i > 0] = cmd[i[i > 0] - 1, 1:]
     # the last of each run of equal stamps
     last = np.ones(len(cmd_t), dtype=bool)
     last[:-1] = cmd_t[1:] != cmd_t[:-1]
     return t, Y, U, cmd_t[last].copy(), cmd[last, 1:].copy()
+
+
+def _width(entries: Sequence[tuple[float, np.ndarray]] | np.ndarray | Rows) -> int:
+    """The width of the values of command rows or pairs: N_INPUT, or more for a thruster
+    vehicle (its thruster commands follow); N_INPUT when there are none to tell."""
+    if isinstance(entries, Rows):
+        entries = entries.array
+    if isinstance(entries, np.ndarray):
+        return entries.shape[1] - 1 if entries.ndim == 2 else N_INPUT
+    return len(entries[0][1]) if len(entries) else N_INPUT
 
 
 def _rows(entries: Sequence[tuple[float, np.ndarray]] | np.ndarray | Rows,

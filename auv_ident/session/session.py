@@ -45,7 +45,7 @@ from auv_ident.core.filter.augmented import DEFAULT_Q_STATE, FilterConfig
 from auv_ident.core.filter.stream import StreamIdentifier
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
-from auv_ident.core.model.state import Input, N_INPUT, N_STATE, STATE_NAMES
+from auv_ident.core.model.state import Input, N_STATE, STATE_NAMES
 from auv_ident.core.model.vehicle import P_FIN, P_NMAX
 from auv_ident.session.auto_choice import AutoChoice, ChoiceJob, failure_text, run_inline
 from auv_ident.session.estimate_file import estimate_document, load_estimate_json
@@ -167,6 +167,8 @@ class IdentSession:
         try:
             self.input_map = load_input_map(settings.input_map)
             self.input_map.check_vehicle(self.vehicle)
+            # thruster channels read into the vehicle's input vector (InputMap.for_vehicle)
+            self.input_map = self.input_map.for_vehicle(self.vehicle)
             odom = self.input_map.odometry
             self.frame = self._map_frame(odom.frame)
         except InputMapError as err:
@@ -207,7 +209,7 @@ class IdentSession:
         self._all_measured = bool(mask.all())
         self.keep_arrays = keep_arrays
         # if keep_arrays (record.Rows, compact: a replay keeps every message of a bag):
-        self.commands = Rows(1 + N_INPUT)           # [t, u7] in arrival order
+        self.commands = Rows(1 + self.vehicle.n_inputs)   # [t, u] in arrival order
         self.measurements = Rows(1 + N_STATE)       # [t, y12] of accepted updates
         self.variances = Rows(N_STATE)              # R diagonal used by each accepted update
         self.time_origin_ns = None  # stamps are taken relative to this (class docstring)
@@ -237,7 +239,8 @@ class IdentSession:
         # the noise model learnt from the innovations (session/noise_learning.py); not
         # without filtering (no filter, no innovations)
         self.noise = NoiseLearner(mask, T, settings.learn_noise and self.filtering
-                                  and settings.noise_mode == 'fixed')
+                                  and settings.noise_mode == 'fixed',
+                                  n_inputs=self.vehicle.n_inputs)
         self._runner = run_inline if auto_runner is None else auto_runner
 
     def _map_frame(self, map_frame):
@@ -346,12 +349,12 @@ class IdentSession:
     def warm_up(self):
         """Run a throwaway copy of the filter over three synthetic trim samples, so numba
         loads (or, with a stale cache, compiles: ~15 s) the EKF before real data arrive."""
-        from auv_ident.core.model.trim import initial_state
+        from auv_ident.core.model.trim import initial_state, rest_inputs
         try:
             s = StreamIdentifier(self.model, self.cfg, self.T, self.max_gap)
             rpm = float(self.vehicle.cruise_rpm)
             x0 = initial_state(self.model, rpm)
-            u0 = np.zeros(N_INPUT)
+            u0 = rest_inputs(self.model)     # thrusters at neutral
             u0[Input.N_RPM] = rpm
             u0[Input.THRUST] = self.vehicle.cruise_thrust     # the trim's (0 for an AUV)
             s.add_command(0.0, u0)
@@ -468,14 +471,15 @@ class IdentSession:
 
         stamp_ns : int, header stamp (ns)
         u7 : (7,) fins (rad), shaft speed (rpm) and thrust (N), core/model/state.py ``Input``
-            order; copied
+            order, then a thruster vehicle's thruster commands (vehicle.n_inputs in all);
+            copied
         """
         try:
             stamp_ns = integer_stamp(stamp_ns)
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err))
         try:
-            u7 = _as_vector(u7, N_INPUT, 'u7').copy()
+            u7 = _as_vector(u7, self.vehicle.n_inputs, 'u7').copy()
         except ConversionError as err:
             return self._reject('actuators', 'conversion', str(err), stamp_ns)
         return self._command(stamp_ns, u7)

@@ -195,7 +195,7 @@ def test_a_map_naming_a_topic_the_bag_lacks_is_one_error(bags, tmp_path, capsys)
     assert cli_main(['report', '--bag', bag, '--input-map', str(bad), '--out',
                      str(tmp_path / 'r')]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no actuator 'thruster_3'" in err[0]
+    assert len(err) == 1 and "'thruster_3' is no actuator of state.Input" in err[0]
 
 
 @pytest.mark.parametrize('example', ['joint_names', 'stonefish_setpoints', 'per_fin_topics'])

@@ -16,9 +16,10 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConfig
-# the example bag's message writer (python -m auv_ident.offline.raw_example)
-from auv_ident.offline.raw_example import record_message as _message
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
+
+# the example bag's message writer (python -m auv_ident.offline.raw_example)
+from auv_ident.offline.raw_example import _v3, record_message as _message
 from auv_ident.offline.sim_bag import _header, _STORE, write_message_bag
 from auv_ident.offline.tf_static import tf_mountings
 from auv_ident.session.input_map import InputMapError, parse_input_map

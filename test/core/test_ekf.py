@@ -100,6 +100,8 @@ def test_rk4_transition_jacobian_matches_finite_differences(name):
     xa = np.concatenate([[1.2, 0.05, -0.03, 0.01, 0.02, -0.01, 3, 4, 10, 0.05, -0.1, 0.4],
                          m.theta_file * 1.2])
     ui = np.array([0.1, -0.2, 0.0, 0.1, 0.05, 800.0, 30.0])
+    # a thruster vehicle's PWM commands (us): both sides of the dead band, one saturated
+    ui = np.r_[ui, np.resize([1700.0, 1350.0, 1560.0, 1950.0, 1200.0], len(v.thrusters))]
     n = len(xa)
     x1, Fa = np.empty(n), np.empty((n, n))
     assert ekf.rk4_jacobian_step(xa, ui, m.compiled, 0.05, True, x1, Fa) == ekf.OK

@@ -7,6 +7,7 @@ import pytest
 
 from auv_ident.core.errors import ConfigError, DomainError
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.trim import rest_inputs
 from auv_ident.vehicles import available_vehicles, load_vehicle
 
 # shared/reference/vehicles.md section 1.7: classic MSS npsauv.m run in GNU Octave
@@ -74,20 +75,24 @@ def test_restoring_moment_rights_a_heeled_vehicle(name):
         x = np.zeros(12)
         x[0] = 1.0
         x[9], x[10] = phi, theta
-        xd = m.f(x, np.zeros(7))
+        xd = m.f(x, rest_inputs(m))
         if phi:
             assert np.sign(xd[3]) == -np.sign(phi), (phi, xd[3])
         if theta:
             assert np.sign(xd[4]) == -np.sign(theta), (theta, xd[4])
 
 
-def _random_states(rng, n, u_range=(0.5, 2.0)):
+def _random_states(rng, n, u_range=(0.5, 2.0), n_thrusters=0):
+    """n random (x, ui); a thruster vehicle's ui also gets PWM commands (us) over the whole
+    range (dead band and saturation included)."""
     for _ in range(n):
         x = np.concatenate([
             [rng.uniform(*u_range)], rng.normal(0, 0.1, 2), rng.normal(0, 0.05, 3),
             rng.normal(0, 10, 3), rng.uniform(-0.5, 0.5, 2), rng.uniform(-3, 3, 1)])
         ui = np.concatenate([rng.uniform(-0.3, 0.3, 5), [rng.uniform(300, 1400)],
                              [rng.uniform(10.0, 60.0)]])
+        if n_thrusters:
+            ui = np.concatenate([ui, rng.uniform(1050.0, 1950.0, n_thrusters)])
         yield x, ui
 
 
@@ -97,7 +102,7 @@ def test_jacobians_match_finite_differences(name):
     # every coefficient identified at once, so each one's column is checked
     m = Model(v, v.names, mass_inverse='exact')
     rng = np.random.default_rng(7)
-    for x, ui in _random_states(rng, 5):
+    for x, ui in _random_states(rng, 5, n_thrusters=len(v.thrusters)):
         th = m.theta_file
         _, A, Bt = m.jacobians(x, ui, th)
         for j in range(12):

@@ -43,7 +43,8 @@ def test_nps_trims_to_about_0p6_m_s_at_500_rpm_from_a_long_run():
 
 
 @pytest.mark.parametrize('name', [n for n in available_vehicles()
-                                  if load_vehicle(n).free_states.all()])
+                                  if load_vehicle(n).free_states.all()
+                                  and not load_vehicle(n).hovers])
 def test_long_zigzag_stays_finite_and_bounded(name):
     # (the AUVs: a ship at constant thrust in 20 s rudder holds slows far more, test_planar)
     m = Model(load_vehicle(name))

@@ -181,3 +181,116 @@ thrusters:
 """))
     assert '2 thrusters, configuration matrix of rank 2; they push alone: surge yaw' in check.facts
     assert any('cannot push sway heave roll pitch alone' in w for w in check.warnings)
+
+
+# --- the thrusters in the compiled model (#29 item 2) ---
+
+def _rov_model(theta=()):
+    from auv_ident.core.model.hydrodynamics import Model
+    from auv_ident.vehicles import load_vehicle
+    return Model(load_vehicle('bluerov2_heavy'), list(theta))
+
+
+def _pwm(horizontal, vertical):
+    """The input vector of the BlueROV2 Heavy: 7 channels of state.Input, then t1..t8 (us)."""
+    return np.r_[np.zeros(7), horizontal, vertical]
+
+
+def test_bluerov2_wrench_in_the_model_is_the_hand_computed_one():
+    # t3, t4 (aft, pushing forward-out at 45 deg) at 1700 us: e = 200 - 28 = 172 us on the
+    # forward side, f = 0.075984 172 + 1.7580e-4 172^2 = 18.2703 N each; their sway and yaw
+    # cancel, X = 2 f cos 45. t5..t8 (vertical, d down) at 1300 us: reverse side, f =
+    # -(0.063798 172 + 1.1891e-4 172^2) = -14.4911 N each, Z = 4 f (up); roll and pitch cancel
+    m = _rov_model()
+    f_fwd = 0.075984 * 172 + 1.7580e-4 * 172 ** 2
+    f_rev = -(0.063798 * 172 + 1.1891e-4 * 172 ** 2)
+    ui = _pwm([1500, 1500, 1700, 1700], [1300] * 4)
+    x = np.zeros(12)
+    M = m.vehicle.mass_matrix()
+    tau = M @ (m.f(x, ui)[:6] - m.f(x, _pwm([1500] * 4, [1500] * 4))[:6])
+    assert tau == pytest.approx([2 * f_fwd * S, 0, 4 * f_rev, 0, 0, 0], abs=1e-9)
+    # and the yaw pair: t1 (front right, d back-right) and t4 (rear left, d forward-left) at
+    # 1700 us push opposite ways along the same diagonal's normal: a pure yaw moment
+    # N = f (x1 dy1 - y1 dx1 + x4 dy4 - y4 dx4) = f S (0.14 + 0.092 + 0.15 + 0.092)
+    tau = M @ (m.f(x, _pwm([1700, 1500, 1500, 1700], [1500] * 4))[:6]
+               - m.f(x, _pwm([1500] * 4, [1500] * 4))[:6])
+    assert tau == pytest.approx([0, 0, 0, 0, 0, f_fwd * S * 0.474], abs=1e-9)
+
+
+def test_dead_band_and_saturation_in_the_model():
+    m = _rov_model()
+    x = np.zeros(12)
+    rest = m.f(x, _pwm([1500] * 4, [1500] * 4))
+    assert m.f(x, _pwm([1527, 1473, 1528, 1472], [1520] * 4)) == pytest.approx(rest, abs=0)
+    # 1900 us: the curve gives 52.6 N, the table's 51.4 N saturates it
+    M = m.vehicle.mass_matrix()
+    tau = M @ (m.f(x, _pwm([1500] * 4, [1900] * 4))[:6] - rest[:6])
+    assert tau[2] == pytest.approx(4 * 51.4, rel=1e-12)
+
+
+def test_thrust_gains_scale_each_side_of_the_curves_and_their_jacobian_is_analytic():
+    m = _rov_model(['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Z_ww'])
+    x = np.array([0.2, -0.1, 0.15, 0.05, -0.02, 0.3, 0, 0, 2, 0.05, -0.03, 1.0])
+    ui = _pwm([1700, 1350, 1620, 1440], [1560, 1380, 1900, 1100])
+    th = m.theta_file
+    xd, A, Bt = m.jacobians(x, ui, th)
+    M = m.vehicle.mass_matrix()
+    rest = m.f(x, _pwm([1500] * 4, [1500] * 4), th)[:6]
+    # the forward side 10 % stronger: M nu_dot grows by 0.1 times the forward thrusts' wrench
+    from auv_ident.core.model.thrusters import configuration_matrix, steady_thrusts
+    f = steady_thrusts(m.vehicle.thrusters, ui[7:])
+    T = configuration_matrix(m.vehicle.thrusters)
+    th2 = th.copy()
+    th2[0] = 1.1
+    assert M @ (m.f(x, ui, th2)[:6] - xd[:6]) == pytest.approx(
+        0.1 * T @ np.where(f > 0, f, 0.0), rel=1e-9, abs=1e-9)
+    assert M @ (xd[:6] - rest) == pytest.approx(T @ f, rel=1e-9, abs=1e-9)
+    for j in range(m.p):
+        h = 1e-6 * max(1.0, abs(th[j]))
+        tp, tm = th.copy(), th.copy()
+        tp[j] += h
+        tm[j] -= h
+        fd = (m.f(x, ui, tp) - m.f(x, ui, tm)) / (2 * h)
+        assert Bt[:, j] == pytest.approx(fd, rel=1e-6, abs=1e-8), m.theta_names[j]
+    for k in range(12):
+        h = 1e-7
+        xp, xm = x.copy(), x.copy()
+        xp[k] += h
+        xm[k] -= h
+        fd = (m.f(xp, ui, th) - m.f(xm, ui, th)) / (2 * h)
+        assert A[:, k] == pytest.approx(fd, rel=1e-5, abs=1e-6), k
+
+
+def test_thruster_vehicle_needs_its_thruster_commands():
+    from auv_ident.core.errors import DimensionError
+    m = _rov_model()
+    with pytest.raises(DimensionError, match='15 entries'):
+        m.f(np.zeros(12), np.zeros(7))
+
+
+def test_a_thrust_gain_names_its_equations(tmp_path):
+    from auv_ident.core.errors import ConfigError
+    text = open(resolve_vehicle_path('bluerov2_heavy'), encoding='utf-8').read()
+    bad = text.replace('thrust_gain_fwd: [1.0, XYZKMN, 0, thrusters_forward]',
+                       'thrust_gain_fwd: [1.0, XXY, 0, thrusters_forward]')
+    p = tmp_path / 'rov.yaml'
+    p.write_text(bad)
+    with pytest.raises(ConfigError, match='each once'):
+        vehicle_from_file(str(p))
+    # a gain of both sides on top of the forward one: two gains of one force
+    both = text.replace('  thrust_gain_rev: [1.0, XYZKMN, 0, thrusters_reverse]',
+                        '  thrust_gain_rev: [1.0, XYZKMN, 0, thrusters_reverse]\n'
+                        '  thrust_gain: [1.0, Z, 0, thrusters]')
+    p.write_text(both)
+    with pytest.raises(ConfigError, match='both scale the forward thrust in Z'):
+        vehicle_from_file(str(p))
+
+
+def test_a_hovering_vehicle_gets_a_pilots_advice():
+    from auv_ident.core.identification.diagnosis import excitation_advice
+    from auv_ident.vehicles import load_vehicle
+    rov, auv = load_vehicle('bluerov2_heavy'), load_vehicle('remus100')
+    assert excitation_advice(rov, 'X_uu').startswith('surge stick steps')
+    assert excitation_advice(rov, 'Z_wdot').startswith('quick stick reversals')
+    assert 'forward and the reverse side' in excitation_advice(rov, 'thrust_gain_rev')
+    assert excitation_advice(auv, 'X_uu').startswith('speed changes')   # a fin AUV's as before

@@ -85,7 +85,9 @@ def test_the_default_map_is_todays_layout():
      "input 'a': type 'sensor_msgs/Temperature' is not read"),
     (_map(a={'type': 'std_msgs/Float64'}), "input 'a': topic = None"),
     (_map(a={'topic': 'x', 'type': 'std_msgs/Float64', 'actuator': 'thruster_1',
-             'unit': 'N'}), "the vehicles have no actuator 'thruster_1'"),
+             'unit': 'kgf'}), "'thruster_1' is no actuator of state.Input"),
+    (_map(a={'topic': 'x', 'type': 'std_msgs/Float64', 'actuator': 't1', 'unit': 'us',
+             'pwm': {'neutral': 1500}}), 'leave pwm out'),
     (_map(a={'topic': 'x', 'type': 'std_msgs/Float64', 'actuator': 'delta_r'}),
      'give the unit of delta_r'),
     (_map(a={'topic': 'x', 'type': 'std_msgs/Float64', 'actuator': 'delta_r',
@@ -282,3 +284,40 @@ def test_the_documented_example_maps():
                 'sensor_msgs/msg/FluidPressure'}
         else:
             m.check_vehicle(nps)
+
+
+# --- thruster channels (#29): a vehicle's thrusters fed by name ---
+
+def test_bluerov2_map_reads_pwm_into_the_thruster_commands():
+    v = load_vehicle('bluerov2_heavy')
+    m = load_input_map('bluerov2_heavy')
+    m.check_vehicle(v)
+    holder = CommandHolder.of(m, v)
+    # before any message: every thruster at its neutral 1500 us
+    assert np.array_equal(holder.u[7:], [1500.0] * 8)
+    entry = m.for_vehicle(v).commands[0]
+    pwm = [1100.0, 1250.5, 1472.0, 1500.0, 1528.0, 1700.0, 1850.0, 1900.0]
+    u = holder.update(entry, SimpleNamespace(data=pwm), 10)
+    assert u is not None and u.shape == (15,)
+    assert np.array_equal(u[7:], pwm) and np.array_equal(u[:7], np.zeros(7))
+
+
+@pytest.mark.parametrize('channel, message', [
+    ({'index': 0, 'actuator': 't9', 'unit': 'us'}, "has no thruster or actuator 't9'"),
+    ({'index': 0, 'actuator': 't1', 'unit': 'N'},
+     r'thruster t1 takes command pwm_us \(vehicle file\), the map gives unit N: use unit us'),
+])
+def test_thruster_channels_are_checked_against_the_vehicle(channel, message):
+    m = parse_input_map(_map(a={'topic': 'thrusters', 'type': 'std_msgs/Float64MultiArray',
+                                'channels': [channel]}))
+    with pytest.raises(InputMapError, match=message):
+        m.check_vehicle(load_vehicle('bluerov2_heavy'))
+
+
+def test_a_thruster_no_channel_feeds_is_named():
+    chans = [{'index': i, 'actuator': f't{i + 1}', 'unit': 'us'} for i in range(7)]
+    m = parse_input_map(_map(a={'topic': 'thrusters', 'type': 'std_msgs/Float64MultiArray',
+                                'channels': chans}))
+    with pytest.raises(InputMapError, match='driven by t8 .thruster., which no command input '
+                                            'feeds'):
+        m.check_vehicle(load_vehicle('bluerov2_heavy'))

@@ -24,7 +24,6 @@ from auv_ident.core.model.state import (
     COEFFICIENTS,
     CURRENT_NAMES,
     N_CURRENT,
-    N_INPUT,
     N_STATE,
     State,
     VEHICLE,
@@ -287,8 +286,8 @@ class AugmentedEKF:
         sd0 = self.noise_std.copy()
         ok = self.measured & np.isfinite(y0)
         x0[ok] = y0[ok]
-        if not ok[State.U]:
-            x0[State.U] = trim_speed(self.model, rpm)
+        if not ok[State.U]:     # a hovering vehicle (ROV) starts at rest
+            x0[State.U] = 0.0 if self.model.vehicle.hovers else trim_speed(self.model, rpm)
         sd0[~ok] = UNMEASURED_SD0[~ok]
         return x0, sd0
 
@@ -426,8 +425,9 @@ class AugmentedEKF:
         m = self.model
         T = self.T if T is None else float(T)
         u_prev = np.ascontiguousarray(u_prev, dtype=float)
-        if u_prev.shape != (N_INPUT,):     # the kernel reads N_INPUT entries unchecked
-            raise DimensionError(f'inputs must have {N_INPUT} entries, got {u_prev.shape}')
+        if u_prev.shape != (m.n_inputs,):     # the kernel reads them unchecked
+            raise DimensionError(f'inputs must have {m.n_inputs} entries (state.Input, then one '
+                                 f'per thruster), got {u_prev.shape}')
         xa_b = np.empty(self.n)
         P_b = np.empty((self.n, self.n))
         st = ekf.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)

@@ -54,13 +54,13 @@ from auv_ident.core.model.state import Input, N_INPUT, N_STATE
 
 def _record(t, Y, U):
     """(t, Y, U) as contiguous float arrays, checked: t (N,) strictly increasing finite times
-    (s), Y (N, 12), U (N, 7)."""
+    (s), Y (N, 12), U (N, 7 + thrusters: the model checks its own width)."""
     Y = np.ascontiguousarray(Y, dtype=float)
     U = np.ascontiguousarray(U, dtype=float)
-    if (Y.ndim != 2 or Y.shape[1] != N_STATE or U.shape != (Y.shape[0], N_INPUT)
-            or Y.shape[0] == 0):
-        raise DimensionError(f'Y must be (N, 12) and U (N, {N_INPUT}) with N >= 1; got '
-                             f'{Y.shape} and {U.shape}')
+    if (Y.ndim != 2 or Y.shape[1] != N_STATE or U.ndim != 2 or U.shape[0] != Y.shape[0]
+            or U.shape[1] < N_INPUT or Y.shape[0] == 0):
+        raise DimensionError(f'Y must be (N, 12) and U (N, {N_INPUT} + thrusters) with N >= 1; '
+                             f'got {Y.shape} and {U.shape}')
     return check_times(t, Y.shape[0]), Y, U
 
 

@@ -43,7 +43,7 @@ from auv_ident.core.identification.uncertainty import (
     with_gaps,
 )
 from auv_ident.core.model.current import MAX_CURRENT_STD
-from auv_ident.core.model.state import INPUT_NAMES, State, STATE_NAMES
+from auv_ident.core.model.state import State, STATE_NAMES
 from auv_ident.core.model.vehicle import EQUATIONS, Vehicle
 
 XCORR_Z = 4.5           # residual-input cross-correlation beyond this many sd: inadequate
@@ -61,6 +61,22 @@ EXCITATION = {
     'N': 'rudder zig-zags with legs held 20-40 s (yaw rate and sway)',
 }
 ADDED_MASS_EXCITATION = 'quick fin reversals at the rate limit (accelerations)'
+# the same for a hovering thruster vehicle (an ROV flown by a pilot's sticks,
+# core/simulation/maneuvers.py)
+PILOT_EXCITATION = {
+    'X': 'surge stick steps of several sizes with rests between (surge drag at several '
+         'speeds, the decays)',
+    'Y': 'sway stick steps of several sizes with rests between',
+    'Z': 'heave stick steps of several sizes, both ways',
+    'K': "roll: moved only through the thrusters' offsets and combined motion; a vehicle "
+         'with roll thrusters: roll steps',
+    'M': "pitch: moved only through the thrusters' offsets and combined motion; a vehicle "
+         'with pitch thrusters: pitch steps',
+    'N': 'yaw stick steps of several sizes with rests between',
+}
+PILOT_ADDED_MASS = 'quick stick reversals and a sweep (0.05-0.5 Hz) of that stick (accelerations)'
+PILOT_GAIN = ("each stick both ways (the forward and the reverse side of every thruster's "
+              'curve), at several sizes')
 
 
 CURRENT_EXCITATION = ('turns: the current is separable from the coefficients only through '
@@ -73,10 +89,12 @@ def excitation_advice(vehicle: Vehicle, name: str) -> str:
     if name.startswith('current_'):
         return CURRENT_EXCITATION
     c = vehicle.coefficients[vehicle.index(name)]
+    if c.is_thrust_gain:
+        return PILOT_GAIN
     if c.is_added_mass:
-        return ADDED_MASS_EXCITATION
-    return EXCITATION.get(EQUATIONS[c.equation], 'a manoeuvre that moves the terms it '
-                                                  'multiplies')
+        return PILOT_ADDED_MASS if vehicle.hovers else ADDED_MASS_EXCITATION
+    return (PILOT_EXCITATION if vehicle.hovers else EXCITATION).get(
+        EQUATIONS[c.equation], 'a manoeuvre that moves the terms it multiplies')
 
 
 def current_std_limits(names: Sequence[str]) -> np.ndarray:
@@ -288,7 +306,7 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
             gap = 4 * max(lags, LJUNG_BOX_LAGS) + 1
             white = with_gaps(split_rows(white, fit.bounds), gap)
             U = with_gaps(split_rows(U, fit.bounds), gap)
-        xcorr = input_correlation(white, U, lags, STATE_NAMES, INPUT_NAMES)
+        xcorr = input_correlation(white, U, lags, STATE_NAMES, vehicle.input_names)
         verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
                                         cov if information_cov is None else information_cov)
     diagnosis = Diagnosis(identifiability=verdicts,

@@ -72,6 +72,18 @@ from auv_ident.core.model.state import (
     State,
     VELOCITY_REFERENCES,
 )
+from auv_ident.core.model.thrusters import (
+    T_CMAX,
+    T_CURVE,
+    T_DEAD,
+    T_FMAX_FWD,
+    T_FMAX_REV,
+    T_FWD1,
+    T_FWD2,
+    T_NEUTRAL,
+    T_REV1,
+    T_REV2,
+)
 from auv_ident.core.model.vehicle import (
     COS_THETA_MIN,
     FACTOR_INDEX,
@@ -123,7 +135,7 @@ kernel = cached_njit(_nrt=False)
 # structref, can be read by the kernels compiled without reference counting.
 CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
                                             'Minv recompute_minv M_RB theta_pos current n_coef '
-                                            'held')
+                                            'held thr gain_idx')
 CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
 
 c0 : (n_coef + 3,) coefficient values (the file's units) for the coefficients not in theta,
@@ -143,6 +155,10 @@ theta_pos : (n_coef + 3,) int, position of each entry of c0 in theta, or -1
 current : int, CURRENT_NONE, CURRENT_GROUND or CURRENT_WATER (how the current enters f)
 n_coef : int, number of vehicle coefficients (the current's place in c0)
 held : (h,) int, the states the vehicle holds (core/model/planar.py; empty for 6 DOF)
+thr : (n, thrusters.THR_COLS) the thrusters (empty for a fin vehicle); their commands are
+    u_in[N_INPUT:N_INPUT + n]
+gain_idx : (2, 6) int, per curve side (forward, reverse) and equation the index in c0 of
+    its thrust gain, or -1 (gain 1)
 """
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
@@ -202,6 +218,59 @@ def _propulsion(u, n_rpm, par, zz, xdot, A, want_jac):
         xdot[_U] += par[P_PROP_A] * s * abs(s)
         xdot[_P] += par[P_PROP_B] * s * abs(s)
     return OK
+
+
+@kernel
+def _thrust(thr, i, cmd):
+    """Steady thrust (N, along the thruster's direction) of thruster i (row of thr) for its
+    command cmd: thrusters.Thruster.thrust, compiled (the same curve, dead band and
+    saturations)."""
+    if thr[i, T_CURVE] == 0.0:
+        f = cmd
+    else:
+        cmax = thr[i, T_CMAX]
+        e = min(max(cmd - thr[i, T_NEUTRAL], -cmax), cmax)
+        dead = thr[i, T_DEAD]
+        if abs(e) <= dead:
+            return 0.0
+        if e > 0.0:
+            e -= dead
+            f = thr[i, T_FWD1] * e + thr[i, T_FWD2] * e * e
+        else:
+            e += dead
+            f = thr[i, T_REV1] * e - thr[i, T_REV2] * e * e
+    return min(max(f, -thr[i, T_FMAX_REV]), thr[i, T_FMAX_FWD])
+
+
+@kernel
+def _thrusters(ui, c, cm, want_jac, xdot, Bt):
+    """The thrusters' wrench tau = T f(commands) (thrusters.py) into xdot[0:6]: per equation
+    the forward thrusts' part times its gain and the reverse thrusts' part times its gain
+    (cm.gain_idx; 1 where none), and d/d(gain) = that part into Bt for a gain in theta. The
+    commands are inputs, so there is no df/dx."""
+    thr = cm.thr
+    n = thr.shape[0]
+    for e in range(N_NU):
+        tau_f = 0.0
+        tau_r = 0.0
+        for i in range(n):
+            col = thr[i, e]
+            if col != 0.0:
+                f = _thrust(thr, i, ui[N_INPUT + i])
+                if f > 0.0:
+                    tau_f += col * f
+                else:
+                    tau_r += col * f
+        for side in range(2):
+            tau = tau_f if side == 0 else tau_r
+            gi = cm.gain_idx[side, e]
+            if gi < 0:
+                xdot[e] += tau
+            else:
+                xdot[e] += c[gi] * tau
+                j = cm.theta_pos[gi]
+                if want_jac and j >= 0:
+                    Bt[e, j] += tau
 
 
 @kernel
@@ -479,7 +548,7 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):  # n
     for i in range(N_STATE):
         if not math.isfinite(x[i]):
             return ERR_NONFINITE
-    for i in range(N_INPUT):
+    for i in range(ui.shape[0]):     # N_INPUT, then one command per thruster
         if not math.isfinite(ui[i]):
             return ERR_NONFINITE
     if cm.held.shape[0] > 0:         # the model reads the held states as 0 (core/model/planar.py)
@@ -539,6 +608,8 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):  # n
             eq = theta_terms[j, 0]
             if eq >= 0:
                 Bt[eq, j] += dprod[theta_terms[j, 1]]
+    if cm.thr.shape[0] > 0:
+        _thrusters(ui, c, cm, want_jac, xdot, Bt)
     _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
     _crossflow(par, xv[_V], xv[_W], xv[_Q], xv[_R], want_jac, xdot, A)
     _solve_vec(Minv, xdot)
@@ -661,7 +732,7 @@ class Model:
         self.mono_addr = monomial_kernel(vehicle.terms_i, vehicle.terms_s).address
         self.held = vehicle.held
         self.theta_terms = np.array(
-            [[-1 if ci >= n_coef or vehicle.coefficients[ci].is_added_mass
+            [[-1 if ci >= n_coef or not vehicle.coefficients[ci].has_monomial
               else vehicle.coefficients[ci].equation, ci] for ci in self.theta_idx],
             dtype=np.int64).reshape(-1, 2)
         self.compiled = self._compiled(self._c_ext(None), self.theta_idx, self.theta_terms,
@@ -672,7 +743,7 @@ class Model:
         v = self.vehicle
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
                              self.Minv, self.recompute_minv, v.M_RB, theta_pos,
-                             self.current_mode, self.n_coef, self.held)
+                             self.current_mode, self.n_coef, self.held, v.thr, v.gain_idx)
 
     def _c_ext(self, theta: ArrayLike | None) -> np.ndarray:
         """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""
@@ -680,6 +751,11 @@ class Model:
         if theta is not None and self.p:
             c[self.theta_idx] = theta
         return c
+
+    @property
+    def n_inputs(self) -> int:
+        """Length of the input vector: N_INPUT, then one command per thruster."""
+        return self.vehicle.n_inputs
 
     def compiled_fixed(self, theta: ArrayLike) -> CompiledModel:
         """CompiledModel of a filter over the 12 vehicle states only, with this model's
@@ -718,9 +794,9 @@ class Model:
                   want_jac: bool) -> tuple[int, np.ndarray, np.ndarray, Any, Any, Any]:
         x = np.ascontiguousarray(x, dtype=float)
         ui = np.ascontiguousarray(ui, dtype=float)
-        if ui.shape != (N_INPUT,):     # the kernel reads N_INPUT entries unchecked
-            raise DimensionError(f'inputs must have {N_INPUT} entries (state.Input), got '
-                                 f'{ui.shape}')
+        if ui.shape != (self.n_inputs,):     # the kernel reads them unchecked
+            raise DimensionError(f'inputs must have {self.n_inputs} entries (state.Input, then '
+                                 f'one per thruster), got {ui.shape}')
         c = self._c_ext(theta)
         v = self.vehicle
         Minv = self.Minv
@@ -737,7 +813,8 @@ class Model:
         return st, x, ui, xdot, A, Bt
 
     def f(self, x: ArrayLike, ui: ArrayLike, theta: ArrayLike | None = None) -> np.ndarray:
-        """x_dot (12,) at state x (12,), inputs ui (7,) (saturated inside), parameters theta."""
+        """x_dot (12,) at state x (12,), inputs ui (n_inputs,: the 7 of state.Input, then the
+        thruster commands; saturated inside), parameters theta."""
         st, x, ui, xdot, _, _ = self._evaluate(x, ui, theta, False)
         self.check(st, x, ui)
         return xdot

@@ -15,9 +15,9 @@ Thrust curve of one thruster, from its command c in the unit its `command:` name
 - `setpoint` (-1..1), `rpm` (shaft speed), `pwm_us` (ESC pulse width, microseconds): the
   command's distance from neutral e = c - c0 (c0 = `neutral`: 1500 us for pwm_us, 0 otherwise)
   is saturated to +-`command_max` (the ESC's range), a dead band of half width `dead_band` around
-  neutral gives no thrust (the ESC's or the blades' stall zone: T200 at 16 V, 1475-1525 us), and
-  beyond it e_d = e - sign(e) dead_band drives a polynomial with separate forward and reverse
-  coefficients (the propeller is not symmetric):
+  neutral gives no thrust (the ESC's or the blades' stall zone: T200 at 16 V, 1472-1528 us
+  in Blue Robotics' table), and beyond it e_d = e - sign(e) dead_band drives a polynomial
+  with separate forward and reverse coefficients (the propeller is not symmetric):
 
       f = a1 e_d + a2 e_d^2          (e_d > 0, `forward: [a1, a2]`)
       f = a1 e_d - a2 e_d^2          (e_d < 0, `reverse: [a1, a2]`, so f < 0 for a1, a2 > 0)
@@ -88,6 +88,31 @@ class Thruster:
             a1, a2 = self.forward if e > 0 else self.reverse
             f = a1 * e + math.copysign(a2 * e * e, e)
         return min(max(f, -self.thrust_max_reverse), self.thrust_max_forward)
+
+
+# Columns of the thruster table the compiled model reads (one row per thruster, the file's
+# order; hydrodynamics._thrusters): its configuration column [d; r x d], whether it follows a
+# thrust curve (1) or takes the force itself (0), and the curve's constants
+T_COL = 0               # 0..5
+T_CURVE, T_NEUTRAL, T_CMAX, T_DEAD = 6, 7, 8, 9
+T_FWD1, T_FWD2, T_REV1, T_REV2, T_FMAX_FWD, T_FMAX_REV = 10, 11, 12, 13, 14, 15
+THR_COLS = 16
+
+
+def thruster_table(thrusters: Sequence[Thruster]) -> np.ndarray:
+    """(n, THR_COLS) float: the thrusters as the compiled model reads them (T_* columns)."""
+    out = np.zeros((len(thrusters), THR_COLS))
+    for i, t in enumerate(thrusters):
+        out[i, T_COL:T_COL + 6] = t.column
+        out[i, T_CURVE] = 0.0 if t.command == 'force' else 1.0
+        out[i, T_NEUTRAL] = t.neutral
+        out[i, T_CMAX] = t.command_max
+        out[i, T_DEAD] = t.dead_band
+        out[i, T_FWD1], out[i, T_FWD2] = t.forward
+        out[i, T_REV1], out[i, T_REV2] = t.reverse
+        out[i, T_FMAX_FWD] = t.thrust_max_forward
+        out[i, T_FMAX_REV] = t.thrust_max_reverse
+    return out
 
 
 def configuration_matrix(thrusters: Sequence[Thruster]) -> np.ndarray:

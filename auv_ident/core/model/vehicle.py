@@ -16,8 +16,23 @@ from typing import Any
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
-from auv_ident.core.model.state import ANGULAR, DOF_STATES, LINEAR, N_NU, N_STATE, NU_NAMES, State
-from auv_ident.core.model.thrusters import Thruster, thrusters_from_file
+from auv_ident.core.model.state import (
+    ANGULAR,
+    DOF_STATES,
+    INPUT_NAMES,
+    LINEAR,
+    N_INPUT,
+    N_NU,
+    N_STATE,
+    NU_NAMES,
+    State,
+)
+from auv_ident.core.model.thrusters import (
+    THR_COLS,
+    Thruster,
+    thruster_table,
+    thrusters_from_file,
+)
 from auv_ident.core.vehicle_files import (
     file_kind,
     finite_number,
@@ -72,10 +87,25 @@ class Coefficient:
     factors: tuple      # factor indices into FACTORS, or ('dot', column) for added mass
     scale: float        # (rho/2) L^k, or 1 for dimensional files
     added_mass_col: int = -1   # 0..5 when this is an added-mass coefficient
+    # the equations (0..5) whose thruster force this coefficient scales (multiplier
+    # `thrusters`, `thrusters_forward` or `thrusters_reverse`: a thrust gain,
+    # core/model/thrusters.py); empty for every other coefficient
+    gain_rows: tuple = ()
+    gain_sides: tuple = ()      # the curve sides it scales: 0 forward, 1 reverse
 
     @property
     def is_added_mass(self) -> bool:
         return self.added_mass_col >= 0
+
+    @property
+    def is_thrust_gain(self) -> bool:
+        return bool(self.gain_rows)
+
+    @property
+    def has_monomial(self) -> bool:
+        """Whether the coefficient is a term of the monomial table (not added mass, not a
+        thrust gain)."""
+        return not (self.is_added_mass or self.is_thrust_gain)
 
 
 @dataclass
@@ -104,6 +134,28 @@ class Vehicle:
     free_states: np.ndarray = field(default_factory=lambda: np.ones(N_STATE, dtype=bool))
     # the file's `thrusters:` (core/model/thrusters.py), empty for a fin or rudder vehicle
     thrusters: tuple[Thruster, ...] = ()
+    # (n, THR_COLS) the thrusters as the compiled model reads them (thrusters.thruster_table)
+    thr: np.ndarray = field(default_factory=lambda: np.zeros((0, THR_COLS)))
+    # (2, 6) int, per curve side (forward, reverse) and equation X..N the index of the
+    # coefficient scaling that side's thruster force in that equation (a thrust gain), or -1
+    gain_idx: np.ndarray = field(default_factory=lambda: -np.ones((2, N_NU), dtype=np.int64))
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """Names of the input vector's entries: state.INPUT_NAMES, then the thrusters'."""
+        return INPUT_NAMES + tuple(t.name for t in self.thrusters)
+
+    @property
+    def hovers(self) -> bool:
+        """A thruster vehicle with no main propeller (ROV, hovering AUV): it has no cruise, its
+        runs start at rest and its trim is hovering (thrusters at neutral)."""
+        return bool(self.thrusters) and self.par[P_PROP] == PROPULSION_MODELS['none']
+
+    @property
+    def n_inputs(self) -> int:
+        """Length of this vehicle's input vector: the N_INPUT channels of state.Input, then one
+        command per thruster in the file's order (docs/vehicles.md, Thrusters)."""
+        return N_INPUT + len(self.thrusters)
 
     @property
     def held(self) -> np.ndarray:
@@ -157,6 +209,8 @@ class Vehicle:
         """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
         value is scale * prime value."""
         c = self.coefficients[self.index(name)]
+        if c.is_thrust_gain:
+            return 1.0          # a ratio to the file's thrust curves in either scaling
         return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
 
 
@@ -301,11 +355,10 @@ def vehicle_from_file(path: str) -> Vehicle:
 _CACHE: dict[tuple[str, float], Vehicle] = {}
 
 
-def _build(raw: object, path: str) -> Vehicle:
-    """The Vehicle of a parsed vehicle file `raw` (read from `path`), or ConfigError naming the
-    file and the first bad entry."""
-    where = os.path.basename(path)
-    raw = {} if raw is None else raw     # an empty file: every required key is missing
+def _six_dof_mapping(raw: object, where: str) -> dict[str, Any]:
+    """The parsed file as the mapping of a 6-DOF vehicle, or ConfigError: an empty file is an
+    empty mapping (every required key then reported missing), a glider file is refused."""
+    raw = {} if raw is None else raw
     if not isinstance(raw, dict):
         raise ConfigError(f'{where}: not a vehicle file (a YAML mapping of keys, '
                           f'docs/vehicles.md; got {type(raw).__name__})')
@@ -314,6 +367,14 @@ def _build(raw: object, path: str) -> Vehicle:
         # derivatives: the 6-DOF model has nothing to fly it with
         raise ConfigError(f'{where}: a glider file (kind: glider): its flight model is '
                           'core/glider (docs/glider.md), not the 6-DOF model this command uses')
+    return raw
+
+
+def _build(raw: object, path: str) -> Vehicle:
+    """The Vehicle of a parsed vehicle file `raw` (read from `path`), or ConfigError naming the
+    file and the first bad entry."""
+    where = os.path.basename(path)
+    raw = _six_dof_mapping(raw, where)
     problems: list[str] = []
 
     def checked(check: Callable[..., Any], *args: Any, default: Any, **kwargs: Any) -> Any:
@@ -343,11 +404,15 @@ def _build(raw: object, path: str) -> Vehicle:
               if k in ('Ix', 'Iy', 'Iz') or k in inertia else 0.0
               for k in ('Ix', 'Iy', 'Iz', 'Ixy', 'Iyz', 'Ixz'))
     limits = raw.get('limits') or {}
-    fin, nmax = (checked(_num, limits, key, where + ' limits', positive=True,
-                         default=float('nan')) for key in ('fin_rad', 'n_rpm'))
-    free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     thrusters, thruster_problems = thrusters_from_file(raw.get('thrusters'), where)
     problems.extend(thruster_problems)
+    # a thruster vehicle has no fins and no main propeller: its limits are 0 unless given
+    # (the fin and shaft-speed channels then saturate to 0 and push nothing)
+    fin, nmax = ((checked(_num, limits, key, where + ' limits', positive=True,
+                          default=float('nan'))
+                  if key in limits or not raw.get('thrusters') else 0.0)
+                 for key in ('fin_rad', 'n_rpm'))
+    free = checked(_dofs, raw, where, default=np.ones(N_STATE, dtype=bool))
     if problems:
         raise VehicleFileProblems(where, problems)
 
@@ -376,7 +441,11 @@ def _build(raw: object, path: str) -> Vehicle:
         cruise_rpm=(_num(raw, 'cruise_rpm', where, positive=True) if 'cruise_rpm' in raw
                     else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
-        free_states=free, thrusters=tuple(thrusters))
+        free_states=free, thrusters=tuple(thrusters), thr=thruster_table(thrusters),
+        gain_idx=_gain_index(coefs, where))
+    if v.gain_idx.max() >= 0 and not thrusters:
+        raise ConfigError(f'{where}: a thrust gain (multiplier `thrusters`) without a '
+                          '`thrusters:` list scales nothing')
     _check_finite_terms(v, where)
     M = v.mass_matrix()
     if not np.allclose(M, M.T, rtol=0, atol=1e-9 * np.abs(M).max()):
@@ -455,6 +524,38 @@ def _coefficients(raw: dict, where: str, rho: float, L: float, scaling: str,
             for name, entry in craw.items()]
 
 
+def _gain_index(coefs: list[Coefficient], where: str) -> np.ndarray:
+    """(2, 6) int: per curve side and equation the thrust gain coefficient scaling that
+    thruster force, or -1."""
+    gain = -np.ones((2, N_NU), dtype=np.int64)
+    for ci, c in enumerate(coefs):
+        for side in c.gain_sides:
+            for e in c.gain_rows:
+                if gain[side, e] >= 0:
+                    raise ConfigError(f'{where}: thrust gains {coefs[gain[side, e]].name} and '
+                                      f'{c.name} both scale the {GAIN_SIDES[side]} thrust in '
+                                      f'{EQUATIONS[e]}')
+                gain[side, e] = ci
+    return gain
+
+
+GAIN_SIDES = ('forward', 'reverse')
+# a thrust gain's multiplier -> the curve sides it scales
+GAIN_MULTIPLIERS = {'thrusters': (0, 1), 'thrusters_forward': (0,), 'thrusters_reverse': (1,)}
+
+
+def _thrust_gain(name: str, value: float, eq: object, sides: tuple, cw: str) -> Coefficient:
+    """A thrust gain `NAME: [value, EQUATIONS, 0, thrusters]`: value (dimensionless, 1 = the
+    file's thrust curves) times the thrusters' force in each equation named (e.g. XYZKMN for
+    one gain of all, XY for the horizontal thrusters' plane); `thrusters_forward` and
+    `thrusters_reverse` scale one side of the curves (f > 0, f < 0) only."""
+    rows = tuple(EQUATIONS.index(a) for a in str(eq) if a in EQUATIONS)
+    if not rows or len(set(rows)) != len(str(eq)):
+        raise ConfigError(f'{cw}: a thrust gain names the equations it scales, letters of '
+                          f'{"".join(EQUATIONS)} each once (XYZKMN: all), got {eq!r}')
+    return Coefficient(name, value, rows[0], 0, (), 1.0, gain_rows=rows, gain_sides=sides)
+
+
 def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scaling: str,
                  free: np.ndarray, dofs: object) -> Coefficient:
     """One `name: [value, equation, k, multiplier]` entry (cw: where, for the messages)."""
@@ -467,6 +568,8 @@ def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scalin
         raise ConfigError(f'{cw}: value {value!r} is not a number') from None
     if not np.isfinite(value):
         raise ConfigError(f'{cw}: value {value!r} is not finite')
+    if str(mult).strip() in GAIN_MULTIPLIERS:
+        return _thrust_gain(name, value, eq, GAIN_MULTIPLIERS[str(mult).strip()], cw)
     if eq not in EQUATIONS:
         raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
     if not isinstance(k, int) or not 0 <= k <= 6:
@@ -491,6 +594,8 @@ def _term_tables(
         if c.is_added_mass:
             am_i.append((c.equation, c.added_mass_col, ci))
             am_s.append(c.scale)
+        elif c.is_thrust_gain:
+            continue            # applied by the thruster kernel (hydrodynamics._thrusters)
         else:
             f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))
             terms_i.append([c.equation, ci] + f)

@@ -20,17 +20,50 @@ seed, rpm).
   All fins rate-limited to 10 deg/s.
 - a CSV file path: columns t, delta_r, delta_s, delta_b, delta_bp, delta_bs, n_rpm and optionally
   thrust (header row), zero-order hold between rows.
+
+A hovering thruster vehicle (ROV: `Vehicle.hovers`) is flown as a pilot flies it in a tank
+(:func:`thruster_commands`): stick inputs in surge, sway, heave and yaw (-1..1), mixed into
+each thruster's command the way ArduSub's manual mode does (a fixed linear mix in command units,
+PWM_i = 1500 + 400 sum_k F_ik s_k, saturated), and sent on change:
+
+- `surge`, `sway`, `heave`, `yaw`: that stick alone: steps of seeded amplitude (held 4-9 s, a
+  rest of 3-6 s after each, either sign) for about 100 s, then a sweep (a chirp 0.05 -> 0.5 Hz
+  over 60 s) and a rest;
+- `steps` (the validation manoeuvre of `report`): steps of each stick in turn, 50 s each,
+  no sweeps, repeated;
+- `tank` (and `ident` for such a vehicle): a tank session, each of the four above in turn,
+  then combined steps of two sticks at once (surge with yaw or sway, sway with yaw, heave with
+  yaw), seeded;
+  its length is the run's (10 minutes in the issue's test).
+
+The sticks move in steps of STICK_STEP (a pilot's joystick resolution), so a command changes
+only when a stick does.
 """
 import csv
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.state import FINS, Input, N_INPUT
 
+if TYPE_CHECKING:
+    from auv_ident.core.model.vehicle import Vehicle
+
 DEG = np.pi / 180.0
 MANEUVERS = ('ident', 'zigzag', 'steps', 'prbs', 'roll')
+THRUSTER_MANEUVERS = ('tank', 'surge', 'sway', 'heave', 'yaw', 'steps')
+STICKS = {'surge': 0, 'sway': 1, 'heave': 2, 'yaw': 5}     # stick -> equation X Y Z K M N
+# stick amplitudes a pilot uses in a tank (fraction of full stick): up to about 0.5 m/s in
+# surge and 0.4 m/s in sway. Not faster: the BlueROV2 Heavy's added-mass (Munk) moments
+# (a3 - a1) u w and (a2 - a3) v w grow with speed against a roll and pitch restoring of only
+# BG = 1 cm, and at 0.7 m/s its model pitches and rolls by 40 deg and more (checked). Yaw far
+# less: full yaw stick spins it at ~3 rad/s
+STICK_LEVELS = {'surge': (0.15, 0.25, 0.35, 0.5), 'sway': (0.15, 0.25, 0.35, 0.45),
+                'heave': (0.2, 0.35, 0.5, 0.7), 'yaw': (0.08, 0.12, 0.18, 0.25)}
+STICK_STEP = 0.01           # joystick resolution (fraction of full stick)
+SWEEP = (0.05, 0.5, 60.0)   # chirp: from Hz, to Hz, over s
 FIN_RATE = 10.0 * DEG   # rad/s: rate limit of the fin actuators for prbs
 
 
@@ -131,3 +164,105 @@ def from_file(path: str, t: np.ndarray) -> np.ndarray:
         raise ConfigError(f'{path}: times in column t must increase strictly')
     idx = np.clip(np.searchsorted(a[:, 0], t, side='right') - 1, 0, len(a) - 1)
     return a[idx, 1:].copy()
+
+
+def pilot_mix(vehicle: 'Vehicle') -> np.ndarray:
+    """(n, 6) the pilot's fixed mix: thruster i's command fraction per unit stick in X Y Z K M N,
+    the pseudo-inverse of the configuration matrix with each column scaled to a largest entry
+    of 1 (full stick drives the busiest thruster to its full command, as ArduSub's motor
+    factors do)."""
+    from auv_ident.core.model.thrusters import configuration_matrix
+    F = np.linalg.pinv(configuration_matrix(vehicle.thrusters))
+    peak = np.abs(F).max(axis=0)
+    return F / np.where(peak > 0, peak, 1.0)
+
+
+def _stick_steps(rng: np.random.Generator, t: np.ndarray, t0: float, t1: float,
+                 levels: tuple) -> np.ndarray:
+    """Seeded steps on [t0, t1): amplitude from levels, either sign, held 4-9 s, then 3-6 s
+    of rest; 0 outside."""
+    s = np.zeros(len(t))
+    k = t0
+    while k < t1:
+        hold = rng.uniform(4.0, 9.0)
+        amp = rng.choice(levels) * rng.choice((-1.0, 1.0))
+        s[(t >= k) & (t < min(k + hold, t1))] = amp
+        k += hold + rng.uniform(3.0, 6.0)
+    return s
+
+
+def _stick_sweep(t: np.ndarray, t0: float, amp: float) -> np.ndarray:
+    """A chirp of amplitude amp from SWEEP[0] to SWEEP[1] Hz over SWEEP[2] s from t0."""
+    f0, f1, dur = SWEEP
+    tau = t - t0
+    inside = (tau >= 0) & (tau < dur)
+    phase = 2 * np.pi * (f0 * tau + 0.5 * (f1 - f0) / dur * tau ** 2)
+    return np.where(inside, amp * np.sin(phase), 0.0)
+
+
+def _one_stick(name: str, t: np.ndarray, t0: float, rng: np.random.Generator) -> np.ndarray:
+    """The `surge` .. `yaw` manoeuvre of one stick from t0: ~100 s of steps, a 60 s sweep at the
+    middle level and 10 s of rest (180 s in all)."""
+    levels = STICK_LEVELS[name]
+    return (_stick_steps(rng, t, t0, t0 + 100.0, levels)
+            + _stick_sweep(t, t0 + 110.0, levels[2]))
+
+
+def sticks(name: str, t: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(len(t), 6) the pilot's sticks (-1..1) per equation X Y Z K M N of manoeuvre `name`
+    (THRUSTER_MANEUVERS, or `ident`: the tank session), quantised to STICK_STEP."""
+    t = np.asarray(t, dtype=float)
+    rng = np.random.default_rng(seed)
+    s = np.zeros((len(t), 6))
+    if name in STICKS:
+        for k in range(int(np.ceil((t[-1] + 1e-9) / 180.0)) if len(t) else 0):
+            s[:, STICKS[name]] += _one_stick(name, t, 180.0 * k, rng)
+    elif name == 'steps':
+        for k in range(int(np.ceil((t[-1] + 1e-9) / 50.0)) if len(t) else 0):
+            stick = tuple(STICKS)[k % len(STICKS)]
+            s[:, STICKS[stick]] += _stick_steps(rng, t, 50.0 * k, 50.0 * (k + 1),
+                                                STICK_LEVELS[stick])
+    elif name in ('tank', 'ident'):
+        block = 110.0 + SWEEP[2]                       # steps + rest + sweep
+        t_one = 0.0
+        for stick in STICKS:                           # each stick in turn
+            s[:, STICKS[stick]] += _stick_steps(rng, t, t_one, t_one + 100.0,
+                                                STICK_LEVELS[stick])
+            s[:, STICKS[stick]] += _stick_sweep(t, t_one + 110.0, STICK_LEVELS[stick][2])
+            t_one += block
+            if t_one >= t[-1]:
+                break
+        # not heave with surge or sway: their added-mass (Munk) moments (a3 - a1) u w and
+        # (a2 - a3) v w against a BG of 1 cm roll and pitch the Heavy by tens of degrees,
+        # which a pilot does not fly
+        pairs = (('surge', 'yaw'), ('surge', 'sway'), ('sway', 'yaw'), ('heave', 'yaw'))
+        k = 0
+        while t_one < t[-1]:                           # then two sticks at once
+            a, b = pairs[k % len(pairs)]
+            for stick in (a, b):
+                s[:, STICKS[stick]] += _stick_steps(rng, t, t_one, t_one + 40.0,
+                                                    STICK_LEVELS[stick])
+            t_one += 45.0
+            k += 1
+    else:
+        raise ConfigError(f'unknown manoeuvre {name!r} for a thruster vehicle: use one of '
+                          f'{", ".join(THRUSTER_MANEUVERS)}')
+    return np.round(np.clip(s, -1.0, 1.0) / STICK_STEP) * STICK_STEP
+
+
+def thruster_commands(name: str, t: np.ndarray, vehicle: 'Vehicle',
+                      seed: int = 0) -> np.ndarray:
+    """(len(t), 7 + n) the inputs of a hovering thruster vehicle under manoeuvre `name`: the
+    state.Input channels at 0, then each thruster's command (its unit; PWM us) from the
+    pilot's sticks through pilot_mix, saturated to its range."""
+    for th in vehicle.thrusters:
+        if not np.isfinite(th.command_max):
+            raise ConfigError(f'thruster {th.name}: command {th.command} has no range '
+                              '(command_max) for a pilot to mix into')
+    s = sticks(name, t, seed)
+    frac = np.clip(s @ pilot_mix(vehicle).T, -1.0, 1.0)
+    neutral = np.array([th.neutral for th in vehicle.thrusters])
+    cmax = np.array([th.command_max for th in vehicle.thrusters])
+    u = np.zeros((len(t), N_INPUT + len(vehicle.thrusters)))
+    u[:, N_INPUT:] = neutral + cmax * frac
+    return u

@@ -37,7 +37,7 @@ from auv_ident.core.simulation import maneuvers
 @dataclass
 class Run:
     """A simulated run sampled at T: t (N,), x true states (N, 12), y measurements (N, 12),
-    u applied commands (N, 7): u[k] is held over [t_k, t_k+1)."""
+    u applied commands (N, 7 + thrusters): u[k] is held over [t_k, t_k+1)."""
 
     vehicle: str
     maneuver: str
@@ -51,6 +51,8 @@ class Run:
     process_std: np.ndarray
     current: np.ndarray | None = None  # (3,) m/s NED, the water current (None: still water)
     velocity_reference: str = 'ground'  # what y's u v w are
+    # the names of u's columns: state.Input's, then a thruster vehicle's thrusters
+    input_names: tuple = INPUT_NAMES
 
     def summary(self) -> dict[str, Any]:
         x = self.x
@@ -111,9 +113,12 @@ def simulate(model: Model, maneuver: str = 'zigzag', duration: float = 200.0, T:
     rng = np.random.default_rng(seed)
     n = int(round(duration / T)) + 1
     t = np.arange(n) * T
-    u = maneuvers.commands(maneuver, t, rpm=rpm, seed=seed,
-                           fin_limit=model.vehicle.par[P_FIN],
-                           thrust=model.vehicle.cruise_thrust)
+    if model.vehicle.hovers:        # an ROV: a pilot's sticks mixed into thruster commands
+        u = maneuvers.thruster_commands(maneuver, t, model.vehicle, seed=seed)
+    else:
+        u = maneuvers.commands(maneuver, t, rpm=rpm, seed=seed,
+                               fin_limit=model.vehicle.par[P_FIN],
+                               thrust=model.vehicle.cruise_thrust)
     x = np.empty((n, N_STATE))
     if x0 is None:
         x[0] = trim
@@ -141,11 +146,12 @@ def simulate(model: Model, maneuver: str = 'zigzag', duration: float = 200.0, T:
     y[:, EULER] = wrap_angle(y[:, EULER])
     return Run(model.vehicle.name, str(maneuver), T, seed, t, x, y, u, noise_std,
                np.zeros(6) if process_std is None else np.asarray(process_std, float),
-               None if vc is None else vc.copy(), velocity_reference)
+               None if vc is None else vc.copy(), velocity_reference,
+               model.vehicle.input_names)
 
 
 def save_run_csv(run: Run, path: str) -> None:
     """Write a run as CSV: t, true states, measured states (y_*), inputs (documented in README)."""
-    header = (['t'] + list(STATE_NAMES) + ['y_' + s for s in STATE_NAMES] + list(INPUT_NAMES))
+    header = ['t'] + list(STATE_NAMES) + ['y_' + s for s in STATE_NAMES] + list(run.input_names)
     data = np.column_stack([run.t, run.x, run.y, run.u])
     np.savetxt(path, data, delimiter=',', header=','.join(header), comments='', fmt='%.17g')
