@@ -33,6 +33,20 @@ def test_energy_decays_without_thrust_when_neutral():
     assert E[-1] < 0.05 * E[0]
 
 
+def test_coriolis_is_skew_symmetric():
+    """C_RB(nu) + C_A(nu) does no work: C = -C^T for any nu, also with r_G off the origin."""
+    rng = np.random.default_rng(0)
+    for r_g in ((0.0, 0.0, 0.0), (0.01, -0.02, 0.03)):
+        model = rov.RovModel(dataclasses.replace(rov.RovTruth(), r_g=r_g))
+        for _ in range(5):
+            C = model.coriolis(rng.normal(size=6))
+            np.testing.assert_allclose(C, -C.T, atol=1e-12)
+    # and it is not zero: the added-mass Munk moment in pitch, (a3 - a1) u w
+    nu = np.array([0.3, 0.0, 0.1, 0.0, 0.0, 0.0])
+    assert -(rov.RovModel(rov.RovTruth()).coriolis(nu) @ nu)[4] == pytest.approx(
+        (18.6863 - 6.3567) * 0.3 * 0.1)
+
+
 def test_heavy_vehicle_sinks_at_the_terminal_speed():
     """W - B = Z_w w + Z_ww w|w| at the terminal heave speed (level, no thrust)."""
     truth = rov.RovTruth()
