@@ -1,8 +1,9 @@
 """Independent data for a thruster vehicle: a BlueROV2 Heavy tank session as a rosbag2 MCAP bag,
 made by a 6-DOF model of its own (plain numpy/scipy) so that it can judge the package's
 thruster model (issue 29). Nothing of ``auv_ident.core.model``, the simulator or
-``offline.independent_data`` (which imports the model) is used: the kinematics, quaternions,
-epoch and QoS helpers below are written out again on purpose.
+``offline.independent_data`` (which imports the model) is used: the kinematics and quaternions
+below are written out again on purpose; only model-free bag helpers are shared
+(offline/generator_common.py).
 
 Truth model (Fossen 2021, ch. 6-8, in body FRD / world NED)::
 
@@ -63,7 +64,6 @@ Usage::
 import argparse
 import dataclasses
 from dataclasses import dataclass
-import datetime
 import json
 import math
 from pathlib import Path
@@ -72,6 +72,8 @@ import sys
 
 import numpy as np
 from scipy.integrate import solve_ivp
+
+from auv_ident.offline.generator_common import epoch_ns, jsonable, qos
 
 GENERATOR = 'auv_ident.offline.independent_rov v1'
 NS = 1_000_000_000
@@ -463,14 +465,6 @@ def to_frame(y12, frame):
     return pos, quat_of(R), lin, ang
 
 
-def _epoch_ns(text):
-    d = datetime.datetime.fromisoformat(text.replace('Z', '+00:00'))
-    if d.tzinfo is None:
-        d = d.replace(tzinfo=datetime.timezone.utc)
-    delta = d - datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
-    return (delta.days * 86400 + delta.seconds) * NS + delta.microseconds * 1000
-
-
 def _streams(seed):
     names = ('pilot', 'odom_jitter', 'odom_delay', 'cmd_delay', 'noise_draw', 'noise')
     return {n: np.random.default_rng(s)
@@ -522,26 +516,12 @@ class _Messages:
         return self.store.serialize_cdr(msg, self.ODOM)
 
 
-def _qos():
-    from rosbags.interfaces import (
-        Qos,
-        QosDurability,
-        QosHistory,
-        QosLiveliness,
-        QosReliability,
-        QosTime,
-    )
-    inf = QosTime(9223372036, 854775807)
-    return Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE, inf,
-               inf, QosLiveliness.AUTOMATIC, inf, False)
-
-
 def _write_bag(path, records, msgs):
     from rosbags.rosbag2 import StoragePlugin, Writer
     w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
     with w:
         conns = {topic: w.add_connection(topic, kind, typestore=msgs.store,
-                                         offered_qos_profiles=[_qos()])
+                                         offered_qos_profiles=[qos()])
                  for topic, kind in ((ODOM_TOPIC, msgs.ODOM), (THRUSTER_TOPIC, msgs.ARRAY))}
         for log_ns, topic, payload in records:
             w.write(conns[topic], int(log_ns), payload)
@@ -581,7 +561,7 @@ def generate(cfg, out_dir, overwrite=False, truth=None):
     truth = truth or RovTruth()
     out_dir = _prepare(out_dir, overwrite)
     rng = _streams(cfg.seed)
-    t0_ns = _epoch_ns(cfg.start_time)
+    t0_ns = epoch_ns(cfg.start_time)
     gain = 1.0 + cfg.thrust_perturb
 
     # odometry stamps
@@ -662,7 +642,7 @@ def generate(cfg, out_dir, overwrite=False, truth=None):
         'vehicle': 'bluerov2_heavy',
         'source': 'von Benzon et al. 2022, J. Mar. Sci. Eng. 10(12):1898, Table 3',
         'coefficients': truth.coefficients(gain),
-        'truth_model': _jsonable(dataclasses.asdict(truth)),
+        'truth_model': jsonable(dataclasses.asdict(truth)),
         'W': truth.W, 'B': truth.B,
         'thrusters': {'names': list(THRUSTER_NAMES), 'r_frd': THRUSTER_R.tolist(),
                       'd_frd': THRUSTER_D.tolist(),
@@ -681,21 +661,11 @@ def generate(cfg, out_dir, overwrite=False, truth=None):
                    'commands': int(len(pub))},
         'manoeuvres': 'pilot blocks: steps of surge, sway, heave, yaw; pairs of surge, sway, '
                       'yaw; chirps 0.05-0.6 Hz; heave steps back to depth0 beyond depth_band',
-        'config': _jsonable(dataclasses.asdict(cfg)),
+        'config': jsonable(dataclasses.asdict(cfg)),
         'integrator': f'scipy solve_ivp RK45 between command switches, rtol {cfg.rtol}',
     }
     (out_dir / 'truth.json').write_text(json.dumps(doc, indent=1) + '\n', encoding='utf-8')
     return doc
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
 
 
 def main(argv=None):

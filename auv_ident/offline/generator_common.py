@@ -1,0 +1,46 @@
+"""What the independent data generators (offline/independent_data.py, offline/independent_rov.py)
+share that has nothing to do with a vehicle model: the start date in ns, the QoS profile their
+bags offer, and numpy values made JSON-ready for truth.json. Kept apart from both so that the
+thruster generator need not import the fin generator (which imports auv_ident.core.model)."""
+import datetime
+
+import numpy as np
+
+NS = 1_000_000_000
+
+
+def epoch_ns(text):
+    """ns since 1970 of an ISO 8601 date ('...Z' or an offset; naive means UTC)."""
+    d = datetime.datetime.fromisoformat(text.replace('Z', '+00:00'))
+    if d.tzinfo is None:
+        d = d.replace(tzinfo=datetime.timezone.utc)
+    delta = d - datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
+    return (delta.days * 86400 + delta.seconds) * NS + delta.microseconds * 1000
+
+
+def qos():
+    """The offered QoS of every topic: reliable, volatile, keep last 10 (a recorder's default)."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+    inf = QosTime(9223372036, 854775807)
+    return Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE, inf,
+               inf, QosLiveliness.AUTOMATIC, inf, False)
+
+
+def jsonable(obj):
+    """dicts, lists, tuples, arrays and numpy scalars as plain JSON values."""
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
