@@ -1,8 +1,10 @@
-"""What the independent data generators (offline/independent_data.py, offline/independent_rov.py)
-share that has nothing to do with a vehicle model: the start date in ns, the QoS profile their
-bags offer, and numpy values made JSON-ready for truth.json. Kept apart from both so that the
-thruster generator need not import the fin generator (which imports auv_ident.core.model)."""
+"""What the independent data generators (offline/independent_data.py and
+offline/independent_rov.py) share that has nothing to do with a vehicle model: the start date
+in ns, the QoS profile their bags offer, a rotation matrix's quaternion, and numpy values made
+JSON-ready for truth.json. Kept apart from both so that the thruster generator need not import
+the fin generator (which imports auv_ident.core.model)."""
 import datetime
+import math
 
 import numpy as np
 
@@ -44,3 +46,21 @@ def jsonable(obj):
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def quat_of(R):
+    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s,
+                0.25 * s)
+    i = int(np.argmax(np.diag(R)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+    q = np.empty(4)
+    q[i] = 0.25 * s
+    q[j] = (R[j, i] + R[i, j]) / s
+    q[k] = (R[k, i] + R[i, k]) / s
+    q[3] = (R[k, j] - R[j, k]) / s
+    return tuple(q)

@@ -71,7 +71,7 @@ import yaml
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.trim import trim_speed
 from auv_ident.core.model.vehicle import vehicle_from_file
-from auv_ident.offline.generator_common import epoch_ns, jsonable, qos
+from auv_ident.offline.generator_common import epoch_ns, jsonable, qos, quat_of
 from auv_ident.session.messages import JOINT_NAMES
 from auv_ident.vehicles import load_vehicle, resolve_vehicle_path
 
@@ -819,24 +819,6 @@ def _exp_rot(v):
     return np.eye(3) + math.sin(a) * K + (1.0 - math.cos(a)) * K @ K
 
 
-def _quat_of(R):
-    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s,
-                0.25 * s)
-    i = int(np.argmax(np.diag(R)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-    q = np.empty(4)
-    q[i] = 0.25 * s
-    q[j] = (R[j, i] + R[i, j]) / s
-    q[k] = (R[k, i] + R[i, k]) / s
-    q[3] = (R[k, j] - R[j, k]) / s
-    return tuple(q)
-
-
 def _ou(t, sigma, tau, rng):
     """Stationary Ornstein-Uhlenbeck noise (len(t), len(sigma)) sampled at t (s); white for
     tau = 0."""
@@ -919,7 +901,7 @@ def generate_raw(cfg):
     for j, k in enumerate(k_imu):
         R = _exp_rot(e_att[j]) @ rotation(*x_true[k, 9:12])
         w = x_true[k, 3:6] + np.asarray(err['gyro_bias']) + e_gyr[j]
-        recs.append(RawMeasurement('imu', float(t_all[k]), np.concatenate([_quat_of(R), w]),
+        recs.append(RawMeasurement('imu', float(t_all[k]), np.concatenate([quat_of(R), w]),
                                    imu_cov))
     # DVL: bottom (or water) velocity at its lever arm, in its turned and misaligned frame
     r_d = np.asarray(cfg.dvl_lever_arm, dtype=float)

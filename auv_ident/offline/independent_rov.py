@@ -73,7 +73,7 @@ import sys
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from auv_ident.offline.generator_common import epoch_ns, jsonable, qos
+from auv_ident.offline.generator_common import epoch_ns, jsonable, qos, quat_of
 
 GENERATOR = 'auv_ident.offline.independent_rov v1'
 NS = 1_000_000_000
@@ -168,26 +168,6 @@ def rotation(phi, theta, psi):
     ry = np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]])
     rx = np.array([[1.0, 0.0, 0.0], [0.0, cf, -sf], [0.0, sf, cf]])
     return rz @ ry @ rx
-
-
-def quat_of(R):
-    """Unit quaternion (x, y, z, w) of a rotation matrix (Shepperd's method), w >= 0."""
-    tr = np.trace(R)
-    cand = np.array([tr, R[0, 0], R[1, 1], R[2, 2]])
-    k = int(np.argmax(cand))
-    if k == 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
-                      (R[1, 0] - R[0, 1]) / s, 0.25 * s])
-    else:
-        i, j, m = k - 1, k % 3, (k + 1) % 3
-        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
-        q = np.empty(4)
-        q[i] = 0.25 * s
-        q[j] = (R[j, i] + R[i, j]) / s
-        q[m] = (R[m, i] + R[i, m]) / s
-        q[3] = (R[m, j] - R[j, m]) / s
-    return q if q[3] >= 0 else -q
 
 
 def t200_thrust(pwm, gain=1.0):
@@ -462,7 +442,8 @@ def to_frame(y12, frame):
     if frame == 'enu':
         R, pos = P_WORLD @ R @ P_BODY, P_WORLD @ pos
         lin, ang = P_BODY @ lin, P_BODY @ ang
-    return pos, quat_of(R), lin, ang
+    q = np.array(quat_of(R))
+    return pos, (q if q[3] >= 0 else -q), lin, ang   # w >= 0, as drivers publish
 
 
 def _streams(seed):
