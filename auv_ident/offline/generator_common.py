@@ -1,10 +1,12 @@
 """What the independent data generators (offline/independent_data.py and
 offline/independent_rov.py) share that has nothing to do with a vehicle model: the start date
-in ns, the QoS profile their bags offer, a rotation matrix's quaternion, and numpy values made
-JSON-ready for truth.json. Kept apart from both so that the thruster generator need not import
-the fin generator (which imports auv_ident.core.model)."""
+in ns, the output folder's preparation, the QoS profile their bags offer, a rotation matrix's
+quaternion, and numpy values made JSON-ready for truth.json. Kept apart from both so that the
+thruster generator need not import the fin generator (which imports auv_ident.core.model)."""
 import datetime
 import math
+from pathlib import Path
+import shutil
 
 import numpy as np
 
@@ -64,3 +66,20 @@ def quat_of(R):
     q[k] = (R[k, i] + R[i, k]) / s
     q[3] = (R[k, j] - R[j, k]) / s
     return tuple(q)
+
+
+def prepare_out_dir(out_dir, overwrite, names):
+    """The output folder, created; FileExistsError if it holds anything and not overwrite, else
+    its earlier outputs ``names`` (files or folders) removed."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and any(out_dir.iterdir()):
+        if not overwrite:
+            raise FileExistsError(f'{out_dir} exists and is not empty (overwrite=True replaces)')
+        for name in names:
+            p = out_dir / name
+            if p.is_dir():
+                shutil.rmtree(p)
+            elif p.exists():
+                p.unlink()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return out_dir

@@ -61,7 +61,6 @@ from dataclasses import dataclass, field
 import json
 import math
 from pathlib import Path
-import shutil
 import sys
 
 import numpy as np
@@ -71,7 +70,13 @@ import yaml
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.trim import trim_speed
 from auv_ident.core.model.vehicle import vehicle_from_file
-from auv_ident.offline.generator_common import epoch_ns, jsonable, qos, quat_of
+from auv_ident.offline.generator_common import (
+    epoch_ns,
+    jsonable,
+    prepare_out_dir,
+    qos,
+    quat_of,
+)
 from auv_ident.session.messages import JOINT_NAMES
 from auv_ident.vehicles import load_vehicle, resolve_vehicle_path
 
@@ -610,18 +615,9 @@ def generate(cfg, out_dir, overwrite=False):
     """Make one bag: ``out_dir/bag`` (rosbag2 MCAP directory), ``out_dir/truth.json`` and, for a
     perturbed truth, ``out_dir/truth_vehicle.yaml``. Returns a :class:`GeneratedData`."""
     cfg.validate()
-    out_dir = Path(out_dir)
+    out_dir = prepare_out_dir(out_dir, overwrite,
+                              ('bag', 'truth.json', 'truth_vehicle.yaml', 'truth_states.npz'))
     bag = out_dir / 'bag'
-    if out_dir.exists() and any(out_dir.iterdir()):
-        if not overwrite:
-            raise FileExistsError(f'{out_dir} exists and is not empty (overwrite=True replaces)')
-        for name in ('bag', 'truth.json', 'truth_vehicle.yaml', 'truth_states.npz'):
-            p = out_dir / name
-            if p.is_dir():
-                shutil.rmtree(p)
-            elif p.exists():
-                p.unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
     rng = _streams(cfg.seed)
 
     # truth vehicle

@@ -67,13 +67,18 @@ from dataclasses import dataclass
 import json
 import math
 from pathlib import Path
-import shutil
 import sys
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from auv_ident.offline.generator_common import epoch_ns, jsonable, qos, quat_of
+from auv_ident.offline.generator_common import (
+    epoch_ns,
+    jsonable,
+    prepare_out_dir,
+    qos,
+    quat_of,
+)
 
 GENERATOR = 'auv_ident.offline.independent_rov v1'
 NS = 1_000_000_000
@@ -520,27 +525,12 @@ def _covariances(cfg, sigma):
     return np.diag(pose).reshape(36), np.diag(twist).reshape(36)
 
 
-def _prepare(out_dir, overwrite):
-    out_dir = Path(out_dir)
-    if out_dir.exists() and any(out_dir.iterdir()):
-        if not overwrite:
-            raise FileExistsError(f'{out_dir} exists and is not empty (overwrite=True replaces)')
-        for name in ('bag', 'truth.json', 'truth_states.npz'):
-            p = out_dir / name
-            if p.is_dir():
-                shutil.rmtree(p)
-            elif p.exists():
-                p.unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    return out_dir
-
-
 def generate(cfg, out_dir, overwrite=False, truth=None):
     """Write ``out_dir/bag``, ``out_dir/truth.json`` and ``out_dir/truth_states.npz`` (truth at
     the odometry stamps). Returns the truth.json document."""
     cfg.validate()
     truth = truth or RovTruth()
-    out_dir = _prepare(out_dir, overwrite)
+    out_dir = prepare_out_dir(out_dir, overwrite, ('bag', 'truth.json', 'truth_states.npz'))
     rng = _streams(cfg.seed)
     t0_ns = epoch_ns(cfg.start_time)
     gain = 1.0 + cfg.thrust_perturb
