@@ -10,6 +10,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.offline import independent_rov as rov
+from auv_ident.session.messages import odometry_to_state
 
 
 @pytest.fixture(scope='module')
@@ -121,6 +122,11 @@ def test_bag_decodes_strictly(run):
     m = odom[k][1]
     assert m.pose.pose.position.z == pytest.approx(-st['y'][k, 8])
     assert m.twist.twist.linear.y == pytest.approx(-st['y'][k, 1])
+    # the package's ENU reader gives back the generator's NED/FRD measurements
+    x = np.array([odometry_to_state(m, 'enu')[1] for _, m in odom])
+    err = x - st['y']
+    err[:, 9:] = (err[:, 9:] + np.pi) % (2 * np.pi) - np.pi
+    assert np.abs(err).max() < 1e-9
 
 
 def test_commands_only_on_change(run):
