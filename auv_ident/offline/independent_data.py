@@ -58,11 +58,9 @@ Usage::
 import argparse
 import dataclasses
 from dataclasses import dataclass, field
-import datetime
 import json
 import math
 from pathlib import Path
-import shutil
 import sys
 
 import numpy as np
@@ -72,6 +70,13 @@ import yaml
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.trim import trim_speed
 from auv_ident.core.model.vehicle import vehicle_from_file
+from auv_ident.offline.generator_common import (
+    epoch_ns,
+    jsonable,
+    prepare_out_dir,
+    qos,
+    quat_of,
+)
 from auv_ident.session.messages import JOINT_NAMES
 from auv_ident.vehicles import load_vehicle, resolve_vehicle_path
 
@@ -521,28 +526,6 @@ def perturbed_vehicle(cfg, rng, out_dir):
 # messages and bag
 
 
-def _epoch_ns(text):
-    d = datetime.datetime.fromisoformat(text.replace('Z', '+00:00'))
-    if d.tzinfo is None:
-        d = d.replace(tzinfo=datetime.timezone.utc)
-    delta = d - datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
-    return (delta.days * 86400 + delta.seconds) * NS + delta.microseconds * 1000
-
-
-def _qos():
-    from rosbags.interfaces import (
-        Qos,
-        QosDurability,
-        QosHistory,
-        QosLiveliness,
-        QosReliability,
-        QosTime,
-    )
-    inf = QosTime(9223372036, 854775807)
-    return Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE, inf,
-               inf, QosLiveliness.AUTOMATIC, inf, False)
-
-
 class MessageBuilder:
     """nav_msgs/Odometry and sensor_msgs/JointState from the rosbags Jazzy typestore."""
 
@@ -604,13 +587,14 @@ def write_bag(path, records, builder, compress=False):
     if compress:
         from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
         w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-    qos = [_qos()]
+    profiles = [qos()]
     with w:
         conns = {
             ODOM_TOPIC: w.add_connection(ODOM_TOPIC, builder.ODOM, typestore=builder.store,
-                                         offered_qos_profiles=qos),
+                                         offered_qos_profiles=profiles),
             ACTUATOR_TOPIC: w.add_connection(ACTUATOR_TOPIC, builder.JOINTS,
-                                             typestore=builder.store, offered_qos_profiles=qos),
+                                             typestore=builder.store,
+                                             offered_qos_profiles=profiles),
         }
         for log_ns, topic, payload in records:
             w.write(conns[topic], int(log_ns), payload)
@@ -627,34 +611,13 @@ def _streams(seed):
     return {n: np.random.default_rng(s) for n, s in zip(names, seqs)}
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
 def generate(cfg, out_dir, overwrite=False):
     """Make one bag: ``out_dir/bag`` (rosbag2 MCAP directory), ``out_dir/truth.json`` and, for a
     perturbed truth, ``out_dir/truth_vehicle.yaml``. Returns a :class:`GeneratedData`."""
     cfg.validate()
-    out_dir = Path(out_dir)
+    out_dir = prepare_out_dir(out_dir, overwrite,
+                              ('bag', 'truth.json', 'truth_vehicle.yaml', 'truth_states.npz'))
     bag = out_dir / 'bag'
-    if out_dir.exists() and any(out_dir.iterdir()):
-        if not overwrite:
-            raise FileExistsError(f'{out_dir} exists and is not empty (overwrite=True replaces)')
-        for name in ('bag', 'truth.json', 'truth_vehicle.yaml', 'truth_states.npz'):
-            p = out_dir / name
-            if p.is_dir():
-                shutil.rmtree(p)
-            elif p.exists():
-                p.unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
     rng = _streams(cfg.seed)
 
     # truth vehicle
@@ -672,7 +635,7 @@ def generate(cfg, out_dir, overwrite=False):
     # commands: the driver's clock, the rate-limited servo commands, the published subset
     targets = _targets(cfg, rng['maneuver'], fin_limit, cfg.duration)
     ticks = command_ticks(cfg, rng['cmd_jitter'])
-    t0_ns = _epoch_ns(cfg.start_time)
+    t0_ns = epoch_ns(cfg.start_time)
     tick_ns = t0_ns + np.round(ticks * NS).astype(np.int64)
     ticks = (tick_ns - t0_ns) / NS           # the truth switches at the stamps as written
     tick_vals = command_values(cfg, targets, ticks, cfg.rpm)
@@ -744,7 +707,7 @@ def generate(cfg, out_dir, overwrite=False):
         'factors': factors,
         'perturbed': [n for n, f in factors.items() if f != 1.0],
         'notes': notes,
-        'config': _jsonable(dataclasses.asdict(cfg)),
+        'config': jsonable(dataclasses.asdict(cfg)),
         'start_ns': t0_ns,
         'current_ned': list(map(float, cfg.current_ned)),
         'current_body_t0': (rotation(*y0[9:12]).T @ np.asarray(cfg.current_ned, float)).tolist(),
@@ -852,24 +815,6 @@ def _exp_rot(v):
     return np.eye(3) + math.sin(a) * K + (1.0 - math.cos(a)) * K @ K
 
 
-def _quat_of(R):
-    """Quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
-    tr = np.trace(R)
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s,
-                0.25 * s)
-    i = int(np.argmax(np.diag(R)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-    q = np.empty(4)
-    q[i] = 0.25 * s
-    q[j] = (R[j, i] + R[i, j]) / s
-    q[k] = (R[k, i] + R[i, k]) / s
-    q[3] = (R[k, j] - R[j, k]) / s
-    return tuple(q)
-
-
 def _ou(t, sigma, tau, rng):
     """Stationary Ornstein-Uhlenbeck noise (len(t), len(sigma)) sampled at t (s); white for
     tau = 0."""
@@ -952,7 +897,7 @@ def generate_raw(cfg):
     for j, k in enumerate(k_imu):
         R = _exp_rot(e_att[j]) @ rotation(*x_true[k, 9:12])
         w = x_true[k, 3:6] + np.asarray(err['gyro_bias']) + e_gyr[j]
-        recs.append(RawMeasurement('imu', float(t_all[k]), np.concatenate([_quat_of(R), w]),
+        recs.append(RawMeasurement('imu', float(t_all[k]), np.concatenate([quat_of(R), w]),
                                    imu_cov))
     # DVL: bottom (or water) velocity at its lever arm, in its turned and misaligned frame
     r_d = np.asarray(cfg.dvl_lever_arm, dtype=float)
@@ -977,7 +922,7 @@ def generate_raw(cfg):
         recs.append(RawMeasurement('command', float(t), np.asarray(u, dtype=float)))
     # time order; a command stamped with a sensor message goes first (it acts from its stamp)
     recs.sort(key=lambda m: (m.t, m.kind != 'command'))
-    truth = {'generator': GENERATOR + ' raw', 'config': _jsonable(dataclasses.asdict(cfg)),
+    truth = {'generator': GENERATOR + ' raw', 'config': jsonable(dataclasses.asdict(cfg)),
              'coefficients': dict(zip(vehicle.names, map(float, vehicle.values))),
              'sensor_errors': err, 'dvl_mounting_nominal_yaw_deg': cfg.dvl_yaw_deg,
              'counts': {k: int(len(v)) for k, v in stamps.items()}}
