@@ -15,7 +15,9 @@ Formats (docs/export.md):
   the plugin's *Dot* terms, ``gz_added_mass``): added mass exact, damping fitted
   (analysis/export_fossen.py), the fit % per DOF in the file's header and echoed;
 - ``urdf-hydrodynamics``: the ``<hydrodynamics>`` URDF block of the ROS 2 ``hydrodynamics``
-  library (auv_controllers), diagonal terms, fitted the same way.
+  library (auv_controllers), diagonal terms, fitted the same way;
+- ``python``: a self-contained numpy module with our model written out term by term (exact;
+  analysis/export_python.py).
 
 The exported vehicle text is read back with the vehicle loader before it is written, and every
 coefficient must come back as exported (identified: the estimate to the last bit; the others:
@@ -35,7 +37,7 @@ from auv_ident.core.errors import AuvIdentError, ConfigError
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.safe_files import write_atomic
 
-FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics')
+FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics', 'python')
 GZ_ADDED_MASS = ('link', 'plugin')
 
 
@@ -219,7 +221,11 @@ def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='li
     out = Path(out)
     model = load_model(model_path, vehicle=vehicle)
     if fmt != 'vehicle':
-        text = _fossen_text(model, fmt, gz_added_mass, echo)
+        if fmt == 'python':
+            from auv_ident.analysis.export_python import python_text
+            text = python_text(model)
+        else:
+            text = _fossen_text(model, fmt, gz_added_mass, echo)
         try:
             return write_atomic(out, text)
         except OSError as exc:
