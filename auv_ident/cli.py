@@ -474,10 +474,13 @@ def cmd_vehicle_check(args):
 
 
 def cmd_export(args):
-    from auv_ident.analysis.export import export_model
-    _check_outputs(args, '--out')
+    from auv_ident.analysis.export import export_model, fit_path, FITTED
+    if args.format in FITTED and not args.fit_out:
+        args.fit_out = str(fit_path(args.out))
+    _check_outputs(args, '--out', '--fit-out')
     path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
-                        gz_added_mass=args.gz_added_mass, echo=print)
+                        gz_added_mass=args.gz_added_mass, echo=print, bags=args.bag,
+                        fit_out=args.fit_out)
     print(f'wrote {path} ({args.format})')
     return 0
 
@@ -791,11 +794,18 @@ def build_parser():
                                                         'fossen xacro), gz (gz-sim '
                                                         'Hydrodynamics SDF), '
                                                         'urdf-hydrodynamics (ROS 2 '
-                                                        'hydrodynamics / auv_controllers)')
+                                                        'hydrodynamics / auv_controllers), '
+                                                        'python (a numpy module, exact)')
     sp.add_argument('--gz-added-mass', default='link', choices=('link', 'plugin'),
                     help='--format gz: added mass as <fluid_added_mass> (link, default, Gazebo '
                          "Ionic+) or as the plugin's *Dot* terms with its Coriolis disabled")
+    sp.add_argument('--bag', action='append', metavar='PATH',
+                    help='uuv, gz, urdf-hydrodynamics: a run whose measured velocities are the '
+                         "damping fit's envelope (repeatable; default: the model's own bags "
+                         'when they are here, else a simulated run)')
     sp.add_argument('--out', required=True, help='file to write')
+    sp.add_argument('--fit-out', help='uuv, gz, urdf-hydrodynamics: the fit %% per DOF as JSON '
+                                      '(default: OUT.fit.json, next to the file)')
     sp.add_argument('--force', action='store_true', help='replace an existing --out')
     sp.set_defaults(func=cmd_export)
     return p

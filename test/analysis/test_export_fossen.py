@@ -10,9 +10,11 @@ HydrodynamicsUtils.hh), fed with the exported file, simulated against our model.
   close to it.
 """
 import json
+from pathlib import Path
 import re
 import xml.etree.ElementTree as ET
 
+import helpers
 import numpy as np
 import pytest
 
@@ -276,7 +278,8 @@ def test_a_fossen_form_vehicle_exports_exactly(tmp_path, fmt):
     form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
     export_model(model, out, fmt=form, gz_added_mass=am or 'link', echo=lines.append)
     v, _, ours = _ours(vehicle, est, rpm=1500.0)
-    fit = [float(x) for x in re.findall(r'[XYZKMN] (\d+\.\d+)', lines[0])]
+    fit_line = next(ln for ln in lines if ln.startswith('fit of'))
+    fit = [float(x) for x in re.findall(r'[XYZKMN] (\d+\.\d+)', fit_line)]
     assert len(fit) == 6 and min(fit) >= 99.9999, lines
     dt, n = 0.01, 2000
     want = _rk4(ours, NU0, dt, n)
@@ -370,3 +373,39 @@ def test_a_bad_gz_added_mass_is_refused(tmp_path):
     model = _model_json(tmp_path / 'm.json', 'remus100', {'Z_w': -60.0})
     with pytest.raises(ExportError, match='--gz-added-mass'):
         export_model(model, tmp_path / 'o.xml', fmt='gz', gz_added_mass='engine')
+
+
+def test_the_fit_envelope_is_the_identified_bags_velocities(tmp_path, capsys):
+    """A model that records its bag is fitted over that bag's measured velocities (and the
+    box of them); the fit % per DOF goes next to the file, and the target's damping
+    re-evaluated on those samples reaches it."""
+    from auv_ident.analysis.export_fossen import bag_velocities
+    from auv_ident.cli import main
+    from auv_ident.offline.replay import read_bag_run
+    from auv_ident.session.settings import IdentifierSettings
+    bag = str(Path(helpers.REPO) / 'bags' / 'nps_auv2_ident')
+    doc = {'vehicle': 'nps_auv2', 'bags': [bag],
+           'coefficients': {'Z_w': {'estimate': -0.3, 'std': 1e-3}}}
+    model = tmp_path / 'm.json'
+    model.write_text(json.dumps(doc), encoding='utf-8')
+    out = tmp_path / 'nps.sdf'
+    assert main(['export', str(model), '--format', 'gz', '--out', str(out)]) == 0
+    said = capsys.readouterr().out
+    assert 'measured velocities' in said and bag in said
+    report = json.loads((tmp_path / 'nps.sdf.fit.json').read_text(encoding='utf-8'))
+    assert report['bags'] == [bag] and report['format'] == 'gz'
+    assert report['fit_percent'] == pytest.approx(
+        {d: round(f, 4) for d, f in _header_fit(out).items()}, abs=1e-4)
+    # the samples: the bag's measured u..r (independently read here) and the box of them
+    Y = read_bag_run(bag, IdentifierSettings.from_values(vehicle='nps_auv2')).Y[:, :6]
+    Y = Y[np.all(np.isfinite(Y), axis=1)]
+    np.testing.assert_array_equal(bag_velocities([bag], load_vehicle('nps_auv2')), Y)
+    box = np.random.default_rng(0).uniform(Y.min(axis=0), Y.max(axis=0), size=(2000, 6))
+    v, m, _ = _ours('nps_auv2', {'Z_w': -0.3})
+    got = _target_fit(out, 'gz', v, m, np.vstack([Y, box]))
+    for d in 'XYZKMN':
+        assert got[d] == pytest.approx(report['fit_percent'][d], abs=2e-3), d
+    # the report is an output like the file: not replaced without --force
+    out.unlink()
+    assert main(['export', str(model), '--format', 'gz', '--out', str(out)]) == 2
+    assert 'nps.sdf.fit.json: exists already' in capsys.readouterr().err
