@@ -310,6 +310,7 @@ def cmd_model_report(args):
         print(f"diagnosis (not scored): rudder bias {b['bias_deg']:+.2f} deg fits the yaw rate "
               f"best ({b['r_fit_percent_with_bias']:.1f} %)")
     print(f"report: {out['report']}, {out['html']}, {out['csv']}")
+    _report_exports(args, args.model, None)     # over the model's own bags
     return 0
 
 
@@ -317,6 +318,9 @@ def cmd_report(args):
     from auv_ident.analysis.report import make_report
     from auv_ident.analysis.results import doc_table
     _check_outputs(args, '--out', folder=True)
+    if args.export:
+        from auv_ident.analysis.export import check_formats
+        check_formats(args.export)      # before the work, not after it
     if args.model:
         return cmd_model_report(args)
     settings = _settings(args)
@@ -350,7 +354,18 @@ def cmd_report(args):
               + ', '.join(f"{k} {v:.3g} {true_val['rms_units'][k]}"
                           for k, v in true_val['rms'].items()))
     print(f"report: {out['report']} and {out['html']}")
+    _report_exports(args, out['json'], [args.bag] if args.bag else None)
     return _trust_status(doc)
+
+
+def _report_exports(args, model_path, bags):
+    """report --export FORMAT: the reported model exported into the report folder."""
+    if not args.export:
+        return
+    from auv_ident.analysis.export import export_into
+    for path in export_into(args.out, model_path, args.export, vehicle=args.vehicle,
+                            bags=bags, echo=print):
+        print(f'wrote {path}')
 
 
 def _pct(v):
@@ -701,6 +716,11 @@ def build_parser():
                          "identified from (default: the model's identification bags)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
+    sp.add_argument('--export', action='append', metavar='FORMAT',
+                    help='also export the model into the report folder, as `export --format '
+                         'FORMAT` would (repeatable: vehicle, uuv, gz, urdf-hydrodynamics, '
+                         'python; files vehicle.yaml, uuv.xacro, gz.sdf, hydrodynamics.urdf, '
+                         'model.py; docs/export.md)')
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('compare-methods',

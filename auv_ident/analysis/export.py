@@ -272,3 +272,25 @@ def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='li
         return write_atomic(out, text)
     except OSError as exc:
         raise ExportError(f'{out}: cannot write: {exc}') from None
+
+
+# report --export FORMAT: the file each format gets in the report folder
+REPORT_FILES = {'vehicle': 'vehicle.yaml', 'uuv': 'uuv.xacro', 'gz': 'gz.sdf',
+                'urdf-hydrodynamics': 'hydrodynamics.urdf', 'python': 'model.py'}
+
+
+def check_formats(formats):
+    """ExportError naming a format that is not one of FORMATS (before a long report)."""
+    for fmt in formats:
+        if fmt not in FORMATS:
+            raise ExportError(f'--export {fmt!r}: use one of {", ".join(FORMATS)}')
+
+
+def export_into(folder, model_path, formats, vehicle=None, bags=None, echo=None):
+    """``report --export FORMAT ...``: the report's model exported into its folder, one file
+    per format named by REPORT_FILES (fitted formats with their fit report next to it).
+    Returns the paths written."""
+    check_formats(formats)
+    return [export_model(model_path, Path(folder) / REPORT_FILES[fmt], fmt=fmt,
+                         vehicle=vehicle, echo=echo, bags=bags)
+            for fmt in dict.fromkeys(formats)]
