@@ -27,7 +27,8 @@ import os
 
 import numpy as np
 
-from auv_ident.core.errors import AuvIdentError
+from auv_ident.analysis import export_gz_thrusters
+from auv_ident.core.errors import AuvIdentError, DomainError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.vehicle import rigid_body_terms
 from auv_ident.core.simulation.simulate import simulate
@@ -119,7 +120,12 @@ def fossen_parts(saved, duration=200.0, bags=None):
         run_name = (f"the measured velocities of the identification's bags ({why}: "
                     f'{", ".join(paths)}; {len(nu_run)} samples)')
     else:
-        run = simulate(model, 'ident', duration=duration, noise_std=np.zeros(12))
+        try:
+            run = simulate(model, 'ident', duration=duration, noise_std=np.zeros(12))
+        except DomainError as exc:
+            raise ExportError(f'the fit envelope: the identified model cannot fly the ident '
+                              f'manoeuvre ({exc}); give the runs to fit over with --bag') \
+                from None
         nu_run = run.x[:, :6]
         run_name = (f'a noise-free {duration:g} s ident manoeuvre of the identified model '
                     '(the model file records no bag here to read)')
@@ -339,6 +345,8 @@ def gz_text(saved, parts, header, added_mass='link'):
             'Why this is the default: the engine integrates the added mass implicitly (no',
             "finite-difference acceleration) with Fossen's Coriolis; the damping fit is the",
             'same either way.']
+    if v.thrusters:
+        lines += export_gz_thrusters.thruster_header(v)
     lines += ["Weight, buoyancy (gz Buoyancy system), mass and inertia are the SDF's, not",
               "this snippet's.", '-->',
               '<sdf version="1.11">', f'  <model name="{v.name}">',
@@ -359,7 +367,9 @@ def gz_text(saved, parts, header, added_mass='link'):
     for name, value in params.items():
         if value != 0.0:
             lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
-    lines += ['    </plugin>', '  </model>', '</sdf>']
+    lines.append('    </plugin>')
+    lines += export_gz_thrusters.thruster_sdf(v, float(v.raw['rho']))
+    lines += ['  </model>', '</sdf>']
     return _xml_text(lines), fit
 
 

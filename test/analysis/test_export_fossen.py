@@ -409,3 +409,72 @@ def test_the_fit_envelope_is_the_identified_bags_velocities(tmp_path, capsys):
     out.unlink()
     assert main(['export', str(model), '--format', 'gz', '--out', str(out)]) == 2
     assert 'nps.sdf.fit.json: exists already' in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------- gz-sim Thruster
+
+def _gz_thrusters(path):
+    """Per Thruster system of the exported SDF: (child link origin (3,), joint axis (3,),
+    min, max thrust command, fluid density, use_angvel_cmd) in the link frame (FLU), read as
+    Thruster.cc reads them (defaults: +-1000 N, 1000 kg/m^3, force commands)."""
+    root = ET.parse(path).getroot()
+    model = root.find('model')
+    links = {ln.get('name'): _floats(ln.findtext('pose') or '0 0 0 0 0 0')[:3]
+             for ln in model.findall('link')}
+    joints = {j.get('name'): (j.findtext('child'), _floats(j.find('axis').findtext('xyz')))
+              for j in model.findall('joint')}
+    out = {}
+    for pl in model.findall('plugin'):
+        if pl.get('name') != 'gz::sim::systems::Thruster':
+            continue
+        child, axis = joints[pl.findtext('joint_name')]
+        out[pl.findtext('joint_name')] = (
+            links[child], axis / np.linalg.norm(axis),
+            float(pl.findtext('min_thrust_cmd') or -1000.0),
+            float(pl.findtext('max_thrust_cmd') or 1000.0),
+            float(pl.findtext('fluid_density') or 1000.0),
+            pl.findtext('use_angvel_cmd') == 'true')
+    return out
+
+
+def test_a_thruster_vehicles_thrusters_become_gz_thruster_systems(tmp_path):
+    """Thruster.cc: the command (N) clamped to [min, max], applied along the joint axis at the
+    child link's origin (AddWorldWrench at the link origin). The body wrench of the
+    exported systems, for our curve's thrust, is ours (T f, FRD) after FLU -> FRD."""
+    from test_export_python import THRUSTER_VEHICLE
+
+    from auv_ident.analysis.export_gz_thrusters import quadratic_law_fit
+    from auv_ident.core.model.thrusters import wrench
+    path = tmp_path / 'thruster_test.yaml'
+    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
+    v = load_vehicle(str(path))
+    model = _model_json(tmp_path / 'm.json', path, {'X_u': -4.4})
+    out = tmp_path / 'rov.sdf'
+    export_model(model, out, fmt='gz')
+    systems = _gz_thrusters(out)
+    assert sorted(systems) == [f'{t.name}_joint' for t in v.thrusters]
+    for command in ([1500.0, 1500.0, 0.0, 0.0], [1620.0, 1380.0, 0.5, 3.0],
+                    [2000.0, 1000.0, -1.0, -5.0], [1900.0, 1100.0, 1.0, 12.0]):
+        tau = np.zeros(6)
+        for t, cmd in zip(v.thrusters, command):
+            r, d, lo, hi, rho, angvel = systems[f'{t.name}_joint']
+            assert not angvel and rho == 1025.0
+            f = min(max(t.thrust(cmd), lo), hi)      # what the controller sends, clamped
+            tau += np.concatenate([d * f, np.cross(r, d * f)])
+        np.testing.assert_allclose(FLU * tau, wrench(v.thrusters, command), atol=1e-12)
+    # t1's limits are its curve at 1100 and 1900 us within thrust_max_*: the clamp is ours
+    _, _, lo, hi, _, _ = systems['t1_joint']
+    assert (lo, hi) == (v.thrusters[0].thrust(1100.0), v.thrusters[0].thrust(1900.0))
+    # the quadratic law gz would apply from an angular velocity: its reported fit is the one
+    # of c |e| e fitted here independently over the command range
+    text = out.read_text(encoding='utf-8')
+    t = v.thrusters[2]                      # setpoint, no dead band: close to quadratic
+    e = np.linspace(-1.0, 1.0, 2001)
+    f = np.array([t.thrust(x) for x in e])
+    x = np.abs(e) * e
+    c = x @ f / (x @ x)
+    fit = 100 * (1 - np.linalg.norm(f - c * x) / np.linalg.norm(f - f.mean()))
+    c_exp, fit_exp = quadratic_law_fit(t)
+    assert c_exp == pytest.approx(c, rel=1e-3) and fit_exp == pytest.approx(fit, abs=0.05)
+    assert 't3: ' in text and f'fits our curve to {fit_exp:.2f} %' in text
+    assert 't4: command = thrust (N); exact' in text

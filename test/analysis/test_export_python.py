@@ -96,7 +96,7 @@ def test_the_python_export_refuses_what_our_model_refuses(tmp_path):
 
 THRUSTER_VEHICLE = """\
 name: thruster_test
-title: a test vehicle with four thrusters and no propeller
+title: a test vehicle with four thrusters
 scaling: dimensional
 rho: 1025.0
 L: 0.45
@@ -106,8 +106,12 @@ B: 114.8
 r_G: [0.0, 0.0, 0.02]
 r_B: [0.0, 0.0, -0.01]
 inertia: {Ix: 0.16, Iy: 0.16, Iz: 0.16, Ixy: 0.0, Iyz: 0.0, Ixz: 0.0}
-limits: {fin_rad: 0.1, n_rpm: 1.0}
+limits: {fin_rad: 0.1, n_rpm: 1000.0}
+cruise_rpm: 1000.0
 mass_inverse: exact
+# a main propeller besides the thrusters, so that the fitted exports' simulated envelope
+# (no bag) can cruise
+propulsion: {model: quadratic_thrust, X_prop: 20.0, K_prop: 0.0, n_nominal_rpm: 1000.0}
 coefficients:
   X_udot: [-5.5, X, 3, udot]
   Y_vdot: [-12.7, Y, 3, vdot]
