@@ -68,6 +68,16 @@ class FossenParts:
     bags: list      # the bags whose velocities are the envelope (empty: a simulated run)
 
 
+def identified_values(saved):
+    """(n_coef,) the vehicle file's coefficient values with the identified ones of a
+    SavedModel in place (the file's units)."""
+    v = saved.vehicle
+    c = v.values.copy()
+    for n, e in zip(saved.names, saved.estimate):
+        c[v.index(n)] = e
+    return c
+
+
 def bag_velocities(paths, vehicle):
     """(N, 6) the measured body velocities u..r (m/s, rad/s, FRD) of the bags' samples that
     measure all six, read as the data are (offline/replay.py read_bag_run: screened, no
@@ -105,9 +115,7 @@ def fossen_parts(saved, duration=200.0, bags=None):
     velocities are the fit's envelope (None: the model's identification bags when it records
     them and they exist, else a simulated `ident` run of the identified model)."""
     v = saved.vehicle
-    c = v.values.copy()
-    for n, e in zip(saved.names, saved.estimate):
-        c[v.index(n)] = e
+    c = identified_values(saved)
     model = Model(v, (), coefficient_values=c)
     M = v.mass_matrix(c)
     # from the file's added-mass terms, not M - M_RB: the exported values to the last bit

@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from auv_ident.analysis.export_fossen import identified_values
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.monomials import Z_EPS, Z_SPEED
 from auv_ident.core.model.state import INPUT_NAMES, STATE_NAMES
@@ -75,11 +76,8 @@ def _matrix(name, a):
 def identified_model(saved):
     """Our Model (core/model/hydrodynamics.py) of a SavedModel: the vehicle file with the
     identified values in place, M^-1 formed as the identification formed it."""
-    v = saved.vehicle
-    c = v.values.copy()
-    for n, e in zip(saved.names, saved.estimate):
-        c[v.index(n)] = e
-    return Model(v, (), mass_inverse=saved.mass_inverse, coefficient_values=c)
+    return Model(saved.vehicle, (), mass_inverse=saved.mass_inverse,
+                 coefficient_values=identified_values(saved))
 
 
 def _term_lines(v, c):
