@@ -233,6 +233,8 @@ def _numbers(values):
 def uuv_text(saved, parts, header):
     L, Lf, Q, fit = uuv_fit(parts)
     v = saved.vehicle
+    thr_header, thr_lines = (export_gz_thrusters.uuv_thruster_lines(v) if v.thrusters
+                             else ([], []))
     g = float(v.raw['W']) / float(v.raw['mass'])
     volume = float(v.raw['B']) / (float(v.raw['rho']) * g)
     cob = FLU[:3] * np.asarray(v.raw['r_B'], float)
@@ -247,7 +249,7 @@ def uuv_text(saved, parts, header):
         f'volume = B / (rho g) with g = W / mass = {g:.6g} m/s^2; center_of_buoyancy is r_B in',
         'the link frame (FLU: y, z negated). The link origin must be our body origin.',
         "Weight, inertia and the link mass are the URDF's, not this snippet's.",
-        '-->',
+        *thr_header, '-->',
         f'<xacro:macro name="{v.name}_hydro_model" params="namespace"'
         ' xmlns:xacro="http://www.ros.org/wiki/xacro">',
         '  <link name="${namespace}/base_link">',
@@ -263,6 +265,14 @@ def uuv_text(saved, parts, header):
         '    </hydrodynamic_model>',
         '  </link>',
         '</xacro:macro>']
+    if thr_lines:
+        # URDF links, joints and plugins: a macro beside the hydro model, not inside it; the
+        # two macros in one xacro <robot> (one XML root)
+        start = lines.index('-->') + 1
+        lines = (lines[:start] + ['<robot xmlns:xacro="http://www.ros.org/wiki/xacro">']
+                 + lines[start:]
+                 + [f'<xacro:macro name="{v.name}_thrusters" params="namespace">', *thr_lines,
+                    '</xacro:macro>', '</robot>'])
     return _xml_text(lines), fit
 
 

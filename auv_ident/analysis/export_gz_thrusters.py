@@ -145,3 +145,82 @@ def _diameter(v, t):
             if isinstance(d, (int, float)) and not isinstance(d, bool) and d > 0:
                 return float(d)
     return None
+
+
+# ------------------------------------------------------------ uuv_simulator ThrusterPlugin
+
+N_TABLE = 64     # interpolation nodes per side of the curve (uuv LinearInterp)
+
+
+def uuv_table(t):
+    """(inputs, outputs) of uuv_simulator's LinearInterp conversion for thruster t: our curve
+    at the command range's ends, the dead band's edges and N_TABLE nodes per side between
+    them (a force thruster: the identity over its thrust limits, or +-1000 N). Linear
+    interpolation between nodes; the largest error is returned by uuv_table_error."""
+    lo, hi = command_range(t)
+    if t.command == 'force':
+        a = -t.thrust_max_reverse if math.isfinite(t.thrust_max_reverse) else -1000.0
+        b = t.thrust_max_forward if math.isfinite(t.thrust_max_forward) else 1000.0
+        cmd = np.array([a, 0.0, b])
+    else:
+        n0 = t.neutral
+        cmd = np.unique(np.concatenate([
+            np.linspace(lo, n0 - t.dead_band, N_TABLE + 1),
+            np.linspace(n0 + t.dead_band, hi, N_TABLE + 1), [n0]]))
+    return cmd, np.array([t.thrust(c) for c in cmd])
+
+
+def uuv_table_error(t):
+    """Largest |table interpolation - our curve| (N) over the command range (1e4 points)."""
+    cmd, out = uuv_table(t)
+    x = np.linspace(cmd[0], cmd[-1], 10001)
+    return float(np.max(np.abs(np.interp(x, cmd, out) - [t.thrust(c) for c in x])))
+
+
+def uuv_thruster_lines(v):
+    """uuv_simulator thruster units (uuv_gazebo_plugins ThrusterPlugin.cc): per thruster a
+    link, a continuous joint at r with axis d (the link frame, FLU) and the plugin with a
+    LinearInterp conversion of our curve, clamps and the thrust limits; (header lines, xacro
+    lines)."""
+    header = ['Thrusters: uuv_simulator thruster units (ThrusterPlugin.cc): the command is',
+              'clamped to [clampMin, clampMax] (our command range, in its unit), passed',
+              'through the dynamics (ZeroOrder; FirstOrder with our time_constant, but uuv',
+              'lags the command, before the curve, where ours lags the thrust: equal in',
+              'steady state only), turned into thrust by LinearInterp of a table of our curve,',
+              'clamped to [thrustMin, thrustMax] and applied along the joint axis on the',
+              'thruster link (AddRelativeForce). Table nodes at the dead-band edges and',
+              f'{N_TABLE} per side. Give each thruster link an <inertial> (Gazebo drops a',
+              'link without one). The largest interpolation error per thruster:']
+    lines = []
+    for i, t in enumerate(v.thrusters):
+        cmd, out = uuv_table(t)
+        header.append(f'  {t.name}: {uuv_table_error(t):.3g} N')
+        r, d = FLU3 * t.position, FLU3 * t.direction
+        lo, hi = (cmd[0], cmd[-1])
+        dyn = (['      <dynamics><type>FirstOrder</type>'
+                f'<timeConstant>{_r(t.time_constant)}</timeConstant></dynamics>']
+               if t.time_constant > 0 else ['      <dynamics><type>ZeroOrder</type></dynamics>'])
+        lines += [f'  <link name="${{namespace}}/thruster_{i}"/>',
+                  f'  <joint name="${{namespace}}/thruster_{i}_joint" type="continuous">',
+                  f'    <origin xyz="{" ".join(_r(x) for x in r)}" rpy="0 0 0"/>',
+                  f'    <axis xyz="{" ".join(_r(x) for x in d)}"/>',
+                  '    <parent link="${namespace}/base_link"/>',
+                  f'    <child link="${{namespace}}/thruster_{i}"/>',
+                  '  </joint>',
+                  '  <gazebo>',
+                  f'    <plugin name="${{namespace}}_{i}_thruster_model" '
+                  'filename="libuuv_thruster_ros_plugin.so">',
+                  f'      <linkName>${{namespace}}/thruster_{i}</linkName>',
+                  f'      <jointName>${{namespace}}/thruster_{i}_joint</jointName>',
+                  f'      <thrusterID>{i}</thrusterID>   <!-- {t.name} ({t.command}) -->',
+                  *dyn,
+                  '      <conversion><type>LinearInterp</type>',
+                  f'        <inputValues>{" ".join(_r(x) for x in cmd)}</inputValues>',
+                  f'        <outputValues>{" ".join(_r(x) for x in out)}</outputValues>',
+                  '      </conversion>',
+                  f'      <clampMin>{_r(lo)}</clampMin>', f'      <clampMax>{_r(hi)}</clampMax>',
+                  f'      <thrustMin>{_r(out.min())}</thrustMin>',
+                  f'      <thrustMax>{_r(out.max())}</thrustMax>',
+                  '    </plugin>',
+                  '  </gazebo>']
+    return header, lines

@@ -478,3 +478,54 @@ def test_a_thruster_vehicles_thrusters_become_gz_thruster_systems(tmp_path):
     assert c_exp == pytest.approx(c, rel=1e-3) and fit_exp == pytest.approx(fit, abs=0.05)
     assert 't3: ' in text and f'fits our curve to {fit_exp:.2f} %' in text
     assert 't4: command = thrust (N); exact' in text
+
+
+def _uuv_linear_interp(table, cmd):
+    """ConversionFunctionLinearInterp::convert (ThrusterConversionFcn.cc): std::map
+    lower_bound, the last output past the end, the first before the start."""
+    keys = sorted(table)
+    i = next((k for k, key in enumerate(keys) if key >= cmd), None)
+    if i is None:
+        return table[keys[-1]]
+    if i == 0:
+        return table[keys[0]]
+    i0, i1 = keys[i - 1], keys[i]
+    w1, w0 = cmd - i0, i1 - cmd
+    return (table[i0] * w0 + table[i1] * w1) / (w0 + w1)
+
+
+def test_a_thruster_vehicles_thrusters_become_uuv_thruster_units(tmp_path):
+    """ThrusterPlugin.cc (ZeroOrder dynamics, gain 1): clamp the command, LinearInterp it to
+    thrust, clamp the thrust, push along the joint axis at the joint origin (FLU): our wrench
+    to the table's interpolation error."""
+    from test_export_python import THRUSTER_VEHICLE
+
+    from auv_ident.core.model.thrusters import wrench
+    path = tmp_path / 'thruster_test.yaml'
+    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
+    v = load_vehicle(str(path))
+    out = tmp_path / 'rov.xacro'
+    export_model(_model_json(tmp_path / 'm.json', path, {'X_u': -4.4}), out, fmt='uuv')
+    root = ET.parse(out).getroot()
+    joints = {j.get('name'): (_floats(j.find('origin').get('xyz')),
+                              _floats(j.find('axis').get('xyz'))) for j in root.iter('joint')}
+    units = []
+    for pl in root.iter('plugin'):
+        assert pl.find('dynamics').findtext('type') == 'ZeroOrder'
+        conv = pl.find('conversion')
+        assert conv.findtext('type') == 'LinearInterp'
+        table = dict(zip(_floats(conv.findtext('inputValues')),
+                         _floats(conv.findtext('outputValues'))))
+        r, d = joints[pl.findtext('jointName')]
+        units.append((table, r, d / np.linalg.norm(d),
+                      *(float(pl.findtext(k)) for k in ('clampMin', 'clampMax', 'thrustMin',
+                                                         'thrustMax'))))
+    assert len(units) == len(v.thrusters)
+    for command in ([1500.0, 1500.0, 0.0, 0.0], [1620.0, 1383.3, 0.537, 3.0],
+                    [2000.0, 1000.0, -1.0, -5.0], [1530.1, 1100.0, 0.021, 12.0]):
+        tau = np.zeros(6)
+        for (table, r, d, cmin, cmax, fmin, fmax), cmd in zip(units, command):
+            f = _uuv_linear_interp(table, min(max(cmd, cmin), cmax))
+            f = min(max(f, fmin), fmax)
+            tau += np.concatenate([d * f, np.cross(r, d * f)])
+        np.testing.assert_allclose(FLU * tau, wrench(v.thrusters, command), atol=2e-3)
