@@ -490,6 +490,9 @@ def cmd_vehicle_check(args):
 
 def cmd_export(args):
     from auv_ident.analysis.export import export_model, fit_path, FITTED
+    if args.format not in FITTED and (args.bag or args.fit_out):
+        raise AuvIdentError(f'--bag and --fit-out are for the fitted formats '
+                            f'({", ".join(FITTED)}), not --format {args.format}')
     if args.format in FITTED and not args.fit_out:
         args.fit_out = str(fit_path(args.out))
     _check_outputs(args, '--out', '--fit-out')

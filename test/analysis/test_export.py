@@ -81,6 +81,8 @@ def test_refusals_name_the_culprit(tmp_path, capsys):
     assert 'exists already' in capsys.readouterr().err
     assert (tmp_path / 'taken.yaml').read_text() == 'keep me'
     assert main(['export', str(model), '--out', str(tmp_path / 'taken.yaml'), '--force']) == 0
+    assert main(['export', str(model), '--bag', 'b', '--out', str(tmp_path / 'x.yaml')]) == 2
+    assert '--bag and --fit-out are for the fitted formats' in capsys.readouterr().err
     assert main(['export', str(model), '--vehicle', 'remus100', '--out',
                  str(tmp_path / 'x.yaml')]) == 2
     assert "model of 'nps_auv2'" in capsys.readouterr().err
