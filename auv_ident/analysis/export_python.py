@@ -12,9 +12,10 @@ written out too, their commands after the seven inputs. The exported f equals
 core/model/hydrodynamics.py's to rounding (test/analysis/test_export_python.py: < 1e-6
 relative along held-out manoeuvres of every shipped vehicle, measured ~1e-13).
 
-Not in the file: a water current (the model is the still-water one; an identified current is
-named in the header), the sensors, the identification's uncertainty (the header gives each
-identified coefficient's 1-sigma).
+A water current constant in NED is an argument of f and simulate (the identified one, if any,
+is IDENTIFIED_CURRENT), with the velocities over ground or through the water, as our model
+takes it. Not in the file: the sensors, the identification's uncertainty (the header gives
+each identified coefficient's 1-sigma).
 """
 import datetime
 import math
@@ -242,7 +243,8 @@ def _header(saved, model, day):
     inputs = list(INPUT_NAMES) + [f'{t.name} ({t.command})' for t in ts]
     cur = ('' if saved.current is None else
            'The identification also estimated a water current (north, east, down) = '
-           f'{", ".join(f"{x:.4g}" for x in saved.current)} m/s; it is not in f (still water).')
+           f'{", ".join(f"{x:.4g}" for x in saved.current)} m/s: IDENTIFIED_CURRENT, for f\'s '
+           "and simulate's current argument (still water without it).")
     lines = [
         f'{v.name}: the identified model, exported by `python -m auv_ident export` on {day}',
         f'from {saved.path} (vehicle file {v.path}; {v.title}).',
@@ -328,6 +330,10 @@ def python_text(saved):
             f'FIN_LIMIT = {_r(par[P_FIN])}   # rad',
             f'N_MAX = {_r(par[P_NMAX])}   # rpm',
             f'HELD = {tuple(int(i) for i in model.held)!r}   # held states (planar vehicle)',
+            '# the water current the identification estimated (north, east, down m/s; None:',
+            '# none estimated); f uses a current only when given one',
+            'IDENTIFIED_CURRENT = ' + ('None' if saved.current is None else
+                                       '(' + ', '.join(_r(x) for x in saved.current) + ')'),
             "# the coefficients in the vehicle file's units (prime values if nondimensional);",
             '# forces() holds them dimensional, (rho/2) L^k times these',
             'COEFFICIENTS = {',
@@ -364,37 +370,69 @@ def kinematics(x):
 '''
 
 F_AND_SIMULATE = '''
-def f(x, u_in):
-    """x_dot (12,) at state x (12,) and inputs u_in (N_INPUTS,)."""
+def body_current(current, phi, theta, psi):
+    """v_cb = R(Theta)^T v_c (3,), m/s: a current constant in NED (north, east, down; where
+    the water goes) in the body frame."""
+    sph, cph, sth, cth = math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta)
+    sp, cp = math.sin(psi), math.cos(psi)
+    R = np.array([[cp * cth, -sp * cph + cp * sth * sph, sp * sph + cp * cph * sth],
+                  [sp * cth, cp * cph + sph * sth * sp, -cp * sph + sth * sp * cph],
+                  [-sth, cth * sph, cth * cph]])
+    return R.T @ np.asarray(current, dtype=float)
+
+
+def f(x, u_in, current=None, velocity_reference='ground'):
+    """x_dot (12,) at state x (12,) and inputs u_in (N_INPUTS,).
+
+    current: None (still water) or a water current constant in NED, (3,) m/s (e.g.
+    IDENTIFIED_CURRENT). The hydrodynamic forces act on the velocity through the water
+    nu_r = nu - [R^T v_c; 0] (Fossen 2021, sec. 10.3). velocity_reference 'ground': x holds
+    the velocity over ground, nu_dot = nu_r_dot + [v_cb x omega; 0]; 'water': x holds nu_r,
+    whose rate is the still-water one, and the position rate gains v_c."""
     x = np.asarray(x, dtype=float)
     if HELD:
         x = x.copy()
         x[list(HELD)] = 0.0
     if abs(math.cos(x[10])) < COS_THETA_MIN_VALUE:
         raise ValueError('pitch theta at +-90 deg: the Euler-angle kinematics are singular')
+    if velocity_reference not in ('ground', 'water'):
+        raise ValueError(f'velocity_reference {velocity_reference!r}: ground or water')
+    moving = current is not None and np.any(np.asarray(current, dtype=float) != 0.0)
     xdot = np.empty(12)
-    xdot[:6] = MINV @ forces(x, u_in)
+    if moving and velocity_reference == 'ground':
+        vcb = body_current(current, x[9], x[10], x[11])
+        xr = x.copy()
+        xr[:3] -= vcb
+        xdot[:6] = MINV @ forces(xr, u_in)
+        xdot[:3] += np.cross(vcb, x[3:6])
+    else:
+        xdot[:6] = MINV @ forces(x, u_in)
     xdot[6:] = kinematics(x)
+    if moving and velocity_reference == 'water':
+        xdot[6:9] += np.asarray(current, dtype=float)
     if HELD:
         xdot[list(HELD)] = 0.0
     return xdot
 
 
-def simulate(x0, inputs, dt, substeps=1):
+def simulate(x0, inputs, dt, substeps=1, current=None, velocity_reference='ground'):
     """Integrate f with classical RK4 (step dt / substeps s), each row of inputs (n, N_INPUTS)
-    held over one dt (zero-order hold). Returns the states (n + 1, 12), x0 first; psi is not
-    wrapped."""
+    held over one dt (zero-order hold); current and velocity_reference as for f. Returns the
+    states (n + 1, 12), x0 first; psi is not wrapped."""
     inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
     x = np.empty((len(inputs) + 1, 12))
     x[0] = x0
     h = dt / substeps
+
+    def rate(xk, uk):
+        return f(xk, uk, current, velocity_reference)
     for k, uk in enumerate(inputs):
         xk = x[k]
         for _ in range(substeps):
-            k1 = f(xk, uk)
-            k2 = f(xk + 0.5 * h * k1, uk)
-            k3 = f(xk + 0.5 * h * k2, uk)
-            k4 = f(xk + h * k3, uk)
+            k1 = rate(xk, uk)
+            k2 = rate(xk + 0.5 * h * k1, uk)
+            k3 = rate(xk + 0.5 * h * k2, uk)
+            k4 = rate(xk + h * k3, uk)
             xk = xk + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         x[k + 1] = xk
     return x
