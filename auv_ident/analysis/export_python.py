@@ -19,6 +19,7 @@ each identified coefficient's 1-sigma).
 """
 import datetime
 import math
+import textwrap
 
 import numpy as np
 
@@ -247,8 +248,9 @@ def _header(saved, model, day):
            "and simulate's current argument (still water without it).")
     lines = [
         f'{v.name}: the identified model, exported by `python -m auv_ident export` on {day}',
-        f'from {saved.path} (vehicle file {v.path}; {v.title}).',
-        f"Identified: {ident}. Every other coefficient is the vehicle file's.",
+        *textwrap.wrap(f'from {saved.path} (vehicle file {v.path}; {v.title}).', 88),
+        *textwrap.wrap(f"Identified: {ident}. Every other coefficient is the vehicle file's.",
+                       88),
         '',
         "Generated from the vehicle's term table: our model written out term by term, not a",
         'fit. Needs numpy only. Units SI (m, s, kg, N, rad; the shaft speed in rpm).',
