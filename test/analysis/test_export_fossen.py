@@ -437,20 +437,37 @@ def _gz_thrusters(path):
     return out
 
 
+def _thruster_export(tmp_path, fmt):
+    """(vehicle, path, header text) of the test thruster vehicle's thruster units as
+    export_fossen writes them into a gz SDF or a uuv xacro, wrapped in a minimal document:
+    the thrusters alone, apart from the damping fit (whose simulated envelope needs a
+    vehicle that can fly the ident manoeuvre)."""
+    from test_export_python import THRUSTER_VEHICLE
+
+    from auv_ident.analysis import export_gz_thrusters as gzt
+    path = tmp_path / 'thruster_test.yaml'
+    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
+    v = load_vehicle(str(path))
+    if fmt == 'gz':
+        header = gzt.thruster_header(v)
+        body = (['<sdf version="1.11">', '  <model name="m">', '    <link name="base_link"/>']
+                + gzt.thruster_sdf(v, float(v.raw['rho'])) + ['  </model>', '</sdf>'])
+    else:
+        header, lines = gzt.uuv_thruster_lines(v)
+        body = ['<robot>'] + [ln.replace('${namespace}', 'rov') for ln in lines] + ['</robot>']
+    out = tmp_path / f'thrusters.{fmt}.xml'
+    out.write_text('\n'.join(body) + '\n', encoding='utf-8')
+    return v, out, '\n'.join(header)
+
+
 def test_a_thruster_vehicles_thrusters_become_gz_thruster_systems(tmp_path):
     """Thruster.cc: the command (N) clamped to [min, max], applied along the joint axis at the
     child link's origin (AddWorldWrench at the link origin). The body wrench of the
     exported systems, for our curve's thrust, is ours (T f, FRD) after FLU -> FRD."""
-    from test_export_python import THRUSTER_VEHICLE
 
     from auv_ident.analysis.export_gz_thrusters import quadratic_law_fit
     from auv_ident.core.model.thrusters import wrench
-    path = tmp_path / 'thruster_test.yaml'
-    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
-    v = load_vehicle(str(path))
-    model = _model_json(tmp_path / 'm.json', path, {'X_u': -4.4})
-    out = tmp_path / 'rov.sdf'
-    export_model(model, out, fmt='gz')
+    v, out, text = _thruster_export(tmp_path, 'gz')
     systems = _gz_thrusters(out)
     assert sorted(systems) == [f'{t.name}_joint' for t in v.thrusters]
     for command in ([1500.0, 1500.0, 0.0, 0.0], [1620.0, 1380.0, 0.5, 3.0],
@@ -467,7 +484,6 @@ def test_a_thruster_vehicles_thrusters_become_gz_thruster_systems(tmp_path):
     assert (lo, hi) == (v.thrusters[0].thrust(1100.0), v.thrusters[0].thrust(1900.0))
     # the quadratic law gz would apply from an angular velocity: its reported fit is the one
     # of c |e| e fitted here independently over the command range
-    text = out.read_text(encoding='utf-8')
     t = v.thrusters[2]                      # setpoint, no dead band: close to quadratic
     e = np.linspace(-1.0, 1.0, 2001)
     f = np.array([t.thrust(x) for x in e])
