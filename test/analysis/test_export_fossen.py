@@ -514,14 +514,9 @@ def test_a_thruster_vehicles_thrusters_become_uuv_thruster_units(tmp_path):
     """ThrusterPlugin.cc (ZeroOrder dynamics, gain 1): clamp the command, LinearInterp it to
     thrust, clamp the thrust, push along the joint axis at the joint origin (FLU): our wrench
     to the table's interpolation error."""
-    from test_export_python import THRUSTER_VEHICLE
-
     from auv_ident.core.model.thrusters import wrench
-    path = tmp_path / 'thruster_test.yaml'
-    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
-    v = load_vehicle(str(path))
-    out = tmp_path / 'rov.xacro'
-    export_model(_model_json(tmp_path / 'm.json', path, {'X_u': -4.4}), out, fmt='uuv')
+    v, out, text = _thruster_export(tmp_path, 'uuv')
+    assert 't1: 0.000772 N' in text     # the interpolation error the header gives
     root = ET.parse(out).getroot()
     joints = {j.get('name'): (_floats(j.find('origin').get('xyz')),
                               _floats(j.find('axis').get('xyz'))) for j in root.iter('joint')}
