@@ -310,6 +310,7 @@ def cmd_model_report(args):
         print(f"diagnosis (not scored): rudder bias {b['bias_deg']:+.2f} deg fits the yaw rate "
               f"best ({b['r_fit_percent_with_bias']:.1f} %)")
     print(f"report: {out['report']}, {out['html']}, {out['csv']}")
+    _report_exports(args, args.model, None)     # over the model's own bags
     return 0
 
 
@@ -317,6 +318,9 @@ def cmd_report(args):
     from auv_ident.analysis.report import make_report
     from auv_ident.analysis.results import doc_table
     _check_outputs(args, '--out', folder=True)
+    if args.export:
+        from auv_ident.analysis.export import check_formats
+        check_formats(args.export)      # before the work, not after it
     if args.model:
         return cmd_model_report(args)
     settings = _settings(args)
@@ -350,7 +354,18 @@ def cmd_report(args):
               + ', '.join(f"{k} {v:.3g} {true_val['rms_units'][k]}"
                           for k, v in true_val['rms'].items()))
     print(f"report: {out['report']} and {out['html']}")
+    _report_exports(args, out['json'], [args.bag] if args.bag else None)
     return _trust_status(doc)
+
+
+def _report_exports(args, model_path, bags):
+    """report --export FORMAT: the reported model exported into the report folder."""
+    if not args.export:
+        return
+    from auv_ident.analysis.export import export_into
+    for path in export_into(args.out, model_path, args.export, vehicle=args.vehicle,
+                            bags=bags, echo=print):
+        print(f'wrote {path}')
 
 
 def _pct(v):
@@ -474,10 +489,16 @@ def cmd_vehicle_check(args):
 
 
 def cmd_export(args):
-    from auv_ident.analysis.export import export_model
-    _check_outputs(args, '--out')
+    from auv_ident.analysis.export import export_model, fit_path, FITTED
+    if args.format not in FITTED and (args.bag or args.fit_out):
+        raise AuvIdentError(f'--bag and --fit-out are for the fitted formats '
+                            f'({", ".join(FITTED)}), not --format {args.format}')
+    if args.format in FITTED and not args.fit_out:
+        args.fit_out = str(fit_path(args.out))
+    _check_outputs(args, '--out', '--fit-out')
     path = export_model(args.model, args.out, fmt=args.format, vehicle=args.vehicle,
-                        gz_added_mass=args.gz_added_mass, echo=print)
+                        gz_added_mass=args.gz_added_mass, echo=print, bags=args.bag,
+                        fit_out=args.fit_out)
     print(f'wrote {path} ({args.format})')
     return 0
 
@@ -700,6 +721,11 @@ def build_parser():
                          "identified from (default: the model's identification bags)")
     sp.add_argument('--sim-current', dest='sim_current', metavar='N,E[,D]',
                     help='with --simulate: fly the run in this water current, m/s NED')
+    sp.add_argument('--export', action='append', metavar='FORMAT',
+                    help='also export the model into the report folder, as `export --format '
+                         'FORMAT` would (repeatable: vehicle, uuv, gz, urdf-hydrodynamics, '
+                         'python; files vehicle.yaml, uuv.xacro, gz.sdf, hydrodynamics.urdf, '
+                         'model.py; docs/export.md)')
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser('compare-methods',
@@ -793,11 +819,18 @@ def build_parser():
                                                         'fossen xacro), gz (gz-sim '
                                                         'Hydrodynamics SDF), '
                                                         'urdf-hydrodynamics (ROS 2 '
-                                                        'hydrodynamics / auv_controllers)')
+                                                        'hydrodynamics / auv_controllers), '
+                                                        'python (a numpy module, exact)')
     sp.add_argument('--gz-added-mass', default='link', choices=('link', 'plugin'),
                     help='--format gz: added mass as <fluid_added_mass> (link, default, Gazebo '
                          "Ionic+) or as the plugin's *Dot* terms with its Coriolis disabled")
+    sp.add_argument('--bag', action='append', metavar='PATH',
+                    help='uuv, gz, urdf-hydrodynamics: a run whose measured velocities are the '
+                         "damping fit's envelope (repeatable; default: the model's own bags "
+                         'when they are here, else a simulated run)')
     sp.add_argument('--out', required=True, help='file to write')
+    sp.add_argument('--fit-out', help='uuv, gz, urdf-hydrodynamics: the fit %% per DOF as JSON '
+                                      '(default: OUT.fit.json, next to the file)')
     sp.add_argument('--force', action='store_true', help='replace an existing --out')
     sp.set_defaults(func=cmd_export)
     return p

@@ -15,32 +15,35 @@ Formats (docs/export.md):
   the plugin's *Dot* terms, ``gz_added_mass``): added mass exact, damping fitted
   (analysis/export_fossen.py), the fit % per DOF in the file's header and echoed;
 - ``urdf-hydrodynamics``: the ``<hydrodynamics>`` URDF block of the ROS 2 ``hydrodynamics``
-  library (auv_controllers), diagonal terms, fitted the same way.
+  library (auv_controllers), diagonal terms, fitted the same way;
+- ``python``: a self-contained numpy module with our model written out term by term (exact;
+  analysis/export_python.py).
 
 The exported vehicle text is read back with the vehicle loader before it is written, and every
 coefficient must come back as exported (identified: the estimate to the last bit; the others:
 the file's value), else an ExportError: a file that loads differently is never written.
 """
 import datetime
+import json
 import math
 import os
 from pathlib import Path
 import re
 import tempfile
+import textwrap
 
 import yaml
 
+from auv_ident.analysis import export_fossen
+from auv_ident.analysis.export_fossen import ExportError
 from auv_ident.analysis.model_report import load_model
-from auv_ident.core.errors import AuvIdentError, ConfigError
+from auv_ident.core.errors import ConfigError
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.safe_files import write_atomic
 
-FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics')
+FORMATS = ('vehicle', 'uuv', 'gz', 'urdf-hydrodynamics', 'python')
 GZ_ADDED_MASS = ('link', 'plugin')
-
-
-class ExportError(AuvIdentError):
-    """An export that cannot be made faithfully (named culprit)."""
+FITTED = ('uuv', 'gz', 'urdf-hydrodynamics')     # their damping is fitted (fit report)
 
 
 def _number(value):
@@ -177,14 +180,16 @@ def _fossen_header(model, parts):
             f'(identified from {_runs(model)}; vehicle {model.vehicle.name}).',
             "Added mass: exactly our M_A. Damping: fitted by least squares to our model's",
             'hydrodynamic force on the velocities (all but rigid body, added-mass inertia and',
-            'Coriolis, restoring, fins and propulsion) over ' + parts.run_name,
-            'and the box of its velocities (analysis/export_fossen.py): terms the target cannot',
-            'hold (cross-flow integrals, fin lift, speed-scaled terms) are approximated.']
+            'Coriolis, restoring, fins and propulsion) over the envelope of',
+            *textwrap.wrap(parts.run_name, 88),
+            f'and {export_fossen.N_BOX} uniform points in the box of those velocities',
+            '(analysis/export_fossen.py): terms the target cannot hold (cross-flow integrals,',
+            'fin lift, speed-scaled terms) are approximated.']
 
 
-def _fossen_text(model, fmt, gz_added_mass, echo):
-    from auv_ident.analysis import export_fossen
-    parts = export_fossen.fossen_parts(model)
+def _fossen_text(model, fmt, gz_added_mass, echo, bags=None):
+    """(text, fit % (6,), parts) of a fitted format."""
+    parts = export_fossen.fossen_parts(model, bags=bags)
     header = _fossen_header(model, parts)
     if fmt == 'uuv':
         text, fit = export_fossen.uuv_text(model, parts, header)
@@ -193,24 +198,44 @@ def _fossen_text(model, fmt, gz_added_mass, echo):
     else:
         text, fit = export_fossen.hydrodynamics_text(model, parts, header)
     if echo is not None:
+        echo(f'fit envelope: {parts.run_name}')
         for line in export_fossen.fit_lines(fit, f'the {fmt} damping'):
             echo(line)
-        low = [d for d, f in zip(export_fossen.DOF, fit) if not f >= 95.0]
-        if low:
-            echo(f"warning: the {fmt} damping reproduces our model's below 95 % (or the "
-                 f'runs do not excite it) in {", ".join(low)}')
-    return text
+    return text, fit, parts
+
+
+def fit_path(out):
+    """Where the fit report of a fitted export goes by default: next to the file."""
+    return Path(str(out) + '.fit.json')
+
+
+def _fit_report(fmt, out, fit, parts):
+    return json.dumps({
+        'format': fmt, 'file': str(out),
+        'fit_percent': {d: (round(float(f), 4) if math.isfinite(f) else None)
+                        for d, f in zip(export_fossen.DOF, fit)},
+        'fit_goal_percent': export_fossen.FIT_GOAL,
+        'below_goal': [d for d, f in zip(export_fossen.DOF, fit)
+                       if math.isfinite(f) and f < export_fossen.FIT_GOAL],
+        'not_excited': [d for d, f in zip(export_fossen.DOF, fit) if not math.isfinite(f)],
+        'envelope': parts.run_name, 'bags': parts.bags, 'samples': int(len(parts.nu)),
+        'definition': '100 (1 - |H - H_target| / |H - mean H|) per DOF over the samples '
+                      '(docs/export.md)'}, indent=1) + '\n'
 
 
 def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='link',
-                 echo=None):
+                 echo=None, bags=None, fit_out=None):
     """Write the model of ``model_path`` (an ``identify --json``/``report`` result.json or the
     identifier node's estimate file) to ``out`` in format ``fmt``. Returns the path written.
 
     ``vehicle``: the vehicle file or name the model was identified with (default: the one the
     model file names). ``out`` is replaced if it exists (the command refuses that without
     --force, cli._check_outputs, as for every output). ``gz_added_mass``:
-    'link' or 'plugin' (format gz). ``echo``: called with each fit line (fitted formats)."""
+    'link' or 'plugin' (format gz). ``echo``: called with each fit line (fitted formats).
+    Fitted formats (uuv, gz, urdf-hydrodynamics): ``bags`` the runs whose measured velocities
+    are the fit's envelope (None: the model's own bags when they are here, else a simulated
+    run); the fit % per DOF is written to ``fit_out`` (default fit_path(out), next to the
+    file) as JSON."""
     if fmt not in FORMATS:
         raise ExportError(f'--format {fmt!r}: use one of {", ".join(FORMATS)}')
     if gz_added_mass not in GZ_ADDED_MASS:
@@ -219,9 +244,20 @@ def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='li
     out = Path(out)
     model = load_model(model_path, vehicle=vehicle)
     if fmt != 'vehicle':
-        text = _fossen_text(model, fmt, gz_added_mass, echo)
+        report = None
+        if fmt == 'python':
+            from auv_ident.analysis.export_python import python_text
+            text = python_text(model)
+        else:
+            text, fit, parts = _fossen_text(model, fmt, gz_added_mass, echo, bags)
+            report = _fit_report(fmt, out, fit, parts)
         try:
-            return write_atomic(out, text)
+            path = write_atomic(out, text)
+            if report is not None:
+                where = write_atomic(Path(fit_out) if fit_out else fit_path(out), report)
+                if echo is not None:
+                    echo(f'wrote the fit report {where}')
+            return path
         except OSError as exc:
             raise ExportError(f'{out}: cannot write: {exc}') from None
     text = vehicle_text(model)
@@ -236,3 +272,25 @@ def export_model(model_path, out, fmt='vehicle', vehicle=None, gz_added_mass='li
         return write_atomic(out, text)
     except OSError as exc:
         raise ExportError(f'{out}: cannot write: {exc}') from None
+
+
+# report --export FORMAT: the file each format gets in the report folder
+REPORT_FILES = {'vehicle': 'vehicle.yaml', 'uuv': 'uuv.xacro', 'gz': 'gz.sdf',
+                'urdf-hydrodynamics': 'hydrodynamics.urdf', 'python': 'model.py'}
+
+
+def check_formats(formats):
+    """ExportError naming a format that is not one of FORMATS (before a long report)."""
+    for fmt in formats:
+        if fmt not in FORMATS:
+            raise ExportError(f'--export {fmt!r}: use one of {", ".join(FORMATS)}')
+
+
+def export_into(folder, model_path, formats, vehicle=None, bags=None, echo=None):
+    """``report --export FORMAT ...``: the report's model exported into its folder, one file
+    per format named by REPORT_FILES (fitted formats with their fit report next to it).
+    Returns the paths written."""
+    check_formats(formats)
+    return [export_model(model_path, Path(folder) / REPORT_FILES[fmt], fmt=fmt,
+                         vehicle=vehicle, echo=echo, bags=bags)
+            for fmt in dict.fromkeys(formats)]

@@ -23,15 +23,19 @@ and speed-scaled terms, lumped Munk moments). So:
 """
 from dataclasses import dataclass
 import math
+import os
 
 import numpy as np
 
+from auv_ident.analysis import export_gz_thrusters
+from auv_ident.core.errors import AuvIdentError, DomainError
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.trim import rest_inputs
 from auv_ident.core.model.vehicle import rigid_body_terms
 from auv_ident.core.simulation.simulate import simulate
 
 DOF = 'XYZKMN'
+FIT_GOAL = 95.0     # %, below this a DOF's fit is warned of (file header and console)
 N_BOX = 2000
 # FRD -> FLU (x forward, y left, z up): y, z and their rotations change sign
 FLU = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
@@ -48,30 +52,92 @@ def coriolis_vector(Ma, nu):
                            -np.cross(a[:3], nu[:3]) - np.cross(a[3:], nu[3:])])
 
 
+class ExportError(AuvIdentError):
+    """An export that cannot be made faithfully (named culprit)."""
+
+
 @dataclass
 class FossenParts:
     """M_A (6, 6) kg, kg m, kg m^2 FRD; nu (N, 6) the samples; H (N, 6) N, N m our model's
-    hydrodynamic force on them (see the module docstring); run_name: where nu came from."""
+    hydrodynamic force on them (see the module docstring); run_name: where nu came from;
+    bags: the bags read for it (empty: a simulated run)."""
 
     M_A: np.ndarray
     nu: np.ndarray
     H: np.ndarray
     run_name: str
+    bags: list      # the bags whose velocities are the envelope (empty: a simulated run)
 
 
-def fossen_parts(saved, duration=200.0):
+def identified_values(saved):
+    """(n_coef,) the vehicle file's coefficient values with the identified ones of a
+    SavedModel in place (the file's units)."""
     v = saved.vehicle
     c = v.values.copy()
     for n, e in zip(saved.names, saved.estimate):
         c[v.index(n)] = e
+    return c
+
+
+def bag_velocities(paths, vehicle):
+    """(N, 6) the measured body velocities u..r (m/s, rad/s, FRD) of the bags' samples that
+    measure all six, read as the data are (offline/replay.py read_bag_run: screened, no
+    filter). ExportError naming a bag that cannot be read or measures none."""
+    from auv_ident.offline.replay import read_bag_run
+    from auv_ident.session.settings import IdentifierSettings
+    settings = IdentifierSettings.from_values(vehicle=vehicle.path)
+    out = []
+    for path in paths:
+        try:
+            Y = read_bag_run(path, settings).Y[:, :6]
+        except AuvIdentError as exc:
+            raise ExportError(f'--bag {path}: {exc}') from None
+        Y = Y[np.all(np.isfinite(Y), axis=1)]
+        if not len(Y):
+            raise ExportError(f'--bag {path}: no sample measures all six body velocities u..r; '
+                              'the fit needs them (leave the bag out to fit over a simulated '
+                              'run)')
+        out.append(Y)
+    return np.vstack(out)
+
+
+def _envelope_bags(saved, bags):
+    """The bags the fit's envelope comes from: those given, else the model's own when all of
+    them are here to read, else none (a simulated run)."""
+    if bags:
+        return list(bags), 'given'
+    if saved.bags and all(os.path.exists(b) for b in saved.bags):
+        return list(saved.bags), 'recorded in the model file'
+    return [], ''
+
+
+def fossen_parts(saved, duration=200.0, bags=None):
+    """FossenParts of a SavedModel (module docstring). bags: the runs whose measured
+    velocities are the fit's envelope (None: the model's identification bags when it records
+    them and they exist, else a simulated `ident` run of the identified model)."""
+    v = saved.vehicle
+    c = identified_values(saved)
     model = Model(v, (), coefficient_values=c)
     M = v.mass_matrix(c)
     # from the file's added-mass terms, not M - M_RB: the exported values to the last bit
     M_A = np.zeros((6, 6))
     for (eq, col, ci), sc in zip(v.am_i, v.am_s):
         M_A[eq, col] -= sc * c[ci]
-    run = simulate(model, 'ident', duration=duration, noise_std=np.zeros(12))
-    nu_run = run.x[:, :6]
+    paths, why = _envelope_bags(saved, bags)
+    if paths:
+        nu_run = bag_velocities(paths, v)
+        run_name = (f"the measured velocities of the identification's bags ({why}: "
+                    f'{", ".join(paths)}; {len(nu_run)} samples)')
+    else:
+        try:
+            run = simulate(model, 'ident', duration=duration, noise_std=np.zeros(12))
+        except DomainError as exc:
+            raise ExportError(f'the fit envelope: the identified model cannot fly the ident '
+                              f'manoeuvre ({exc}); give the runs to fit over with --bag') \
+                from None
+        nu_run = run.x[:, :6]
+        run_name = (f'a noise-free {duration:g} s ident manoeuvre of the identified model '
+                    '(the model file records no bag here to read)')
     lo, hi = nu_run.min(axis=0), nu_run.max(axis=0)
     box = np.random.default_rng(0).uniform(lo, hi, size=(N_BOX, 6))
     nu = np.vstack([nu_run, box])
@@ -89,9 +155,7 @@ def fossen_parts(saved, duration=200.0):
         for eq, k, fac in rb:
             Frb[eq] += k * s[fac[0]] * s[fac[1]]
         H[i] = F - F0 - Frb
-    return FossenParts(M_A=M_A, nu=nu, H=H,
-                       run_name=(f'a noise-free {duration:g} s ident manoeuvre of the '
-                                 'identified model'))
+    return FossenParts(M_A=M_A, nu=nu, H=H, run_name=run_name, bags=paths)
 
 
 def _restoring_at_rest(raw):
@@ -124,9 +188,15 @@ def least_squares(columns, y):
 
 
 def fit_lines(fit, what):
-    return [f'fit of {what}, % per DOF: ' + ', '.join(
+    """The fit % line, and a warning line naming the DOFs below FIT_GOAL."""
+    lines = [f'fit of {what}, % per DOF: ' + ', '.join(
         f'{d} {f:.4f}' if math.isfinite(f) else f'{d} not excited (exported as no damping)'
         for d, f in zip(DOF, fit))]
+    low = [d for d, f in zip(DOF, fit) if math.isfinite(f) and f < FIT_GOAL]
+    if low:
+        lines.append(f'WARNING: below {FIT_GOAL:g} % in {", ".join(low)}: there this export '
+                     "does not reproduce our model's damping; simulate with care")
+    return lines
 
 
 # ------------------------------------------------------------------------------------ uuv
@@ -164,6 +234,8 @@ def _numbers(values):
 def uuv_text(saved, parts, header):
     L, Lf, Q, fit = uuv_fit(parts)
     v = saved.vehicle
+    thr_header, thr_lines = (export_gz_thrusters.uuv_thruster_lines(v) if v.thrusters
+                             else ([], []))
     g = float(v.raw['W']) / float(v.raw['mass'])
     volume = float(v.raw['B']) / (float(v.raw['rho']) * g)
     cob = FLU[:3] * np.asarray(v.raw['r_B'], float)
@@ -178,7 +250,7 @@ def uuv_text(saved, parts, header):
         f'volume = B / (rho g) with g = W / mass = {g:.6g} m/s^2; center_of_buoyancy is r_B in',
         'the link frame (FLU: y, z negated). The link origin must be our body origin.',
         "Weight, inertia and the link mass are the URDF's, not this snippet's.",
-        '-->',
+        *thr_header, '-->',
         f'<xacro:macro name="{v.name}_hydro_model" params="namespace"'
         ' xmlns:xacro="http://www.ros.org/wiki/xacro">',
         '  <link name="${namespace}/base_link">',
@@ -194,6 +266,14 @@ def uuv_text(saved, parts, header):
         '    </hydrodynamic_model>',
         '  </link>',
         '</xacro:macro>']
+    if thr_lines:
+        # URDF links, joints and plugins: a macro beside the hydro model, not inside it; the
+        # two macros in one xacro <robot> (one XML root)
+        start = lines.index('-->') + 1
+        lines = (lines[:start] + ['<robot xmlns:xacro="http://www.ros.org/wiki/xacro">']
+                 + lines[start:]
+                 + [f'<xacro:macro name="{v.name}_thrusters" params="namespace">', *thr_lines,
+                    '</xacro:macro>', '</robot>'])
     return _xml_text(lines), fit
 
 
@@ -284,6 +364,8 @@ def gz_text(saved, parts, header, added_mass='link'):
             'Why this is the default: the engine integrates the added mass implicitly (no',
             "finite-difference acceleration) with Fossen's Coriolis; the damping fit is the",
             'same either way.']
+    if v.thrusters:
+        lines += export_gz_thrusters.thruster_header(v)
     lines += ["Weight, buoyancy (gz Buoyancy system), mass and inertia are the SDF's, not",
               "this snippet's.", '-->',
               '<sdf version="1.11">', f'  <model name="{v.name}">',
@@ -304,7 +386,9 @@ def gz_text(saved, parts, header, added_mass='link'):
     for name, value in params.items():
         if value != 0.0:
             lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
-    lines += ['    </plugin>', '  </model>', '</sdf>']
+    lines.append('    </plugin>')
+    lines += export_gz_thrusters.thruster_sdf(v, float(v.raw['rho']))
+    lines += ['  </model>', '</sdf>']
     return _xml_text(lines), fit
 
 

@@ -81,6 +81,8 @@ def test_refusals_name_the_culprit(tmp_path, capsys):
     assert 'exists already' in capsys.readouterr().err
     assert (tmp_path / 'taken.yaml').read_text() == 'keep me'
     assert main(['export', str(model), '--out', str(tmp_path / 'taken.yaml'), '--force']) == 0
+    assert main(['export', str(model), '--bag', 'b', '--out', str(tmp_path / 'x.yaml')]) == 2
+    assert '--bag and --fit-out are for the fitted formats' in capsys.readouterr().err
     assert main(['export', str(model), '--vehicle', 'remus100', '--out',
                  str(tmp_path / 'x.yaml')]) == 2
     assert "model of 'nps_auv2'" in capsys.readouterr().err
@@ -117,3 +119,32 @@ def test_round_trip_identify_export_identify_gives_the_same_coefficients(tmp_pat
     for n in a:
         assert abs(b[n]['estimate'] - a[n]['estimate']) < 0.01 * a[n]['std'], n
         assert b[n]['std'] == pytest.approx(a[n]['std'], rel=1e-3)
+
+
+def test_report_export_refuses_an_unknown_format_before_any_work(tmp_path, capsys):
+    assert main(['report', '--simulate', 'ident', '--duration', '5', '--out',
+                 str(tmp_path / 'rep'), '--export', 'vrml']) == 2
+    assert "--export 'vrml': use one of" in capsys.readouterr().err
+    assert not (tmp_path / 'rep').exists()
+
+
+def test_export_into_a_report_folder_names_each_format(tmp_path):
+    from auv_ident.analysis.export import export_into, REPORT_FILES
+    model = _model_json(tmp_path / 'm.json', 'remus100', {'Z_w': -70.0}, [1.0])
+    paths = export_into(tmp_path, model, ['python', 'gz', 'vehicle', 'gz'])
+    assert [p.name for p in paths] == [REPORT_FILES[f] for f in ('python', 'gz', 'vehicle')]
+    assert (tmp_path / 'gz.sdf.fit.json').exists()
+    assert vehicle_from_file(str(tmp_path / 'vehicle.yaml')).values[
+        load_vehicle('remus100').index('Z_w')] == -70.0
+
+
+@pytest.mark.slow   # a report of a simulated run (~30 s)
+def test_report_exports_its_model_into_its_folder(tmp_path):
+    out = tmp_path / 'rep'
+    assert main(['report', '--simulate', 'ident', '--duration', '60', '--vehicle', 'remus100',
+                 '--out', str(out), '--export', 'vehicle', '--export', 'python']) in (0, 1)
+    doc = json.loads((out / 'result.json').read_text(encoding='utf-8'))
+    back = vehicle_from_file(str(out / 'vehicle.yaml'))
+    for n, c in doc['coefficients'].items():
+        assert back.values[back.index(n)] == c['estimate'], n
+    assert 'def simulate(' in (out / 'model.py').read_text(encoding='utf-8')

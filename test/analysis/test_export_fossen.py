@@ -10,9 +10,11 @@ HydrodynamicsUtils.hh), fed with the exported file, simulated against our model.
   close to it.
 """
 import json
+from pathlib import Path
 import re
 import xml.etree.ElementTree as ET
 
+import helpers
 import numpy as np
 import pytest
 
@@ -276,7 +278,8 @@ def test_a_fossen_form_vehicle_exports_exactly(tmp_path, fmt):
     form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
     export_model(model, out, fmt=form, gz_added_mass=am or 'link', echo=lines.append)
     v, _, ours = _ours(vehicle, est, rpm=1500.0)
-    fit = [float(x) for x in re.findall(r'[XYZKMN] (\d+\.\d+)', lines[0])]
+    fit_line = next(ln for ln in lines if ln.startswith('fit of'))
+    fit = [float(x) for x in re.findall(r'[XYZKMN] (\d+\.\d+)', fit_line)]
     assert len(fit) == 6 and min(fit) >= 99.9999, lines
     dt, n = 0.01, 2000
     want = _rk4(ours, NU0, dt, n)
@@ -370,3 +373,170 @@ def test_a_bad_gz_added_mass_is_refused(tmp_path):
     model = _model_json(tmp_path / 'm.json', 'remus100', {'Z_w': -60.0})
     with pytest.raises(ExportError, match='--gz-added-mass'):
         export_model(model, tmp_path / 'o.xml', fmt='gz', gz_added_mass='engine')
+
+
+def test_the_fit_envelope_is_the_identified_bags_velocities(tmp_path, capsys):
+    """A model that records its bag is fitted over that bag's measured velocities (and the
+    box of them); the fit % per DOF goes next to the file, and the target's damping
+    re-evaluated on those samples reaches it."""
+    from auv_ident.analysis.export_fossen import bag_velocities
+    from auv_ident.cli import main
+    from auv_ident.offline.replay import read_bag_run
+    from auv_ident.session.settings import IdentifierSettings
+    bag = str(Path(helpers.REPO) / 'bags' / 'nps_auv2_ident')
+    doc = {'vehicle': 'nps_auv2', 'bags': [bag],
+           'coefficients': {'Z_w': {'estimate': -0.3, 'std': 1e-3}}}
+    model = tmp_path / 'm.json'
+    model.write_text(json.dumps(doc), encoding='utf-8')
+    out = tmp_path / 'nps.sdf'
+    assert main(['export', str(model), '--format', 'gz', '--out', str(out)]) == 0
+    said = capsys.readouterr().out
+    assert 'measured velocities' in said and bag in said
+    report = json.loads((tmp_path / 'nps.sdf.fit.json').read_text(encoding='utf-8'))
+    assert report['bags'] == [bag] and report['format'] == 'gz'
+    assert report['fit_percent'] == pytest.approx(
+        {d: round(f, 4) for d, f in _header_fit(out).items()}, abs=1e-4)
+    # the samples: the bag's measured u..r (independently read here) and the box of them
+    Y = read_bag_run(bag, IdentifierSettings.from_values(vehicle='nps_auv2')).Y[:, :6]
+    Y = Y[np.all(np.isfinite(Y), axis=1)]
+    np.testing.assert_array_equal(bag_velocities([bag], load_vehicle('nps_auv2')), Y)
+    box = np.random.default_rng(0).uniform(Y.min(axis=0), Y.max(axis=0), size=(2000, 6))
+    v, m, _ = _ours('nps_auv2', {'Z_w': -0.3})
+    got = _target_fit(out, 'gz', v, m, np.vstack([Y, box]))
+    for d in 'XYZKMN':
+        assert got[d] == pytest.approx(report['fit_percent'][d], abs=2e-3), d
+    # the report is an output like the file: not replaced without --force
+    out.unlink()
+    assert main(['export', str(model), '--format', 'gz', '--out', str(out)]) == 2
+    assert 'nps.sdf.fit.json: exists already' in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------- gz-sim Thruster
+
+def _gz_thrusters(path):
+    """Per Thruster system of the exported SDF: (child link origin (3,), joint axis (3,),
+    min, max thrust command, fluid density, use_angvel_cmd) in the link frame (FLU), read as
+    Thruster.cc reads them (defaults: +-1000 N, 1000 kg/m^3, force commands)."""
+    root = ET.parse(path).getroot()
+    model = root.find('model')
+    links = {ln.get('name'): _floats(ln.findtext('pose') or '0 0 0 0 0 0')[:3]
+             for ln in model.findall('link')}
+    joints = {j.get('name'): (j.findtext('child'), _floats(j.find('axis').findtext('xyz')))
+              for j in model.findall('joint')}
+    out = {}
+    for pl in model.findall('plugin'):
+        if pl.get('name') != 'gz::sim::systems::Thruster':
+            continue
+        child, axis = joints[pl.findtext('joint_name')]
+        out[pl.findtext('joint_name')] = (
+            links[child], axis / np.linalg.norm(axis),
+            float(pl.findtext('min_thrust_cmd') or -1000.0),
+            float(pl.findtext('max_thrust_cmd') or 1000.0),
+            float(pl.findtext('fluid_density') or 1000.0),
+            pl.findtext('use_angvel_cmd') == 'true')
+    return out
+
+
+def _thruster_export(tmp_path, fmt):
+    """(vehicle, path, header text) of the test thruster vehicle's thruster units as
+    export_fossen writes them into a gz SDF or a uuv xacro, wrapped in a minimal document:
+    the thrusters alone, apart from the damping fit (whose simulated envelope needs a
+    vehicle that can fly the ident manoeuvre)."""
+    from test_export_python import THRUSTER_VEHICLE
+
+    from auv_ident.analysis import export_gz_thrusters as gzt
+    path = tmp_path / 'thruster_test.yaml'
+    path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
+    v = load_vehicle(str(path))
+    if fmt == 'gz':
+        header = gzt.thruster_header(v)
+        body = (['<sdf version="1.11">', '  <model name="m">', '    <link name="base_link"/>']
+                + gzt.thruster_sdf(v, float(v.raw['rho'])) + ['  </model>', '</sdf>'])
+    else:
+        header, lines = gzt.uuv_thruster_lines(v)
+        body = ['<robot>'] + [ln.replace('${namespace}', 'rov') for ln in lines] + ['</robot>']
+    out = tmp_path / f'thrusters.{fmt}.xml'
+    out.write_text('\n'.join(body) + '\n', encoding='utf-8')
+    return v, out, '\n'.join(header)
+
+
+def test_a_thruster_vehicles_thrusters_become_gz_thruster_systems(tmp_path):
+    """Thruster.cc: the command (N) clamped to [min, max], applied along the joint axis at the
+    child link's origin (AddWorldWrench at the link origin). The body wrench of the
+    exported systems, for our curve's thrust, is ours (T f, FRD) after FLU -> FRD."""
+
+    from auv_ident.analysis.export_gz_thrusters import quadratic_law_fit
+    from auv_ident.core.model.thrusters import wrench
+    v, out, text = _thruster_export(tmp_path, 'gz')
+    systems = _gz_thrusters(out)
+    assert sorted(systems) == [f'{t.name}_joint' for t in v.thrusters]
+    for command in ([1500.0, 1500.0, 0.0, 0.0], [1620.0, 1380.0, 0.5, 3.0],
+                    [2000.0, 1000.0, -1.0, -5.0], [1900.0, 1100.0, 1.0, 12.0]):
+        tau = np.zeros(6)
+        for t, cmd in zip(v.thrusters, command):
+            r, d, lo, hi, rho, angvel = systems[f'{t.name}_joint']
+            assert not angvel and rho == 1025.0
+            f = min(max(t.thrust(cmd), lo), hi)      # what the controller sends, clamped
+            tau += np.concatenate([d * f, np.cross(r, d * f)])
+        np.testing.assert_allclose(FLU * tau, wrench(v.thrusters, command), atol=1e-12)
+    # t1's limits are its curve at 1100 and 1900 us within thrust_max_*: the clamp is ours
+    _, _, lo, hi, _, _ = systems['t1_joint']
+    assert (lo, hi) == (v.thrusters[0].thrust(1100.0), v.thrusters[0].thrust(1900.0))
+    # the quadratic law gz would apply from an angular velocity: its reported fit is the one
+    # of c |e| e fitted here independently over the command range
+    t = v.thrusters[2]                      # setpoint, no dead band: close to quadratic
+    e = np.linspace(-1.0, 1.0, 2001)
+    f = np.array([t.thrust(x) for x in e])
+    x = np.abs(e) * e
+    c = x @ f / (x @ x)
+    fit = 100 * (1 - np.linalg.norm(f - c * x) / np.linalg.norm(f - f.mean()))
+    c_exp, fit_exp = quadratic_law_fit(t)
+    assert c_exp == pytest.approx(c, rel=1e-3) and fit_exp == pytest.approx(fit, abs=0.05)
+    assert 't3: ' in text and f'fits our curve to {fit_exp:.2f} %' in text
+    assert 't4: command = thrust (N); exact' in text
+
+
+def _uuv_linear_interp(table, cmd):
+    """ConversionFunctionLinearInterp::convert (ThrusterConversionFcn.cc): std::map
+    lower_bound, the last output past the end, the first before the start."""
+    keys = sorted(table)
+    i = next((k for k, key in enumerate(keys) if key >= cmd), None)
+    if i is None:
+        return table[keys[-1]]
+    if i == 0:
+        return table[keys[0]]
+    i0, i1 = keys[i - 1], keys[i]
+    w1, w0 = cmd - i0, i1 - cmd
+    return (table[i0] * w0 + table[i1] * w1) / (w0 + w1)
+
+
+def test_a_thruster_vehicles_thrusters_become_uuv_thruster_units(tmp_path):
+    """ThrusterPlugin.cc (ZeroOrder dynamics, gain 1): clamp the command, LinearInterp it to
+    thrust, clamp the thrust, push along the joint axis at the joint origin (FLU): our wrench
+    to the table's interpolation error."""
+    from auv_ident.core.model.thrusters import wrench
+    v, out, text = _thruster_export(tmp_path, 'uuv')
+    assert 't1: 0.000772 N' in text     # the interpolation error the header gives
+    root = ET.parse(out).getroot()
+    joints = {j.get('name'): (_floats(j.find('origin').get('xyz')),
+                              _floats(j.find('axis').get('xyz'))) for j in root.iter('joint')}
+    units = []
+    for pl in root.iter('plugin'):
+        assert pl.find('dynamics').findtext('type') == 'ZeroOrder'
+        conv = pl.find('conversion')
+        assert conv.findtext('type') == 'LinearInterp'
+        table = dict(zip(_floats(conv.findtext('inputValues')),
+                         _floats(conv.findtext('outputValues'))))
+        r, d = joints[pl.findtext('jointName')]
+        units.append((table, r, d / np.linalg.norm(d),
+                      *(float(pl.findtext(k)) for k in ('clampMin', 'clampMax', 'thrustMin',
+                                                         'thrustMax'))))
+    assert len(units) == len(v.thrusters)
+    for command in ([1500.0, 1500.0, 0.0, 0.0], [1620.0, 1383.3, 0.537, 3.0],
+                    [2000.0, 1000.0, -1.0, -5.0], [1530.1, 1100.0, 0.021, 12.0]):
+        tau = np.zeros(6)
+        for (table, r, d, cmin, cmax, fmin, fmax), cmd in zip(units, command):
+            f = _uuv_linear_interp(table, min(max(cmd, cmin), cmax))
+            f = min(max(f, fmin), fmax)
+            tau += np.concatenate([d * f, np.cross(r, d * f)])
+        np.testing.assert_allclose(FLU * tau, wrench(v.thrusters, command), atol=2e-3)
