@@ -519,7 +519,7 @@ def test_payload_template_gives_rclpy_bytes():
     the three messages the identifier publishes this way (odd lengths, strings before)."""
 
     from geometry_msgs.msg import TwistWithCovarianceStamped
-    from rclpy.serialization import serialize_message
+    from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
     from auv_ident.ros.cdr import PayloadTemplate
@@ -546,7 +546,10 @@ def test_payload_template_gives_rclpy_bytes():
                 msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
             for (setter, _), v in zip(arrays, values):
                 setter(msg, v)
-            assert t.fill(sec, nsec, *values) == serialize_message(msg)
+            # compared as messages: the bytes may differ in CDR padding, which the serializer
+            # leaves as it finds it in memory (seen in a full run: one padding byte of the
+            # Float64MultiArray)
+            assert deserialize_message(t.fill(sec, nsec, *values), type(msg)) == msg
     with pytest.raises(ValueError):     # another length: an error, never a resized payload
         t.fill(0, 0, np.zeros(35))
     assert PayloadTemplate.build(Float64MultiArray(), [], serialize_message) is None  # no header
