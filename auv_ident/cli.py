@@ -283,7 +283,7 @@ def cmd_model_report(args):
         raise AuvIdentError('report --model needs --validate BAG: a run the model never saw')
     ident = [b.strip() for b in (args.ident_bags or '').split(',') if b.strip()] or None
     out = make_model_report(args.out, args.model, args.validate, vehicle=args.vehicle,
-                            ident_bags=ident,
+                            ident_bags=ident, input_map=args.input_map,
                             command='python -m auv_ident ' + ' '.join(sys.argv[1:]))
     val = out['result']['validation']
     fits = {ch: val['channels'][ch] for ch in ('r', 'psi') if ch in val['channels']}

@@ -50,6 +50,7 @@ from auv_ident.core.model.state import Input, N_STATE, State
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
 from auv_ident.core.simulation.steering import identify_steering_gear, SteeringGear
 from auv_ident.core.simulation.zigzag import zigzag_problem
+from auv_ident.session.input_map import vehicle_actuators
 from auv_ident.session.settings import IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
@@ -299,11 +300,13 @@ def zigzag_validation(saved, run, x0, ident_runs, ident_bag_names):
 def rudder_bias(saved, val):
     """The constant rudder bias (deg, added to the measured rudder) whose free run of the
     saved model fits the run's yaw rate best, and the fits (%) with it: a diagnosis made after
-    the scores, never part of them. None when the run does not measure r."""
+    the scores, never part of them. None when the run does not measure r, or when the
+    vehicle's model has no rudder (a thruster vehicle: no term multiplies the rudder angle, so
+    every bias flies the same run and the search would report its bound)."""
     r = val.Y[:, State.R]
-    if not np.any(np.isfinite(r)):
-        return None
     v = saved.vehicle
+    if not np.any(np.isfinite(r)) or Input.DELTA_R not in vehicle_actuators(v):
+        return None
     model = Model(v, coefficient_values=Model(v, saved.names).coefficients_with(saved.estimate),
                   current=saved.current, velocity_reference=val.velocity_reference)
 
@@ -520,7 +523,7 @@ def markdown(doc, figures):
 # ----------------------------------------------------------------------------------- entry
 
 def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bags=None,
-                      command='', bias_diagnosis=True):
+                      command='', bias_diagnosis=True, input_map=None):
     """Judge the saved model on validate_bag and write the report (module docstring).
 
     Parameters
@@ -530,6 +533,8 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     vehicle : name or path; must be the model's (None: the model's)
     ident_bags : bags to identify the steering gear and the thrust model from (None: the
         model's identification bags)
+    input_map : the bags' topics and fields (session/input_map.py; None: what each bag's
+        metadata names, else the default /odom + /actuators)
     command : the command line (quoted in the report); bias_diagnosis : estimate the rudder
         bias after scoring
 
@@ -543,7 +548,8 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     v = saved.vehicle
     if not os.path.exists(validate_bag):
         raise ConfigError(f'--validate {validate_bag}: no such bag')
-    val, src = mv.validate_on_bag(v, saved.names, saved.estimate, saved.current, validate_bag)
+    val, src = mv.validate_on_bag(v, saved.names, saved.estimate, saved.current, validate_bag,
+                                  input_map=input_map)
     if src.vehicle.name != v.name:
         raise ConfigError(f'--validate {validate_bag} is a run of {src.vehicle.name!r}, the '
                           f'model one of {v.name!r}')
@@ -555,9 +561,9 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
             raise ConfigError(f'identification bag {b} (from the model, or --ident-bags) does '
                               'not exist: give --ident-bags A,B')
         # the measured rudder and thrust as the data are (no filter judges the samples)
-        s = bag_source(b, IdentifierSettings.from_values(vehicle=v.path,
-                                                         coefficients=saved.names),
-                       filtering=False)
+        s = bag_source(b, IdentifierSettings.from_values(
+            vehicle=v.path, coefficients=saved.names,
+            **({'input_map': input_map} if input_map else {})), filtering=False)
         mv.refuse_identification_run(s, src)
         ident_srcs.append(s)
         ident_runs.append(measured_run(s))

@@ -486,7 +486,9 @@ def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, vali
     run = bag_source(validate_bag, IdentifierSettings.from_values(
         vehicle=v.path, coefficients=full.names, mass_inverse=v.mass_inverse,
         velocity_reference=(settings.velocity_reference if 'velocity_reference'
-                            in settings.given else full.velocity_reference)), filtering=False)
+                            in settings.given else full.velocity_reference),
+        **({'input_map': settings.input_map} if 'input_map' in settings.given else {})),
+        filtering=False)
     mv.refuse_identification_run(full, run)
     return full, run, None, named
 

@@ -414,19 +414,20 @@ def _derived_scores(Y, free, failed, measured_idx):
 
 
 def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=None,
-                    **kwargs):
+                    input_map=None, **kwargs):
     """validate_on_run on a bag's measurements as the data are: every well-formed odometry
     message paired with the command in force at its stamp, none judged by a filter's
     innovation gate (bag_identify.bag_source with filtering False: a model under test that
     disagrees with a sample must be scored on it, not drop it; the Source's `screening` says
     what the screening of malformed messages dropped). The truth flies too when the bag is our
     simulator's (its truth is the vehicle file). velocity_reference: None for what the bag
-    says (else 'ground'); kwargs: validate_on_run's horizons, max_step, x0_window. Returns
-    (RunValidation, Source)."""
+    says (else 'ground'); input_map: the bag's topics and fields (session/input_map.py; None:
+    the one its metadata names, else the default); kwargs: validate_on_run's horizons,
+    max_step, x0_window. Returns (RunValidation, Source)."""
     from auv_ident.analysis.bag_identify import bag_source
     run = bag_source(bag, IdentifierSettings.from_values(
-        vehicle=vehicle.path, coefficients=names, velocity_reference=velocity_reference),
-        filtering=False)
+        vehicle=vehicle.path, coefficients=names, velocity_reference=velocity_reference,
+        **({'input_map': input_map} if input_map else {})), filtering=False)
     val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
                           source=run.description, velocity_reference=run.velocity_reference,
                           include_truth=run.truth is not None, truth_current=run.current_truth,

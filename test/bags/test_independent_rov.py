@@ -156,3 +156,20 @@ def test_bad_option_is_named(tmp_path):
     with pytest.raises(ValueError, match='frame'):
         rov.generate(rov.RovConfig(duration=1.0, frame='xyz'), tmp_path / 'x')
     assert rov.main(['--out', str(tmp_path / 'y'), '--duration', '-1']) == 2
+
+
+def test_file_curve_is_the_vehicle_files_thrust_and_is_chosen_by_curve():
+    """curve 'file' is the vehicle file's polynomial (checked against the file's own entries
+    through our loader here, in the test only), the table stays the default, a bad name is
+    refused."""
+    from auv_ident.core.model.thrusters import steady_thrusts
+    from auv_ident.vehicles import load_vehicle
+    pwm = np.array([1100.0, 1300, 1471, 1500, 1529, 1600, 1750, 1900, 1950])
+    file_thrusters = load_vehicle('bluerov2_heavy').thrusters
+    ours = steady_thrusts(file_thrusters[:1] * len(pwm), pwm)
+    assert np.allclose(rov.file_curve_thrust(pwm), ours, rtol=1e-12, atol=1e-12)
+    assert np.allclose(rov.file_curve_thrust(pwm, 1.1), 1.1 * ours)
+    assert not np.allclose(rov.t200_thrust(pwm[4:8]), ours[4:8], rtol=0.02)
+    assert rov.RovConfig().curve == 'table'
+    with pytest.raises(ValueError, match='curve'):
+        rov.RovConfig(curve='spline').validate()
