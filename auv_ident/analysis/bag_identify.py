@@ -43,6 +43,13 @@ from auv_ident.vehicles import load_vehicle
 REPLAY_REJECT_LIMIT = 0.02     # a replay rejecting more than this fraction is made again
 
 
+def _given_map(settings):
+    """The input map the bags were read through when the user named one (the model file
+    records it, so export and report --model read the same bags the same way), else None (the
+    bag's metadata or the default decides again)."""
+    return settings.input_map if 'input_map' in settings.given else None
+
+
 def _simulated(meta):
     """Whether a bag is our simulator's (its custom data say so): its truth is the vehicle
     file's values."""
@@ -362,6 +369,7 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
     head += (f'\nwater current: {settings.current_option.describe()}; velocity '
              f'over {over}')
     doc = ex.result_dict(v, res, {'bag': str(path), 'rejected': rr.rejected,
+                                  'input_map': _given_map(settings),
                                   'noise_mode': settings.noise_mode,
                                   'noise_source': settings.noise_source,
                                   'mass_inverse': res.model.mass_inverse,
@@ -445,6 +453,7 @@ def identify_bags(paths, settings=None, refine_pass=True, progress=None):
     res, v, fit = b.result, b.vehicle, b.result.noise
     rejected = b.replays.rejected
     doc = ex.result_dict(v, res, {'bags': [str(p) for p in paths], 'rejected': rejected,
+                                  'input_map': _given_map(settings),
                                   'noise_mode': 'fixed',
                                   'noise_source': settings.noise_source,
                                   'mass_inverse': res.model.mass_inverse,

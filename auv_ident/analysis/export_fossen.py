@@ -79,13 +79,15 @@ def identified_values(saved):
     return c
 
 
-def bag_velocities(paths, vehicle):
+def bag_velocities(paths, vehicle, input_map=None):
     """(N, 6) the measured body velocities u..r (m/s, rad/s, FRD) of the bags' samples that
     measure all six, read as the data are (offline/replay.py read_bag_run: screened, no
-    filter). ExportError naming a bag that cannot be read or measures none."""
+    filter), through ``input_map`` (None: what each bag names, else the default). ExportError
+    naming a bag that cannot be read or measures none."""
     from auv_ident.offline.replay import read_bag_run
     from auv_ident.session.settings import IdentifierSettings
-    settings = IdentifierSettings.from_values(vehicle=vehicle.path)
+    settings = IdentifierSettings.from_values(
+        vehicle=vehicle.path, **({'input_map': input_map} if input_map else {}))
     out = []
     for path in paths:
         try:
@@ -125,7 +127,7 @@ def fossen_parts(saved, duration=200.0, bags=None):
         M_A[eq, col] -= sc * c[ci]
     paths, why = _envelope_bags(saved, bags)
     if paths:
-        nu_run = bag_velocities(paths, v)
+        nu_run = bag_velocities(paths, v, saved.input_map)
         run_name = (f"the measured velocities of the identification's bags ({why}: "
                     f'{", ".join(paths)}; {len(nu_run)} samples)')
     else:

@@ -84,6 +84,7 @@ class SavedModel:
     q_state: object
     source: str = ''
     mass_inverse: str = 'default'
+    input_map: str | None = None      # the map the bags were read through (None: their own)
 
 
 def _twelve(doc, key, path):
@@ -139,7 +140,8 @@ def load_model(path, vehicle=None):
                       noise_std=_twelve(doc, 'noise_std', path),
                       q_state=_twelve(doc, 'q_state', path),
                       source=str(doc.get('source') or ''),
-                      mass_inverse=str(doc.get('mass_inverse') or 'default'))
+                      mass_inverse=str(doc.get('mass_inverse') or 'default'),
+                      input_map=doc.get('input_map') or None)
 
 
 def _from_estimate_file(doc):
@@ -542,6 +544,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
     """
     from auv_ident.analysis.bag_identify import bag_source
     saved = load_model(model_path, vehicle)
+    input_map = input_map or saved.input_map
     refuse_identification_bag(saved.bags, validate_bag)
     ident_bags = list(ident_bags) if ident_bags else saved.bags
     refuse_identification_bag(ident_bags, validate_bag)

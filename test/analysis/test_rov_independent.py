@@ -20,15 +20,21 @@ def _bag(tmp_path, seed, duration):
 
 
 def test_report_model_validates_a_thruster_bag_through_its_input_map(tmp_path, capsys):
-    """--input-map reaches the validation bag (it named the default map before: exit 2), and a
-    vehicle without a rudder gets no rudder-bias diagnosis (it reported its search bound)."""
+    """The model file records the input map its bags were read through, and export reads them
+    with it for its fit envelope; --input-map reaches report --model's validation bag (both
+    named the default map before: exit 2); a vehicle without a rudder gets no rudder-bias
+    diagnosis (it reported its search bound)."""
     ident, _ = _bag(tmp_path, 3, 40.0)
     held, _ = _bag(tmp_path, 4, 30.0)
     model = tmp_path / 'm.json'
     cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(ident), '--input-map',
               'bluerov2_heavy', '--noise-source', 'parameter', '--coefficients',
               'thrust_gain_fwd,X_uu,N_rr', '--json', str(model)])
-    assert model.exists()
+    assert json.loads(model.read_text())['input_map'] == 'bluerov2_heavy'
+    # export fits its damping over the bags the model records, through the recorded map
+    assert cli_main(['export', str(model), '--vehicle', 'bluerov2_heavy', '--format', 'uuv',
+                     '--out', str(tmp_path / 'rov.xacro')]) in (0, None)
+    assert 'identification\'s bags' in capsys.readouterr().out
     out = tmp_path / 'report'
     assert cli_main(['report', '--vehicle', 'bluerov2_heavy', '--model', str(model),
                      '--validate', str(held), '--input-map', 'bluerov2_heavy',
