@@ -34,7 +34,7 @@ def test_report_model_validates_a_thruster_bag_through_its_input_map(tmp_path, c
     # export fits its damping over the bags the model records, through the recorded map
     assert cli_main(['export', str(model), '--vehicle', 'bluerov2_heavy', '--format', 'uuv',
                      '--out', str(tmp_path / 'rov.xacro')]) in (0, None)
-    assert 'identification\'s bags' in capsys.readouterr().out
+    assert "identification's bags" in capsys.readouterr().out
     out = tmp_path / 'report'
     assert cli_main(['report', '--vehicle', 'bluerov2_heavy', '--model', str(model),
                      '--validate', str(held), '--input-map', 'bluerov2_heavy',
