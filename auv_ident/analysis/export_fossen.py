@@ -86,8 +86,7 @@ def bag_velocities(paths, vehicle, input_map=None):
     naming a bag that cannot be read or measures none."""
     from auv_ident.offline.replay import read_bag_run
     from auv_ident.session.settings import IdentifierSettings
-    settings = IdentifierSettings.from_values(
-        vehicle=vehicle.path, **({'input_map': input_map} if input_map else {}))
+    settings = IdentifierSettings.from_values(vehicle=vehicle.path, input_map=input_map)
     out = []
     for path in paths:
         try:

@@ -566,7 +566,7 @@ def make_model_report(out_dir, model_path, validate_bag, vehicle=None, ident_bag
         # the measured rudder and thrust as the data are (no filter judges the samples)
         s = bag_source(b, IdentifierSettings.from_values(
             vehicle=v.path, coefficients=saved.names,
-            **({'input_map': input_map} if input_map else {})), filtering=False)
+            input_map=input_map), filtering=False)
         mv.refuse_identification_run(s, src)
         ident_srcs.append(s)
         ident_runs.append(measured_run(s))

@@ -487,7 +487,7 @@ def _sources(settings, simulate_maneuver, bag, seed, duration, sim_current, vali
         vehicle=v.path, coefficients=full.names, mass_inverse=v.mass_inverse,
         velocity_reference=(settings.velocity_reference if 'velocity_reference'
                             in settings.given else full.velocity_reference),
-        **({'input_map': settings.input_map} if 'input_map' in settings.given else {})),
+        input_map=settings.input_map if 'input_map' in settings.given else None),
         filtering=False)
     mv.refuse_identification_run(full, run)
     return full, run, None, named

@@ -427,7 +427,7 @@ def validate_on_bag(vehicle, names, estimate, current, bag, velocity_reference=N
     from auv_ident.analysis.bag_identify import bag_source
     run = bag_source(bag, IdentifierSettings.from_values(
         vehicle=vehicle.path, coefficients=names, velocity_reference=velocity_reference,
-        **({'input_map': input_map} if input_map else {})), filtering=False)
+        input_map=input_map), filtering=False)
     val = validate_on_run(vehicle, names, estimate, current, run.t, run.Y, run.U,
                           source=run.description, velocity_reference=run.velocity_reference,
                           include_truth=run.truth is not None, truth_current=run.current_truth,
