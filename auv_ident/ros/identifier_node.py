@@ -121,8 +121,9 @@ null, "steps": accepted updates, "diagnosis": {"consistent": true/false/null, "m
 "live_noise_model": {...}}`` (auv_ident/session/estimate_file.py) of the last good estimate; with
 ``coefficients`` [auto, ...] also ``"selection"`` (state, window; once chosen the offline
 JSON's selection block: chosen, named, left_out with reasons, steps, criteria).
-Written on ``~/save``, on shutdown (SIGINT/SIGTERM) and every AUTOSAVE_PERIOD_S (10 s, steady
-clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
+Written on ``~/save``, on shutdown (SIGINT/SIGTERM: after the messages DDS already received
+are processed, for at most 2 s; a second signal skips that) and every AUTOSAVE_PERIOD_S (10 s,
+steady clock) while new updates arrive, always atomically (temp file + rename: a kill leaves the
 previous complete file). ``warm_start`` starts a later run from it.
 
 Parameters (read once at start-up, declared read-only): every field of
@@ -230,6 +231,7 @@ class IdentifierNode(Node):
         self.save_path = values.pop('save_path')
         check_save_path(self.save_path)     # a bad folder: exit 2 now, not at shutdown
         settings = IdentifierSettings.from_values(**values)
+        self.taken = 0      # messages the subscriptions' callbacks took (the stop's drain)
         # an input map with raw sensors: each message a step of the raw-sensor filter
         # (ros/raw_live.py, session/raw_session.py); the rest of this class is the odometry path
         self.raw = RawLive(self, settings) if has_raw_sensors(settings) else None
@@ -399,6 +401,7 @@ class IdentifierNode(Node):
         """A command message of the input map's input `name`; returns the session's Event.
         receive_ns : the stamp of a message without a header (default: the node's clock now,
         the receive time: system time, or /clock with use_sim_time)."""
+        self.taken += 1
         try:
             if receive_ns is None and not self.session.input_map_entry(name).stamped:
                 receive_ns = self.get_clock().now().nanoseconds
@@ -437,6 +440,7 @@ class IdentifierNode(Node):
 
     def on_odom_payload(self, payload):
         """The odom subscription's callback: serialized Odometry -> :meth:`on_odom`."""
+        self.taken += 1
         if self._odom_view.read(payload):
             return self.on_odom(self._odom_view)
         try:    # not XCDR1 (another DDS, XCDR2): rclpy decodes it
@@ -660,6 +664,10 @@ class IdentifierNode(Node):
             return ok
         return True
 
+    def messages_taken(self):
+        """How many messages the input subscriptions' callbacks have taken."""
+        return self.taken if self.raw is None else self.raw.taken
+
     def _final_log(self, level, message):
         # After SIGINT/SIGTERM the context is already shut down and every log call would add
         # 'Failed to publish log message to rosout': write to the console directly then.
@@ -681,8 +689,14 @@ def _set_linear(msg, linear):
 def main(args=None):
     """Entry point: identify until SIGINT/SIGTERM (0), or exit 2 on a bad parameter (a
     save_path whose folder is missing or read-only included) or when the final save fails."""
-    return run_node('identifier', args, __doc__, '-p vehicle:=nps_auv2', IdentifierNode, spin,
-                    finish=lambda node: node.shutdown_save())
+    return run_node('identifier', args, __doc__, '-p vehicle:=nps_auv2', IdentifierNode,
+                    _identify, finish=lambda node: node.shutdown_save())
+
+
+def _identify(node, stop):
+    # a stop drains what DDS already received (toolkit.drain): a bag's last messages, played
+    # just before the SIGINT, are in the saved estimate
+    spin(node, stop, taken=node.messages_taken)
 
 
 if __name__ == '__main__':

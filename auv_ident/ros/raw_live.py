@@ -36,6 +36,7 @@ class RawLive:
         self.node = node
         self.session = RawSession(settings)
         self.session.warm_up()
+        self.taken = 0      # messages the subscriptions' callbacks took (the stop's drain)
         names = self.session.names
         p = len(names)
         joined = ','.join(names)
@@ -66,6 +67,7 @@ class RawLive:
 
     def on_input(self, name, msg, receive_ns=None):
         """One message of the map's input `name`; returns the session's Event."""
+        self.taken += 1
         s = self.session
         if receive_ns is None and not s.input_entry(name).stamped:
             receive_ns = self.node.get_clock().now().nanoseconds

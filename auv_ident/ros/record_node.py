@@ -85,8 +85,6 @@ from auv_ident.session.input_map import InputMapError, load_input_map
 from auv_ident.session.settings import ParameterError
 
 NODE_NAME = 'recorder'
-DRAIN_IDLE_S = 0.1   # stop draining after this long without a new message
-DRAIN_MAX_S = 2.0    # and never drain for longer than this
 
 _PARAMETERS = (
     Param('topics', Parameter.Type.STRING_ARRAY,
@@ -256,20 +254,6 @@ class RecordNode(Node):
             except (BagError, OSError) as exc:
                 self.get_logger().error(f'flush failed: {exc}')
 
-    def drain(self, executor):
-        """Take the samples DDS already holds (after a stop request) before closing."""
-        if self.writer is None:
-            return
-        start = idle_since = time.monotonic()
-        last = self.received
-        while True:
-            executor.spin_once(timeout_sec=0.02)
-            now = time.monotonic()
-            if self.received != last:
-                last, idle_since = self.received, now
-            elif now - idle_since >= DRAIN_IDLE_S or now - start >= DRAIN_MAX_S:
-                return
-
     def close(self):
         """Finish the bag (summary + metadata.yaml); idempotent, safe in ``finally``."""
         if self._flush_timer is not None:
@@ -290,9 +274,8 @@ def _record(node, stop):
         # The SingleThreadedExecutor: the callbacks take the MessageInfo (receive time), which
         # rclpy's EventsExecutor cannot pass in Jazzy (ros/toolkit.py).
         executor = SingleThreadedExecutor(context=node.context)
-        spin(node, stop, executor=executor)
-        executor.add_node(node)
-        node.drain(executor)
+        spin(node, stop, executor=executor,
+             taken=(lambda: node.received) if node.writer is not None else None)
 
 
 def _close(node):

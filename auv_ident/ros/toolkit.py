@@ -74,6 +74,8 @@ from auv_ident.session.settings import ParameterError
 
 STREAM_DEPTH = 1000
 POLL_S = 0.1          # spin slice: how long a stop request can wait to be seen
+DRAIN_IDLE_S = 0.1    # after a stop, drain until this long without a new message
+DRAIN_MAX_S = 2.0     # and never for longer than this
 SETTLE_S = 0.25       # after SubscriberWait is satisfied: the readers' side of the match
 GRAPH_POLL_S = 0.05   # how often SubscriberWait re-reads the graph
 
@@ -275,17 +277,37 @@ class SubscriberWait:
 # --- spinning ---------------------------------------------------------------------------------
 
 
-def spin(node, stop, done=None, executor=None):
+def spin(node, stop, done=None, executor=None, taken=None):
     """Run ``node``'s callbacks until ``stop`` is set, the context shuts down or ``done()``.
 
-    ``executor``: rclpy's EventsExecutor by default (module docstring)."""
+    ``executor``: rclpy's EventsExecutor by default (module docstring). ``taken``: a count of
+    the messages the node's callbacks have taken; given, a stop request is followed by
+    :func:`drain` (a stop must not lose the samples DDS has already received and
+    acknowledged: the player's last ones, when it is stopped right after the bag's end)."""
     executor = EventsExecutor(context=node.context) if executor is None else executor
     executor.add_node(node)
     try:
         while not stop.is_set() and node.context.ok() and not (done and done()):
             executor.spin_once(timeout_sec=POLL_S)
+        if taken is not None and stop.is_set() and node.context.ok():
+            drain(executor, taken)
     finally:
         executor.remove_node(node)
+
+
+def drain(executor, taken, idle_s=DRAIN_IDLE_S, max_s=DRAIN_MAX_S):
+    """Run the callbacks of the samples DDS already holds, until ``taken()`` (the node's count
+    of messages taken) has not grown for ``idle_s`` s, and never for longer than ``max_s``
+    (a publisher that goes on must not keep a stopped node alive)."""
+    start = idle_since = time.monotonic()
+    last = taken()
+    while True:
+        executor.spin_once(timeout_sec=0.02)
+        now = time.monotonic()
+        if taken() != last:
+            last, idle_since = taken(), now
+        elif now - idle_since >= idle_s or now - start >= max_s:
+            return
 
 
 # --- entry point ------------------------------------------------------------------------------

@@ -130,6 +130,34 @@ def test_subscriber_wait_by_node_and_by_topic(ctx):
         pub_node.destroy_node()
 
 
+def test_a_stop_drains_what_dds_already_received(ctx):
+    """A stop requested while acknowledged messages wait in the subscription's queue: spin
+    with ``taken`` runs their callbacks before it returns; without, they are lost (what a
+    bag's last messages were when the identifier got its SIGINT right after the player)."""
+    pub_node = rclpy.create_node('drain_talker', context=ctx)
+    sub_node = rclpy.create_node('drain_listener', context=ctx)
+    got = []
+    try:
+        pub = pub_node.create_publisher(String, '/drained', toolkit.STREAM_QOS)
+        sub_node.create_subscription(String, '/drained', got.append, toolkit.STREAM_QOS)
+        assert SubscriberWait(pub_node, [pub], topics=['/drained'], timeout=10.0).wait()
+        flag = StopFlag()
+        try:
+            flag.event.set()            # stopped before the messages are taken
+            for i in range(50):
+                pub.publish(String(data=str(i)))
+            assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10.0))
+            toolkit.spin(sub_node, flag)
+            assert got == []
+            toolkit.spin(sub_node, flag, taken=lambda: len(got))
+        finally:
+            flag.restore()
+        assert [m.data for m in got] == [str(i) for i in range(50)]
+    finally:
+        sub_node.destroy_node()
+        pub_node.destroy_node()
+
+
 def test_stop_flag_first_signal_requests_second_interrupts():
     before = signal.getsignal(signal.SIGTERM)
     flag = StopFlag()
