@@ -1,4 +1,4 @@
-"""Load test of the identifier node: ``python -m auv_ident loadtest`` (wired by cli.py).
+"""Load test of the identifier node: ``python -m auv_ident loadtest`` (wired by auv_ident/cli).
 
 A real identifier process (``python -m auv_ident run identifier``, sample_time = 1/rate_hz)
 gets odometry and actuator commands of a simulated run (NPS AUV II, 'ident' manoeuvre) at

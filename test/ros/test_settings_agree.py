@@ -65,7 +65,7 @@ def test_the_command_line_options_are_made_from_the_fields(command, names):
 
 
 def test_the_command_line_builds_the_settings_it_was_given():
-    from auv_ident.cli import _settings
+    from auv_ident.cli.common import settings_of as _settings
     args = _subparser('identify').parse_args(
         ['--bag', 'x', '--coefficients', 'auto,Z_ds', '--mass-inverse', 'exact',
          '--noise-std', ','.join(['0.1'] * 12), '--current-down', '--max-command-age', '0.5'])
