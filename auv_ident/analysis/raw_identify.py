@@ -34,6 +34,7 @@ from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.replay import bag_custom_data
 from auv_ident.offline.tf_static import tf_mountings
 from auv_ident.session.input_map import load_input_map
+from auv_ident.session.raw_session import check_raw_settings
 from auv_ident.session.stuck import describe_spans, STUCK_SAMPLES, STUCK_SECONDS, StuckSpan
 from auv_ident.vehicles import load_vehicle
 
@@ -111,6 +112,7 @@ def identify_raw_bag(path, settings, passes=2):
     filter's default FilterConfig, ``passes`` passes (identify_raw), the sensors' exact repeats
     not fed (drop_repeats); the first line the verdict (module docstring), also the document's
     'diagnosis' (cli exits 3 on a result not to be trusted)."""
+    check_raw_settings(settings)
     imap = load_input_map(settings.input_map)
     v = load_vehicle(settings.vehicle)
     names = results.coefficient_list(v, settings.coefficients)

@@ -42,10 +42,28 @@ from auv_ident.session.settings import (
     coefficient_request,
     IdentifierSettings,
     ParameterError,
+    settings_fields,
     vehicle_named,
 )
 
 CONVERGED_REL_STD = 0.05     # every coefficient's 1-sigma below this fraction of |estimate|
+# What the raw-sensor filter takes of the identifier settings: frames, mountings, rates and
+# units come from the input map, the noise from the filter's own configuration; any other
+# setting given would be silently ignored (a frame or a current the user believes applied)
+RAW_SETTINGS = ('vehicle', 'coefficients', 'input_map')
+
+
+def check_raw_settings(settings: IdentifierSettings) -> None:
+    """ParameterError naming the first setting set away from its default that the raw-sensor
+    path does not use (the others listed in its message). Away from the default, not
+    'given': the node passes every parameter, set or not."""
+    unused = sorted(f.name for f in settings_fields()
+                    if f.name not in RAW_SETTINGS and getattr(settings, f.name) != f.default)
+    if unused:
+        also = f' (also given: {", ".join(unused[1:])})' if len(unused) > 1 else ''
+        raise ParameterError(unused[0], 'not used with raw sensors: the input map says the '
+                                        'frames, mountings and units, the raw filter takes '
+                                        'only ' + ', '.join(RAW_SETTINGS) + also)
 
 
 def has_raw_sensors(settings: IdentifierSettings) -> bool:
@@ -81,6 +99,7 @@ class RawSession:
     default FilterConfig (as identify --bag with that map)."""
 
     def __init__(self, settings: IdentifierSettings) -> None:
+        check_raw_settings(settings)
         self.settings = settings
         self.vehicle = vehicle_named(settings.vehicle)
         try:

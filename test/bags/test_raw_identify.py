@@ -112,6 +112,20 @@ def test_a_raw_map_topic_the_bag_lacks_is_exit_2(raw_bag, capsys):
     assert '/not_recorded' in capsys.readouterr().err
 
 
+@pytest.mark.parametrize('option, value', [('--frame', 'enu'), ('--warm-start', 'e.json'),
+                                           ('--tau', '5')])
+def test_a_setting_the_raw_path_does_not_use_is_exit_2_naming_it(raw_bag, capsys, option,
+                                                                  value):
+    """A setting the raw-sensor filter does not use (its map says frames and units) was
+    silently ignored: --frame enu then identified in the map's frame as if told nothing."""
+    _, _, bag, maps = raw_bag
+    code = main(['identify', '--bag', str(bag), '--input-map', str(maps['enu']),
+                 '--coefficients', ','.join(NAMES), option, value])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f'error: {option}: not used with raw sensors') and err.count('\n') == 1
+
+
 def test_a_raw_bag_read_in_the_wrong_frame_is_not_consistent_exit_3(raw_bag, capsys):
     _, _, bag, maps = raw_bag
     code = main(['identify', '--bag', str(bag), '--input-map', str(maps['enu']),

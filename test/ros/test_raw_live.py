@@ -21,7 +21,7 @@ from auv_ident.offline.raw_example import write_raw_example
 from auv_ident.ros.identifier_node import IdentifierNode
 from auv_ident.session.input_map import load_input_map
 from auv_ident.session.raw_session import RawSession
-from auv_ident.session.settings import IdentifierSettings
+from auv_ident.session.settings import IdentifierSettings, ParameterError
 from auv_ident.vehicles import load_vehicle
 
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
@@ -65,6 +65,14 @@ def test_raw_session_is_the_offline_first_pass(raw_example):
     assert s.health().level == 'OK'
     keys = dict(s.diagnostic_values())
     assert int(keys['fused_imu']) == ref.fused['imu'] and 'dvl_misalignment' in keys
+
+
+def test_raw_session_refuses_a_setting_it_does_not_use(raw_example):
+    _, map_path = raw_example
+    with pytest.raises(ParameterError) as err:
+        RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES,
+                                                  frame='enu', tau=5.0))
+    assert err.value.name == 'frame' and 'also given: tau' in err.value.message
 
 
 def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_example):
