@@ -13,6 +13,7 @@ and correlation drawn per run and not told), identified
 :func:`compare_case` returns both results against the truth; tools/raw_sensor_campaign.py
 prints the figures over seeds, test/analysis/test_raw_comparison.py runs a short case.
 """
+from collections import Counter
 from dataclasses import dataclass
 import math
 import time
@@ -43,7 +44,10 @@ FUSED_RATE = 20.0    # Hz, the navigation filter's odometry
 class Case:
     """One run's comparison: per coefficient (names) the truth, and for 'raw' and 'fused' the
     estimate and 1-sigma; the raw pass's sensor errors (name -> (value, 1-sigma)) and the
-    generator's; seconds of each identification."""
+    generator's; seconds of each identification; per record kind the records the generator
+    made (records), those the raw pass fused (raw_fused; commands: taken) and per reason those
+    it did not (raw_skipped: every record is a good message, so only 'waiting' for the start
+    belongs there) and how many sensor records precede the raw filter's start (before_start)."""
 
     seed: int
     names: list[str]
@@ -57,6 +61,10 @@ class Case:
     raw_s: float
     fused_s: float
     fused_dropped: dict
+    records: dict
+    raw_fused: dict
+    raw_skipped: dict
+    before_start: int
 
     def rel_error(self, which: str) -> np.ndarray:
         """|estimate - truth| / |truth| (per coefficient) of 'raw' or 'fused'."""
@@ -87,6 +95,21 @@ def fused_record(run, cfg: RawConfig) -> tuple[Record, int]:
     return Record(t2, Y2, U2), int(np.count_nonzero(~ok))
 
 
+def before_start(records) -> int:
+    """The sensor records (in time order) before the first IMU message after the first
+    command: the raw filter starts at that IMU message (core/filter/raw.py), so these are the
+    only good messages it may leave unfused ('waiting')."""
+    commanded, n = False, 0
+    for m in records:
+        if m.kind == 'command':
+            commanded = True
+        elif commanded and m.kind == 'imu':
+            return n
+        else:
+            n += 1
+    return n
+
+
 def compare_case(seed: int, duration: float, names: tuple[str, ...] = PAPER_FIVE,
                  vehicle: str = 'nps_auv2', passes: int = DEFAULT_PASSES) -> Case:
     """Generate one raw run (seed, duration s) and identify `names` from its raw records and
@@ -103,9 +126,11 @@ def compare_case(seed: int, duration: float, names: tuple[str, ...] = PAPER_FIVE
     t0 = time.perf_counter()
     fused = identify_with_diagnosis(model, FilterConfig(), [record], T=1.0 / FUSED_RATE)
     fused_s = time.perf_counter() - t0
+    kinds = Counter(m.kind for m in run.records)
     return Case(seed, list(model.theta_names), truth, raw.estimate, raw.std,
                 np.asarray(fused.estimate), np.asarray(fused.std), raw.errors,
-                run.truth['sensor_errors'], raw_s, fused_s, {'before_first_command': dropped})
+                run.truth['sensor_errors'], raw_s, fused_s, {'before_first_command': dropped},
+                dict(kinds), dict(raw.fused), dict(raw.skipped), before_start(run.records))
 
 
 def summary(cases: list[Case]) -> dict:

@@ -17,5 +17,10 @@ def test_raw_sensors_at_least_as_accurate_as_fused_odometry():
     for k, b in zip(('gyro_bias_p', 'gyro_bias_q', 'gyro_bias_r'),
                     case.true_errors['gyro_bias']):
         assert abs(case.raw_errors[k][0] - b) <= 3.0 * case.raw_errors[k][1]
+    # no good message rejected (every generated record is one): all fused or taken, but the
+    # sensor records stamped before the filter can start
+    assert case.raw_skipped == ({'waiting': case.before_start} if case.before_start else {})
+    assert sum(case.raw_fused.values()) + case.before_start == sum(case.records.values())
+    assert case.records['dvl'] > 0 and case.records['pressure'] > 0
     s = summary([case])
     assert set(s['coefficients']) == set(case.names)
