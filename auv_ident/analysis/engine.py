@@ -146,12 +146,21 @@ def local_cluster(workers, silence_logs=logging.ERROR, env=None, secure=True):
     the machine could connect to the scheduler's port and run code in the workers. A client
     connects with the cluster object (``Client(cluster)``), which carries the credentials.
     secure=False: plain TCP, as an existing cluster reached by its address (`--scheduler`) may
-    be; the tests use it to stand in for one."""
+    be; the tests use it to stand in for one.
+
+    Scratch folders: the scheduler, the nannies and the workers each put their scratch folder
+    first on their sys.path (distributed's ServerNode, for uploaded files), and by default that
+    folder is <temp>/dask-scratch-space, a name anyone on the machine can create first (distributed
+    uses it as found when it is writable): a module planted there would be imported in place of
+    the one asked for, in the workers and in this process. So they live in the user's private
+    folder 'dask' (core/safe_files.py: 0700, checked)."""
+    scratch = str(private_dir('dask'))
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         host=LOOPBACK, dashboard_address=None, security=True if secure else None,
                         env=dict(WORKER_ENV, **difference_threads_env(workers), **(env or {})),
-                        silence_logs=silence_logs,
-                        scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0'})
+                        silence_logs=silence_logs, local_directory=scratch,
+                        scheduler_kwargs={'dashboard_address': f'{LOOPBACK}:0',
+                                          'local_directory': scratch})
 
 
 @contextlib.contextmanager

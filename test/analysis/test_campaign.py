@@ -5,10 +5,12 @@ mid-campaign, resuming, Monte Carlo equal to the serial loop; and (slow) a campa
 import csv
 import json
 import os
+import pathlib
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -387,3 +389,30 @@ def test_local_workers_share_the_cores_for_the_finite_differences(cluster, monke
     assert seen == {str(max(1, cpus // 2))}
     monkeypatch.setenv('AUV_IDENT_THREADS', '3')
     assert engine.difference_threads_env(2) == {}
+
+
+def _planted_module():
+    import importlib.util
+    spec = importlib.util.find_spec('planted_by_another_user')
+    return None if spec is None else spec.origin
+
+
+def test_a_module_planted_in_the_shared_temp_folder_is_never_importable(tmp_path, monkeypatch):
+    """Another local user creates <temp>/dask-scratch-space (open to all) with a module in it
+    before the campaign starts: distributed would use that folder as found and put it first on
+    the import path of this process and of every worker; the cluster's scratch folders are in
+    the user's private cache instead, so the module is found nowhere."""
+    shared = tmp_path / 'shared_tmp'
+    planted = shared / 'dask-scratch-space'
+    planted.mkdir(parents=True)
+    os.chmod(shared, 0o1777)
+    os.chmod(planted, 0o777)
+    (planted / 'planted_by_another_user.py').write_text('RAN = True\n', encoding='utf-8')
+    monkeypatch.setattr(tempfile, 'tempdir', str(shared))
+    monkeypatch.setenv('AUV_IDENT_CACHE', str(tmp_path / 'cache'))
+    with engine.local_cluster(1) as lc, Client(lc) as client:
+        assert _planted_module() is None
+        assert list(client.run(_planted_module).values()) == [None]
+        scratch = client.run(lambda dask_worker: dask_worker.local_directory)
+    assert all(pathlib.Path(d).is_relative_to(tmp_path / 'cache' / 'dask')
+               for d in scratch.values())
