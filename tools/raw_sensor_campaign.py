@@ -5,7 +5,9 @@ DVL misalignment of 1-2 deg and a scale error, coloured noise of a level and cor
 drawn per run), identified from the raw records (identify_raw) and from the plain navigation
 EKF's 20 Hz odometry through the package's pipeline (analysis/raw_comparison.py). Printed:
 per coefficient the median |error| % of each, and over all (seed, coefficient) cases the share
-of truths within 3 sigma and the median |error|/sigma; per seed the sensor errors found.
+of truths within 3 sigma and the median |error|/sigma; per seed the sensor errors found and the
+records the raw pass did not fuse (every record is a good message: only those before the
+filter's start may wait).
 
     PYTHONPATH=. .venv/bin/python tools/raw_sensor_campaign.py [--seeds 10] [--duration 300]
         [--first-seed 0] [--passes 2] [--json OUT]
@@ -49,6 +51,10 @@ def main(argv=None):
                          for k in ('gyro_bias_p', 'gyro_bias_q', 'gyro_bias_r'))
               + f'; DVL scale {te["dvl_scale"]:+.4f}, found {found["dvl_scale"][0]:+.4f} +- '
               f'{found["dvl_scale"][1]:.4f}', flush=True)
+        print(f'    records {sum(c.records.values())} ('
+              + ', '.join(f'{k} {n}' for k, n in sorted(c.records.items()))
+              + f'): fused or taken {sum(c.raw_fused.values())}, not fused {c.raw_skipped or 0} '
+              f'(before the start: {c.before_start})', flush=True)
     s = summary(cases)
     print(f'\n{len(cases)} runs of {a.duration:g} s, {a.passes} raw passes')
     print('coefficient   median |error| %: raw    fused')
@@ -64,7 +70,9 @@ def main(argv=None):
             'seed': c.seed, 'names': c.names, 'truth': c.truth.tolist(), 'raw': c.raw.tolist(),
             'raw_std': c.raw_std.tolist(), 'fused': c.fused.tolist(),
             'fused_std': c.fused_std.tolist(), 'raw_errors': c.raw_errors,
-            'true_errors': c.true_errors, 'raw_s': c.raw_s, 'fused_s': c.fused_s}
+            'true_errors': c.true_errors, 'raw_s': c.raw_s, 'fused_s': c.fused_s,
+            'records': c.records, 'raw_fused': c.raw_fused, 'raw_skipped': c.raw_skipped,
+            'before_start': c.before_start}
             for c in cases]}
         Path(a.json).write_text(json.dumps(doc, indent=1) + '\n', encoding='utf-8')
     return 0

@@ -380,6 +380,10 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
                                   'identifiability': diagnosis.identifiability,
                                   'rejection_reasons': dict(rr.reasons),
                                   'replayed_with_noise_model': b.replays.again,
+                                  # a fault still active when the bag ends: the final
+                                  # estimate was formed while it was ('' for none)
+                                  'stuck_at_end': describe_spans(
+                                      [s for s in rr.stuck if s.active]),
                                   'selection': None if selection is None
                                   else selection.document()},
                          current_truth=_bag_current_truth(meta))

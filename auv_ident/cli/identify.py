@@ -79,7 +79,13 @@ def cmd_identify(args):
         from auv_ident.analysis.bag_identify import identify_bag
         doc, table = identify_bag(args.bag[0], settings, refine_pass=not args.no_refine)
         print(table)
-        if args.estimate_out:
+        if args.estimate_out and doc['stuck_at_end']:
+            # the node never saves an estimate formed while a sensor is stuck as its last good
+            # one (session/stuck.py); its warm start must not carry one either
+            print(f'--estimate-out {args.estimate_out}: not written: the odometry '
+                  f"{doc['stuck_at_end']} is still stuck at the end of the bag, so the estimate "
+                  'was formed while the fault was active', file=sys.stderr)
+        elif args.estimate_out:
             from auv_ident.session.estimate_file import estimate_document, write_estimate_json
             names = list(doc['coefficients'])
             write_estimate_json(args.estimate_out, estimate_document(

@@ -75,6 +75,31 @@ def test_orientation_never_filled_is_named_and_untrusted(run, tmp_path, capsys):
     assert 'leave the channels out (--measured)' in printed.splitlines()[0]
 
 
+def test_no_estimate_file_is_formed_while_a_sensor_is_stuck(run, tmp_path, capsys):
+    """identify --bag --estimate-out writes the identifier node's warm start: a bag whose
+    sensor is still stuck at its end (the orientation never filled) gives an estimate formed
+    while the fault was active, which the node never saves as its last good one: not written,
+    said on stderr, exit 3. A fault that ended (the 5 s repeat) gives the file: its repeats
+    were never fed."""
+    def identity(y):
+        y[:, State.PHI:] = 0.0
+
+    def freeze(y):
+        y[STUCK[0]:STUCK[1]] = y[STUCK[0] - 1]
+    out = tmp_path / 'e.json'
+    bag = _bag(run, tmp_path, 'identity', identity)
+    assert main(['identify', '--bag', str(bag), '--no-refine', '--estimate-out',
+                 str(out)]) == EXIT_UNTRUSTED
+    err = capsys.readouterr().err
+    assert not out.exists()
+    assert (f'--estimate-out {out}: not written: the odometry attitude repeated exactly for '
+            '30.0 s from t = 0.000 s (600 samples not fed) is still stuck at the end of the '
+            'bag') in err
+    assert main(['identify', '--bag', str(_bag(run, tmp_path, 'stuck', freeze)), '--no-refine',
+                 '--estimate-out', str(out)]) == EXIT_UNTRUSTED
+    assert json.loads(out.read_text())['steps'] == 501      # the 100 repeats not fed
+
+
 def test_the_clean_bag_is_consistent(run, tmp_path, capsys):
     status, doc, _ = _identify(_bag(run, tmp_path, 'clean', lambda y: None), tmp_path, capsys)
     assert status == 0 and doc['diagnosis']['consistent']
