@@ -62,6 +62,10 @@ def cmd_identify(args):
         raise AuvIdentError('give either --simulate MANEUVER or --bag PATH, not both')
     check_outputs(args, '--json', '--estimate-out')
     settings = settings_of(args)
+    if args.bag and len(args.bag) > 1 and args.estimate_out:
+        # the several-bags path writes no warm start; said before the work, not ignored
+        raise AuvIdentError('--estimate-out: one --bag only (a warm start is written from one '
+                            "bag's identification); drop it or identify one bag")
     if args.bag and len(args.bag) > 1:
         from auv_ident.analysis.bag_identify import identify_bags
         doc, table = identify_bags(args.bag, settings, refine_pass=not args.no_refine)

@@ -53,3 +53,15 @@ def test_force_overwrites(tmp_path, capsys):
     assert main(['simulate', '--duration', '2', '--out', str(out), '--force']) == 0
     assert out.read_text().startswith('t,')
     assert f'wrote {out}' in capsys.readouterr().out
+
+
+def test_an_estimate_file_asked_of_several_bags_is_refused_at_once(tmp_path, capsys):
+    """identify --bag A --bag B --estimate-out FILE identified both and wrote nothing, silently:
+    an option that is not honoured is refused before the work, naming it."""
+    out = tmp_path / 'e.json'
+    t0 = time.monotonic()
+    assert main(['identify', '--bag', BAG, '--bag', BAG, '--estimate-out', str(out)]) == 2
+    assert time.monotonic() - t0 < 10.0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith('error: --estimate-out: one --bag only')
+    assert not out.exists()
