@@ -264,7 +264,36 @@ class _McapFile:
         return Counter(r.channel_id for r in records if isinstance(r, Message))
 
     def _iter_indexed(self, topics):
-        """Yield (schema, channel, message) through the index in log-time order."""
+        """Yield (channel, message) through the index in log-time order (ties: the file's
+        order, as mcap's reader orders them)."""
+        chunks = _chunks_in_time_order(self.summary.chunk_indexes)
+        if chunks is not None:
+            yield from self._iter_chunks(chunks, topics)
+            return
+        for _, channel, message in self._iter_merged(topics):
+            yield channel, message
+
+    def _iter_chunks(self, chunks, topics):
+        """The chunks one after another, each one's messages stably sorted by log time: the
+        same order as mcap's merge of every message (log time, chunk offset, offset in the
+        chunk) when no chunk's time range overlaps the next one's, at a fraction of its
+        cost (its heap compares message pairs in Python: 40 % of reading a 100 Hz IMU bag)."""
+        wanted = {cid for cid, c in self.channels.items()
+                  if topics is None or c.topic in topics}
+        for index in chunks:
+            chunk = _read_chunk(self.fh, index, self.path)
+            try:
+                records = breakup_chunk(chunk, validate_crc=True)
+            except Exception as exc:  # CRC mismatch, bad compression, ...
+                raise BagError(f'{self.path}: corrupted MCAP chunk ({type(exc).__name__}: '
+                               f'{exc})') from exc
+            messages = [r for r in records if isinstance(r, Message) and r.channel_id in wanted]
+            messages.sort(key=lambda m: m.log_time)
+            for m in messages:
+                yield self.channels[m.channel_id], m
+
+    def _iter_merged(self, topics):
+        """Yield (schema, channel, message) through mcap's log-time-ordered merge."""
         it = self.reader.iter_messages(topics=None if topics is None else list(topics),
                                        log_time_order=True)
         while True:
@@ -285,8 +314,23 @@ class _McapFile:
                 if topics is None or channel.topic in topics:
                     yield m.log_time, channel.topic, self.msgtype(channel), m.data
             return
-        for _, channel, message in self._iter_indexed(topics):
+        for channel, message in self._iter_indexed(topics):
             yield message.log_time, channel.topic, self.msgtype(channel), message.data
+
+
+def _chunks_in_time_order(indexes):
+    """The chunk indexes in reading order if reading them one after another, each sorted in
+    itself, gives log-time order: each chunk starts after the one before ends (at the same
+    nanosecond only when it also lies later in the file); else None (then mcap merges)."""
+    if not indexes or any(i.message_start_time > i.message_end_time for i in indexes):
+        return None
+    ordered = sorted(indexes, key=lambda i: (i.message_start_time, i.chunk_start_offset))
+    for a, b in zip(ordered, ordered[1:]):
+        if a.message_end_time > b.message_start_time or (
+                a.message_end_time == b.message_start_time
+                and a.chunk_start_offset > b.chunk_start_offset):
+            return None
+    return ordered
 
 
 def _read_chunk(fh, index, path):

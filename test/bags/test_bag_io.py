@@ -166,6 +166,32 @@ def test_log_time_order(tmp_path):
     assert times == sorted(times) and len(times) == 30
 
 
+@pytest.mark.parametrize('pattern', ['in_order', 'ties', 'overlapping', 'shuffled'])
+def test_log_time_order_is_mcaps_own_order(tmp_path, pattern):
+    """read_bag reads chunks whose time ranges do not overlap one after another (each sorted
+    in itself) and leaves the rest to mcap's merge: either way the order is exactly mcap's
+    (log time, then the file's order), ties at chunk boundaries included."""
+    rng = np.random.default_rng(3)
+    msgs = list(EXPECTED[:60])
+    if pattern == 'ties':       # runs of equal log times across chunk boundaries
+        msgs = [(topic, T0_NS + (k // 7), m) for k, (topic, _, m) in enumerate(msgs)]
+    elif pattern == 'overlapping':  # each chunk spans the whole run: mcap must merge
+        msgs = [msgs[i] for i in np.argsort([(k % 5) * 1000 + k for k in range(60)])]
+    elif pattern == 'shuffled':
+        msgs = [msgs[i] for i in rng.permutation(60)]
+    path = _write_bag(tmp_path / pattern, chunk_size=1024, messages=msgs)
+    got = [(topic, ns, bytes(data)) for topic, ns, data in read_bag(path, raw=True)]
+    with open(_mcap_file(path), 'rb') as fh:
+        reader = SeekingReader(fh)
+        want = [(ch.topic, m.log_time, bytes(m.data))
+                for _, ch, m in reader.iter_messages(log_time_order=True)]
+        chunks = reader.get_summary().chunk_indexes
+    assert got == want and len(got) == 60 and len(chunks) > 3
+    # the path taken: chunk by chunk unless chunks overlap in time
+    merged = bag_reader._chunks_in_time_order(chunks) is None
+    assert merged == (pattern in ('overlapping', 'shuffled'))
+
+
 def test_rosbags_reader_and_anyreader(bag):
     with RosbagsReader(bag) as reader:
         conns = {c.topic: c for c in reader.connections}
