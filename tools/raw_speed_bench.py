@@ -1,7 +1,7 @@
 """Identification speed from raw sensors against fused odometry, side by side on one run.
 
     .venv/bin/python tools/raw_speed_bench.py [--duration 600] [--seed 20] [--rounds 2]
-        [--profile]
+        [--profile] [--bags DIR]
 
 One run of the independent generator (offline/independent_data.py generate_raw: 100 Hz IMU,
 5 Hz DVL with dropouts, 10 Hz pressure, commands on change) is identified
@@ -14,7 +14,12 @@ One run of the independent generator (offline/independent_data.py generate_raw: 
 
 Each is run `rounds` times, taking turns (a slow spell of the shared machine hits both), and
 its best round is printed in seconds, with the ratio raw / fused (issue 28's goal: at most 2).
-A first untimed call of each compiles numba's kernels. --profile prints cProfile's 25 most
+A first untimed call of each compiles numba's kernels. --bags DIR also writes the run as two
+bags, the raw sensors (with their input map, as offline/raw_example.py writes them) and the
+navigation filter's odometry with the commands (/odom + /actuators), and times what a user
+runs end to end, reading included: `identify --bag DIR/raw --input-map DIR/map.yaml` against
+`identify --bag DIR/fused --noise-source parameter` (analysis identify_raw_bag and
+identify_bag; the odometry carries no covariance). --profile prints cProfile's 25 most
 expensive functions of one raw identification (cumulative time).
 """
 import argparse
@@ -41,12 +46,63 @@ from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConf
 from auv_ident.vehicles import load_vehicle  # noqa: E402
 
 
+def write_bags(run, cfg, folder):
+    """(raw bag, its map, fused bag) of the run in ``folder`` (module docstring)."""
+    import numpy as np
+    import yaml
+
+    from auv_ident.offline.independent_data import fused_odometry
+    from auv_ident.offline.raw_example import EPOCH_NS, input_map, record_message, TOPICS
+    from auv_ident.offline.sim_bag import joint_state_msg, odometry_msg, write_message_bag
+    os.makedirs(folder, exist_ok=True)
+    raw = write_message_bag(os.path.join(folder, 'raw'), TOPICS, {},
+                            (record_message(r) for r in run.records), None)
+    map_path = os.path.join(folder, 'map.yaml')
+    with open(map_path, 'w', encoding='utf-8') as fh:
+        yaml.safe_dump(input_map(cfg), fh, sort_keys=False)
+    t, Y = fused_odometry(run, cfg, FUSED_RATE)
+    msgs = [('/odom', EPOCH_NS + int(round(tk * 1e9)), y) for tk, y in zip(t, Y)]
+    msgs += [('/actuators', EPOCH_NS + int(round(tk * 1e9)), u)
+             for tk, u in zip(run.cmd_t, run.cmd_values)]
+    msgs.sort(key=lambda m: (m[1], m[0] == '/odom'))   # a command before odometry at a tie
+    fused = write_message_bag(
+        os.path.join(folder, 'fused'),
+        {'/odom': 'nav_msgs/msg/Odometry', '/actuators': 'sensor_msgs/msg/JointState'},
+        {'vehicle': 'nps_auv2'},
+        ((topic, ns, odometry_msg(ns, np.asarray(v)) if topic == '/odom'
+          else joint_state_msg(ns, np.asarray(v))) for topic, ns, v in msgs), None)
+    return raw, map_path, fused
+
+
+def time_bags(run, cfg, folder, rounds):
+    """Best-of-rounds seconds of identify --bag on the raw and the fused bag (module
+    docstring), after one untimed call of each (numba's kernels)."""
+    from auv_ident.analysis.bag_identify import identify_bag
+    from auv_ident.analysis.raw_identify import identify_raw_bag
+    from auv_ident.session.settings import IdentifierSettings
+    raw, map_path, fused = write_bags(run, cfg, folder)
+    names = list(PAPER_FIVE)
+    jobs = {'raw': lambda: identify_raw_bag(raw, IdentifierSettings.from_values(
+                coefficients=names, input_map=map_path)),
+            'fused': lambda: identify_bag(fused, IdentifierSettings.from_values(
+                coefficients=names, noise_source='parameter'))}
+    best = {k: float('inf') for k in jobs}
+    for _ in range(rounds):
+        for name, fn in jobs.items():
+            t = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - t)
+    return best
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--duration', type=float, default=600.0, help='s of run (600)')
     ap.add_argument('--seed', type=int, default=20)
     ap.add_argument('--rounds', type=int, default=2)
     ap.add_argument('--profile', action='store_true')
+    ap.add_argument('--bags', metavar='DIR', help='also time identify --bag end to end on the '
+                                                  'run written as bags into DIR (new)')
     a = ap.parse_args(argv)
     cfg = RawConfig(data=DataConfig(duration=a.duration, seed=a.seed))
     t0 = time.perf_counter()
@@ -83,6 +139,10 @@ def main(argv=None):
           f'{best["raw"] / passes:.2f} s a pass)')
     print(f'fused odometry: {best["fused"]:.2f} s (noise model, EKF pass, refinement)')
     print(f'ratio raw / fused: {best["raw"] / best["fused"]:.2f} (goal: at most 2)')
+    if a.bags:
+        bags = time_bags(run, cfg, a.bags, a.rounds)
+        print(f'identify --bag, reading included: raw sensors {bags["raw"]:.2f} s, fused '
+              f'odometry {bags["fused"]:.2f} s, ratio {bags["raw"] / bags["fused"]:.2f}')
     if a.profile:
         prof = cProfile.Profile()
         prof.runcall(raw)
