@@ -36,6 +36,11 @@ correlated errors. This module picks the largest set the run determines, in two 
    block of the information matrix). If any was dropped, the rest are identified again,
    started at the first identification's values.
 
+A hovering thruster vehicle (an ROV: Vehicle.hovers) is chosen for as a tank session
+identifies it: its cross terms are no candidates (HOVER_CROSS_TERM), and after the
+one-at-a-time pass its degrees of freedom's terms and thrust gains may enter as groups, judged
+by their relative 1-sigma (:func:`_group_entries`, :func:`_identifiable_part`).
+
 Pass 1 alone is :func:`choose_coefficients`: the live identifier (session/auto_choice.py) runs
 only it, on its first `auto_window` seconds, and lets its filter identify the chosen set;
 :func:`identify_auto` runs both passes.
