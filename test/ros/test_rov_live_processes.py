@@ -8,10 +8,8 @@ map (replay_bag: the node's session fed the bag in log-time order) to 1e-9 relat
 command stamped with its log time, and the noise learning's re-runs (a worker thread live)
 ending where the replay's do."""
 import json
-import signal
-import subprocess
 
-from conftest import require_loopback_dds
+from conftest import play_into_identifier
 import numpy as np
 import pytest
 
@@ -28,13 +26,6 @@ SETTINGS = {'vehicle': 'bluerov2_heavy', 'input_map': 'bluerov2_heavy',
             'noise_source': 'parameter'}
 
 
-def _spawn(cmd, env):
-    require_loopback_dds()
-    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-
-
 def test_player_fed_node_identifies_the_bluerov2_as_identify_bag(tmp_path, ros_env):
     # 25 s: 500 odometry samples, past the noise learning's first re-run (200 samples) and
     # its second (400), where a worker thread's takeover changed the estimates before
@@ -44,25 +35,12 @@ def test_player_fed_node_identifies_the_bluerov2_as_identify_bag(tmp_path, ros_e
     bag = str(out / 'bag')
     ref = replay_bag(bag, IdentifierSettings.from_values(**SETTINGS), warn=False)
     saved = tmp_path / 'live.json'
-    ident = _spawn(_node_cmd('identifier', 'use_sim_time:=true', f'save_path:={saved}',
-                             *(f'{k}:={v}' for k, v in SETTINGS.items())), ros_env)
-    player = None
-    try:
-        player = _spawn(_node_cmd('play', f'bag:={bag}', 'input_map:=bluerov2_heavy',
-                                  'publish_clock:=true', 'rate:=2.0',
-                                  'wait_for_subscribers:=[/odom,/thrusters,/clock]',
-                                  'wait_for_subscribers_s:=60.0',
-                                  'wait_for_all_acked_s:=30.0'), ros_env)
-        _, perr = player.communicate(timeout=120.0)
-        assert player.returncode == 0, perr[-2000:]
-        ident.send_signal(signal.SIGINT)
-        _, err = ident.communicate(timeout=30.0)
-        assert ident.returncode == 0, err[-3000:]
-    finally:
-        for p in (ident, player):
-            if p is not None and p.poll() is None:
-                p.kill()
-                p.communicate()
+    err = play_into_identifier(
+        _node_cmd('identifier', 'use_sim_time:=true', f'save_path:={saved}',
+                  *(f'{k}:={v}' for k, v in SETTINGS.items())),
+        _node_cmd('play', f'bag:={bag}', 'input_map:=bluerov2_heavy', 'publish_clock:=true',
+                  'rate:=2.0', 'wait_for_subscribers:=[/odom,/thrusters,/clock]',
+                  'wait_for_subscribers_s:=60.0', 'wait_for_all_acked_s:=30.0'), ros_env)
     assert 'Traceback' not in err, err[-3000:]
     live = json.loads(saved.read_text())
     assert live['coefficients'] == ref.names and len(ref.names) == 14   # 12 and the current
