@@ -24,7 +24,9 @@ does the same from the running filter:
    replaces the running filter (its estimate, covariance, windows and last good estimate). The
    re-run runs in the session's runner (the node's: a worker thread, as the 'auto' choice; the
    running filter takes and keeps the messages meanwhile, and the re-run filter is fed them before
-   it takes over at the next message after it ends: IdentSession.poll_noise). Its innovations are
+   it takes over at the next message after it ends: IdentSession.poll_noise; the fits due among
+   those messages are made then, as if it had taken over at once, so that the live node ends
+   where replay_bag does: NoiseLearner.rerun_done). Its innovations are
    whitened by the new variances, so the next fit of a learnt model gives factors near 1: a fixed
    point. A re-run costs one filter pass over the record (~0.6 ms per sample), so one is made only
    once the record holds RERUN_GROWTH times the samples of the last one (at 200, 400, 800, ...
