@@ -65,6 +65,35 @@ def ros_env():
     return dict(os.environ)
 
 
+def spawn_node(cmd, env):
+    """A node process of a test (loopback DDS only), its stdout and stderr piped."""
+    require_loopback_dds()
+    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def play_into_identifier(ident_cmd, player_cmd, env, timeout=120.0):
+    """Start the identifier, play a bag into it with the player (both exit 0), then SIGINT
+    the identifier (it writes its estimate file); returns the identifier's stderr. Every
+    process is killed on the way out."""
+    import signal
+    ident, player = spawn_node(ident_cmd, env), None
+    try:
+        player = spawn_node(player_cmd, env)
+        _, perr = player.communicate(timeout=timeout)
+        assert player.returncode == 0, perr[-2000:]
+        ident.send_signal(signal.SIGINT)
+        _, err = ident.communicate(timeout=30.0)
+        assert ident.returncode == 0, err[-3000:]
+    finally:
+        for p in (ident, player):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.communicate()
+    return err
+
+
 def pytest_sessionfinish(session, exitstatus):
     fastdds = os.path.join(os.path.dirname(sys.executable), 'fastdds')
     if os.path.exists(fastdds):

@@ -874,13 +874,14 @@ class IdentSession:
         noise.pending = None
         try:
             fed, whites = job.future.result()
-            whites += rerun(None, self.guard_on, noise.entries(self.noise_default, job.scale,
-                                                               job.taken), fed)[1]
+            samples = fed.samples       # the record the re-run was started on
+            later = rerun(None, self.guard_on, noise.entries(self.noise_default, job.scale,
+                                                             job.taken), fed)[1]
         except Exception as err:                 # noqa: BLE001 - the running filter stays
             noise.rerun_failed(failure_text(err), noise.kept_odometry)
             return False
         self.filter = fed.filter
-        noise.rerun_done(job.scale, fed.samples, whites)
+        noise.rerun_done(job.scale, samples, whites, later)
         ekf = self.filter.stream.ekf
         self.counters.new_filter(float(ekf.nis), int(ekf.dof))
         return True

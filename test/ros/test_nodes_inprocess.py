@@ -752,3 +752,30 @@ def test_identifier_reads_the_topics_of_an_input_map(ctx, nodes, run, tmp_path):
     # the same run from today's layout: the same estimates, to the rounding of degrees
     ref = replay_messages(_ordered_messages(run), IdentSession())
     assert np.allclose(ref[-1][1], last.estimate, rtol=1e-6, atol=1e-9)
+
+
+def test_a_headerless_command_takes_the_clock_taken_before_it_with_sim_time(ctx, nodes):
+    """use_sim_time with a map of headerless commands (a BlueROV2's PWM Float64MultiArray): the
+    node keeps every /clock (its own RELIABLE depth-1000 subscription, taken in arrival order
+    with the commands) and stamps a command with the last one taken, as replay_bag stamps it
+    with its log time; rclpy's time source keeps only the newest /clock, which under load was
+    already a later message's (73 of 543 commands up to 107 ms late). Without sim time the
+    command takes the system time and there is no such subscription."""
+    from builtin_interfaces.msg import Time
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(
+        vehicle='bluerov2_heavy', input_map='bluerov2_heavy', use_sim_time=True))
+    nodes.append(ident)
+    assert ident.sub_clock is not None and ident.sub_clock.topic_name == '/clock'
+    assert ident.sub_clock.qos_profile.depth == 1000
+    pwm = Float64MultiArray(data=[1500.0] * 8)
+    ident._on_clock(Clock(clock=Time(sec=1758031200, nanosec=4353801)))
+    ev = ident.on_input('thrusters', pwm)
+    assert ev.stamp_ns == 1758031200004353801
+    ident._on_clock(Clock(clock=Time(sec=1758031201, nanosec=0)))
+    assert ident.on_input('thrusters', pwm).stamp_ns == 1758031201000000000
+    plain = IdentifierNode(context=ctx, parameter_overrides=_params(
+        vehicle='bluerov2_heavy', input_map='bluerov2_heavy'))
+    nodes.append(plain)
+    assert plain.sub_clock is None
+    before = time.time_ns()
+    assert before <= plain.on_input('thrusters', pwm).stamp_ns <= time.time_ns()

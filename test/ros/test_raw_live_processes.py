@@ -2,10 +2,8 @@
 the player (ros/play_node.py with the same map): its final estimate (the estimate file written
 at shutdown) is identify --bag's first EKF pass over that bag with that map."""
 import json
-import signal
-import subprocess
 
-from conftest import require_loopback_dds
+from conftest import play_into_identifier
 import numpy as np
 import pytest
 
@@ -22,13 +20,6 @@ from auv_ident.vehicles import load_vehicle
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
 
 
-def _spawn(cmd, env):
-    require_loopback_dds()
-    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-
-
 def test_player_fed_raw_node_publishes_the_offline_pass(tmp_path, ros_env):
     bag, map_path = write_raw_example(tmp_path / 'ex', duration=10.0, seed=5)
     imap = load_input_map(str(map_path))
@@ -37,25 +28,13 @@ def test_player_fed_raw_node_publishes_the_offline_pass(tmp_path, ros_env):
     ref = identify_raw(Model(v, NAMES), FilterConfig(), records, raw_sensor_config(imap),
                        passes=1)
     out = tmp_path / 'estimate.json'
-    ident = _spawn(_node_cmd('identifier', f'input_map:={map_path}',
-                             f'coefficients:=[{",".join(NAMES)}]', f'save_path:={out}'),
-                   ros_env)
-    player = None
-    try:
-        topics = ','.join(e.bag_topic for e in imap.inputs)
-        player = _spawn(_node_cmd('play', f'bag:={bag}', f'input_map:={map_path}', 'rate:=2.0',
-                                  f'wait_for_subscribers:=[{topics}]',
-                                  'wait_for_subscribers_s:=60.0'), ros_env)
-        _, perr = player.communicate(timeout=120.0)
-        assert player.returncode == 0, perr[-2000:]
-        ident.send_signal(signal.SIGINT)
-        _, err = ident.communicate(timeout=30.0)
-        assert ident.returncode == 0, err[-3000:]
-    finally:
-        for p in (ident, player):
-            if p is not None and p.poll() is None:
-                p.kill()
-                p.communicate()
+    topics = ','.join(e.bag_topic for e in imap.inputs)
+    play_into_identifier(
+        _node_cmd('identifier', f'input_map:={map_path}', f'coefficients:=[{",".join(NAMES)}]',
+                  f'save_path:={out}'),
+        _node_cmd('play', f'bag:={bag}', f'input_map:={map_path}', 'rate:=2.0',
+                  f'wait_for_subscribers:=[{topics}]', 'wait_for_subscribers_s:=60.0'),
+        ros_env)
     doc = json.loads(out.read_text())
     assert doc['input_mode'] == 'raw sensors' and doc['coefficients'] == NAMES
     # every sensor message fused, as offline

@@ -200,8 +200,10 @@ def test_a_rerun_in_the_background_takes_over_with_what_arrived_meanwhile(run):
     assert s.filter is running                           # not switched between messages
     feed(s, LEARN_MIN_UPDATES + 50, LEARN_MIN_UPDATES + 51)
     assert s.filter is not running and s.noise.pending is None and s.noise.reruns == 1
-    # fed the whole record: the 200 it was started with and the 50 kept meanwhile
-    assert any(f'over {LEARN_MIN_UPDATES + 50} kept samples' in n for n in s.noise.news)
+    # started on the 200 kept then (the news and the next re-run's size say so, as a
+    # synchronous re-run's would), then fed the 50 kept meanwhile
+    assert any(f'over {LEARN_MIN_UPDATES} kept samples' in n for n in s.noise.news)
+    assert s.noise.rerun_at == 2 * LEARN_MIN_UPDATES
     assert s.counters.odom_accepted == LEARN_MIN_UPDATES + 51
     # a failed re-run leaves the running filter; the next one waits for twice the record
     jobs.clear()
@@ -213,6 +215,46 @@ def test_a_rerun_in_the_background_takes_over_with_what_arrived_meanwhile(run):
     assert failing.filter is running and failing.noise.reruns == 0
     assert 'internal error: RuntimeError: boom' in failing.noise.news[-1]
     assert failing.noise.rerun_at == 2 * (LEARN_MIN_UPDATES + 10)
+
+
+class _SlowFuture(Future):
+    """A finished job that says it is done only from its polls-th poll on: a worker thread
+    that took that many messages' time."""
+
+    def __init__(self, polls):
+        super().__init__()
+        self.polls = polls
+
+    def done(self):
+        self.polls -= 1
+        return self.polls < 0 and super().done()
+
+
+def test_a_rerun_that_takes_a_while_ends_where_an_immediate_one_does(run):
+    """The live node's re-runs run in a worker thread and take over when they end, the
+    replay's (replay_bag, identify --bag's EKF pass) at once: the fits among the samples kept
+    meanwhile are made as if it had taken over at once, so both end at the same estimate, to
+    the bit (before: the fits came after the takeover, the next re-run at twice the record
+    then; the estimates of a played BlueROV2 bag ended 0.5-4 % apart)."""
+    rng = np.random.default_rng(1)
+    y = run.x + 2.0 * DEFAULT_NOISE_STD * ar1(rng, len(run.t), math.exp(-T / 1.0))
+
+    def slow(work):
+        future = _SlowFuture(60)
+        future.set_result(work())
+        return future
+
+    def feed(s):
+        for k in range(len(run.t)):
+            ns = int(round(run.t[k] * 1e9))
+            s.add_command(ns, run.u[k])
+            s.add_odometry(ns, y[k])
+        return s
+    at_once, later = feed(IdentSession()), feed(IdentSession(auto_runner=slow))
+    assert at_once.noise.reruns >= 3 and later.noise.reruns == at_once.noise.reruns
+    assert later.noise.state == at_once.noise.state
+    np.testing.assert_array_equal(later.best()[0], at_once.best()[0])
+    np.testing.assert_array_equal(later.best()[1], at_once.best()[1])
 
 
 def test_white_noise_of_the_configured_level_is_left_alone(run):

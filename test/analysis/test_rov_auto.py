@@ -1,0 +1,37 @@
+"""`identify --bag --coefficients auto` on a BlueROV2 Heavy tank session of the independent
+generator (offline/independent_rov.py --curve file: thrust +10 % from the file's curve; the
+rest of the truth the file's values): the choice is what the tank manoeuvres identify, the
+thrust gains and the diagonal added mass and damping of surge, sway, heave and yaw (and roll
+and pitch where the run determines them), each near the truth; the cross terms are left out
+with their reason (core/identification/selection.py HOVER_CROSS_TERM). Before, it chose
+thrust_gain_fwd alone: every other term "would not lower the expected error"."""
+import json
+
+import pytest
+
+from auv_ident.cli import main as cli_main
+from auv_ident.core.identification.selection import HOVER_CROSS_TERM
+from auv_ident.offline.independent_rov import main as generate
+
+TANK = ['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Y_vdot', 'Z_wdot', 'N_rdot', 'X_u',
+        'Z_w', 'X_uu', 'Y_vv', 'Z_ww', 'N_rr']
+
+
+@pytest.mark.slow       # a 600 s bag and 17 sensitivities over it: ~4-5 min on 2 cores
+def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
+    out = tmp_path / 'rov'
+    assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve',
+                     'file']) == 0
+    truth = json.loads((out / 'truth.json').read_text())['coefficients']
+    model = tmp_path / 'm.json'
+    cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(out / 'bag'),
+              '--input-map', 'bluerov2_heavy', '--noise-source', 'parameter',
+              '--coefficients', 'auto', '--json', str(model)])
+    doc = json.loads(model.read_text())
+    chosen, left = doc['selection']['chosen'], doc['selection']['left_out']
+    assert set(TANK) <= set(chosen), left
+    assert left['X_vr'] == HOVER_CROSS_TERM and left['N_uv'] == HOVER_CROSS_TERM
+    for name, c in doc['coefficients'].items():
+        t = truth[name]
+        assert abs(c['estimate'] - t) <= 0.05 * abs(t), (name, c['estimate'], t)
+        assert abs(c['estimate'] - t) <= 3 * c['std'], (name, c['estimate'], t, c['std'])
