@@ -11,10 +11,11 @@ and speed-scaled terms, lumped Munk moments). So:
   and shaft speed; g the restoring force; F_RB the rigid-body Coriolis monomials; at zero shaft
   speed the Healey-Lienard propeller leaves the hull's axial drag -(rho/2) L^2 Cd0 u^2, which is
   damping and stays), minus what the target's own added-
-  mass Coriolis term already applies. The samples: a noise-free 200 s zig-zag of the identified
-  model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps) plus 2000 uniform
-  points (seed 0) in the box of that run's velocities. The run is simulated, not the bags
-  read: the identified model at the identification's speed and fin ranges.
+  mass Coriolis term already applies. The samples: the measured velocities of the
+  identification's bags when the model records them, else a noise-free 200 s zig-zag of the
+  identified model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps; a
+  hovering thruster vehicle: a 900 s tank session), plus 2000 uniform points (seed 0) in the
+  box of those velocities.
   The fit % per DOF, 100 (1 - |y - y_fit| / |y - mean y|) with y = H and y_fit the target's
   damping plus its own added-mass Coriolis term, goes in the file and on the console;
   a DOF whose force never changes over the samples (not excited: its damping is fitted as
@@ -124,11 +125,20 @@ def _envelope_bags(saved, bags):
     return [], ''
 
 
-def fossen_parts(saved, duration=200.0, bags=None):
+# s, the simulated envelope of a hovering thruster vehicle: its `ident` tank session flies one
+# stick for 180 s at a time (surge, sway, heave, yaw), then two at once; 200 s would be surge
+# alone, and the sway, heave and yaw damping fitted over nothing
+HOVER_ENVELOPE_S = 900.0
+
+
+def fossen_parts(saved, duration=None, bags=None):
     """FossenParts of a SavedModel (module docstring). bags: the runs whose measured
     velocities are the fit's envelope (None: the model's identification bags when it records
-    them and they exist, else a simulated `ident` run of the identified model)."""
+    them and they exist, else a simulated `ident` run of the identified model, `duration` s:
+    None for 200 s, HOVER_ENVELOPE_S for a hovering thruster vehicle)."""
     v = saved.vehicle
+    if duration is None:
+        duration = HOVER_ENVELOPE_S if v.hovers else 200.0
     c = identified_values(saved)
     model = Model(v, (), coefficient_values=c)
     M = v.mass_matrix(c)

@@ -52,7 +52,7 @@ def with_gains(v, c):
         sides = {}
         rows = [e for e in range(6) if t.column[e] != 0.0]
         for side in (0, 1):
-            g = {e: 1.0 for e in rows}
+            g = dict.fromkeys(rows, 1.0)
             names = {}
             for ci, co in enumerate(v.coefficients):
                 if co.is_thrust_gain and side in co.gain_sides:
@@ -86,7 +86,7 @@ def sides_text(v, c):
              if co.is_thrust_gain]
     if not gains:
         return []
-    return ['Thrust gains folded into the curves below (gain times the file\'s curve side and',
+    return ["Thrust gains folded into the curves below (gain times the file's curve side and",
             'its saturation): ' + ', '.join(f'{n} = {g!r}' for n, g in gains) + '.']
 
 

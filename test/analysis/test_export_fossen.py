@@ -181,7 +181,8 @@ def _hyd_model(path):
         C[3:, 3:] = -_skew(c2)
         return C @ nu
 
-    def rate(nu, tau, R=np.eye(3)):
+    def rate(nu, tau, R=None):
+        R = np.eye(3) if R is None else R
         D = -np.diag(lin) - np.diag(quad * np.abs(nu))
         fg, fb = R.T @ np.array([0.0, 0.0, W]), R.T @ np.array([0.0, 0.0, -B])
         g = -np.concatenate([fg + fb, np.cross(rg, fg) + np.cross(rb, fb)])
