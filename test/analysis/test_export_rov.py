@@ -297,11 +297,34 @@ def _show(fmt, reported, result):
 
 
 def test_a_bluerov2_export_flies_as_our_model_quick(tmp_path):
-    """gz (the default) on a short held-out run: the exact round trip, in the quick suite."""
-    result, reported = round_trip(_model(tmp_path, CONSISTENT), tmp_path, 'gz-link',
+    """gz (the default) on a short held-out run: the exact round trip of an identified added
+    mass (the Munk difference in u w, u v, u r, u q needs the plain products with u: an
+    ROV's u changes sign), in the quick suite."""
+    result, reported = round_trip(_model(tmp_path, TRUTHLIKE), tmp_path, 'gz-link',
                                   held_out=(('steps', 30.0, 1),))
     _show('gz-link', reported, result)
     assert result['steps'][1] < 1e-6
+    # the identified thrust gains are in the clamps (our curve's ends times the gain)
+    t1 = _gz_thrusters(tmp_path / 'rov.gz-link')['t1_joint']
+    assert t1[3] == pytest.approx(1.1 * 51.4, rel=1e-12)
+    assert t1[2] == pytest.approx(-1.1 * 39.9, rel=1e-12)
+
+
+def test_a_gain_of_some_of_a_thrusters_equations_is_refused(tmp_path):
+    """A forward gain of X and Y only: the horizontal thrusters push in N too, so no curve of
+    theirs carries it (docs/export.md)."""
+    from auv_ident.analysis.export_fossen import ExportError
+    text = open(load_vehicle(ROV).path, encoding='utf-8').read()
+    old = 'thrust_gain_fwd: [1.0, XYZKMN, 0, thrusters_forward]'
+    assert old in text
+    yaml_path = tmp_path / 'rov_xy.yaml'
+    yaml_path.write_text(text.replace(old, 'thrust_gain_fwd: [1.0, XY, 0, thrusters_forward]'),
+                         encoding='utf-8')
+    model = tmp_path / 'm.json'
+    model.write_text(json.dumps({'vehicle': str(yaml_path), 'coefficients': {
+        'thrust_gain_fwd': {'estimate': 1.1, 'std': 0.01}}}), encoding='utf-8')
+    with pytest.raises(ExportError, match='thrust_gain_fwd: thruster t1 pushes in XYN'):
+        export_model(model, tmp_path / 'o.sdf', fmt='gz')
 
 
 @pytest.mark.slow      # 500 s of the target in Python per format (~20 s)
