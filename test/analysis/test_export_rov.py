@@ -17,6 +17,7 @@ the model was identified or fitted on).
 """
 import json
 import math
+from pathlib import Path
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -314,7 +315,7 @@ def test_a_gain_of_some_of_a_thrusters_equations_is_refused(tmp_path):
     """A forward gain of X and Y only: the horizontal thrusters push in N too, so no curve of
     theirs carries it (docs/export.md)."""
     from auv_ident.analysis.export_fossen import ExportError
-    text = open(load_vehicle(ROV).path, encoding='utf-8').read()
+    text = Path(load_vehicle(ROV).path).read_text(encoding='utf-8')
     old = 'thrust_gain_fwd: [1.0, XYZKMN, 0, thrusters_forward]'
     assert old in text
     yaml_path = tmp_path / 'rov_xy.yaml'
