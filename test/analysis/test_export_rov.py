@@ -239,7 +239,9 @@ def _rk4(target, x0, u, dt):
 
 
 def _fit(y, yh):
-    return 100.0 * (1.0 - np.linalg.norm(y - yh) / np.linalg.norm(y - y.mean()))
+    """Fit % of yh to y; NaN where y does not move (a short run that flies one stick)."""
+    den = np.linalg.norm(y - y.mean())
+    return math.nan if den == 0.0 else 100.0 * (1.0 - np.linalg.norm(y - yh) / den)
 
 
 def round_trip(model_json, tmp_path, fmt, held_out=HELD_OUT):
