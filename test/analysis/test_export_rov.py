@@ -382,3 +382,120 @@ def test_an_identified_bluerov2_export_flies_as_our_model(identified, tmp_path, 
     result, reported = round_trip(identified, tmp_path, fmt)
     _show(fmt, reported, result)
     _check_identified_case(fmt, result)
+
+
+# ------------------------------------------------------------------ torpedo AUVs (fins, shaft)
+
+def _torpedo_target(out, fmt, raw):
+    """(x_dot(x, tau), None) of a torpedo's export under the target's equations: the engine's
+    rigid body about the body origin (M_RB with r_G and the products of inertia, Kirchhoff's
+    C_RB), gravity W at r_G, buoyancy B at r_B (the file's: the user's SDF/URDF), the
+    target's hydrodynamics; tau is the fins' and propeller's wrench, which no export holds
+    (the simulators' own fin and thruster systems)."""
+    m = float(raw['mass'])
+    rg, rb = np.array(raw['r_G'], float), np.array(raw['r_B'], float)
+    W, B = float(raw['W']), float(raw['B'])
+    ii = raw['inertia']
+    Ib = np.array([[ii['Ix'], -ii['Ixy'], -ii['Ixz']], [-ii['Ixy'], ii['Iy'], -ii['Iyz']],
+                   [-ii['Ixz'], -ii['Iyz'], ii['Iz']]], float)
+    S = np.array([[0.0, -rg[2], rg[1]], [rg[2], 0.0, -rg[0]], [-rg[1], rg[0], 0.0]])
+    M_RB = np.block([[m * np.eye(3), -m * S], [m * S, Ib]])
+    if fmt == 'urdf-hydrodynamics':
+        _, rate = _hyd_model(out)
+
+        def f(x, tau):
+            R, T = _euler(x[9:12])
+            return np.concatenate([rate(x[:6], tau, R), R @ x[:3], T @ x[3:6]])
+        return f
+    if fmt.startswith('gz'):
+        params = _gz_params(out)
+        M = M_RB + np.outer(FLU, FLU) * (params[5] - params[3])
+        hydro = _gz_hydro(params, _fossen_coriolis)
+    else:
+        Ma, DL, DLf, DQ = _uuv_params(out)
+        M = M_RB + Ma
+
+        def hydro(nu):
+            D = -DL - nu[0] * DLf - np.diag(np.diag(DQ) * np.abs(nu))
+            return -D @ nu - _fossen_coriolis(Ma, nu)
+
+    def f(x, tau):
+        nu = x[:6]
+        R, T = _euler(x[9:12])
+        fg, fb = R.T @ np.array([0.0, 0.0, W]), R.T @ np.array([0.0, 0.0, -B])
+        g = np.concatenate([fg + fb, _cross(rg, fg) + _cross(rb, fb)])
+        nudot = np.linalg.solve(M, hydro(nu) + tau + g - _fossen_coriolis(M_RB, nu))
+        return np.concatenate([nudot, R @ nu[:3], T @ nu[3:]])
+    return f
+
+
+def torpedo_round_trip(tmp_path, vehicle, fmt, est, held_out=(('zigzag', 60.0, 1),
+                                                              ('prbs', 60.0, 2))):
+    """Export a torpedo model (est on `vehicle`) in fmt and fly it on held_out with our
+    model's fin and propeller wrench (our model's M nu_dot at the inputs less at rest, the
+    part the export leaves to the simulator's own fin and thruster systems): {manoeuvre: (fit
+    % per u..r, largest relative velocity error)}, and the reported fit."""
+    from auv_ident.core.model.trim import rest_inputs
+    model = tmp_path / 'm.json'
+    model.write_text(json.dumps({'vehicle': vehicle, 'coefficients': {
+        n: {'estimate': x, 'std': abs(x) * 0.01} for n, x in est.items()}}), encoding='utf-8')
+    form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
+    out = tmp_path / f'{vehicle}.{fmt}'
+    export_model(model, out, fmt=form, gz_added_mass=am or 'link')
+    reported = json.loads((tmp_path / f'{vehicle}.{fmt}.fit.json').read_text())['fit_percent']
+    v = load_vehicle(vehicle)
+    c = v.values.copy()
+    for n, e in est.items():
+        c[v.index(n)] = e
+    ours = Model(v, (), coefficient_values=c)
+    M = v.mass_matrix(c)
+    rest = rest_inputs(ours)
+    target = _torpedo_target(out, fmt, dict(v.raw))
+
+    def actuators(x, ui):
+        return M @ (ours.f(x, ui)[:6] - ours.f(x, rest)[:6])
+
+    result = {}
+    for name, duration, seed in held_out:
+        run = simulate(ours, name, duration=duration, seed=seed, noise_std=np.zeros(12))
+        x = np.empty_like(run.x)
+        x[0] = run.x[0]
+        dt = run.T
+        for k in range(len(x) - 1):
+            xk, uk = x[k], run.u[k]
+
+            def f(y, uk=uk):
+                return target(y, actuators(y, uk))
+            k1 = f(xk)
+            k2 = f(xk + 0.5 * dt * k1)
+            k3 = f(xk + 0.5 * dt * k2)
+            k4 = f(xk + dt * k3)
+            x[k + 1] = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        want = run.x[:, :6]
+        err = np.abs(x[:, :6] - want).max() / np.abs(want).max()
+        result[name] = ({d: _fit(want[:, i], x[:, i]) for i, d in enumerate(VEL)}, err)
+    return result, reported
+
+
+# an identified value per torpedo (the file's + 10 %: our identify default set's first term)
+TORPEDOES = {'remus100': {'Z_w': -31.46}, 'isimi': {'Z_w': -0.0688446},
+             'nps_auv2': {'Z_w': -0.3}}
+EXACT_TORPEDO = {('remus100', 'gz-link'), ('remus100', 'gz-plugin'), ('isimi', 'gz-link'),
+                 ('isimi', 'gz-plugin')}
+
+
+@pytest.mark.slow      # 120 s of the target in Python per case (~10 s)
+@pytest.mark.parametrize('vehicle', sorted(TORPEDOES))
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_a_torpedo_export_flies_as_our_model(tmp_path, vehicle, fmt):
+    """Held-out zigzag and prbs (60 s each; the fit envelope is the 200 s ident run): an
+    exact export to < 1e-6; a fitted one whose reported fit reaches the goal (95 %) in all six
+    equations reaches it in all six velocities too. Below the goal (the header warns) the
+    figures are docs/export.md's table."""
+    result, reported = torpedo_round_trip(tmp_path, vehicle, fmt, TORPEDOES[vehicle])
+    _show(f'{vehicle} {fmt}', reported, result)
+    for name, (fit, err) in result.items():
+        if (vehicle, fmt) in EXACT_TORPEDO:
+            assert err < 1e-6, (name, err)
+        elif all(f is None or f >= 95.0 for f in reported.values()):
+            assert min(fit.values()) >= 95.0, (name, fit)
