@@ -14,6 +14,9 @@ the model was identified or fitted on).
   differ from the C_A the targets compute from the exported M_A: gz holds the difference (its
   plain products) and stays exact; uuv and the library cannot, and the fit % per velocity
   u..r on the held-out runs is what they reach (docs/export.md, the BlueROV2 table).
+
+The torpedo AUVs (remus100, isimi, nps_auv2) are flown the same way on held-out zigzag and
+prbs runs, with our model's fin and propeller wrench as the simulator's actuators.
 """
 import json
 import math
