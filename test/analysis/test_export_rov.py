@@ -226,13 +226,12 @@ def _uuv_units(root):
     return units
 
 
-def _rk4(target, x0, u, dt):
-    """RK4 with the commands u[k] held over a step (the thrust wrench once per step)."""
-    f, thrust = target
+def _rk4(f, x0, u, dt):
+    """RK4 of x_dot = f(x, u[k]) with the commands u[k] held over a step."""
     x = np.empty((len(u), 12))
     x[0] = x0
     for k in range(len(u) - 1):
-        xk, uk = x[k], thrust(u[k])
+        xk, uk = x[k], u[k]
         k1 = f(xk, uk)
         k2 = f(xk + 0.5 * dt * k1, uk)
         k3 = f(xk + 0.5 * dt * k2, uk)
@@ -247,6 +246,19 @@ def _fit(y, yh):
     return math.nan if den == 0.0 else 100.0 * (1.0 - np.linalg.norm(y - yh) / den)
 
 
+def _export(model_json, out, fmt, vehicle, est):
+    """Export model_json (estimates est of vehicle) to out in fmt ('gz-link', 'gz-plugin',
+    'uuv', ...): (reported fit % per equation, the model's coefficient values, our Model)."""
+    form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
+    export_model(model_json, out, fmt=form, vehicle=vehicle, gz_added_mass=am or 'link')
+    reported = json.loads(Path(f'{out}.fit.json').read_text())['fit_percent']
+    v = load_vehicle(vehicle)
+    c = v.values.copy()
+    for n, e in est.items():
+        c[v.index(n)] = e
+    return reported, c, Model(v, (), coefficient_values=c)
+
+
 def round_trip(model_json, tmp_path, fmt, held_out=HELD_OUT):
     """Export model_json in fmt and fly it on held_out: {manoeuvre: (fit % per u..r,
     largest velocity error relative to the largest velocity)}, and the reported fit."""
@@ -254,30 +266,23 @@ def round_trip(model_json, tmp_path, fmt, held_out=HELD_OUT):
     est = {n: c['estimate'] for n, c in doc['coefficients'].items()}
     raw = _raw()
     gains = (est.get('thrust_gain_fwd', 1.0), est.get('thrust_gain_rev', 1.0))
-    form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
     out = tmp_path / f'rov.{fmt}'
-    export_model(model_json, out, fmt=form, vehicle=ROV, gz_added_mass=am or 'link')
-    reported = json.loads((tmp_path / f'rov.{fmt}.fit.json').read_text())['fit_percent']
-    v = load_vehicle(ROV)
-    c = v.values.copy()
-    for n, e in est.items():
-        c[v.index(n)] = e
-    ours = Model(v, (), coefficient_values=c)
-    target = _target(out, fmt, raw, gains)
+    reported, _, ours = _export(model_json, out, fmt, ROV, est)
+    rate, thrust = _target(out, fmt, raw, gains)
     result = {}
     for name, duration, seed in held_out:
         run = simulate(ours, name, duration=duration, seed=seed, noise_std=np.zeros(12),
                        x0=np.zeros(12))
-        got = _rk4(target, np.zeros(12), run.u[:, 7:], run.T)
+        got = _rk4(lambda x, cmd: rate(x, thrust(cmd)), np.zeros(12), run.u[:, 7:], run.T)
         want = run.x[:, :6]
         err = np.abs(got[:, :6] - want).max() / np.abs(want).max()
         result[name] = ({d: _fit(want[:, i], got[:, i]) for i, d in enumerate(VEL)}, err)
     return result, reported
 
 
-def _model(tmp_path, est):
+def _model(tmp_path, est, vehicle=ROV):
     path = tmp_path / 'm.json'
-    path.write_text(json.dumps({'vehicle': ROV, 'coefficients': {
+    path.write_text(json.dumps({'vehicle': vehicle, 'coefficients': {
         n: {'estimate': x, 'std': abs(x) * 0.01} for n, x in est.items()}}), encoding='utf-8')
     return path
 
@@ -439,18 +444,9 @@ def torpedo_round_trip(tmp_path, vehicle, fmt, est, held_out=(('zigzag', 60.0, 1
     part the export leaves to the simulator's own fin and thruster systems): {manoeuvre: (fit
     % per u..r, largest relative velocity error)}, and the reported fit."""
     from auv_ident.core.model.trim import rest_inputs
-    model = tmp_path / 'm.json'
-    model.write_text(json.dumps({'vehicle': vehicle, 'coefficients': {
-        n: {'estimate': x, 'std': abs(x) * 0.01} for n, x in est.items()}}), encoding='utf-8')
-    form, _, am = fmt.partition('-') if fmt.startswith('gz') else (fmt, '', '')
     out = tmp_path / f'{vehicle}.{fmt}'
-    export_model(model, out, fmt=form, gz_added_mass=am or 'link')
-    reported = json.loads((tmp_path / f'{vehicle}.{fmt}.fit.json').read_text())['fit_percent']
-    v = load_vehicle(vehicle)
-    c = v.values.copy()
-    for n, e in est.items():
-        c[v.index(n)] = e
-    ours = Model(v, (), coefficient_values=c)
+    reported, c, ours = _export(_model(tmp_path, est, vehicle), out, fmt, vehicle, est)
+    v = ours.vehicle
     M = v.mass_matrix(c)
     rest = rest_inputs(ours)
     target = _torpedo_target(out, fmt, dict(v.raw))
@@ -461,19 +457,7 @@ def torpedo_round_trip(tmp_path, vehicle, fmt, est, held_out=(('zigzag', 60.0, 1
     result = {}
     for name, duration, seed in held_out:
         run = simulate(ours, name, duration=duration, seed=seed, noise_std=np.zeros(12))
-        x = np.empty_like(run.x)
-        x[0] = run.x[0]
-        dt = run.T
-        for k in range(len(x) - 1):
-            xk, uk = x[k], run.u[k]
-
-            def f(y, uk=uk):
-                return target(y, actuators(y, uk))
-            k1 = f(xk)
-            k2 = f(xk + 0.5 * dt * k1)
-            k3 = f(xk + 0.5 * dt * k2)
-            k4 = f(xk + dt * k3)
-            x[k + 1] = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = _rk4(lambda y, ui: target(y, actuators(y, ui)), run.x[0], run.u, run.T)
         want = run.x[:, :6]
         err = np.abs(x[:, :6] - want).max() / np.abs(want).max()
         result[name] = ({d: _fit(want[:, i], x[:, i]) for i, d in enumerate(VEL)}, err)
