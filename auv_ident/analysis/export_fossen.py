@@ -11,10 +11,11 @@ and speed-scaled terms, lumped Munk moments). So:
   and shaft speed; g the restoring force; F_RB the rigid-body Coriolis monomials; at zero shaft
   speed the Healey-Lienard propeller leaves the hull's axial drag -(rho/2) L^2 Cd0 u^2, which is
   damping and stays), minus what the target's own added-
-  mass Coriolis term already applies. The samples: a noise-free 200 s zig-zag of the identified
-  model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps) plus 2000 uniform
-  points (seed 0) in the box of that run's velocities. The run is simulated, not the bags
-  read: the identified model at the identification's speed and fin ranges.
+  mass Coriolis term already applies. The samples: the measured velocities of the
+  identification's bags when the model records them, else a noise-free 200 s zig-zag of the
+  identified model (simulate.py, the `ident` manoeuvre: rudder zig-zag and plane steps; a
+  hovering thruster vehicle: a 900 s tank session), plus 2000 uniform points (seed 0) in the
+  box of those velocities.
   The fit % per DOF, 100 (1 - |y - y_fit| / |y - mean y|) with y = H and y_fit the target's
   damping plus its own added-mass Coriolis term, goes in the file and on the console;
   a DOF whose force never changes over the samples (not excited: its damping is fitted as
@@ -79,6 +80,18 @@ def identified_values(saved):
     return c
 
 
+def exported_thrusters(saved):
+    """(thrusters, header lines): the vehicle's thrusters with the model's thrust gains (the
+    identified ones in place) folded into their curves (export_gz_thrusters.with_gains)."""
+    v = saved.vehicle
+    if not v.thrusters:
+        return [], []
+    try:
+        return export_gz_thrusters.with_gains(v, identified_values(saved))
+    except export_gz_thrusters.GainError as exc:
+        raise ExportError(str(exc)) from None
+
+
 def bag_velocities(paths, vehicle, input_map=None):
     """(N, 6) the measured body velocities u..r (m/s, rad/s, FRD) of the bags' samples that
     measure all six, read as the data are (offline/replay.py read_bag_run: screened, no
@@ -112,11 +125,20 @@ def _envelope_bags(saved, bags):
     return [], ''
 
 
-def fossen_parts(saved, duration=200.0, bags=None):
+# s, the simulated envelope of a hovering thruster vehicle: its `ident` tank session flies one
+# stick for 180 s at a time (surge, sway, heave, yaw), then two at once; 200 s would be surge
+# alone, and the sway, heave and yaw damping fitted over nothing
+HOVER_ENVELOPE_S = 900.0
+
+
+def fossen_parts(saved, duration=None, bags=None):
     """FossenParts of a SavedModel (module docstring). bags: the runs whose measured
     velocities are the fit's envelope (None: the model's identification bags when it records
-    them and they exist, else a simulated `ident` run of the identified model)."""
+    them and they exist, else a simulated `ident` run of the identified model, `duration` s:
+    None for 200 s, HOVER_ENVELOPE_S for a hovering thruster vehicle)."""
     v = saved.vehicle
+    if duration is None:
+        duration = HOVER_ENVELOPE_S if v.hovers else 200.0
     c = identified_values(saved)
     model = Model(v, (), coefficient_values=c)
     M = v.mass_matrix(c)
@@ -235,8 +257,10 @@ def _numbers(values):
 def uuv_text(saved, parts, header):
     L, Lf, Q, fit = uuv_fit(parts)
     v = saved.vehicle
-    thr_header, thr_lines = (export_gz_thrusters.uuv_thruster_lines(v) if v.thrusters
+    thrusters, gain_lines = exported_thrusters(saved)
+    thr_header, thr_lines = (export_gz_thrusters.uuv_thruster_lines(thrusters) if thrusters
                              else ([], []))
+    thr_header = gain_lines + thr_header
     g = float(v.raw['W']) / float(v.raw['mass'])
     volume = float(v.raw['B']) / (float(v.raw['rho']) * g)
     cob = FLU[:3] * np.asarray(v.raw['r_B'], float)
@@ -282,16 +306,26 @@ def uuv_text(saved, parts, header):
 
 VEL = 'UVWPQR'
 MOM = 'xyzkmn'
-# the non-abs products nu_j nu_k; not with u, whose nu_j |u| terms hold them for u > 0
+# the non-abs products nu_j nu_k, 1 <= j <= k; with u as well (U_PAIRS) only when the samples
+# have u of both signs (an ROV): for u > 0 alone nu_j |u| holds them, and both columns would be
+# the same (a torpedo's envelope)
 PAIRS = [(j, k) for j in range(1, 6) for k in range(j, 6)]
+U_PAIRS = [(0, k) for k in range(1, 6)]
 
 
-def gz_columns(nu):
+def gz_pairs(nu):
+    """The non-abs products the gz fit uses for samples nu (N, 6): PAIRS, and U_PAIRS when u
+    takes both signs."""
+    return (U_PAIRS if nu[:, 0].min() < 0.0 < nu[:, 0].max() else []) + PAIRS
+
+
+def gz_columns(nu, pairs):
     """Regressors of gz-sim's damping: nu_j (xU..), nu_j |nu_k| (xUabsU..) and nu_j nu_k for
-    1 <= j <= k (xVV..: the bilinear terms, v r, w q, ..., that the abs terms cannot hold
-    when both factors change sign; the torpedo files' X_vr, X_wq need them)."""
+    (j, k) in pairs (xVV..: the bilinear terms, v r, w q, u w, ..., that the abs terms cannot
+    hold when both factors change sign; the torpedo files' X_vr, X_wq need them, and an ROV's
+    Munk moment M_uw u w, whose u changes sign, too)."""
     cols = [nu] + [nu[:, [j]] * np.abs(nu[:, [k]]) for j in range(6) for k in range(6)]
-    cols += [nu[:, [j]] * nu[:, [k]] for j, k in PAIRS]
+    cols += [nu[:, [j]] * nu[:, [k]] for j, k in pairs]
     return np.hstack(cols)
 
 
@@ -304,12 +338,13 @@ def gz_fit(parts, plugin_added_mass):
     nu = parts.nu
     ca = (np.zeros_like(nu) if plugin_added_mass
           else np.array([coriolis_vector(parts.M_A, s) for s in nu]))
-    cols = gz_columns(nu)
+    pairs = gz_pairs(nu)
+    cols = gz_columns(nu, pairs)
     coef = least_squares(cols, parts.H + ca)
     fit = fit_percent(parts.H, cols @ coef - ca)
     names = [f'{VEL[j]}' for j in range(6)] + [
         f'{VEL[j]}abs{VEL[k]}' for j in range(6) for k in range(6)]
-    names += [f'{VEL[j]}{VEL[k]}' for j, k in PAIRS]
+    names += [f'{VEL[j]}{VEL[k]}' for j, k in pairs]
     return {MOM[i] + n: coef[c, i] for i in range(6) for c, n in enumerate(names)}, fit
 
 
@@ -365,8 +400,9 @@ def gz_text(saved, parts, header, added_mass='link'):
             'Why this is the default: the engine integrates the added mass implicitly (no',
             "finite-difference acceleration) with Fossen's Coriolis; the damping fit is the",
             'same either way.']
-    if v.thrusters:
-        lines += export_gz_thrusters.thruster_header(v)
+    thrusters, gain_lines = exported_thrusters(saved)
+    if thrusters:
+        lines += gain_lines + export_gz_thrusters.thruster_header(thrusters)
     lines += ["Weight, buoyancy (gz Buoyancy system), mass and inertia are the SDF's, not",
               "this snippet's.", '-->',
               '<sdf version="1.11">', f'  <model name="{v.name}">',
@@ -388,7 +424,7 @@ def gz_text(saved, parts, header, added_mass='link'):
         if value != 0.0:
             lines.append(f'      <{name}>{float(to_flu(name, value))!r}</{name}>')
     lines.append('    </plugin>')
-    lines += export_gz_thrusters.thruster_sdf(v, float(v.raw['rho']))
+    lines += export_gz_thrusters.thruster_sdf(v, float(v.raw['rho']), thrusters)
     lines += ['  </model>', '</sdf>']
     return _xml_text(lines), fit
 
@@ -415,40 +451,71 @@ def _attrs(names, values):
     return ' '.join(f'{n}="{float(x) + 0.0!r}"' for n, x in zip(names, values))
 
 
+LIB_G = 9.81    # m/s^2: the library's weight is mass * 9.81 (parse_model_from_xml)
+
+
+def _xyz(values):
+    return ' '.join(f'{a}="{float(x) + 0.0!r}"' for a, x in zip('xyz', values))
+
+
+def _products(inertia):
+    """Header lines for products of inertia the export leaves out: the library's parser puts
+    ixy, ixz, iyz into the upper triangle only (inertia(0, 1) = ixy, inertia(1, 0) stays 0),
+    an unsymmetric inertia; none is better than that."""
+    prod = {k: float(inertia[k]) for k in ('Ixy', 'Ixz', 'Iyz') if float(inertia[k]) != 0.0}
+    if not prod:
+        return []
+    return ['Left out: the products of inertia ' + ', '.join(f'{k} {x:.6g}' for k, x in
+                                                             prod.items()),
+            "(the library's parser fills only the upper triangle of the inertia matrix)."]
+
+
 def hydrodynamics_text(saved, parts, header):
     L, Q, fit = hydrodynamics_fit(parts)
     v = saved.vehicle
     raw = v.raw
     inertia = raw['inertia']
+    mass, W = float(raw['mass']), float(raw['W'])
     off = [(f'{"XYZKMN"[i]}{"XYZKMN"[j]}', parts.M_A[i, j]) for i in range(6)
            for j in range(6) if i != j and parts.M_A[i, j] != 0.0]
+    weight = ([] if abs(W - mass * LIB_G) <= 1e-9 * W else [
+        f'WARNING: the library takes the weight as mass * {LIB_G:g} = {mass * LIB_G:.6g} N; this',
+        f'vehicle file has W = {W:.6g} N (another g or a trim weight): the restoring force',
+        f'differs by {W - mass * LIB_G:.6g} N. Set the buoyancy accordingly.'])
     lines = ['<?xml version="1.0"?>', '<!--'] + header + fit_lines(fit, 'the damping') + [
         'ROS 2 `hydrodynamics` library (Robotic-Decision-Making-Lab/hydrodynamics, src/',
-        'hydrodynamics.cpp), read by auv_controllers: FRD body, NED world (its restoring force',
-        'puts the weight on +z), SNAME signs, everything diagonal:',
-        '  M = diag(m, m, m) + I_moments - diag(Xdu .. Ndr)',
-        '  C = [[m S(w), 0], [0, -S(I w)]] + [[0, S(a1)], [S(a1), S(a2)]],',
-        '      a1 = (Xdu u, Ydv v, Zdw w), a2 = (Kdp p, Mdq q, Ndr r)   (= Fossen C_A)',
-        '  D = -diag(Xu .. Nr) - diag(Xuu |u| .. Nrr |r|);  M nu_dot + C nu + D nu + g = tau',
-        'Not held by the library (left out): the rigid-body coupling of a centre of gravity',
-        'away from the origin in M and C (it uses r_G only in g), and any off-diagonal',
-        'added mass' + (': ' + ', '.join(f'{n} {x:.6g}' for n, x in off) if off else
-                        ' (none here).'),
+        'hydrodynamics.cpp parse_model_from_xml and forward_dynamics), read by auv_controllers:',
+        'FRD body, NED world, SNAME signs:',
+        '  M = M_RB(m, I, r_G) - diag(Xdu .. Ndr)',
+        "  C = C_RB(nu) + C_A(nu) (Fossen's, from the rigid-body and the diagonal added mass)",
+        '  D = -diag(Xu .. Nr) - diag(Xuu |u| .. Nrr |r|)',
+        '  g = -[R^T (f_g + f_b); r_G x R^T f_g + r_B x R^T f_b], f_g = (0, 0, m 9.81),',
+        '      f_b = (0, 0, -buoyancy)',
+        '  nu_dot = M^-1 (tau - C nu - D nu - g)',
+        'The damping is diagonal: cross terms (Y_r, N_v, M_w, Z_q, Munk moments the diagonal',
+        'C_A does not give) are fitted away. Not held by the library (left out): any',
+        'off-diagonal added mass' + (': ' + ', '.join(f'{n} {x:.6g}' for n, x in off) if off
+                                     else ' (none here).'),
+        *weight, *_products(inertia),
         '-->',
         f'<robot name="{v.name}">',
         '  <hydrodynamics>',
-        f'    <mass>{float(raw["mass"])!r}</mass>',
-        '    <inertia ' + _attrs(('ixx', 'iyy', 'izz'),
-                                 (inertia['Ix'], inertia['Iy'], inertia['Iz'])) + ' />',
-        '    <added_mass ' + _attrs(('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr'),
-                                    -np.diag(parts.M_A)) + ' />',
-        '    <linear_damping ' + _attrs(('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr'), L) + ' />',
-        '    <quadratic_damping ' + _attrs(('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr'), Q)
-        + ' />',
-        f'    <weight>{float(raw["W"])!r}</weight>',
-        f'    <buoyancy>{float(raw["B"])!r}</buoyancy>',
-        '    <center_of_gravity ' + _attrs('xyz', raw['r_G']) + ' />',
-        '    <center_of_buoyancy ' + _attrs('xyz', raw['r_B']) + ' />',
+        '    <inertial>',
+        f'      <mass value="{mass!r}" />',
+        '      <inertia ' + _attrs(('ixx', 'iyy', 'izz'),
+                                   [inertia[k] for k in ('Ix', 'Iy', 'Iz')]) + ' />',
+        '      <center_of_gravity ' + _xyz(raw['r_G']) + ' />',
+        '      <added_mass ' + _attrs(('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr'),
+                                      -np.diag(parts.M_A)) + ' />',
+        '    </inertial>',
+        '    <damping>',
+        '      <linear ' + _attrs(('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr'), L) + ' />',
+        '      <quadratic ' + _attrs(('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr'), Q) + ' />',
+        '    </damping>',
+        '    <hydrostatics>',
+        f'      <buoyancy value="{float(raw["B"])!r}" />',
+        '      <center_of_buoyancy ' + _xyz(raw['r_B']) + ' />',
+        '    </hydrostatics>',
         '  </hydrodynamics>',
         '</robot>']
     return _xml_text(lines), fit

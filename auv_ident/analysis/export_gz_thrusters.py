@@ -24,12 +24,70 @@ then a1 e + a2 e^2 on each side, saturated. gz has no such curve:
   `propeller_diameter` (m), where omega = 2 pi rpm / 60 is known, so Ct = c / (rho D^4
   (2 pi / 60)^2). A PWM or setpoint thruster's command-to-omega map is not in the file.
 """
+import dataclasses
 import math
 
 import numpy as np
 
+from auv_ident.core.errors import AuvIdentError
+
 N_CURVE = 801       # samples of the command range for the quadratic-law fit
 FLU3 = np.array([1.0, -1.0, -1.0])
+
+
+class GainError(AuvIdentError):
+    """A thrust gain that no per-thruster curve can carry (named)."""
+
+
+def with_gains(v, c):
+    """The vehicle's thrusters with its thrust gains (values c, the file's coefficient order:
+    the identified ones in place) folded into their curves: the model applies gain * f per
+    equation and curve side (core/model/hydrodynamics.py _thrusters), which is one thruster's
+    curve side times the gain when that gain is the same in every equation the thruster
+    pushes in (a gain of all six, or of XYN with horizontal thrusters only). Since
+    g sat(f, f_max) = sat(g f, g f_max) for g > 0, the scaled curve is
+    (g a1, g a2) with its saturation g f_max: exact. GainError naming the gain otherwise."""
+    out = []
+    for t in v.thrusters:
+        sides = {}
+        rows = [e for e in range(6) if t.column[e] != 0.0]
+        for side in (0, 1):
+            g = dict.fromkeys(rows, 1.0)
+            names = {}
+            for ci, co in enumerate(v.coefficients):
+                if co.is_thrust_gain and side in co.gain_sides:
+                    for e in co.gain_rows:
+                        if e in g:
+                            g[e], names[e] = float(c[ci]), co.name
+            values = set(g.values())
+            if len(values) > 1:
+                raise GainError(
+                    f'thrust gain {", ".join(sorted(set(names.values())))}: thruster {t.name} '
+                    f'pushes in {"".join("XYZKMN"[e] for e in rows)} but the gain scales only '
+                    'some of those equations; a simulator thruster has one curve, so this '
+                    'model cannot be exported exactly (identify one gain per side of all six)')
+            value = values.pop() if values else 1.0
+            if value <= 0.0:
+                raise GainError(f'thrust gain {names.get(rows[0], "?")} = {value!r}: not '
+                                'positive, so no thrust curve carries it')
+            sides[side] = value
+        gf, gr = sides[0], sides[1]
+        out.append(dataclasses.replace(
+            t, forward=(gf * t.forward[0], gf * t.forward[1]),
+            reverse=(gr * t.reverse[0], gr * t.reverse[1]),
+            thrust_max_forward=gf * t.thrust_max_forward,
+            thrust_max_reverse=gr * t.thrust_max_reverse))
+    return out, sides_text(v, c)
+
+
+def sides_text(v, c):
+    """Header lines naming the thrust gains folded into the exported curves."""
+    gains = [(co.name, float(c[ci])) for ci, co in enumerate(v.coefficients)
+             if co.is_thrust_gain]
+    if not gains:
+        return []
+    return ["Thrust gains folded into the curves below (gain times the file's curve side and",
+            'its saturation): ' + ', '.join(f'{n} = {g!r}' for n, g in gains) + '.']
 
 
 def _r(x):
@@ -74,7 +132,7 @@ def _curve_text(t):
             f'{t.reverse[0]:.6g} e_d - {t.reverse[1]:.6g} e_d^2 (e < 0)')
 
 
-def thruster_header(v):
+def thruster_header(thrusters):
     """Header lines for the thrusters (what is exact, the fit of gz's quadratic law)."""
     lines = ['Thrusters: gz-sim Thruster systems (src/systems/thruster/Thruster.cc), one per',
              'thruster of the vehicle file: a revolute joint <NAME>_joint from base_link to',
@@ -88,7 +146,7 @@ def thruster_header(v):
              "link your propeller's <inertial> (SDF's default is 1 kg).",
              'thrust_max_forward/-reverse and the curve at the command range become',
              'max/min_thrust_cmd.']
-    for t in v.thrusters:
+    for t in thrusters:
         c, fit = quadratic_law_fit(t)
         law = ('exact (a force command)' if not math.isfinite(fit) else
                f'quadratic law f = {c:.6g} |e| e fits our curve to {fit:.2f} %')
@@ -96,15 +154,16 @@ def thruster_header(v):
     return lines
 
 
-def thruster_fits(v):
+def thruster_fits(thrusters):
     """{name: fit %} of the quadratic law per thruster (NaN: exact, a force command)."""
-    return {t.name: quadratic_law_fit(t)[1] for t in v.thrusters}
+    return {t.name: quadratic_law_fit(t)[1] for t in thrusters}
 
 
-def thruster_sdf(v, rho):
-    """The SDF lines of the thrusters' links, joints and Thruster systems (inside <model>)."""
+def thruster_sdf(v, rho, thrusters):
+    """The SDF lines of the thrusters' links, joints and Thruster systems (inside <model>);
+    thrusters: v's, with their gains (with_gains)."""
     out = []
-    for t in v.thrusters:
+    for t in thrusters:
         r = FLU3 * t.position
         d = FLU3 * t.direction
         fmin, fmax = limits(t)
@@ -116,7 +175,7 @@ def thruster_sdf(v, rho):
                 f'      <axis><xyz expressed_in="base_link">{" ".join(_r(x) for x in d)}</xyz>'
                 '</axis>',
                 '    </joint>']
-    for t in v.thrusters:
+    for t in thrusters:
         fmin, fmax = limits(t)
         out += ['    <plugin filename="gz-sim-thruster-system" '
                 'name="gz::sim::systems::Thruster">',
@@ -177,7 +236,7 @@ def uuv_table_error(t):
     return float(np.max(np.abs(np.interp(x, cmd, out) - [t.thrust(c) for c in x])))
 
 
-def uuv_thruster_lines(v):
+def uuv_thruster_lines(thrusters):
     """uuv_simulator thruster units (uuv_gazebo_plugins ThrusterPlugin.cc): per thruster a
     link, a continuous joint at r with axis d (the link frame, FLU) and the plugin with a
     LinearInterp conversion of our curve, clamps and the thrust limits; (header lines, xacro
@@ -192,7 +251,7 @@ def uuv_thruster_lines(v):
               f'{N_TABLE} per side. Give each thruster link an <inertial> (Gazebo drops a',
               'link without one). The largest interpolation error per thruster:']
     lines = []
-    for i, t in enumerate(v.thrusters):
+    for i, t in enumerate(thrusters):
         cmd, out = uuv_table(t)
         header.append(f'  {t.name}: {uuv_table_error(t):.3g} N')
         r, d = FLU3 * t.position, FLU3 * t.direction

@@ -47,7 +47,7 @@ FLU = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
 
 def _fossen_vehicle(tmp_path):
     lines = ['name: fossen_test', 'title: Fossen-form test vehicle', 'scaling: dimensional',
-             'rho: 1025.0', 'L: 1.5', f'mass: {MASS}', 'W: 294.0', 'B: 294.0',
+             'rho: 1025.0', 'L: 1.5', f'mass: {MASS}', 'W: 294.3', 'B: 294.3',
              'r_G: [0.0, 0.0, 0.0]', 'r_B: [0.0, 0.0, 0.0]',
              'inertia: {Ix: %r, Iy: %r, Iz: %r, Ixy: 0.0, Iyz: 0.0, Ixz: 0.0}' % INERTIA,
              'limits: {fin_rad: 0.35, n_rpm: 1500.0}', 'cruise_rpm: 1500.0',
@@ -131,35 +131,69 @@ def _skew(a):
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
-def _hyd_nudot(path):
-    """hydrodynamics.cpp: Inertia, Coriolis (rigid body from the angular velocity only, plus
-    the added-mass matrix), Damping; M nu_dot + C nu + D nu = tau (g = 0 for W = B at the
-    origin)."""
+def _hyd_params(path):
+    """parse_model_from_xml (hydrodynamics.cpp, 2025-04): <inertial> mass value, inertia ixx
+    iyy izz (products into the upper triangle only), center_of_gravity, added_mass Xdu..;
+    <damping> linear Xu.., quadratic Xuu..; <hydrostatics> buoyancy value, center_of_buoyancy;
+    weight = mass * 9.81. Returns (m, I (3, 3), added (6,), lin (6,), quad (6,), r_G, r_B, W,
+    B)."""
     h = ET.parse(path).getroot().find('hydrodynamics')
-    m = float(h.findtext('mass'))
-    a = h.find('inertia').attrib
-    I = np.diag([float(a['ixx']), float(a['iyy']), float(a['izz'])])
-    am = h.find('added_mass').attrib
-    add = np.array([float(am[k]) for k in ('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr')])
-    ld, qd = h.find('linear_damping').attrib, h.find('quadratic_damping').attrib
-    lin = np.array([float(ld[k]) for k in ('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr')])
-    quad = np.array([float(qd[k]) for k in ('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr')])
-    M = np.zeros((6, 6))
-    M[:3, :3] = m * np.eye(3)
-    M[3:, 3:] = I
-    M = M - np.diag(add)
+    ine, damp, stat = h.find('inertial'), h.find('damping'), h.find('hydrostatics')
 
-    def f(nu):
+    def six(el, keys):
+        return np.array([float(el.attrib[k]) for k in keys])
+
+    def xyz(el):
+        return np.array([float(el.attrib.get(k, 0.0)) for k in 'xyz'])
+
+    m = float(ine.find('mass').get('value'))
+    ia = ine.find('inertia').attrib
+    I = np.diag([float(ia['ixx']), float(ia['iyy']), float(ia['izz'])])
+    I[0, 1], I[0, 2], I[1, 2] = (float(ia.get(k, 0.0)) for k in ('ixy', 'ixz', 'iyz'))
+    add = six(ine.find('added_mass'), ('Xdu', 'Ydv', 'Zdw', 'Kdp', 'Mdq', 'Ndr'))
+    lin = six(damp.find('linear'), ('Xu', 'Yv', 'Zw', 'Kp', 'Mq', 'Nr'))
+    quad = six(damp.find('quadratic'), ('Xuu', 'Yvv', 'Zww', 'Kpp', 'Mqq', 'Nrr'))
+    return (m, I, add, lin, quad, xyz(ine.find('center_of_gravity')),
+            xyz(stat.find('center_of_buoyancy')), m * 9.81,
+            float(stat.find('buoyancy').get('value')))
+
+
+def _hyd_model(path):
+    """(M (6, 6), rate(nu, tau, R)) of hydrodynamics.cpp forward_dynamics:
+    M^-1 (tau - C nu - D nu - g(R)), M = M_RB(m, I, r_G) - diag(added); C = C_RB + C_A, each
+    [[0, -S(c1)], [-S(c1), -S(c2)]] of its matrix times nu; D = -diag(lin) - diag(quad) |nu|;
+    g = -[R^T (fg + fb); r_G x R^T fg + r_B x R^T fb], fg = (0, 0, W), fb = (0, 0, -B)."""
+    m, I, add, lin, quad, rg, rb, W, B = _hyd_params(path)
+    M_RB = np.zeros((6, 6))
+    M_RB[:3, :3] = m * np.eye(3)
+    M_RB[:3, 3:] = -m * _skew(rg)
+    M_RB[3:, :3] = m * _skew(rg)
+    M_RB[3:, 3:] = I
+    M_A = -np.diag(add)
+    M = M_RB + M_A
+
+    def cor(Mx, nu):
+        c1 = Mx[:3, :3] @ nu[:3] + Mx[:3, 3:] @ nu[3:]
+        c2 = Mx[3:, :3] @ nu[:3] + Mx[3:, 3:] @ nu[3:]
         C = np.zeros((6, 6))
-        C[:3, :3] = m * _skew(nu[3:])
-        C[3:, 3:] = -_skew(I @ nu[3:])
-        s1, s2 = _skew(add[:3] * nu[:3]), _skew(add[3:] * nu[3:])
-        C[:3, 3:] += s1
-        C[3:, :3] += s1
-        C[3:, 3:] += s2
+        C[:3, 3:] = -_skew(c1)
+        C[3:, :3] = -_skew(c1)
+        C[3:, 3:] = -_skew(c2)
+        return C @ nu
+
+    def rate(nu, tau, R=None):
+        R = np.eye(3) if R is None else R
         D = -np.diag(lin) - np.diag(quad * np.abs(nu))
-        return np.linalg.solve(M, THRUST - C @ nu - D @ nu)
-    return f
+        fg, fb = R.T @ np.array([0.0, 0.0, W]), R.T @ np.array([0.0, 0.0, -B])
+        g = -np.concatenate([fg + fb, np.cross(rg, fg) + np.cross(rb, fb)])
+        return np.linalg.solve(M, tau - cor(M_RB, nu) - cor(M_A, nu) - D @ nu - g)
+    return M, rate
+
+
+def _hyd_nudot(path):
+    """The library's forward dynamics at zero attitude with THRUST (W = B at the origin)."""
+    _, rate = _hyd_model(path)
+    return lambda nu: rate(nu, THRUST)
 
 
 # ------------------------------------------------------------------ gz-sim Hydrodynamics
@@ -449,11 +483,12 @@ def _thruster_export(tmp_path, fmt):
     path.write_text(THRUSTER_VEHICLE, encoding='utf-8')
     v = load_vehicle(str(path))
     if fmt == 'gz':
-        header = gzt.thruster_header(v)
+        header = gzt.thruster_header(v.thrusters)
         body = (['<sdf version="1.11">', '  <model name="m">', '    <link name="base_link"/>']
-                + gzt.thruster_sdf(v, float(v.raw['rho'])) + ['  </model>', '</sdf>'])
+                + gzt.thruster_sdf(v, float(v.raw['rho']), v.thrusters)
+                + ['  </model>', '</sdf>'])
     else:
-        header, lines = gzt.uuv_thruster_lines(v)
+        header, lines = gzt.uuv_thruster_lines(v.thrusters)
         body = ['<robot>'] + [ln.replace('${namespace}', 'rov') for ln in lines] + ['</robot>']
     out = tmp_path / f'thrusters.{fmt}.xml'
     out.write_text('\n'.join(body) + '\n', encoding='utf-8')
