@@ -336,6 +336,16 @@ def _mean_nis(res, replays, auto):
     return res.noise.reported_pass.mean_nis_per_dof
 
 
+def _start_line(settings):
+    """Where the coefficients start, as the settings say: the guesses given (--initial), a
+    warm start's estimate, or the vehicle file's values offset by initial_offset."""
+    if settings.initial:
+        return 'initial guesses as given (--initial)'
+    if settings.warm_start:
+        return f'initial guesses from the warm start {settings.warm_start}'
+    return f'initial guesses {100 * settings.initial_offset:+.0f} % from the vehicle file'
+
+
 def identify_bag(path, settings=None, refine_pass=True, progress=None):
     """`identify --bag`: the live identifier's EKF pass over the bag (replay_bag, made again
     with the noise from the data if it rejected more than REPLAY_REJECT_LIMIT), then the noise
@@ -359,7 +369,7 @@ def identify_bag(path, settings=None, refine_pass=True, progress=None):
         head += (f'\nsimulated by auv_ident: manoeuvre {meta.get("auv_ident.maneuver")!r}, seed '
                  f'{meta.get("auv_ident.seed")}; truth = the vehicle file values')
     start = ('automatic selection, initial guesses at the vehicle file' if b.auto else
-             f'initial guesses {100 * settings.initial_offset:+.0f} % from the vehicle file')
+             _start_line(settings))
     head += (f'\n{start}; noise '
              f'adaptation: {settings.noise_mode}; '
              + ('EKF pass + batch refinement (filter-error ML)' if refine_pass
@@ -470,7 +480,7 @@ def identify_bags(paths, settings=None, refine_pass=True, progress=None):
                          current_truth=_common([_bag_current_truth(m) for m in b.metas]))
     head = (f'{v.title}: identified {", ".join(res.names)} from {len(paths)} bags together '
             f'({", ".join(str(p) for p in paths)}; {res.steps} samples, {rejected} rejected)'
-            f'\ninitial guesses {100 * settings.initial_offset:+.0f} % from the vehicle file; '
+            f'\n{_start_line(settings)}; '
             'configured noise ' + ('as given' if b.noise_given
                                    else "the messages' (median over the bags)")
             + (', state process noise as given' if b.q_given else '')

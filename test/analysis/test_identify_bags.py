@@ -57,6 +57,13 @@ def test_identify_command_takes_several_bags(bags, capsys):
                  '--initial-offset', '0.1', '--no-refine']) == 0
     out = capsys.readouterr().out
     assert 'from 2 bags together' in out and 'N_r' in out
+    # the start the output names is the one taken: guesses given are not "+10 % from the
+    # vehicle file" (what both bag paths printed whatever --initial said)
+    for argv in ([bags[0]], [bags[0], '--bag', bags[1]]):
+        assert main(['identify', '--bag', *argv, '--coefficients', 'N_r', '--initial=-0.004',
+                     '--no-refine']) in (0, 3)
+        out = capsys.readouterr().out
+        assert 'initial guesses as given (--initial)' in out and '% from the vehicle' not in out
     # what applies to one bag only is one clear error (exit status 2)
     assert main(['identify', '--bag', bags[0], '--bag', bags[1], '--noise-mode', 'paper']) == 2
     assert '--noise-mode applies to one bag' in capsys.readouterr().err
