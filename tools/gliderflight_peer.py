@@ -91,9 +91,13 @@ def _model(gf, kind, calibrate):
     return cls(rho0=RHO0, k1=K1, k2=K2, dt=DT, max_CPUs=1)
 
 
-def calibrate(gf, kind, record, free=FREE):
-    """(values, seconds): gliderflight's calibration of the ``free`` parameters on a record."""
+def calibrate(gf, kind, record, free=FREE, xtol=None):
+    """(values, seconds): gliderflight's calibration of the ``free`` parameters on a record;
+    xtol: its Nelder-Mead's tolerance on the parameters scaled by its REFERENCE_VALUES (None:
+    its own, 1e-4 steady, 1e-2 dynamic)."""
     m = _model(gf, kind, calibrate=True)
+    if xtol is not None:
+        m.xtol = float(xtol)
     m.define(**EXAMPLE)
     m.set_input_data(**_data(record))
     dbar = record.pressure / 1e4
@@ -130,20 +134,23 @@ def ours_speeds(halves, prior):
     return out
 
 
-def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None):
+def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None, xtol=None,
+             fitted_on=('first', 'second')):
     """The peer's runs on a GliderRecord split at its middle (as run_campaign): per model
-    kind and direction the calibrated values, wall time and scores (judge), and with a prior
-    (GliderParameters) its RMS against ours on the same samples (versus_ours)."""
+    kind and direction (the halves fitted on) the calibrated values, wall time and scores
+    (judge), and with a prior (GliderParameters) its RMS against ours on the same samples
+    (versus_ours); xtol as :func:`calibrate`."""
     t_split = 0.5 * (record.t[0] + record.t[-1])
     halves = dict(zip(('first', 'second'), record.split(t_split)))
     kept_times = record.t[consistent_dvl(record).keep]
     ours = ours_speeds(halves, prior) if prior is not None else None
     out = {'split': t_split, 'gliderflight': getattr(gf, '__version__', '?'), 'free': free,
-           'models': {}}
+           'xtol': xtol, 'models': {}}
     for kind in kinds:
         runs = {}
-        for fit_name, val_name in (('first', 'second'), ('second', 'first')):
-            values, seconds = calibrate(gf, kind, halves[fit_name], free)
+        for fit_name in fitted_on:
+            val_name = 'second' if fit_name == 'first' else 'first'
+            values, seconds = calibrate(gf, kind, halves[fit_name], free, xtol)
             val = halves[val_name]
             flight = fly(gf, kind, values, val)
             runs[fit_name] = {'fitted_on': fit_name, 'validated_on': val_name,
@@ -158,7 +165,9 @@ def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None):
 
 def format_peer(result):
     free = result['free']
-    L = [f"gliderflight {result['gliderflight']}, calibrating {' '.join(free)}", '',
+    xtol = result.get('xtol')
+    L = [f"gliderflight {result['gliderflight']}, calibrating {' '.join(free)}"
+         + (f', xtol {xtol:g}' if xtol is not None else ''), '',
          *SCORE_HEADER]
     for label, runs in result['models'].items():
         L += [score_row(label, run) for run in runs.values()]
@@ -183,6 +192,13 @@ def main(argv=None):
                     help='skip the dynamic calibration (minutes)')
     ap.add_argument('--free', nargs='+', default=list(FREE), choices=('Cd0', 'mg', 'Vg'),
                     help="the parameters gliderflight calibrates (default: its example's)")
+    ap.add_argument('--dynamic-only', action='store_true',
+                    help='skip the steady calibration')
+    ap.add_argument('--xtol', type=float,
+                    help="gliderflight's Nelder-Mead tolerance on its scaled parameters "
+                         '(default: its own, 1e-4 steady, 1e-2 dynamic)')
+    ap.add_argument('--fitted-on', nargs='+', default=['first', 'second'],
+                    choices=('first', 'second'), help='the halves to calibrate on')
     ap.add_argument('--vehicle', default='slocum_comet',
                     help="the glider file of ours' prior (a name in config/ or a path)")
     ap.add_argument('--json', help='write the runs here')
@@ -199,8 +215,9 @@ def main(argv=None):
     except AuvIdentError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
-    result = run_peer(gf, record, ('steady',) if a.steady_only else ('steady', 'dynamic'),
-                      tuple(a.free), prior)
+    kinds = tuple(k for k, skip in (('steady', a.dynamic_only), ('dynamic', a.steady_only))
+                  if not skip)
+    result = run_peer(gf, record, kinds, tuple(a.free), prior, a.xtol, tuple(a.fitted_on))
     print('\n'.join(format_peer(result)))
     if a.json:
         Path(a.json).write_text(json.dumps(result, indent=1, default=float) + '\n')
