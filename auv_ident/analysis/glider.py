@@ -12,6 +12,10 @@ Models (:mod:`auv_ident.core.glider`):
   (``SteadyStateCalibrate(rho0=1004)``, a_h 3.8, C_D1 10.5, the 10-35 m window); written here
   with our code, least squares in place of Nelder-Mead (the same minimum);
 - ``dynamic (gliderflight style)``: the same three parameters and density, the dynamic model;
+- ``dynamic (gliderflight's example)``: the problem gliderflight's own dynamic calibration
+  solves as its example sets it (tools/gliderflight_peer.py): C_D0 and m from m = 70 kg,
+  V_g = 70/1004 m^3 held, the depth rate with 1004 kg/m^3; solved by our least squares to
+  its minimum, where gliderflight's Nelder-Mead stops within its tolerance of it;
 - ``dynamic + mass (inertia)``: ours with the mass freed too. Only rho V_g - m enters the
   buoyancy, so the mass is seen only through the inertia m (1 + k) of the transients: what
   the depth rate says of it, and what it changes in the prediction (docs/glider.md);
@@ -40,12 +44,16 @@ from auv_ident.core.glider.flight import FLIGHT_MODELS, GliderParameters
 from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.glider.validation import compare_speeds, consistent_dvl, dvl_dives, score
 
-# label: (model, free parameters, depth-rate density (None: local), water temperature used)
+# label: (model, free parameters, depth-rate density (None: local), water temperature used[,
+# values replacing the prior's: a peer's own start])
 OURS = ('dynamic', ('hull_volume', 'drag_zero_lift'), None, False)
 GLIDERFLIGHT_FREE = ('drag_zero_lift', 'mass', 'hull_volume')
 MODELS = {'dynamic': OURS,
           'steady (gliderflight style)': ('steady', GLIDERFLIGHT_FREE, 1004.0, False),
           'dynamic (gliderflight style)': ('dynamic', GLIDERFLIGHT_FREE, 1004.0, False),
+          "dynamic (gliderflight's example)": ('dynamic', ('drag_zero_lift', 'mass'), 1004.0,
+                                               False, {'mass': 70.0,
+                                                       'hull_volume': 70.0 / 1004.0}),
           'dynamic + mass (inertia)': ('dynamic', ('hull_volume', 'drag_zero_lift', 'mass'),
                                        None, False)}
 # with the water temperature (the raw logs'): the hull's thermal expansion at the prior, and
@@ -102,11 +110,12 @@ def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
     if record.temperature is not None:
         models.update(THERMAL_MODELS)
     ours_speed = {}
-    for label, (model, free, density, thermal) in models.items():
+    for label, (model, free, density, thermal, *start) in models.items():
         runs = {}
         data = with_temperature if thermal else halves
+        start_params = replace(prior, **start[0]) if start else prior
         for fit_name, val_name in (('first', 'second'), ('second', 'first')):
-            cal = calibrate(data[fit_name], prior, model, free, window=window,
+            cal = calibrate(data[fit_name], start_params, model, free, window=window,
                             depth_rate_density=density)
             speed = _flight(cal, data[val_name]).speed
             ours_speed.setdefault(val_name, speed)     # the first model is ours

@@ -44,8 +44,8 @@ def test_gliderflight_steady_calibration_on_the_comet_split(peer, tmp_path):
     bag = tmp_path / 'bag'
     assert cli_main(['import', '--format', 'npy', str(data / slocum_data.NPY_NAME),
                      '--out', str(bag)]) == 0
-    from auv_ident.offline.glider_import import read_glider_bag
     from auv_ident.core.glider.vehicle import glider_from_file
+    from auv_ident.offline.glider_import import read_glider_bag
     from auv_ident.vehicles import resolve_vehicle_path
     prior = glider_from_file(resolve_vehicle_path('slocum_comet')).params
     # the baseline: Cd0, mg and Vg, the steady model, against ours
