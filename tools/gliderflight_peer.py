@@ -30,6 +30,7 @@ file's prior, --vehicle) on the same DVL samples, paired dive by dive with the d
 1-sigma over the dives (auv_ident.analysis.glider.versus).
 """
 import argparse
+from dataclasses import replace
 import json
 from pathlib import Path
 import sys
@@ -124,8 +125,11 @@ def fly(gf, kind, values, record):
 
 def ours_speeds(halves, prior):
     """{validated half: (N,) m/s}: our dynamic model (the campaign's, OURS) calibrated on the
-    other half from the prior (GliderParameters), flown on this one."""
+    other half from the prior (GliderParameters), flown on this one; as in the campaign,
+    without the water temperature (ours leaves the hull's thermal expansion out,
+    docs/glider.md)."""
     model, free, density, _ = OURS
+    halves = {name: replace(h, temperature=None) for name, h in halves.items()}
     out = {}
     for fit_name, val_name in (('first', 'second'), ('second', 'first')):
         cal = calibrate_ours(halves[fit_name], prior, model, free,
@@ -135,11 +139,12 @@ def ours_speeds(halves, prior):
 
 
 def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None, xtol=None,
-             fitted_on=('first', 'second')):
+             fitted_on=('first', 'second'), calibrated=None):
     """The peer's runs on a GliderRecord split at its middle (as run_campaign): per model
     kind and direction (the halves fitted on) the calibrated values, wall time and scores
     (judge), and with a prior (GliderParameters) its RMS against ours on the same samples
-    (versus_ours); xtol as :func:`calibrate`."""
+    (versus_ours); xtol as :func:`calibrate`. calibrated: a previous run's result (its
+    'models'), whose values and wall times are judged again without calibrating anew."""
     t_split = 0.5 * (record.t[0] + record.t[-1])
     halves = dict(zip(('first', 'second'), record.split(t_split)))
     kept_times = record.t[consistent_dvl(record).keep]
@@ -150,7 +155,11 @@ def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None, xto
         runs = {}
         for fit_name in fitted_on:
             val_name = 'second' if fit_name == 'first' else 'first'
-            values, seconds = calibrate(gf, kind, halves[fit_name], free, xtol)
+            if calibrated is None:
+                values, seconds = calibrate(gf, kind, halves[fit_name], free, xtol)
+            else:
+                old = calibrated['models'][f'gliderflight {kind} (its own code)'][fit_name]
+                values, seconds = old['values'], old['seconds']
             val = halves[val_name]
             flight = fly(gf, kind, values, val)
             runs[fit_name] = {'fitted_on': fit_name, 'validated_on': val_name,
@@ -183,6 +192,20 @@ def format_peer(result):
     return L
 
 
+def previous_run(path):
+    """A previous run's result (its --json), checked to hold what run_peer reads again."""
+    try:
+        result = json.loads(Path(path).read_text())
+        for runs in result['models'].values():
+            for run in runs.values():
+                run['values'], run['seconds']
+        result['free']
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise AuvIdentError(f'--judge-again {path}: not a run of this tool '
+                            f'({type(err).__name__}: {err})') from None
+    return result
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('bag', help='a glider bag written by import --format npy')
@@ -199,6 +222,9 @@ def main(argv=None):
                          '(default: its own, 1e-4 steady, 1e-2 dynamic)')
     ap.add_argument('--fitted-on', nargs='+', default=['first', 'second'],
                     choices=('first', 'second'), help='the halves to calibrate on')
+    ap.add_argument('--judge-again', metavar='OLD.json',
+                    help="judge a previous run's calibrated values (its --json) again, "
+                         'without calibrating (the dynamic calibration takes minutes)')
     ap.add_argument('--vehicle', default='slocum_comet',
                     help="the glider file of ours' prior (a name in config/ or a path)")
     ap.add_argument('--json', help='write the runs here')
@@ -212,12 +238,17 @@ def main(argv=None):
     try:
         prior = glider_from_file(resolve_vehicle_path(a.vehicle)).params
         record = read_glider_bag(a.bag)
+        calibrated = previous_run(a.judge_again) if a.judge_again else None
     except AuvIdentError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
+    if calibrated is not None:
+        a.free = calibrated['free']
+        a.xtol = calibrated.get('xtol')
     kinds = tuple(k for k, skip in (('steady', a.dynamic_only), ('dynamic', a.steady_only))
                   if not skip)
-    result = run_peer(gf, record, kinds, tuple(a.free), prior, a.xtol, tuple(a.fitted_on))
+    result = run_peer(gf, record, kinds, tuple(a.free), prior, a.xtol, tuple(a.fitted_on),
+                      calibrated)
     print('\n'.join(format_peer(result)))
     if a.json:
         Path(a.json).write_text(json.dumps(result, indent=1, default=float) + '\n')
