@@ -12,6 +12,13 @@ Models (:mod:`auv_ident.core.glider`):
   (``SteadyStateCalibrate(rho0=1004)``, a_h 3.8, C_D1 10.5, the 10-35 m window); written here
   with our code, least squares in place of Nelder-Mead (the same minimum);
 - ``dynamic (gliderflight style)``: the same three parameters and density, the dynamic model;
+- ``dynamic (gliderflight's example)``: the problem gliderflight's own dynamic calibration
+  solves as its example sets it (tools/gliderflight_peer.py): C_D0 and m from m = 70 kg,
+  V_g = 70/1004 m^3 held, the depth rate with 1004 kg/m^3; solved by our least squares to
+  its minimum, where gliderflight's Nelder-Mead stops within its tolerance of it;
+- ``dynamic + mass (inertia)``: ours with the mass freed too. Only rho V_g - m enters the
+  buoyancy, so the mass is seen only through the inertia m (1 + k) of the transients: what
+  the depth rate says of it, and what it changes in the prediction (docs/glider.md);
 - with the water temperature in the record (``import --format npy`` given the raw logs too):
   ours with the hull's thermal expansion at its prior, and with it fitted. Ours leaves it out
   (docs/glider.md says why).
@@ -19,11 +26,14 @@ Models (:mod:`auv_ident.core.glider`):
 Every model starts from the glider file's prior (config/slocum_comet.yaml,
 :func:`auv_ident.core.glider.vehicle.glider_from_file`).
 
-Scores on the half not fitted: speed through water against the DVL (bias, RMS, fit %) over
+Scores on the half not fitted: speed through water against the DVL (bias with its 1-sigma over
+the dives, RMS, fit %) over
 the dives that pass the instruments' consistency check (run once over the whole record before
 the split, :func:`auv_ident.core.glider.validation.consistent_dvl`; reported dive by dive)
-and over every DVL sample, and the depth rate (RMS over the fit window). Agreement of the
-halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
+and over every DVL sample, and the depth rate (RMS over the fit window); and every other
+model's RMS against ours on the same DVL samples, paired dive by dive, with the difference's
+1-sigma over the dives (:func:`auv_ident.core.glider.validation.compare_speeds`). Agreement
+of the halves: per parameter |a - b| / sqrt(s_a^2 + s_b^2).
 """
 from dataclasses import asdict, replace
 
@@ -32,14 +42,20 @@ import numpy as np
 from auv_ident.core.glider.calibration import calibrate, DEPTH_WINDOW, identifiability
 from auv_ident.core.glider.flight import FLIGHT_MODELS, GliderParameters
 from auv_ident.core.glider.record import GliderRecord
-from auv_ident.core.glider.validation import consistent_dvl, dvl_dives, score
+from auv_ident.core.glider.validation import compare_speeds, consistent_dvl, dvl_dives, score
 
-# label: (model, free parameters, depth-rate density (None: local), water temperature used)
+# label: (model, free parameters, depth-rate density (None: local), water temperature used[,
+# values replacing the prior's: a peer's own start])
 OURS = ('dynamic', ('hull_volume', 'drag_zero_lift'), None, False)
 GLIDERFLIGHT_FREE = ('drag_zero_lift', 'mass', 'hull_volume')
 MODELS = {'dynamic': OURS,
           'steady (gliderflight style)': ('steady', GLIDERFLIGHT_FREE, 1004.0, False),
-          'dynamic (gliderflight style)': ('dynamic', GLIDERFLIGHT_FREE, 1004.0, False)}
+          'dynamic (gliderflight style)': ('dynamic', GLIDERFLIGHT_FREE, 1004.0, False),
+          "dynamic (gliderflight's example)": ('dynamic', ('drag_zero_lift', 'mass'), 1004.0,
+                                               False, {'mass': 70.0,
+                                                       'hull_volume': 70.0 / 1004.0}),
+          'dynamic + mass (inertia)': ('dynamic', ('hull_volume', 'drag_zero_lift', 'mass'),
+                                       None, False)}
 # with the water temperature (the raw logs'): the hull's thermal expansion at the prior, and
 # freed
 THERMAL_MODELS = {
@@ -51,8 +67,19 @@ THERMAL_MODELS = {
 EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
 
 
+def _flight(cal, record):
+    return FLIGHT_MODELS[cal.model](cal.params, record)
+
+
 def _scores(cal, record, kept_times):
-    return judge(FLIGHT_MODELS[cal.model](cal.params, record), record, kept_times, cal.window)
+    return judge(_flight(cal, record), record, kept_times, cal.window)
+
+
+def versus(speed, ours_speed, record, kept_times):
+    """The Comparison dict (validation.compare_speeds) of a model's speed (N,) m/s against
+    ours on a record's DVL samples at kept_times (the consistent dives): rms_a is the
+    model's, rms_b ours, difference = rms_a - rms_b (positive: ours closer to the DVL)."""
+    return compare_speeds(speed, ours_speed, record, np.isin(record.t, kept_times)).__dict__
 
 
 def judge(flight, record, kept_times, window=DEPTH_WINDOW):
@@ -82,18 +109,23 @@ def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
     models = dict(MODELS)
     if record.temperature is not None:
         models.update(THERMAL_MODELS)
-    for label, (model, free, density, thermal) in models.items():
+    ours_speed = {}
+    for label, (model, free, density, thermal, *start) in models.items():
         runs = {}
         data = with_temperature if thermal else halves
+        start_params = replace(prior, **start[0]) if start else prior
         for fit_name, val_name in (('first', 'second'), ('second', 'first')):
-            cal = calibrate(data[fit_name], prior, model, free, window=window,
+            cal = calibrate(data[fit_name], start_params, model, free, window=window,
                             depth_rate_density=density)
+            speed = _flight(cal, data[val_name]).speed
+            ours_speed.setdefault(val_name, speed)     # the first model is ours
             runs[fit_name] = {
                 'fitted_on': fit_name, 'validated_on': val_name,
                 'estimates': {n: list(v) for n, v in cal.estimates().items()},
                 'verdicts': {n: v['verdict'] for n, v in cal.verdicts.items()},
                 'seconds': cal.seconds, 'lags': cal.lags, 'depth_rate_rms_fit': cal.rms,
                 'validation': _scores(cal, data[val_name], kept_times),
+                'versus_ours': versus(speed, ours_speed[val_name], data[val_name], kept_times),
                 'fit': _scores(cal, data[fit_name], kept_times),
                 'params': asdict(cal.params), 'calibration': cal}
         a, b = runs['first']['estimates'], runs['second']['estimates']
@@ -116,9 +148,14 @@ def _cm(v):
     return f'{100.0 * v:+.2f}' if np.isfinite(v) else 'n/a'
 
 
-SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s | U RMS cm/s | U fit % | '
-                'U bias (DVL-consistent dives) | U RMS (consistent) | U fit % (consistent) | '
-                'dz/dt RMS cm/s | fit s (wall) |',
+def _cm_std(v, std):
+    """'+0.32 (0.10)': a value and its 1-sigma, cm/s."""
+    return f'{_cm(v)} ({100.0 * std:.2f})' if np.isfinite(std) else _cm(v)
+
+
+SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s (1-sigma) | U RMS cm/s | '
+                'U fit % | U bias (DVL-consistent dives) | U RMS (consistent) | '
+                'U fit % (consistent) | dz/dt RMS cm/s | fit s (wall) |',
                 '|---|---|---|---|---|---|---|---|---|---|---|']
 
 
@@ -127,12 +164,27 @@ def score_row(label, run):
     fitted_on, validated_on, seconds and validation = {'all': Scores dict, 'consistent': ...}
     (run_campaign's runs; tools/gliderflight_peer.py's)."""
     v = run['validation']
+    a, c = v['all'], v['consistent']
     return (f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
-            f"{_cm(v['all']['speed_bias'])} | {100 * v['all']['speed_rms']:.2f} | "
-            f"{v['all']['speed_fit']:.1f} | {_cm(v['consistent']['speed_bias'])} | "
+            f"{_cm_std(a['speed_bias'], a.get('speed_bias_std', np.nan))} | "
+            f"{100 * a['speed_rms']:.2f} | {a['speed_fit']:.1f} | "
+            f"{_cm_std(c['speed_bias'], c.get('speed_bias_std', np.nan))} | "
             f"{100 * v['consistent']['speed_rms']:.2f} | "
             f"{v['consistent']['speed_fit']:.1f} | "
             f"{100 * v['all']['depth_rate_rms']:.2f} | {run['seconds']:.2f} |")
+
+
+VERSUS_HEADER = ['| model | fitted on | validated on | its U RMS cm/s | ours | '
+                 'its - ours (1-sigma over the dives) | dives |', '|---|---|---|---|---|---|---|']
+
+
+def versus_row(label, run):
+    """The table line of one model's RMS against ours on the consistent dives of the half it
+    did not see (run['versus_ours'], a Comparison dict)."""
+    c = run['versus_ours']
+    return (f"| {label} | {run['fitted_on']} half | {run['validated_on']} half | "
+            f"{100 * c['rms_a']:.2f} | {100 * c['rms_b']:.2f} | "
+            f"{_cm_std(c['difference'], c['difference_std'])} | {c['dives']} |")
 
 
 def format_campaign(result):
@@ -141,6 +193,11 @@ def format_campaign(result):
     for label, model in result['models'].items():
         for run in model['runs'].values():
             L.append(score_row(label, run))
+    L += ['', 'Each model against ours on the same DVL samples (the consistent dives), paired '
+          'dive by dive:', '', *VERSUS_HEADER]
+    for label, model in result['models'].items():
+        if label != 'dynamic':
+            L += [versus_row(label, run) for run in model['runs'].values()]
     L += ['', '| model | parameter | first half (1-sigma) | second half (1-sigma) | '
           'difference / combined sigma |', '|---|---|---|---|---|']
     for label, model in result['models'].items():
@@ -168,10 +225,13 @@ def format_dvl_check(check):
          f"(1.4826 MAD) {check['spread_deg']:.2f} deg; a dive fails at |z| > "
          f"{check['z_limit']:.2f} ({100 * check['false_rejection']:g} % chance of failing any "
          f"of {len(dives)} consistent dives); failed: {len(failed)}", '',
-         '| dive start (UTC) | DVL samples | median implied angle of attack deg (s.e.) | z | '
-         'passes |', '|---|---|---|---|---|']
+         '| dive start (UTC) | DVL samples | pumped cc | pitch deg | depth rate m/s | '
+         'DVL speed m/s | median implied angle of attack deg (s.e.) | z | passes |',
+         '|---|---|---|---|---|---|---|---|---|']
     for d in dives:
         L.append(f"| {np.datetime64(int(d['start']), 's')} | {d['samples']} | "
+                 f"{d['pumped_cc']:.0f} | {d['pitch_deg']:.1f} | {d['depth_rate']:.3f} | "
+                 f"{d['dvl_speed']:.3f} | "
                  f"{d['median_aoa_deg']:.2f} ({d['stderr_deg']:.2f}) | {d['z']:+.1f} | "
                  f"{'yes' if d['kept'] else 'no'} |")
     return L

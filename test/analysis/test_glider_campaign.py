@@ -3,6 +3,7 @@ processed file imported as a bag, the flight model calibrated on one half of the
 judged on the other, both ways. Asserted: the issue's goals as the campaign reaches them
 (docs/glider.md prints the table), and what it says the dives cannot identify. Skipped
 without ../shared/realdata/slocum_comet."""
+import numpy as np
 import pytest
 import slocum_data
 
@@ -32,9 +33,16 @@ def test_the_dynamic_model_predicts_the_dvl_on_dives_it_never_saw(campaign):
     for fitted in ('first', 'second'):
         run = ours['runs'][fitted]
         v = run['validation']['consistent']
-        assert abs(v['speed_bias']) < 0.005                 # the goal: within 0.5 cm/s
+        # the goal, within 0.5 cm/s, by more than the bias's 1-sigma over the dives
+        # (+0.32 (0.10) and +0.07 (0.15) cm/s)
+        assert abs(v['speed_bias']) + v['speed_bias_std'] < 0.005
+        assert v['speed_dives'] in (8, 9)
         assert v['speed_rms'] < BASELINE_RMS
         assert v['speed_rms'] < steady['runs'][fitted]['validation']['consistent']['speed_rms']
+        # paired on the same samples, the steady baseline is worse by >10 of the
+        # difference's 1-sigma over the dives (2.8 and 2.7 cm/s)
+        c = steady['runs'][fitted]['versus_ours']
+        assert c['difference'] > 0.02 and c['difference'] > 10.0 * c['difference_std']
         assert v['speed_samples'] > 1500
         assert run['seconds'] < 60.0
         assert set(run['verdicts'].values()) == {'identifiable'}
@@ -46,6 +54,33 @@ def test_the_dynamic_model_predicts_the_dvl_on_dives_it_never_saw(campaign):
     # where that dive lies, and only there
     assert ours['runs']['first']['validation']['all']['speed_bias'] > 0.005
     assert abs(ours['runs']['second']['validation']['all']['speed_bias']) < 0.005
+
+
+def test_the_inertia_is_what_the_dynamic_variants_differ_by(campaign):
+    """gliderflight's dynamic calibration differs from ours by the mass (70 kg against the
+    prior's 60), which the depth rate sees only through the inertia: freed, the halves put
+    it at 71 and 62 kg +- 3.5-3.8 (1.7 combined sigma), and the predictions of ours, of
+    the gliderflight-style dynamic calibration and of ours with the mass freed differ by
+    less than 0.05 cm/s of RMS, within twice the difference's 1-sigma over the dives: a
+    difference this record cannot tell."""
+    inertia = campaign['models']['dynamic + mass (inertia)']
+    masses = [inertia['runs'][h]['estimates']['mass'] for h in ('first', 'second')]
+    assert all(55.0 < m < 80.0 and 2.0 < s < 6.0 for m, s in masses)
+    assert max(inertia['agreement'].values()) < 3.0
+    for label in ('dynamic + mass (inertia)', 'dynamic (gliderflight style)'):
+        for run in campaign['models'][label]['runs'].values():
+            c = run['versus_ours']
+            assert abs(c['difference']) < 0.0005
+            assert abs(c['difference']) < 2.0 * c['difference_std']
+    # gliderflight's example problem (C_D0 and m, V_g held at 70/1004 m^3) at its
+    # least-squares minimum: on the second half 1.20 cm/s (gliderflight's Nelder-Mead stops at
+    # 1.18), within its 1-sigma of ours; on the first worse than ours by 0.08 (0.03) cm/s
+    example = campaign['models']["dynamic (gliderflight's example)"]['runs']
+    c = example['first']['versus_ours']
+    assert 0.0115 < c['rms_a'] < 0.0125 and abs(c['difference']) < 2.0 * c['difference_std']
+    c = example['second']['versus_ours']
+    assert c['difference'] > 0.0005 and c['difference'] > 2.0 * c['difference_std']
+    assert all(abs(example[h]['estimates']['mass'][0] - 70.1) < 0.05 for h in example)
 
 
 def test_the_hull_thermal_expansion_with_the_water_temperature_is_refuted(campaign):
@@ -77,6 +112,18 @@ def test_what_the_dives_cannot_identify_and_the_dvl_dive_set_apart(campaign):
     assert dropped[0]['z'] > 2.0 * check['z_limit']
     assert max(abs(d['z']) for d in check['dives'] if d['kept']) < 0.5 * check['z_limit']
     assert 2.0 < check['centre_deg'] < 5.0 and 3.0 < check['z_limit'] < 4.0
+    # that dive is flown as every other (the same pump, pitch and depth rate: the pressure
+    # sees one glide); only the DVL differs: 0.20 m/s, two thirds of the others' median
+    # (0.29) and a quarter below the slowest of them (0.28)
+    kept = [d for d in check['dives'] if d['kept']]
+    last = dropped[0]
+    for key, tol in (('pumped_cc', 1.0), ('pitch_deg', 0.2), ('depth_rate', 0.002)):
+        assert min(d[key] for d in kept) - tol < last[key] < max(d[key] for d in kept) + tol
+    assert last['dvl_speed'] < 0.75 * min(d['dvl_speed'] for d in kept)
+    assert last['dvl_speed'] < 0.7 * np.median([d['dvl_speed'] for d in kept])
     lines = format_campaign(campaign)
     assert any(line.startswith('| dynamic | first half | second half |') for line in lines)
     assert any(line.endswith('| +9.1 | no |') for line in lines)
+    # the paired table: its RMS, ours, the difference (1-sigma over the dives)
+    assert ('| dynamic (gliderflight style) | first half | second half | 1.20 | 1.24 | '
+            '-0.03 (0.04) | 8 |') in lines

@@ -18,7 +18,12 @@ from auv_ident.core.glider.flight import (
     steady_flight,
 )
 from auv_ident.core.glider.record import G, GliderRecord
-from auv_ident.core.glider.validation import consistent_dvl, score
+from auv_ident.core.glider.validation import (
+    compare_speeds,
+    consistent_dvl,
+    dive_groups,
+    score,
+)
 from auv_ident.core.glider.vehicle import glider_from_file
 
 # the published prior, the glider file's
@@ -169,6 +174,41 @@ def test_the_dvl_consistency_check_fails_the_dive_where_the_instruments_disagree
     few = consistent_dvl(replace(rec, speed_through_water=np.where(
         rec.t < check.dives[3].start, slow, np.nan)))
     assert len(few.dives) == 3 and np.isnan(few.z_limit) and all(d.kept for d in few.dives)
+
+
+def test_the_scores_error_bars_count_dives_not_samples():
+    """A model off by a different constant on each dive (a current's, the DVL's per-dive
+    processing): its bias's 1-sigma is the spread of the dive means over the dives (the
+    cluster-robust one), not the samples' (200 a dive: ~15 times narrower)."""
+    rec = _dvl_on_descents(synthetic_dives(TRUE, 6))
+    use = np.isfinite(rec.speed_through_water)
+    groups = dive_groups(rec, use)
+    offsets = np.array([0.004, -0.006, 0.011, 0.001, -0.003, 0.008])      # m/s, per dive
+    assert len(groups) == len(offsets)
+    speed = np.zeros(len(rec))
+    for g, o in zip(groups, offsets):
+        speed[g] = rec.speed_through_water[g] + o
+    flight = replace(dynamic_flight(TRUE, rec), speed=speed)
+    s = score(flight, rec, use, (10.0, 35.0))
+    w = np.array([len(g) for g in groups]) / use.sum()
+    expected = math.sqrt(6 / 5 * np.sum(w ** 2 * (offsets - np.sum(w * offsets)) ** 2))
+    assert s.speed_bias == pytest.approx(np.sum(w * offsets))
+    assert s.speed_bias_std == pytest.approx(expected) and s.speed_dives == 6
+    # paired on the same samples: a model 1 cm/s further from the DVL on every sample than
+    # another is worse by about 1 cm/s of RMS, though both share the per-dive offsets; the
+    # same model against itself: no difference, no spread
+    worse = compare_speeds(speed + 0.01, speed, rec, use)
+    assert worse.difference == pytest.approx(worse.rms_a - worse.rms_b)
+    d = 0.02 * offsets + 1e-4                   # per dive: (o + 0.01)^2 - o^2
+    d_std = math.sqrt(6 / 5 * np.sum(w ** 2 * (d - np.sum(w * d)) ** 2))
+    assert worse.difference_std == pytest.approx(d_std / (worse.rms_a + worse.rms_b))
+    assert 0.005 < worse.difference < 0.011 and worse.difference > 2.0 * worse.difference_std
+    assert worse.dives == 6 and worse.samples == use.sum()
+    same = compare_speeds(speed, speed, rec, use)
+    assert same.difference == 0.0 and same.difference_std == 0.0
+    # one dive judged alone: no spread to judge by
+    one = score(flight, rec, use & (rec.t < rec.t[groups[1][0]]), (10.0, 35.0))
+    assert one.speed_dives == 1 and math.isnan(one.speed_bias_std)
 
 
 def test_bad_input_is_named():

@@ -12,6 +12,13 @@ own sampling error explain is one where the three instruments disagree
 dive: 17.5 deg against 3.6 +- 0.7 deg, z = 9 for a limit of 3.45). Such a dive cannot judge
 a flight model: the validation scores the dives that pass, and gives every model the figures
 over every DVL sample too.
+
+Error bars of the scores (:func:`score`, :func:`compare_speeds`): the speed errors last a dive
+(a current, internal waves, the DVL's own per-dive processing), so the dive, not the sample,
+is the independent unit: the bias's 1-sigma and that of the difference between two models'
+RMS errors on the same DVL samples are the cluster-robust ones over the dives
+(``G / (G - 1) sum_i w_i^2 (x_i - x)^2``, w_i the dive's share of the samples, G dives). A
+difference between two models smaller than twice its 1-sigma is one this record cannot tell.
 """
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -58,6 +65,13 @@ class DiveCheck:
     stderr_deg: float
     z: float
     kept: bool
+    # what the three instruments and the pump read on the dive (medians over its DVL samples):
+    # m/s, deg, cc, m/s; a dive flown as the others (same pump, pitch, depth rate) with a DVL
+    # speed unlike theirs is the DVL's, not the flight's
+    depth_rate: float = float('nan')
+    pitch_deg: float = float('nan')
+    pumped_cc: float = float('nan')
+    dvl_speed: float = float('nan')
 
 
 @dataclass
@@ -118,21 +132,47 @@ def consistent_dvl(record: GliderRecord,
         z = np.full(len(runs), np.nan)
     keep = np.zeros(len(record), dtype=bool)
     dives = []
+    rate = record.depth_rate()
     for idx, med, err, zi in zip(runs, medians, errors, z):
         ok = not abs(zi) > z_limit          # NaN (too few dives): kept
         keep[idx] = ok
         dives.append(DiveCheck(start=float(record.t[idx[0]]), samples=len(idx),
                                median_aoa_deg=float(med), stderr_deg=float(err), z=float(zi),
-                               kept=bool(ok)))
+                               kept=bool(ok), depth_rate=float(np.median(rate[idx])),
+                               pitch_deg=float(np.degrees(np.median(record.pitch[idx]))),
+                               pumped_cc=float(1e6 * np.median(record.pumped_volume[idx])),
+                               dvl_speed=float(np.median(record.speed_through_water[idx]))))
     return DvlConsistency(keep=keep, dives=dives, centre_deg=centre, spread_deg=spread,
                           z_limit=z_limit)
+
+
+def dive_groups(record: GliderRecord, use: np.ndarray) -> list[np.ndarray]:
+    """Index arrays of the samples where use (N,) bool, one per DVL dive that has any."""
+    return [idx[use[idx]] for idx in dvl_dives(record) if use[idx].any()]
+
+
+def clustered_mean(values: np.ndarray, groups: list[np.ndarray]) -> tuple[float, float]:
+    """(mean, 1-sigma) of values (N,) over the samples of groups (index arrays, one per
+    dive): the sample mean and its cluster-robust standard error over the groups (module
+    docstring); NaN 1-sigma with fewer than 2 groups."""
+    n = np.array([len(g) for g in groups], dtype=float)
+    if not n.sum():
+        return np.nan, np.nan
+    w = n / n.sum()
+    means = np.array([np.mean(values[g]) for g in groups])
+    mean = float(np.sum(w * means))
+    if len(groups) < 2:
+        return mean, np.nan
+    var = len(groups) / (len(groups) - 1.0) * np.sum(w ** 2 * (means - mean) ** 2)
+    return mean, float(np.sqrt(var))
 
 
 @dataclass
 class Scores:
     """Speed through water against the DVL (bias = mean(model - DVL), rms, fit %, m/s and %)
-    over the DVL samples kept, and the depth rate against the pressure's over the fit
-    window (bias, rms m/s)."""
+    over the DVL samples kept, the bias's 1-sigma over the dives (module docstring) and
+    their number, and the depth rate against the pressure's over the fit window (bias,
+    rms m/s)."""
 
     speed_bias: float
     speed_rms: float
@@ -140,6 +180,8 @@ class Scores:
     speed_samples: int
     depth_rate_bias: float
     depth_rate_rms: float
+    speed_bias_std: float = float('nan')
+    speed_dives: int = 0
 
 
 def score(flight: Flight, record: GliderRecord, dvl_mask: np.ndarray,
@@ -151,9 +193,46 @@ def score(flight: Flight, record: GliderRecord, dvl_mask: np.ndarray,
     e = flight.speed[use] - dvl[use]
     fit = fit_window(record, window)
     ez = flight.depth_rate[fit] - record.depth_rate()[fit]
+    groups = dive_groups(record, use)
+    _, bias_std = clustered_mean(flight.speed - dvl, groups)
     return Scores(speed_bias=float(np.mean(e)) if len(e) else np.nan,
                   speed_rms=float(np.sqrt(np.mean(e ** 2))) if len(e) else np.nan,
                   speed_fit=fit_percent(dvl[use], flight.speed[use]),
                   speed_samples=int(use.sum()),
                   depth_rate_bias=float(np.mean(ez)),
-                  depth_rate_rms=float(np.sqrt(np.mean(ez ** 2))))
+                  depth_rate_rms=float(np.sqrt(np.mean(ez ** 2))),
+                  speed_bias_std=bias_std, speed_dives=len(groups))
+
+
+@dataclass
+class Comparison:
+    """Two models' speeds judged on the same DVL samples, paired dive by dive
+    (:func:`compare_speeds`): their RMS errors (m/s), the difference rms_a - rms_b and its
+    1-sigma over the dives (m/s), the dives and samples."""
+
+    rms_a: float
+    rms_b: float
+    difference: float
+    difference_std: float
+    dives: int
+    samples: int
+
+
+def compare_speeds(speed_a: np.ndarray, speed_b: np.ndarray, record: GliderRecord,
+                   use: np.ndarray) -> Comparison:
+    """Is model a's speed (N,) m/s closer to the DVL than model b's on the samples where use
+    (N,) bool (finite DVL ones)? rms_a^2 - rms_b^2 is the mean of e_a^2 - e_b^2, whose
+    1-sigma is the cluster-robust one over the dives (module docstring): paired on the same
+    samples, the DVL's own dive-to-dive errors, common to both, cancel."""
+    dvl = record.speed_through_water
+    use = use & np.isfinite(dvl)
+    ea, eb = speed_a - dvl, speed_b - dvl
+    groups = dive_groups(record, use)
+    rms_a = float(np.sqrt(np.mean(ea[use] ** 2)))
+    rms_b = float(np.sqrt(np.mean(eb[use] ** 2)))
+    with np.errstate(invalid='ignore'):
+        _, d_std = clustered_mean(ea ** 2 - eb ** 2, groups)
+    # rms_a - rms_b = (rms_a^2 - rms_b^2) / (rms_a + rms_b), exactly
+    return Comparison(rms_a=rms_a, rms_b=rms_b, difference=rms_a - rms_b,
+                      difference_std=d_std / (rms_a + rms_b), dives=len(groups),
+                      samples=int(use.sum()))
