@@ -28,6 +28,8 @@ import math
 
 import numpy as np
 
+from auv_ident.core.model.thrusters import curve_text
+
 N_CURVE = 801       # samples of the command range for the quadratic-law fit
 FLU3 = np.array([1.0, -1.0, -1.0])
 
@@ -65,15 +67,6 @@ def limits(t):
     return (fmin if math.isfinite(fmin) else None), (fmax if math.isfinite(fmax) else None)
 
 
-def _curve_text(t):
-    if t.command == 'force':
-        return 'command = thrust (N)'
-    return (f'e = {t.command} - {t.neutral:g} saturated to +-{t.command_max:g}, no thrust for '
-            f'|e| <= {t.dead_band:g}, then e_d = e -+ {t.dead_band:g}: f = '
-            f'{t.forward[0]:.6g} e_d + {t.forward[1]:.6g} e_d^2 (e > 0), '
-            f'{t.reverse[0]:.6g} e_d - {t.reverse[1]:.6g} e_d^2 (e < 0)')
-
-
 def thruster_header(v):
     """Header lines for the thrusters (what is exact, the fit of gz's quadratic law)."""
     lines = ['Thrusters: gz-sim Thruster systems (src/systems/thruster/Thruster.cc), one per',
@@ -92,7 +85,7 @@ def thruster_header(v):
         c, fit = quadratic_law_fit(t)
         law = ('exact (a force command)' if not math.isfinite(fit) else
                f'quadratic law f = {c:.6g} |e| e fits our curve to {fit:.2f} %')
-        lines.append(f'  {t.name}: {_curve_text(t)}; {law}')
+        lines.append(f'  {t.name}: {curve_text(t)}; {law}')
     return lines
 
 
@@ -164,9 +157,11 @@ def uuv_table(t):
         cmd = np.array([a, 0.0, b])
     else:
         n0 = t.neutral
+        # a table's own points too: its dead band's edges and its kinks are among them
+        own = [] if t.table is None else t.table[0]
         cmd = np.unique(np.concatenate([
             np.linspace(lo, n0 - t.dead_band, N_TABLE + 1),
-            np.linspace(n0 + t.dead_band, hi, N_TABLE + 1), [n0]]))
+            np.linspace(n0 + t.dead_band, hi, N_TABLE + 1), [n0], own]))
     return cmd, np.array([t.thrust(c) for c in cmd])
 
 
