@@ -5,7 +5,7 @@ docs/vehicles.md (BlueROV2 Heavy) identifies and validates on.
 Run from the package root:
     .venv/bin/python tools/rov_tank_bag.py --seed 13 --noise 1 --out bags/rov13
 
-The truth: config/bluerov2_heavy.yaml with its T200 curves (and saturations) +10 % on the forward
+The truth: config/bluerov2_heavy.yaml with its T200 table +10 % on the forward
 side and -5 % on the reverse side, X_uu x1.2, N_rr x0.8, Z_wdot x1.15, Y_vdot x0.9. The run: the
 `tank` manoeuvre (a pilot's sticks, PWM on change, core/simulation/maneuvers.py) for --duration s,
 integrated with RK4 at T/4 (the filter uses T), measurement noise first-order correlated (time
@@ -20,41 +20,34 @@ import sys
 import tempfile
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from auv_ident.core.model.hydrodynamics import Model  # noqa: E402
 from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD  # noqa: E402
+from auv_ident.core.model.thrusters import scaled_curves  # noqa: E402
 from auv_ident.core.model.vehicle import vehicle_from_file  # noqa: E402
 from auv_ident.core.simulation.simulate import simulate  # noqa: E402
+from auv_ident.core.vehicle_files import read_yaml_file  # noqa: E402
 from auv_ident.offline.sim_bag import write_run_bag  # noqa: E402
 from auv_ident.vehicles import resolve_vehicle_path  # noqa: E402
 
 FWD, REV = 1.10, 0.95
 # coefficient -> factor of the truth
 FACTORS = {'X_uu': 1.2, 'N_rr': 0.8, 'Z_wdot': 1.15, 'Y_vdot': 0.9}
-REPLACE = (('forward: [0.075984, 1.7580e-4]',
-            f'forward: [{0.075984 * FWD!r}, {1.7580e-4 * FWD!r}]'),
-           ('reverse: [0.063798, 1.1891e-4]',
-            f'reverse: [{0.063798 * REV!r}, {1.1891e-4 * REV!r}]'),
-           ('thrust_max_forward: 51.4', f'thrust_max_forward: {51.4 * FWD!r}'),
-           ('thrust_max_reverse: 39.9', f'thrust_max_reverse: {39.9 * REV!r}'))
 
 
 def truth_file(folder):
     """The perturbed vehicle file in folder; returns its path."""
-    text = open(resolve_vehicle_path('bluerov2_heavy'), encoding='utf-8').read()
-    for old, new in REPLACE:
-        assert text.count(old) == 8, old
-        text = text.replace(old, new)
+    raw = read_yaml_file(resolve_vehicle_path('bluerov2_heavy'))
+    raw['thrusters'] = scaled_curves(raw['thrusters'], FWD, REV)
     for name, factor in FACTORS.items():
-        head = f'  {name}: ['
-        i = text.index(head) + len(head)
-        j = text.index(',', i)
-        text = text[:i] + repr(float(text[i:j]) * factor) + text[j:]
+        raw['coefficients'][name] = [raw['coefficients'][name][0] * factor,
+                                     *raw['coefficients'][name][1:]]
     path = os.path.join(folder, 'bluerov2_heavy.yaml')
     with open(path, 'w', encoding='utf-8') as fh:
-        fh.write(text)
+        yaml.safe_dump(raw, fh)
     return path
 
 

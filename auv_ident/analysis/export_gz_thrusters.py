@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from auv_ident.core.errors import AuvIdentError
+from auv_ident.core.model.thrusters import curve_text
 
 N_CURVE = 801       # samples of the command range for the quadratic-law fit
 FLU3 = np.array([1.0, -1.0, -1.0])
@@ -75,9 +76,24 @@ def with_gains(v, c):
         out.append(dataclasses.replace(
             t, forward=(gf * t.forward[0], gf * t.forward[1]),
             reverse=(gr * t.reverse[0], gr * t.reverse[1]),
+            table=None if t.table is None else _scaled_table(t.table, gf, gr),
             thrust_max_forward=gf * t.thrust_max_forward,
             thrust_max_reverse=gr * t.thrust_max_reverse))
     return out, sides_text(v, c)
+
+
+def _scaled_table(table, gf, gr):
+    """A thrust table (rows command, thrust N, slope N per unit) with its forward points
+    (thrust > 0) times gf and its reverse points times gr, slopes alike: the model's gain
+    times the table's cubic on every interval within one side, so exact where no interval
+    runs from reverse to forward thrust directly (a table with a dead band: its zero-thrust
+    points have zero slope, as the monotone cubic makes them at a plateau's ends)."""
+    out = np.array(table, dtype=float)
+    f = out[1]
+    gain = np.where(f > 0.0, gf, np.where(f < 0.0, gr, 1.0))
+    out[1] = f * gain
+    out[2] = out[2] * gain
+    return out
 
 
 def sides_text(v, c):
@@ -123,15 +139,6 @@ def limits(t):
     return (fmin if math.isfinite(fmin) else None), (fmax if math.isfinite(fmax) else None)
 
 
-def _curve_text(t):
-    if t.command == 'force':
-        return 'command = thrust (N)'
-    return (f'e = {t.command} - {t.neutral:g} saturated to +-{t.command_max:g}, no thrust for '
-            f'|e| <= {t.dead_band:g}, then e_d = e -+ {t.dead_band:g}: f = '
-            f'{t.forward[0]:.6g} e_d + {t.forward[1]:.6g} e_d^2 (e > 0), '
-            f'{t.reverse[0]:.6g} e_d - {t.reverse[1]:.6g} e_d^2 (e < 0)')
-
-
 def thruster_header(thrusters):
     """Header lines for the thrusters (what is exact, the fit of gz's quadratic law)."""
     lines = ['Thrusters: gz-sim Thruster systems (src/systems/thruster/Thruster.cc), one per',
@@ -150,7 +157,7 @@ def thruster_header(thrusters):
         c, fit = quadratic_law_fit(t)
         law = ('exact (a force command)' if not math.isfinite(fit) else
                f'quadratic law f = {c:.6g} |e| e fits our curve to {fit:.2f} %')
-        lines.append(f'  {t.name}: {_curve_text(t)}; {law}')
+        lines.append(f'  {t.name}: {curve_text(t)}; {law}')
     return lines
 
 
@@ -223,9 +230,11 @@ def uuv_table(t):
         cmd = np.array([a, 0.0, b])
     else:
         n0 = t.neutral
+        # a table's own points too: its dead band's edges and its kinks are among them
+        own = [] if t.table is None else t.table[0]
         cmd = np.unique(np.concatenate([
             np.linspace(lo, n0 - t.dead_band, N_TABLE + 1),
-            np.linspace(n0 + t.dead_band, hi, N_TABLE + 1), [n0]]))
+            np.linspace(n0 + t.dead_band, hi, N_TABLE + 1), [n0], own]))
     return cmd, np.array([t.thrust(c) for c in cmd])
 
 

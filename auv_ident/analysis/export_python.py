@@ -182,14 +182,18 @@ def _thruster_lines(v, c):
         return [], []
     data = ['# thrusters (core/model/thrusters.py): name, command unit, neutral, command_max,',
             '# dead_band, forward (a1, a2), reverse (a1, a2), thrust_max_forward,',
-            '# thrust_max_reverse (N), configuration column [d; r x d] (FRD)',
+            '# thrust_max_reverse (N), configuration column [d; r x d] (FRD), and the table',
+            '# (commands, thrusts N, slopes N per unit) or None (the polynomial)',
             'THRUSTERS = (']
     for t in ts:
         data.append(f'    ({t.name!r}, {t.command!r}, {_r(t.neutral)}, {_r(t.command_max)}, '
                     f'{_r(t.dead_band)}, ({_r(t.forward[0])}, {_r(t.forward[1])}), '
                     f'({_r(t.reverse[0])}, {_r(t.reverse[1])}), {_r(t.thrust_max_forward)}, '
                     f'{_r(t.thrust_max_reverse)},')
-        data.append('     np.array([' + ', '.join(_r(x) for x in t.column) + '])),')
+        data.append('     np.array([' + ', '.join(_r(x) for x in t.column) + ']),')
+        data.append('     None),' if t.table is None else
+                    '     np.array([' + ',\n               '.join(
+                        '[' + ', '.join(_r(x) for x in row) + ']' for row in t.table) + '])),')
     data.append(')')
     gain_idx = getattr(v, 'gain_idx', None)
     gains = np.ones((2, 6))
@@ -217,10 +221,25 @@ THRUST_FUNCTION = '''
 def thruster_force(i, command):
     """Steady thrust (N, along the thruster's direction) of THRUSTERS[i] for its command (in
     its unit): dead band around neutral, then a1 e + a2 e^2 (forward) or a1 e - a2 e^2
-    (reverse) of the command's distance e beyond it, saturated."""
-    _, unit, neutral, cmax, dead, fwd, rev, fmax_f, fmax_r, _ = THRUSTERS[i]
+    (reverse) of the command's distance e beyond it, saturated; or its table's monotone cubic
+    Hermite curve (PCHIP) at the command, the table's end values beyond its ends."""
+    _, unit, neutral, cmax, dead, fwd, rev, fmax_f, fmax_r, _, table = THRUSTERS[i]
     if unit == 'force':
         f = float(command)
+    elif table is not None:
+        x, fs, d = table
+        c = min(max(float(command), neutral - cmax), neutral + cmax)
+        if c <= x[0]:
+            f = fs[0]
+        elif c >= x[-1]:
+            f = fs[-1]
+        else:
+            k = int(np.searchsorted(x, c, side='right')) - 1
+            h = x[k + 1] - x[k]
+            t = (c - x[k]) / h
+            t2, t3 = t * t, t * t * t
+            f = ((2 * t3 - 3 * t2 + 1) * fs[k] + (t3 - 2 * t2 + t) * h * d[k]
+                 + (-2 * t3 + 3 * t2) * fs[k + 1] + (t3 - t2) * h * d[k + 1])
     else:
         e = min(max(float(command) - neutral, -cmax), cmax)
         if abs(e) <= dead:

@@ -23,7 +23,7 @@ from auv_ident.core.glider.vehicle import glider_from_file
 from auv_ident.core.identification.plausibility import is_self_damping
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import DOF_STATES, Input, NU_NAMES, State
-from auv_ident.core.model.thrusters import configuration_matrix
+from auv_ident.core.model.thrusters import configuration_matrix, curve_text
 from auv_ident.core.model.trim import initial_state, rest_inputs, trim_speed
 from auv_ident.core.model.vehicle import P_ZB, P_ZG, vehicle_from_file
 from auv_ident.core.vehicle_files import file_kind, read_yaml_file, VehicleFileProblems
@@ -100,6 +100,12 @@ def _thruster_checks(vehicle, check):
             alone.append(d)
     check.facts.append(f'{len(vehicle.thrusters)} thrusters, configuration matrix of rank '
                        f'{np.linalg.matrix_rank(T)}; they push alone: {" ".join(alone) or "none"}')
+    curves: dict = {}          # one line per distinct curve, naming its thrusters
+    for t in vehicle.thrusters:
+        limits = (f', thrust within -{t.thrust_max_reverse:g}..{t.thrust_max_forward:g} N'
+                  if max(t.thrust_max_reverse, t.thrust_max_forward) < math.inf else '')
+        curves.setdefault(curve_text(t) + limits, []).append(t.name)
+    check.facts += [f'thrust curves: {" ".join(names)}: {text}' for text, names in curves.items()]
     missing = [d for d in dofs if d not in alone]
     if missing:
         check.warnings.append(f'the thrusters cannot push {" ".join(missing)} alone (each '

@@ -23,11 +23,12 @@ as vortexntnu/vortex-auv motion/thruster_interface_auv/resources/T200-Thrusters-
 carries them; kgf * 9.80665 N), the TABLE itself and not a fit, so a fitted curve is judged;
 its dead band 1472-1528 us gives 0 N. Truth thrust = (1 + thrust_perturb) * table (default
 +10 %), optionally through a first-order motor lag. ``curve: file`` replaces the table by the
-curve config/bluerov2_heavy.yaml states (its polynomial, dead band and saturations, written
-here as numbers, not read through our loader): the issue's "thrust curve perturbed 10 % from
-the file", where the table judges the file's curve as well. Positions (FRD, m) from
-clydemcqueen/bluerov2_ignition models/bluerov2_heavy/configs.yaml (Gazebo FLU, y and z
-negated here); directions from ArduSub's VECTORED_6DOF frame (ardupilot
+curve config/bluerov2_heavy.yaml states (the same published points through the file's
+interpolation, a monotone piecewise cubic, here scipy's PchipInterpolator, not our loader or
+kernel): the issue's "thrust curve perturbed 10 % from the file". The two differ only in
+how they interpolate the same points: by at most 0.12 N, between the table's 4 us steps.
+Positions (FRD, m) from clydemcqueen/bluerov2_ignition models/bluerov2_heavy/configs.yaml
+(Gazebo FLU, y and z negated here); directions from ArduSub's VECTORED_6DOF frame (ardupilot
 libraries/AP_Motors/AP_Motors6DOF.cpp): a PWM above 1500 us pushes along ``d``.
 
 Thruster order (the order of ``/thrusters`` data and of config/bluerov2_heavy.yaml)::
@@ -74,6 +75,7 @@ import sys
 
 import numpy as np
 from scipy.integrate import solve_ivp
+from scipy.interpolate import PchipInterpolator
 
 from auv_ident.offline.generator_common import (
     epoch_ns,
@@ -185,20 +187,17 @@ def t200_thrust(pwm, gain=1.0):
 
 
 # the curve config/bluerov2_heavy.yaml states (its `thrusters:` entries; the same for all
-# eight): f = a1 e + a2 e^2 beyond the dead band (e = |pwm - 1500| - 28 us), reverse likewise,
-# saturated to 51.4 / 39.9 N and at +-400 us
-FILE_CURVE = {'dead_band': 28.0, 'command_max': 400.0, 'forward': (0.075984, 1.7580e-4),
-              'reverse': (0.063798, 1.1891e-4), 'max_forward': 51.4, 'max_reverse': 39.9}
+# eight): the same published table (the file copies its 201 points, in kgf, as T200_KGF here)
+# through the interpolation the file names, the monotone piecewise cubic (PCHIP), here scipy's
+# own; the command saturated at 1100..1900 us (neutral 1500 +- command_max 400, the table's ends)
+FILE_CURVE = {'pwm': T200_PWM, 'kgf': T200_KGF, 'interpolation': 'pchip',
+              'command_range': (1100.0, 1900.0)}
+_FILE_PCHIP = PchipInterpolator(FILE_CURVE['pwm'], KGF * FILE_CURVE['kgf'])
 
 
 def file_curve_thrust(pwm, gain=1.0):
-    """Thrust (N) of the vehicle file's polynomial curve (FILE_CURVE), times gain."""
-    c = FILE_CURVE
-    e = np.clip(np.asarray(pwm, float) - 1500.0, -c['command_max'], c['command_max'])
-    ed = np.maximum(np.abs(e) - c['dead_band'], 0.0)
-    fwd = np.minimum(c['forward'][0] * ed + c['forward'][1] * ed ** 2, c['max_forward'])
-    rev = np.minimum(c['reverse'][0] * ed + c['reverse'][1] * ed ** 2, c['max_reverse'])
-    return gain * np.where(e > 0, fwd, -rev)
+    """Thrust (N) of the vehicle file's curve (FILE_CURVE), times gain."""
+    return gain * _FILE_PCHIP(np.clip(np.asarray(pwm, float), *FILE_CURVE['command_range']))
 
 
 THRUST_CURVES = {'table': t200_thrust, 'file': file_curve_thrust}
@@ -289,7 +288,7 @@ class RovConfig:
     depth0: float = 1.5                 # m, initial depth (NED z)
     start_time: str = '2025-09-16T14:00:00Z'
     thrust_perturb: float = 0.10        # truth thrust = (1 + this) * table
-    curve: str = 'table'                # 'table' (T200 table) or 'file' (the file's polynomial)
+    curve: str = 'table'                # 'table' (T200 table) or 'file' (the file's curve)
     motor_lag: float = 0.0              # s, first-order thrust lag (0: none)
     pilot_rate: float = 20.0            # Hz, the stick's clock
     repeat_period: float = 2.0          # s of silence before a command is repeated
@@ -646,7 +645,8 @@ def generate(cfg, out_dir, overwrite=False, truth=None):
                       'd_frd': THRUSTER_D.tolist(),
                       'curve': ('T200 16 V table, linear interpolation, times thrust_gain'
                                 if cfg.curve == 'table' else
-                                "the vehicle file's polynomial (FILE_CURVE), times thrust_gain"),
+                                "the vehicle file's curve (FILE_CURVE: the table, PCHIP), "
+                                'times thrust_gain'),
                       'dead_band_us': list(DEAD_BAND)},
         'perturbed': {'thrust_gain_fwd': gain, 'thrust_gain_rev': gain,
                       'note': ('truth thrust = gain * the published table (the vehicle file '

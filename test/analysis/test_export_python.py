@@ -138,7 +138,8 @@ thrusters:
      dead_band: 25.0, forward: [0.06, 0.00009], reverse: [0.05, 0.00006],
      thrust_max_forward: 51.5, thrust_max_reverse: 40.0}
   - {name: t2, r: [0.156, -0.111, 0.085], d: [0.7071, 0.7071, 0.0], command: pwm_us,
-     dead_band: 25.0, forward: [0.06, 0.00009], reverse: [0.05, 0.00006]}
+     table: {unit: kgf, command: [1100, 1300, 1472, 1528, 1700, 1900],
+             thrust: [-4.07, -1.44, 0.0, 0.0, 1.82, 5.25]}}
   - {name: t3, r: [0.0, 0.218, 0.0], d: [0.0, 0.0, 1.0], command: setpoint,
      forward: [40.0, 10.0], reverse: [30.0, 8.0]}
   - {name: t4, r: [-0.1, 0.0, 0.0], d: [0.0, 0.0, 1.0], command: force}

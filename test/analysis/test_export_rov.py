@@ -25,6 +25,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from scipy.interpolate import PchipInterpolator
 from test_export_fossen import (
     _floats,
     _gz_params,
@@ -54,10 +55,30 @@ def _raw():
         return yaml.safe_load(fh)
 
 
+KGF = {'N': 1.0, 'kgf': 9.80665, 'lbf': 4.4482216152605}    # N per unit, by definition
+_TABLES = {}
+
+
+def _table_curve(table):
+    """scipy's monotone cubic through a file's thrust table (N), its end values beyond."""
+    key = id(table)
+    if key not in _TABLES:
+        x = np.asarray(table['command'], dtype=float)
+        f = np.asarray(table['thrust'], dtype=float) * KGF[table['unit']]
+        _TABLES[key] = (x, PchipInterpolator(x, f, extrapolate=False), f[0], f[-1])
+    return _TABLES[key]
+
+
 def _curve(entry, gains, cmd):
     """The thrust (N) of one thruster entry of the vehicle file for a PWM command, read from
-    the file here (its comment: dead band, forward/reverse polynomial, saturation), times the
-    model's thrust gain of the side."""
+    the file here (its comment: a table through a monotone cubic; or dead band, forward/reverse
+    polynomial, saturation), times the model's thrust gain of the side."""
+    if 'table' in entry:
+        x, interp, f_lo, f_hi = _table_curve(entry['table'])
+        c = min(max(cmd, entry['neutral'] - entry['command_max']),
+                entry['neutral'] + entry['command_max'])
+        f = f_lo if c <= x[0] else f_hi if c >= x[-1] else float(interp(c))
+        return f * (gains[0] if f > 0 else gains[1])
     e = min(max(cmd - entry['neutral'], -entry['command_max']), entry['command_max'])
     if abs(e) <= entry['dead_band']:
         return 0.0
@@ -317,8 +338,9 @@ def test_a_bluerov2_export_flies_as_our_model_quick(tmp_path):
     assert result['steps'][1] < 1e-6
     # the identified thrust gains are in the clamps (our curve's ends times the gain)
     t1 = _gz_thrusters(tmp_path / 'rov.gz-link')['t1_joint']
-    assert t1[3] == pytest.approx(1.1 * 51.4, rel=1e-12)
-    assert t1[2] == pytest.approx(-1.1 * 39.9, rel=1e-12)
+    table = _raw()['thrusters'][0]['table']
+    assert t1[3] == pytest.approx(1.1 * table['thrust'][-1] * KGF[table['unit']], rel=1e-12)
+    assert t1[2] == pytest.approx(1.1 * table['thrust'][0] * KGF[table['unit']], rel=1e-12)
 
 
 def test_a_gain_of_some_of_a_thrusters_equations_is_refused(tmp_path):

@@ -4,31 +4,27 @@ a finer step than the filter's and the noise is coloured and twice the configure
 file's coefficient set (two thrust gains, diagonal added mass and damping in surge, sway,
 heave, yaw) comes back within 5 %, and with the truth inside 3 sigma."""
 import numpy as np
+import yaml
 
 from auv_ident.analysis import results
 from auv_ident.core.identification.pipeline import identify_with_diagnosis
 from auv_ident.core.identification.results import Record
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD
+from auv_ident.core.model.thrusters import scaled_curves
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.simulation.simulate import simulate
+from auv_ident.core.vehicle_files import read_yaml_file
 from auv_ident.vehicles import load_vehicle, resolve_vehicle_path
 
 FWD, REV = 1.10, 0.95       # the truth's curves: forward side +10 %, reverse side -5 %
 
 
 def _perturbed_vehicle(tmp_path):
-    text = open(resolve_vehicle_path('bluerov2_heavy'), encoding='utf-8').read()
-    for old, new in (('forward: [0.075984, 1.7580e-4]',
-                      f'forward: [{0.075984 * FWD!r}, {1.7580e-4 * FWD!r}]'),
-                     ('reverse: [0.063798, 1.1891e-4]',
-                      f'reverse: [{0.063798 * REV!r}, {1.1891e-4 * REV!r}]'),
-                     ('thrust_max_forward: 51.4', f'thrust_max_forward: {51.4 * FWD!r}'),
-                     ('thrust_max_reverse: 39.9', f'thrust_max_reverse: {39.9 * REV!r}')):
-        assert text.count(old) == 8
-        text = text.replace(old, new)
+    raw = read_yaml_file(resolve_vehicle_path('bluerov2_heavy'))
+    raw['thrusters'] = scaled_curves(raw['thrusters'], FWD, REV)
     p = tmp_path / 'bluerov2_heavy.yaml'
-    p.write_text(text)
+    p.write_text(yaml.safe_dump(raw))
     return vehicle_from_file(str(p))
 
 

@@ -185,10 +185,30 @@ thrusters:
 
 # --- the thrusters in the compiled model (#29 item 2) ---
 
-def _rov_model(theta=()):
+# the BlueROV2 Heavy with the polynomial the file stated before its table (least squares on
+# ten of the T200 16 V table's points): the polynomial form's figures below are hand-computed
+POLY_T200 = {'dead_band': 28, 'forward': [0.075984, 1.7580e-4], 'reverse': [0.063798, 1.1891e-4],
+             'thrust_max_forward': 51.4, 'thrust_max_reverse': 39.9}
+
+
+@pytest.fixture(scope='module')
+def poly_rov(tmp_path_factory):
+    """Path of config/bluerov2_heavy.yaml with POLY_T200 in place of each thruster's table."""
+    import yaml
+
+    from auv_ident.core.vehicle_files import read_yaml_file
+    raw = read_yaml_file(resolve_vehicle_path('bluerov2_heavy'))
+    raw['thrusters'] = [dict({k: v for k, v in t.items() if k != 'table'}, **POLY_T200)
+                        for t in raw['thrusters']]
+    path = tmp_path_factory.mktemp('poly') / 'bluerov2_heavy_poly.yaml'
+    path.write_text(yaml.safe_dump(raw), encoding='utf-8')
+    return str(path)
+
+
+def _rov_model(theta=(), path='bluerov2_heavy'):
     from auv_ident.core.model.hydrodynamics import Model
     from auv_ident.vehicles import load_vehicle
-    return Model(load_vehicle('bluerov2_heavy'), list(theta))
+    return Model(load_vehicle(path), list(theta))
 
 
 def _pwm(horizontal, vertical):
@@ -196,14 +216,23 @@ def _pwm(horizontal, vertical):
     return np.r_[np.zeros(7), horizontal, vertical]
 
 
-def test_bluerov2_wrench_in_the_model_is_the_hand_computed_one():
+def test_bluerov2_wrench_in_the_model_is_the_hand_computed_one(poly_rov):
     # t3, t4 (aft, pushing forward-out at 45 deg) at 1700 us: e = 200 - 28 = 172 us on the
     # forward side, f = 0.075984 172 + 1.7580e-4 172^2 = 18.2703 N each; their sway and yaw
     # cancel, X = 2 f cos 45. t5..t8 (vertical, d down) at 1300 us: reverse side, f =
     # -(0.063798 172 + 1.1891e-4 172^2) = -14.4911 N each, Z = 4 f (up); roll and pitch cancel
-    m = _rov_model()
     f_fwd = 0.075984 * 172 + 1.7580e-4 * 172 ** 2
     f_rev = -(0.063798 * 172 + 1.1891e-4 * 172 ** 2)
+    _check_wrench(_rov_model(path=poly_rov), f_fwd, f_rev)
+
+
+def test_bluerov2_table_wrench_in_the_model_is_the_tables_points():
+    # the file's T200 table at two of its points: 1700 us 1.82 kgf, 1300 us -1.44 kgf (the
+    # interpolant passes through every point)
+    _check_wrench(_rov_model(), 1.82 * 9.80665, -1.44 * 9.80665)
+
+
+def _check_wrench(m, f_fwd, f_rev):
     ui = _pwm([1500, 1500, 1700, 1700], [1300] * 4)
     x = np.zeros(12)
     M = m.vehicle.mass_matrix()
@@ -217,19 +246,25 @@ def test_bluerov2_wrench_in_the_model_is_the_hand_computed_one():
     assert tau == pytest.approx([0, 0, 0, 0, 0, f_fwd * S * 0.474], abs=1e-9)
 
 
-def test_dead_band_and_saturation_in_the_model():
-    m = _rov_model()
+@pytest.mark.parametrize('curve, top', [('poly', 51.4), ('table', 5.25 * 9.80665)])
+def test_dead_band_and_saturation_in_the_model(poly_rov, curve, top):
+    m = _rov_model(path=poly_rov if curve == 'poly' else 'bluerov2_heavy')
     x = np.zeros(12)
     rest = m.f(x, _pwm([1500] * 4, [1500] * 4))
     assert m.f(x, _pwm([1527, 1473, 1528, 1472], [1520] * 4)) == pytest.approx(rest, abs=0)
-    # 1900 us: the curve gives 52.6 N, the table's 51.4 N saturates it
+    # 1900 us: the polynomial gives 52.6 N, the table's 51.4 N saturates it; the table ends at
+    # its 1900 us point, and a command beyond the range is the range's end
     M = m.vehicle.mass_matrix()
-    tau = M @ (m.f(x, _pwm([1500] * 4, [1900] * 4))[:6] - rest[:6])
-    assert tau[2] == pytest.approx(4 * 51.4, rel=1e-12)
+    for pwm in (1900, 2000):
+        tau = M @ (m.f(x, _pwm([1500] * 4, [pwm] * 4))[:6] - rest[:6])
+        assert tau[2] == pytest.approx(4 * top, rel=1e-12)
 
 
-def test_thrust_gains_scale_each_side_of_the_curves_and_their_jacobian_is_analytic():
-    m = _rov_model(['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Z_ww'])
+@pytest.mark.parametrize('curve', ['poly', 'table'])
+def test_thrust_gains_scale_each_side_of_the_curves_and_their_jacobian_is_analytic(poly_rov,
+                                                                                    curve):
+    m = _rov_model(['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Z_ww'],
+                   poly_rov if curve == 'poly' else 'bluerov2_heavy')
     x = np.array([0.2, -0.1, 0.15, 0.05, -0.02, 0.3, 0, 0, 2, 0.05, -0.03, 1.0])
     ui = _pwm([1700, 1350, 1620, 1440], [1560, 1380, 1900, 1100])
     th = m.theta_file
@@ -294,3 +329,106 @@ def test_a_hovering_vehicle_gets_a_pilots_advice():
     assert excitation_advice(rov, 'Z_wdot').startswith('quick stick reversals')
     assert 'forward and the reverse side' in excitation_advice(rov, 'thrust_gain_rev')
     assert excitation_advice(auv, 'X_uu').startswith('speed changes')   # a fin AUV's as before
+
+
+# --- a thrust curve given as a table (#29: the T200's published points) ---
+
+TABLE = {'name': 'tb', 'r': [0.0, 0.0, 0.0], 'd': [1, 0, 0], 'command': 'pwm_us',
+         'table': {'unit': 'kgf', 'command': [1100, 1300, 1468, 1472, 1528, 1532, 1700, 1900],
+                   'thrust': [-4.07, -1.44, -0.04, 0.0, 0.0, 0.04, 1.82, 5.25]}}
+
+
+def test_table_curve_is_the_monotone_cubic_through_its_points():
+    """Through every point (kgf to N), scipy's PCHIP between them (the same curve, so the
+    generator's independent copy can use scipy), exactly 0 in the dead band, never falling,
+    the ends beyond the range; the compiled kernel evaluates the same numbers."""
+    from scipy.interpolate import PchipInterpolator
+
+    from auv_ident.core.model.hydrodynamics import _thrust
+    from auv_ident.core.model.thrusters import thruster_table
+    th, problems = thrusters_from_file([TABLE, PWM], 'test')
+    assert problems == []
+    t = th[0]
+    x = np.array(TABLE['table']['command'], float)
+    f = 9.80665 * np.array(TABLE['table']['thrust'])
+    assert [t.thrust(c) for c in x] == pytest.approx(f, abs=1e-14)
+    cmd = np.linspace(1000.0, 2000.0, 4001)
+    ours = np.array([t.thrust(c) for c in cmd])
+    np.testing.assert_allclose(ours, PchipInterpolator(x, f)(np.clip(cmd, 1100, 1900)),
+                               rtol=0, atol=1e-12)
+    assert np.all(np.diff(ours) >= 0.0)
+    assert np.all(ours[(cmd >= 1472) & (cmd <= 1528)] == 0.0)
+    thr = thruster_table(th)
+    assert thr.shape == (2, 17 + 3 * 8)
+    for i, th_i in enumerate(th):
+        assert [_thrust(thr, i, c) for c in cmd[::7]] == pytest.approx(
+            [th_i.thrust(c) for c in cmd[::7]], rel=1e-14, abs=1e-14)
+
+
+def test_a_table_within_thrust_limits_and_in_newton():
+    t = thrusters_from_file([dict(TABLE, thrust_max_forward=10.0, table=dict(
+        TABLE['table'], unit='N'))], 'test')[0][0]
+    assert t.thrust(1900) == 5.25 and t.thrust(1100) == -4.07
+    t = thrusters_from_file([dict(TABLE, thrust_max_forward=10.0)], 'test')[0][0]
+    assert t.thrust(1900) == 10.0
+
+
+@pytest.mark.parametrize('change, words', [
+    ({'command': [1100, 1300, 1468, 1472, 1528, 1528, 1700, 1900]},
+     'table.command is not increasing (1528 then 1528)'),
+    ({'thrust': [-4.07, -1.44, -0.04, 0.0, 0.0, 0.04, 1.82, 1.5]},
+     'table.thrust falls from 1.82 to 1.5 kgf (commands 1700 to 1900)'),
+    ({'thrust': [-4.07, -1.44, -0.04, 0.0, 0.0, 0.04, 1.82, float('nan')]},
+     'table.thrust is not a list of at least two finite numbers'),
+    ({'thrust': [-4.07, -1.44, -0.04, 0.0, 0.0, 0.04, 1.82]},
+     'table.command has 8 points and table.thrust 7'),
+    ({'unit': 'kg'}, "table.unit = 'kg'; the thrust unit is one of N, kgf, lbf"),
+    ({'command': [-1.0, -0.5, -0.1, 0.0, 0.05, 0.1, 0.5, 1.0]},
+     'table.command spans -1..1, not inside the command range 1100..1900 around neutral 1500'),
+    ({'thrust': [-4.07, -1.44, 0.5, 0.5, 0.5, 0.5, 1.82, 5.25]},
+     'table.thrust is not <= 0 below neutral 1500 and >= 0 above it'),
+    ({'scale': 2.0}, 'table: unknown key(s) scale'),
+])
+def test_a_bad_table_is_one_error_naming_the_key(change, words):
+    _, problems = thrusters_from_file([dict(TABLE, table=dict(TABLE['table'], **change))],
+                                      'test')
+    assert len(problems) == 1
+    assert problems[0].startswith('thrusters[0] (tb): table')
+    assert words in problems[0]
+
+
+def test_a_table_with_a_polynomial_or_on_a_force_thruster_is_refused():
+    _, problems = thrusters_from_file([dict(TABLE, dead_band=28), dict(FORCE, table=TABLE[
+        'table']), dict(TABLE, table=[[1100, -4.0], [1900, 5.0]])], 'test')
+    assert 'table and dead_band: give the curve one way' in problems[0]
+    assert 'a `command: force` thruster takes its thrust as the command' in problems[1]
+    assert 'table = [[1100, -4.0], [1900, 5.0]]; give table: {unit:' in problems[2]
+
+
+def test_scaled_curves_scale_each_side_of_table_and_polynomial():
+    from auv_ident.core.model.thrusters import scaled_curves
+    raw = [TABLE, dict(PWM, thrust_max_forward=50.0, thrust_max_reverse=40.0)]
+    th = thrusters_from_file(scaled_curves(raw, 1.1, 0.9), 'test')[0]
+    base = thrusters_from_file(raw, 'test')[0]
+    for c in (1100, 1250, 1490, 1510, 1650, 1900, 2000):
+        for t, b in zip(th, base):
+            k = 1.1 if b.thrust(c) > 0 else 0.9
+            assert t.thrust(c) == pytest.approx(k * b.thrust(c), rel=1e-12, abs=1e-15)
+    assert raw[0]['table']['thrust'][-1] == 5.25     # the caller's entries are unchanged
+
+
+def test_vehicle_check_states_the_table_and_names_a_bad_one(tmp_path):
+    from auv_ident.analysis.vehicle_check import check_vehicle
+    from auv_ident.core.vehicle_files import read_yaml_file
+    check = check_vehicle(resolve_vehicle_path('bluerov2_heavy'))
+    assert ('thrust curves: t1 t2 t3 t4 t5 t6 t7 t8: e = pwm_us - 1500 saturated to +-400; table '
+            'of 201 points, 1100..1900 -> -39.91..51.48 N, monotone cubic (PCHIP) between them, '
+            'its end values beyond') in check.facts
+    import yaml
+    raw = read_yaml_file(resolve_vehicle_path('bluerov2_heavy'))
+    raw['thrusters'][3] = dict(raw['thrusters'][3], table=dict(raw['thrusters'][3]['table'],
+                                                               unit='newton'))
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump(raw), encoding='utf-8')
+    check = check_vehicle(str(path))
+    assert any("thrusters[3] (t4): table.unit = 'newton'" in e for e in check.errors), check.errors

@@ -81,8 +81,10 @@ from auv_ident.core.model.thrusters import (
     T_FWD1,
     T_FWD2,
     T_NEUTRAL,
+    T_NTAB,
     T_REV1,
     T_REV2,
+    THR_COLS,
 )
 from auv_ident.core.model.vehicle import (
     COS_THETA_MIN,
@@ -155,8 +157,8 @@ theta_pos : (n_coef + 3,) int, position of each entry of c0 in theta, or -1
 current : int, CURRENT_NONE, CURRENT_GROUND or CURRENT_WATER (how the current enters f)
 n_coef : int, number of vehicle coefficients (the current's place in c0)
 held : (h,) int, the states the vehicle holds (core/model/planar.py; empty for 6 DOF)
-thr : (n, thrusters.THR_COLS) the thrusters (empty for a fin vehicle); their commands are
-    u_in[N_INPUT:N_INPUT + n]
+thr : (n, thrusters.THR_COLS + 3 K_max) the thrusters and their tables (empty for a fin
+    vehicle); their commands are u_in[N_INPUT:N_INPUT + n]
 gain_idx : (2, 6) int, per curve side (forward, reverse) and equation the index in c0 of
     its thrust gain, or -1 (gain 1)
 """
@@ -221,12 +223,46 @@ def _propulsion(u, n_rpm, par, zz, xdot, A, want_jac):
 
 
 @kernel
+def _table_thrust(thr, i, c):
+    """Thruster i's table curve at command c (thrusters.hermite, compiled): the table's end
+    values beyond its ends, else the cubic Hermite piece of the interval holding c (found by
+    bisection over the K points stored from column THR_COLS: commands, thrusts, slopes)."""
+    k_n = int(thr[i, T_NTAB])
+    x0 = THR_COLS
+    f0 = THR_COLS + k_n
+    d0 = THR_COLS + 2 * k_n
+    if c <= thr[i, x0]:
+        return thr[i, f0]
+    if c >= thr[i, x0 + k_n - 1]:
+        return thr[i, f0 + k_n - 1]
+    lo = 0
+    hi = k_n - 1
+    while hi - lo > 1:          # x[lo] <= c < x[hi]
+        mid = (lo + hi) // 2
+        if thr[i, x0 + mid] <= c:
+            lo = mid
+        else:
+            hi = mid
+    h = thr[i, x0 + hi] - thr[i, x0 + lo]
+    t = (c - thr[i, x0 + lo]) / h
+    t2 = t * t
+    t3 = t2 * t
+    return ((2.0 * t3 - 3.0 * t2 + 1.0) * thr[i, f0 + lo]
+            + (t3 - 2.0 * t2 + t) * h * thr[i, d0 + lo]
+            + (-2.0 * t3 + 3.0 * t2) * thr[i, f0 + hi] + (t3 - t2) * h * thr[i, d0 + hi])
+
+
+@kernel
 def _thrust(thr, i, cmd):
     """Steady thrust (N, along the thruster's direction) of thruster i (row of thr) for its
     command cmd: thrusters.Thruster.thrust, compiled (the same curve, dead band and
     saturations)."""
     if thr[i, T_CURVE] == 0.0:
         f = cmd
+    elif thr[i, T_NTAB] > 0.0:
+        cmax = thr[i, T_CMAX]
+        n0 = thr[i, T_NEUTRAL]
+        f = _table_thrust(thr, i, min(max(cmd, n0 - cmax), n0 + cmax))
     else:
         cmax = thr[i, T_CMAX]
         e = min(max(cmd - thr[i, T_NEUTRAL], -cmax), cmax)

@@ -27,8 +27,25 @@ Thrust curve of one thruster, from its command c in the unit its `command:` name
 
 Why a polynomial in the command and not in the shaft speed alone: most ROV logs carry the ESC
 command (PWM or a setpoint), not the shaft speed; a user with rpm chooses `command: rpm` and the
-same form. The thrust is finally saturated to [-thrust_max_reverse, thrust_max_forward] (N)
-when the file gives them.
+same form.
+
+Or a table (`table: {unit: N|kgf|lbf, command: [c_0 .. c_K-1], thrust: [f_0 .. f_K-1]}`, in
+place of `forward`, `reverse` and `dead_band`): the manufacturer's measured points, the dead
+band as the points of zero thrust. The command is saturated to +-`command_max` around neutral
+as above, then to the table's ends (the table's end values beyond them), and the thrust
+between points is the monotone piecewise cubic Hermite interpolant of Fritsch and Carlson in
+the form of Fritsch and Butland (the slopes of scipy.interpolate.PchipInterpolator, see
+pchip_slopes): it passes through every point, never overshoots them (a flat run of zeros,
+the dead band, stays exactly 0) and has a continuous slope. Why not straight lines between
+the points: either would serve the filter, which never differentiates the curve (the commands
+are inputs; the thrust gains multiply the curve's value, and that value is d/d(gain)), but a
+continuous slope keeps a coarser table (every 16 us of the T200's 4 us steps) within the
+measured points' own scatter, and a trim or a controller built on the curve can
+differentiate it. The table's thrust is in its `unit` (kgf: x 9.80665, as Blue Robotics
+publishes it; lbf x 4.4482216152605), held in N.
+
+The thrust is finally saturated to [-thrust_max_reverse, thrust_max_forward] (N) when the file
+gives them.
 
 First-order lag (`time_constant`, s, optional): the thrust the ESC and motor deliver follows
 the curve's value f_ss with tau_m f_dot = f_ss - f (Fossen 2021, sec. 9.3); a zero or absent
@@ -52,6 +69,55 @@ NEUTRAL = {'force': 0.0, 'setpoint': 0.0, 'rpm': 0.0, 'pwm_us': 1500.0}
 # definition, PWM the 1100-1900 us of hobby ESCs; rpm and force have no natural range
 COMMAND_MAX = {'setpoint': 1.0, 'pwm_us': 400.0}
 UNIT_TOL = 1e-3       # |d| must be 1 to this: a longer vector is a typo, not a thrust gain
+# a table's thrust unit -> N (kgf and lbf: the standard gravity 9.80665 m/s^2 by definition)
+TABLE_UNITS = {'N': 1.0, 'kgf': 9.80665, 'lbf': 4.4482216152605}
+TABLE_KEYS = ('unit', 'command', 'thrust')
+
+
+def pchip_slopes(x: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(K,) slopes (N per command unit) of the monotone cubic Hermite interpolant through the
+    points (x strictly increasing, K >= 2): Fritsch and Butland's weighted harmonic mean of the
+    neighbouring secants inside, 0 where they differ in sign or one is 0 (a flat run stays
+    flat); the ends by the one-sided three-point formula, limited to keep monotone (the
+    slopes scipy.interpolate.PchipInterpolator uses, so either evaluates the same curve)."""
+    h = np.diff(x)
+    m = np.diff(f) / h
+    d = np.zeros(len(x))
+    if len(x) == 2:
+        d[:] = m[0]
+        return d
+    for k in range(1, len(x) - 1):
+        if m[k - 1] * m[k] > 0.0:
+            w1, w2 = 2.0 * h[k] + h[k - 1], h[k] + 2.0 * h[k - 1]
+            d[k] = (w1 + w2) / (w1 / m[k - 1] + w2 / m[k])
+    d[0] = _end_slope(h[0], h[1], m[0], m[1])
+    d[-1] = _end_slope(h[-1], h[-2], m[-1], m[-2])
+    return d
+
+
+def _end_slope(h0: float, h1: float, m0: float, m1: float) -> float:
+    d = ((2.0 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    if np.sign(d) != np.sign(m0):
+        return 0.0
+    if np.sign(m0) != np.sign(m1) and abs(d) > 3.0 * abs(m0):
+        return 3.0 * m0
+    return float(d)
+
+
+def hermite(table: np.ndarray, c: float) -> float:
+    """The table's curve (3, K: command, thrust N, slope) at command c, c saturated to the
+    table's ends: the cubic Hermite piece of the interval holding c."""
+    x, f, d = table
+    if c <= x[0]:
+        return float(f[0])
+    if c >= x[-1]:
+        return float(f[-1])
+    k = int(np.searchsorted(x, c, side='right')) - 1
+    h = x[k + 1] - x[k]
+    t = (c - x[k]) / h
+    t2, t3 = t * t, t * t * t
+    return float((2 * t3 - 3 * t2 + 1) * f[k] + (t3 - 2 * t2 + t) * h * d[k]
+                 + (-2 * t3 + 3 * t2) * f[k + 1] + (t3 - t2) * h * d[k + 1])
 
 
 @dataclass(frozen=True)
@@ -70,6 +136,9 @@ class Thruster:
     thrust_max_forward: float = math.inf    # N
     thrust_max_reverse: float = math.inf    # N (positive number; f >= -this)
     time_constant: float = 0.0              # s, first-order lag; 0 instantaneous
+    # (3, K) the table's command, thrust (N) and slope (N per unit) at each point, or None:
+    # the polynomial above (module docstring)
+    table: np.ndarray | None = None
 
     @property
     def column(self) -> np.ndarray:
@@ -80,6 +149,9 @@ class Thruster:
         """Steady thrust (N, along d) for a command in this thruster's unit."""
         if self.command == 'force':
             f = float(command)
+        elif self.table is not None:
+            n0, cmax = self.neutral, self.command_max
+            f = hermite(self.table, min(max(float(command), n0 - cmax), n0 + cmax))
         else:
             e = min(max(float(command) - self.neutral, -self.command_max), self.command_max)
             if abs(e) <= self.dead_band:
@@ -92,17 +164,26 @@ class Thruster:
 
 # Columns of the thruster table the compiled model reads (one row per thruster, the file's
 # order; hydrodynamics._thrusters): its configuration column [d; r x d], whether it follows a
-# thrust curve (1) or takes the force itself (0), and the curve's constants
+# thrust curve (1) or takes the force itself (0), and the curve's constants; a table's K
+# points (T_NTAB = K, 0 for the polynomial) follow from column THR_COLS on: K commands, K
+# thrusts (N), K slopes (the row is as long as the longest table; shorter ones end in zeros)
 T_COL = 0               # 0..5
 T_CURVE, T_NEUTRAL, T_CMAX, T_DEAD = 6, 7, 8, 9
 T_FWD1, T_FWD2, T_REV1, T_REV2, T_FMAX_FWD, T_FMAX_REV = 10, 11, 12, 13, 14, 15
-THR_COLS = 16
+T_NTAB = 16
+THR_COLS = 17
 
 
 def thruster_table(thrusters: Sequence[Thruster]) -> np.ndarray:
-    """(n, THR_COLS) float: the thrusters as the compiled model reads them (T_* columns)."""
-    out = np.zeros((len(thrusters), THR_COLS))
+    """(n, THR_COLS + 3 K_max) float: the thrusters as the compiled model reads them (T_*
+    columns, then each table's points)."""
+    k_max = max((t.table.shape[1] for t in thrusters if t.table is not None), default=0)
+    out = np.zeros((len(thrusters), THR_COLS + 3 * k_max))
     for i, t in enumerate(thrusters):
+        if t.table is not None:
+            k = t.table.shape[1]
+            out[i, T_NTAB] = k
+            out[i, THR_COLS:THR_COLS + 3 * k] = t.table.reshape(-1)
         out[i, T_COL:T_COL + 6] = t.column
         out[i, T_CURVE] = 0.0 if t.command == 'force' else 1.0
         out[i, T_NEUTRAL] = t.neutral
@@ -195,8 +276,21 @@ def _thruster(entry: object, where: str) -> Thruster:  # noqa: C901 (one check p
         raise ConfigError(f'{w}: command = {cmd!r}; known: {", ".join(COMMAND_TYPES)}')
     neutral = _number(entry, 'neutral', w, NEUTRAL[cmd])
     cmax = _number(entry, 'command_max', w, COMMAND_MAX.get(cmd, math.inf), nonnegative=True)
+    table = None
     if cmd == 'force':
+        if 'table' in entry:
+            raise ConfigError(f'{w}: table: a `command: force` thruster takes its thrust as '
+                              'the command; a table belongs to a pwm_us, setpoint or rpm one')
         fwd = rev = (1.0, 0.0)
+        dead = 0.0
+    elif 'table' in entry:
+        both = [k for k in ('forward', 'reverse', 'dead_band') if k in entry]
+        if both:
+            raise ConfigError(f'{w}: table and {", ".join(both)}: give the curve one way, the '
+                              'table (its zero-thrust points are the dead band) or the '
+                              'polynomial')
+        table = _table(entry['table'], w, neutral, cmax)
+        fwd = rev = (0.0, 0.0)
         dead = 0.0
     else:
         fwd = _pair(entry, 'forward', w)
@@ -210,7 +304,64 @@ def _thruster(entry: object, where: str) -> Thruster:  # noqa: C901 (one check p
         command_max=cmax, dead_band=dead, forward=fwd, reverse=rev,
         thrust_max_forward=_number(entry, 'thrust_max_forward', w, math.inf, nonnegative=True),
         thrust_max_reverse=_number(entry, 'thrust_max_reverse', w, math.inf, nonnegative=True),
-        time_constant=_number(entry, 'time_constant', w, 0.0, nonnegative=True))
+        time_constant=_number(entry, 'time_constant', w, 0.0, nonnegative=True), table=table)
+
+
+def _numbers(raw: object) -> np.ndarray | None:
+    """raw as a float array when it is a list of finite numbers, else None."""
+    if (not isinstance(raw, (list, tuple))
+            or not all(isinstance(a, (int, float)) and not isinstance(a, bool)
+                       and math.isfinite(a) for a in raw)):
+        return None
+    return np.array(raw, dtype=float)
+
+
+def _table(raw: object, w: str, neutral: float, cmax: float) -> np.ndarray:  # noqa: C901
+    """The `table:` of thruster w as (3, K): command, thrust (N), slope (pchip_slopes); one
+    ConfigError naming `table` and what is wrong (module docstring: the table's form)."""
+    form = ('give table: {unit: N|kgf|lbf, command: [...], thrust: [...]} (command in the '
+            "thruster's command unit, increasing; thrust along d, never falling)")
+    if not isinstance(raw, dict):
+        raise ConfigError(f'{w}: table = {raw!r}; {form}')
+    extra = sorted(set(map(str, raw)) - set(TABLE_KEYS))
+    missing = [k for k in TABLE_KEYS if k not in raw]
+    if extra or missing:
+        raise ConfigError(f'{w}: table: ' + '; '.join(
+            ([f'unknown key(s) {", ".join(extra)}'] if extra else [])
+            + ([f'missing {", ".join(missing)}'] if missing else [])) + f'; {form}')
+    unit = raw['unit']
+    if unit not in TABLE_UNITS:
+        raise ConfigError(f'{w}: table.unit = {unit!r}; the thrust unit is one of '
+                          f'{", ".join(TABLE_UNITS)}')
+    x, f = _numbers(raw['command']), _numbers(raw['thrust'])
+    for key, a in (('command', x), ('thrust', f)):
+        if a is None or len(a) < 2:
+            raise ConfigError(f'{w}: table.{key} is not a list of at least two finite '
+                              f'numbers; {form}')
+    assert x is not None and f is not None        # for mypy: checked just above
+    if len(x) != len(f):
+        raise ConfigError(f'{w}: table.command has {len(x)} points and table.thrust '
+                          f'{len(f)}: one thrust per command')
+    if np.any(np.diff(x) <= 0.0):
+        k = int(np.argmax(np.diff(x) <= 0.0))
+        raise ConfigError(f'{w}: table.command is not increasing ({x[k]:g} then '
+                          f'{x[k + 1]:g}): one point per command, in order')
+    if np.any(np.diff(f) < 0.0):
+        k = int(np.argmax(np.diff(f) < 0.0))
+        raise ConfigError(f'{w}: table.thrust falls from {f[k]:g} to {f[k + 1]:g} {unit} '
+                          f'(commands {x[k]:g} to {x[k + 1]:g}): a larger command never '
+                          'pushes less (a curve measured the other way round is a thruster '
+                          'pointing along -d)')
+    lo, hi = neutral - cmax, neutral + cmax
+    if x[0] < lo or x[-1] > hi or not x[0] <= neutral <= x[-1]:
+        raise ConfigError(f'{w}: table.command spans {x[0]:g}..{x[-1]:g}, not inside the '
+                          f'command range {lo:g}..{hi:g} around neutral {neutral:g}, or not '
+                          'across neutral: check the command unit (and neutral, command_max)')
+    if np.any(f[x < neutral] > 0.0) or np.any(f[x > neutral] < 0.0):
+        raise ConfigError(f'{w}: table.thrust is not <= 0 below neutral {neutral:g} and >= 0 '
+                          'above it: a command above neutral pushes along d')
+    f = f * TABLE_UNITS[unit]
+    return np.stack([x, f, pchip_slopes(x, f)])
 
 
 def thrusters_from_file(raw: object, where: str) -> tuple[list[Thruster], list[str]]:
@@ -234,3 +385,41 @@ def thrusters_from_file(raw: object, where: str) -> tuple[list[Thruster], list[s
         problems.append(f'thrusters: names {", ".join(dup)} appear more than once (each names '
                         'its command channel)')
     return out, problems
+
+
+def scaled_curves(raw: list, forward: float, reverse: float) -> list:
+    """A vehicle file's `thrusters:` entries (raw YAML mappings) with every thrust curve scaled:
+    the forward side (f > 0) by `forward`, the reverse side by `reverse`, polynomial
+    coefficients, table thrusts and saturations alike (a truth whose thrusters differ from the
+    file's, as worn propellers or another battery voltage make them). New mappings; raw is
+    unchanged (the entries may share one table through a YAML alias)."""
+    out = []
+    for entry in raw:
+        e = dict(entry)
+        if 'table' in e:
+            t = dict(e['table'])
+            t['thrust'] = [v * (forward if v > 0 else reverse) for v in t['thrust']]
+            e['table'] = t
+        for key, k in (('forward', forward), ('reverse', reverse)):
+            if key in e:
+                e[key] = [a * k for a in e[key]]
+        for key, k in (('thrust_max_forward', forward), ('thrust_max_reverse', reverse)):
+            if key in e:
+                e[key] = e[key] * k
+        out.append(e)
+    return out
+
+
+def curve_text(t: Thruster) -> str:
+    """One line saying thruster t's thrust curve (its form and numbers), for reports."""
+    if t.command == 'force':
+        return 'command = thrust (N)'
+    head = f'e = {t.command} - {t.neutral:g} saturated to +-{t.command_max:g}'
+    if t.table is not None:
+        x, f = t.table[0], t.table[1]
+        return (f'{head}; table of {len(x)} points, {x[0]:g}..{x[-1]:g} -> '
+                f'{f[0]:.4g}..{f[-1]:.4g} N, monotone cubic (PCHIP) between them, its end '
+                'values beyond')
+    return (f'{head}, no thrust for |e| <= {t.dead_band:g}, then e_d = e -+ {t.dead_band:g}: '
+            f'f = {t.forward[0]:.6g} e_d + {t.forward[1]:.6g} e_d^2 (e > 0), '
+            f'{t.reverse[0]:.6g} e_d - {t.reverse[1]:.6g} e_d^2 (e < 0)')
