@@ -30,7 +30,9 @@ Publications
     ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good, the
         last good estimate rule of auv_ident/session/guard.py: fused, finite, positive
         definite, innovations consistent; during a divergence nothing is published, so the
-        latched value stays the last good estimate):
+        latched value stays the last good estimate; with ``publish_rate_hz`` > 0 only the first
+        good update in each 1/rate interval of odometry stamps, session/messages.py
+        PublishGate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
         (vehicle file's units); velocity = 1-sigma; effort empty. The names and their number
         are fixed for the run, except once with ``coefficients`` [auto, ...] (below): at the
@@ -187,6 +189,7 @@ from auv_ident.session.messages import (
     current_twist_fields,
     DEFAULT_FRAME_IDS,
     NS_PER_S,
+    PublishGate,
 )
 from auv_ident.session.raw_session import has_raw_sensors
 from auv_ident.session.session import Event, IdentSession
@@ -251,6 +254,7 @@ class IdentifierNode(Node):
         self._odom_at_last_check = 0
         self._saved_steps = 0
         self._last_autosave = time.monotonic()
+        self._publish_gate = PublishGate(settings.publish_rate_hz)
         self._estimate = JointState()
         self._covariance = Float64MultiArray()
         self._lay_out()
@@ -426,7 +430,7 @@ class IdentifierNode(Node):
             ev = self._internal_error('odom', err)
         if self.session.auto is not None:
             self._follow_choice()
-        if ev.kind == 'update' and ev.good:
+        if ev.kind == 'update' and ev.good and self._publish_gate.due(ev.stamp_ns):
             self.publish_estimate(ev)
         self._report(ev)
         if self.session.notices:

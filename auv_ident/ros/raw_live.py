@@ -5,7 +5,8 @@ which drives a session/raw_session.py :class:`RawSession` message by message.
 Subscriptions: one per input of the map, with its type (RELIABLE, KEEP_LAST 1000, as the
 odometry path's), the commands first. Publications as the odometry path's: ``~/estimate``
 (JointState: names, estimates, 1-sigma) and ``~/covariance`` (Float64MultiArray, p x p) after
-every fused sensor message, latched; ``/diagnostics`` every 1 s and at once on a filter
+every fused sensor message (with ``publish_rate_hz`` > 0: the first in each 1/rate interval of
+stamps), latched; ``/diagnostics`` every 1 s and at once on a filter
 restart (RawSession.health and diagnostic_values). The services ``~/reset`` (restart the
 filter) and ``~/save`` (write ``save_path``: the estimate file with 'input_mode' 'raw sensors'
 and the sensor errors; also at shutdown) as on the odometry path.
@@ -21,7 +22,7 @@ from std_srvs.srv import Trigger
 
 from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
 from auv_ident.session.estimate_file import write_estimate_json
-from auv_ident.session.messages import NS_PER_S
+from auv_ident.session.messages import NS_PER_S, PublishGate
 from auv_ident.session.raw_session import RawSession
 
 STATUS_NAME = 'auv_ident identifier'
@@ -37,6 +38,7 @@ class RawLive:
         self.session = RawSession(settings)
         self.session.warm_up()
         self.taken = 0      # messages the subscriptions' callbacks took (the stop's drain)
+        self._publish_gate = PublishGate(settings.publish_rate_hz)
         names = self.session.names
         p = len(names)
         joined = ','.join(names)
@@ -72,7 +74,7 @@ class RawLive:
         if receive_ns is None and not s.input_entry(name).stamped:
             receive_ns = self.node.get_clock().now().nanoseconds
         ev = s.on_input(name, msg, receive_ns)
-        if ev.kind == 'update':
+        if ev.kind == 'update' and self._publish_gate.due(ev.stamp_ns):
             self.publish_estimate(ev)
         elif ev.kind == 'error':
             self.node.get_logger().error(ev.reason)

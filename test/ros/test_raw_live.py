@@ -100,6 +100,34 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         node.destroy_node()
 
 
+def test_raw_node_publishes_at_the_publish_rate(ctx, raw_example):
+    """publish_rate_hz 5: the same estimates as the session's, published for the first update
+    of each 0.2 s of stamps."""
+    bag, map_path = raw_example
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)), Parameter('coefficients', value=NAMES),
+        Parameter('publish_rate_hz', value=5.0)])
+    try:
+        published = []
+        node.raw.publish_estimate = published.append
+        events = _feed(node.raw.on_input, bag, map_path)
+        s = RawSession(IdentifierSettings.from_values(input_map=str(map_path),
+                                                      coefficients=NAMES))
+        expected = _feed(s.on_input, bag, map_path)
+        updates = [e for e in events if e.kind == 'update']
+        assert [e.stamp_ns for e in updates] == [e.stamp_ns for e in expected
+                                                 if e.kind == 'update']
+        np.testing.assert_array_equal(updates[-1].estimate,
+                                      [e for e in expected if e.kind == 'update'][-1].estimate)
+        firsts = {}
+        for e in updates:
+            firsts.setdefault(e.stamp_ns // 200_000_000, e)
+        assert len(updates) > 500 and 45 <= len(published) <= 55
+        assert published == list(firsts.values())
+    finally:
+        node.destroy_node()
+
+
 def test_raw_session_document_before_and_after_data(raw_example, tmp_path):
     bag, map_path = raw_example
     s = RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES))
