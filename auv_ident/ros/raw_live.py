@@ -3,7 +3,8 @@ pose; docs/raw_sensors.md) makes ros/identifier_node.py hand its work to :class:
 which drives a session/raw_session.py :class:`RawSession` message by message.
 
 Subscriptions: one per input of the map, with its type (RELIABLE, KEEP_LAST 1000, as the
-odometry path's), the commands first. Publications as the odometry path's: ``~/estimate``
+odometry path's), the commands first; an IMU's raw, its bytes read by ros/cdr.py ImuView.
+Publications as the odometry path's: ``~/estimate``
 (JointState: names, estimates, 1-sigma) and ``~/covariance`` (Float64MultiArray, p x p) after
 every fused sensor message (with ``publish_rate_hz`` > 0: the first in each 1/rate interval of
 stamps), latched; ``/diagnostics`` every 1 s and at once on a filter
@@ -16,12 +17,15 @@ from array import array
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.clock import Clock, ClockType
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
+from auv_ident.ros.cdr import ImuView, UndecodableMessage
 from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
 from auv_ident.session.estimate_file import write_estimate_json
+from auv_ident.session.input_map import IMU
 from auv_ident.session.messages import NS_PER_S, PublishGate
 from auv_ident.session.raw_session import RawSession
 
@@ -56,9 +60,13 @@ class RawLive:
         self.subscriptions = []
         for entry in imap.commands + imap.sensors:
             cls = message_class(entry.type, entry.topic)
-            self.subscriptions.append(node.create_subscription(
-                cls, entry.topic, lambda msg, name=entry.name: self.on_input(name, msg),
-                STREAM_QOS))
+            if entry.type == IMU:
+                # the fast stream read from its CDR bytes (ros/cdr.py ImuView)
+                callback, raw = self._imu_callback(entry.name, cls), True
+            else:
+                callback, raw = lambda msg, name=entry.name: self.on_input(name, msg), False
+            self.subscriptions.append(node.create_subscription(cls, entry.topic, callback,
+                                                               STREAM_QOS, raw=raw))
         self.srv_reset = node.create_service(Trigger, '~/reset', self.on_reset)
         self.srv_save = node.create_service(Trigger, '~/save', self.on_save)
         self.timer = node.create_timer(1.0, self.publish_diagnostics,
@@ -66,6 +74,22 @@ class RawLive:
         node.get_logger().info(
             f'identifying {", ".join(names)} of {self.session.vehicle.name} from raw sensors ('
             + ', '.join(f'{e.name} on {e.topic}' for e in imap.sensors) + ')')
+
+    def _imu_callback(self, name, cls):
+        """The callback of IMU input `name`'s raw subscription: its bytes through one reused
+        ImuView into :meth:`on_input`; bytes the view cannot read (not XCDR1) go through
+        rclpy, and bytes neither reads are one rejected conversion."""
+        view = ImuView()
+
+        def on_payload(payload):
+            if view.read(payload):
+                return self.on_input(name, view)
+            try:
+                msg = deserialize_message(payload, cls)
+            except Exception as err:             # noqa: BLE001 - undecodable bytes
+                msg = UndecodableMessage(f'{type(err).__name__}: {err}')
+            return self.on_input(name, msg)
+        return on_payload
 
     def on_input(self, name, msg, receive_ns=None):
         """One message of the map's input `name`; returns the session's Event."""

@@ -128,6 +128,56 @@ def test_raw_node_publishes_at_the_publish_rate(ctx, raw_example):
         node.destroy_node()
 
 
+def _rclpy_imu(m):
+    """An rclpy Imu with the fields of a bag's decoded one."""
+    msg = Imu()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = m.header.stamp.sec, m.header.stamp.nanosec
+    msg.header.frame_id = m.header.frame_id
+    for name in ('orientation', 'angular_velocity', 'linear_acceleration'):
+        src, dst = getattr(m, name), getattr(msg, name)
+        for k in ('x', 'y', 'z', 'w') if name == 'orientation' else ('x', 'y', 'z'):
+            setattr(dst, k, float(getattr(src, k)))
+        setattr(msg, name + '_covariance', np.asarray(getattr(m, name + '_covariance'), float))
+    return msg
+
+
+def test_node_reads_imu_bytes_as_the_messages(ctx, raw_example):
+    """The IMU subscription is raw (ros/cdr.py ImuView): its callback gives the events the
+    same messages give RawSession; bytes nobody can decode are one rejected message."""
+    from rclpy.serialization import serialize_message
+    bag, map_path = raw_example
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)), Parameter('coefficients', value=NAMES)])
+    try:
+        sub = next(s for s in node.raw.subscriptions if s.topic_name == '/imu')
+        assert sub.raw
+        s = RawSession(IdentifierSettings.from_values(input_map=str(map_path),
+                                                      coefficients=NAMES))
+        imap = load_input_map(str(map_path))
+        by_topic = {e.bag_topic: e.name for e in imap.inputs}
+        imu = 0
+        for topic, log_ns, msg in read_bag(bag, imap.topic_types):
+            name = by_topic[topic]
+            if name == 'imu':
+                msg = _rclpy_imu(msg)
+                got, expected = sub.callback(serialize_message(msg)), s.on_input(name, msg)
+                imu += 1
+            else:
+                got, expected = node.raw.on_input(name, msg, log_ns), s.on_input(name, msg,
+                                                                                  log_ns)
+            assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
+                                                            expected.reason)
+            assert np.array_equal(got.estimate, expected.estimate)
+            if imu == 300:
+                break
+        assert node.raw.session.counters.fused['imu'] > 250
+        ev = sub.callback(b'\x00\x01\x00\x00' + b'\xff' * 40)
+        # no header to read a stamp from: RawSession rejects it as any message without one
+        assert ev.kind == 'rejected' and node.raw.session.counters.rejected == 1
+    finally:
+        node.destroy_node()
+
+
 def test_raw_session_document_before_and_after_data(raw_example, tmp_path):
     bag, map_path = raw_example
     s = RawSession(IdentifierSettings.from_values(input_map=str(map_path), coefficients=NAMES))
