@@ -21,6 +21,7 @@ measured ~30 us): the same header, then (align 8) orientation x y z w, orientati
 angular_velocity x y z, angular_velocity_covariance 9, linear_acceleration x y z,
 linear_acceleration_covariance 9, all float64.
 """
+import copy
 import struct
 
 import numpy as np
@@ -205,3 +206,18 @@ class PayloadTemplate:
         for (a, b), values in zip(self.offsets, arrays):
             view[a:b] = np.ascontiguousarray(values, dtype='<f8').data.cast('B')
         return bytes(self.buffer)
+
+
+def _setter(name):
+    """setter(msg, values) of a float64 array field of a message (PayloadTemplate.build)."""
+    return lambda m, v: setattr(m, name, v.tolist())
+
+
+def estimate_templates(estimate, covariance, p, serialize):
+    """(~/estimate, ~/covariance) PayloadTemplates of a p-coefficient estimate: a JointState
+    whose position and velocity hold p values, and a Float64MultiArray of p*p, each laid out
+    (names, dimensions) as the messages given (copied); None for one that cannot be built."""
+    return (PayloadTemplate.build(copy.deepcopy(estimate), [(_setter('position'), p),
+                                                            (_setter('velocity'), p)], serialize),
+            PayloadTemplate.build(copy.deepcopy(covariance), [(_setter('data'), p * p)],
+                                  serialize, stamped=False))

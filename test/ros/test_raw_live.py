@@ -11,6 +11,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure, Imu, JointState
+from std_msgs.msg import Float64MultiArray
 
 from auv_ident.bags.reader import read_bag
 from auv_ident.core.filter.augmented import FilterConfig
@@ -77,8 +78,10 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         subs = {s.topic_name: s.msg_type for s in node.raw.subscriptions}
         assert subs['/imu'] is Imu and subs['/pressure'] is FluidPressure
         assert subs['/actuators'] is JointState and len(subs) == 4
-        estimates, diags = [], []
+        estimates, diags, covariances = [], [], []
         probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+        probe.create_subscription(Float64MultiArray, '/identifier/covariance',
+                                  covariances.append, LATCHED)
         probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
@@ -88,10 +91,17 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         np.testing.assert_allclose(last.estimate, ref.estimate, rtol=1e-12, atol=0)
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline and not (
-                estimates and list(estimates[-1].position) == list(last.estimate) and diags):
+                estimates and list(estimates[-1].position) == list(last.estimate) and diags
+                and covariances and list(covariances[-1].data) == list(last.cov.ravel())):
             ex.spin_once(timeout_sec=0.05)
         assert list(estimates[-1].name) == NAMES
         assert list(estimates[-1].position) == list(last.estimate)
+        assert list(estimates[-1].velocity) == list(last.std)
+        assert (estimates[-1].header.stamp.sec * 10**9 + estimates[-1].header.stamp.nanosec
+                == last.stamp_ns)
+        assert list(covariances[-1].data) == list(last.cov.ravel())
+        assert [d.label for d in covariances[-1].layout.dim] == ['row:' + ','.join(NAMES),
+                                                                 'col:' + ','.join(NAMES)]
         st = diags[-1].status[0]
         assert st.name == 'auv_ident identifier' and st.message in ('converging', 'converged')
         assert node.shutdown_save()
