@@ -169,7 +169,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.ros.cdr import OdometryView, PayloadTemplate, UndecodableMessage
+from auv_ident.ros.cdr import (
+    estimate_templates,
+    OdometryView,
+    PayloadTemplate,
+    UndecodableMessage,
+)
 from auv_ident.ros.raw_live import RawLive
 from auv_ident.ros.toolkit import (
     declare_parameters,
@@ -479,20 +484,14 @@ class IdentifierNode(Node):
         None where the bytes path is not available (the messages are published instead)."""
         if kind in self._templates:
             return self._templates[kind]
-        p = len(self.names)
-        if kind == 'estimate':
-            msg, arrays = copy.deepcopy(self._estimate), [
-                (lambda m, v: setattr(m, 'position', v.tolist()), p),
-                (lambda m, v: setattr(m, 'velocity', v.tolist()), p)]
-        elif kind == 'covariance':
-            msg, arrays = copy.deepcopy(self._covariance), [
-                (lambda m, v: setattr(m, 'data', v.tolist()), p * p)]
-        else:
-            msg = copy.deepcopy(self._current)
-            msg.header.frame_id = kind
-            arrays = [(_set_linear, 3), (lambda m, v: setattr(m.twist, 'covariance', v), 36)]
-        template = PayloadTemplate.build(msg, arrays, serialize_message,
-                                         stamped=kind != 'covariance')
+        if kind in ('estimate', 'covariance'):
+            self._templates['estimate'], self._templates['covariance'] = estimate_templates(
+                self._estimate, self._covariance, len(self.names), serialize_message)
+            return self._templates[kind]
+        msg = copy.deepcopy(self._current)
+        msg.header.frame_id = kind
+        arrays = [(_set_linear, 3), (lambda m, v: setattr(m.twist, 'covariance', v), 36)]
+        template = PayloadTemplate.build(msg, arrays, serialize_message)
         self._templates[kind] = template
         return template
 
