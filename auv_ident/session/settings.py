@@ -503,10 +503,10 @@ class IdentifierSettings:
              'the first good update in each 1/rate interval of message stamps; 0 = after every '
              'good update', unit='Hz', check=_non_negative,
         note='Every message is still processed and the estimates are the same; only what is '
-             'published thins out. Each publication costs the node about 0.1 ms of CPU per '
-             'subscriber-facing topic (docs/latency.md), as much as a filter step at 400 Hz, '
-             'so a fast IMU or odometry stream with a slower consumer wants e.g. 10. Offline '
-             'passes keep every update.')
+             'published thins out. An update published to a subscriber costs the node about '
+             '0.3 ms of CPU (the three topics, measured at 200 Hz odometry, docs/latency.md), '
+             'more than the update itself, so a fast IMU or odometry stream with a slower '
+             'consumer wants e.g. 10. Offline passes keep every update.')
     # the settings given: to from_values, or away from their default (not a setting itself)
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
