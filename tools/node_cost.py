@@ -71,31 +71,16 @@ def main(argv=None):
     rclpy.init(context=ctx)
     node = IdentifierNode(context=ctx, parameter_overrides=[
         Parameter('sample_time', value=T), Parameter('publish_rate_hz', value=a.publish_rate)])
-    session_on_input = node.session.on_input
-    publish_estimate = node.publish_estimate
     parts = {'deserialize': 0.0, 'session': 0.0, 'publish': 0.0}
     clock = time.thread_time
-
-    def timed_session(*args):
-        t0 = clock()
-        try:
-            return session_on_input(*args)
-        finally:
-            parts['session'] += clock() - t0
-
-    def timed_publish(ev):
-        t0 = clock()
-        publish_estimate(ev)
-        parts['publish'] += clock() - t0
-
-    node.session.on_input = timed_session
-    node.publish_estimate = timed_publish
+    node.session.on_input = _timed(node.session.on_input, parts, 'session')
+    node.publish_estimate = _timed(node.publish_estimate, parts, 'publish')
     cmd_t = odom_t = 0.0
     prof = cProfile.Profile() if a.profile else None
     for k, (cmd, odom) in enumerate(payloads):
         if k == warm:
             cmd_t = odom_t = 0.0
-            parts = dict.fromkeys(parts, 0.0)
+            parts.update(dict.fromkeys(parts, 0.0))    # in place: _timed holds it
             if prof is not None:
                 prof.enable()
         t0 = clock()
@@ -124,6 +109,17 @@ def main(argv=None):
         pstats.Stats(prof).sort_stats('cumulative').print_stats(35)
     node.destroy_node()
     rclpy.shutdown(context=ctx)
+
+
+def _timed(fn, parts, key):
+    """``fn`` adding its thread CPU time to ``parts[key]`` (s)."""
+    def timed(*args):
+        t0 = time.thread_time()
+        try:
+            return fn(*args)
+        finally:
+            parts[key] += time.thread_time() - t0
+    return timed
 
 
 def raw_cost(a):
@@ -160,27 +156,15 @@ def raw_cost(a):
             feed.append((raw.on_input, (e.name, m, ns)))
     clock = time.thread_time
     parts = {'session': 0.0, 'publish': 0.0}
-    session_on_input, publish_estimate = raw.session.on_input, raw.publish_estimate
-
-    def timed_session(*args):
-        t0 = clock()
-        try:
-            return session_on_input(*args)
-        finally:
-            parts['session'] += clock() - t0
-
-    def timed_publish(ev):
-        t0 = clock()
-        publish_estimate(ev)
-        parts['publish'] += clock() - t0
-
-    raw.session.on_input, raw.publish_estimate = timed_session, timed_publish
+    raw.session.on_input = _timed(raw.session.on_input, parts, 'session')
+    raw.publish_estimate = _timed(raw.publish_estimate, parts, 'publish')
     n, warm = len(feed), len(feed) // 10
     total = 0.0
     prof = cProfile.Profile() if a.profile else None
     for k, (callback, args) in enumerate(feed):
         if k == warm:
-            total, parts = 0.0, dict.fromkeys(parts, 0.0)
+            total = 0.0
+            parts.update(dict.fromkeys(parts, 0.0))
             if prof is not None:
                 prof.enable()
         t0 = clock()
