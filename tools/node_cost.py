@@ -15,6 +15,13 @@ mean over the samples after the first 10 % (warm-up), with process CPU time (thr
 Parts, each timed alone: rclpy's JointState deserialization; the command callback; the
 odometry callback; of that, the session's on_input (IdentSession) and publish_estimate.
 ``--profile`` prints a cProfile of the whole loop (cumulative, top 35).
+
+``--raw`` measures the raw-sensor path instead (ros/raw_live.py): the example raw bag
+(offline/raw_example.py: IMU at --imu-rate Hz, 5 Hz DVL, 10 Hz pressure, commands on change,
+--seconds long), each IMU message handed to the node's raw IMU callback as its CDR bytes from
+the bag (what its raw subscription gives), the others as the bag's decoded messages to
+RawLive.on_input; us per message, of which RawSession.on_input and publishing.
+``--publish-rate`` sets the node's publish_rate_hz (both paths).
 """
 import argparse
 import cProfile
@@ -32,7 +39,12 @@ def main(argv=None):
     ap.add_argument('--rate', type=float, default=200.0, help='Hz (default 200)')
     ap.add_argument('--seconds', type=float, default=60.0, help='simulated s (default 60)')
     ap.add_argument('--profile', action='store_true')
+    ap.add_argument('--raw', action='store_true', help='the raw-sensor path (docstring)')
+    ap.add_argument('--imu-rate', type=float, default=400.0, help='Hz, with --raw')
+    ap.add_argument('--publish-rate', type=float, default=0.0, help='publish_rate_hz')
     a = ap.parse_args(argv)
+    if a.raw:
+        return raw_cost(a)
 
     import rclpy
     from rclpy.parameter import Parameter
@@ -57,32 +69,18 @@ def main(argv=None):
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    node = IdentifierNode(context=ctx, parameter_overrides=[Parameter('sample_time', value=T)])
-    session_on_input = node.session.on_input
-    publish_estimate = node.publish_estimate
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('sample_time', value=T), Parameter('publish_rate_hz', value=a.publish_rate)])
     parts = {'deserialize': 0.0, 'session': 0.0, 'publish': 0.0}
     clock = time.thread_time
-
-    def timed_session(*args):
-        t0 = clock()
-        try:
-            return session_on_input(*args)
-        finally:
-            parts['session'] += clock() - t0
-
-    def timed_publish(ev):
-        t0 = clock()
-        publish_estimate(ev)
-        parts['publish'] += clock() - t0
-
-    node.session.on_input = timed_session
-    node.publish_estimate = timed_publish
+    node.session.on_input = _timed(node.session.on_input, parts, 'session')
+    node.publish_estimate = _timed(node.publish_estimate, parts, 'publish')
     cmd_t = odom_t = 0.0
     prof = cProfile.Profile() if a.profile else None
     for k, (cmd, odom) in enumerate(payloads):
         if k == warm:
             cmd_t = odom_t = 0.0
-            parts = dict.fromkeys(parts, 0.0)
+            parts.update(dict.fromkeys(parts, 0.0))    # in place: _timed holds it
             if prof is not None:
                 prof.enable()
         t0 = clock()
@@ -109,6 +107,78 @@ def main(argv=None):
     print(f'  of the callbacks: publish        {parts["publish"] * us:7.1f}')
     if prof is not None:
         pstats.Stats(prof).sort_stats('cumulative').print_stats(35)
+    node.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def _timed(fn, parts, key):
+    """``fn`` adding its thread CPU time to ``parts[key]`` (s)."""
+    def timed(*args):
+        t0 = time.thread_time()
+        try:
+            return fn(*args)
+        finally:
+            parts[key] += time.thread_time() - t0
+    return timed
+
+
+def raw_cost(a):
+    """The --raw measurement (module docstring)."""
+    import tempfile
+
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from auv_ident.bags.reader import read_bag
+    from auv_ident.offline.raw_example import write_raw_example
+    from auv_ident.ros.identifier_node import IdentifierNode
+    from auv_ident.session.input_map import IMU, load_input_map
+
+    bag, map_path = write_raw_example(tempfile.mkdtemp(prefix='node_cost_'),
+                                      duration=a.seconds, seed=5, imu_rate=a.imu_rate)
+    imap = load_input_map(str(map_path))
+    by_topic = {e.bag_topic: e for e in imap.inputs}
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)),
+        Parameter('coefficients', value=['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']),
+        Parameter('publish_rate_hz', value=a.publish_rate)])
+    raw = node.raw
+    imu_callback = {s.topic_name: s.callback for s in raw.subscriptions if s.raw}
+    feed = []
+    for (topic, ns, m), (_, _, payload) in zip(read_bag(bag, imap.topic_types),
+                                               read_bag(bag, imap.topic_types, raw=True)):
+        e = by_topic[topic]
+        if e.type == IMU:
+            feed.append((imu_callback[e.topic], (payload,)))
+        else:
+            feed.append((raw.on_input, (e.name, m, ns)))
+    clock = time.thread_time
+    parts = {'session': 0.0, 'publish': 0.0}
+    raw.session.on_input = _timed(raw.session.on_input, parts, 'session')
+    raw.publish_estimate = _timed(raw.publish_estimate, parts, 'publish')
+    n, warm = len(feed), len(feed) // 10
+    total = 0.0
+    prof = cProfile.Profile() if a.profile else None
+    for k, (callback, args) in enumerate(feed):
+        if k == warm:
+            total = 0.0
+            parts.update(dict.fromkeys(parts, 0.0))
+            if prof is not None:
+                prof.enable()
+        t0 = clock()
+        callback(*args)
+        total += clock() - t0
+    if prof is not None:
+        prof.disable()
+    us = 1e6 / (n - warm)
+    print(f'{n} raw messages (IMU {a.imu_rate:g} Hz), {n - warm} timed; us per message, CPU:')
+    print(f'  total (callback)                 {total * us:7.1f}')
+    print(f'  of it: RawSession.on_input       {parts["session"] * us:7.1f}')
+    print(f'  of it: publish                   {parts["publish"] * us:7.1f}')
+    if prof is not None:
+        pstats.Stats(prof).sort_stats('tottime').print_stats(35)
     node.destroy_node()
     rclpy.shutdown(context=ctx)
 

@@ -1,4 +1,5 @@
-"""Reading nav_msgs/Odometry straight from its CDR bytes (a raw subscription).
+"""Reading nav_msgs/Odometry and sensor_msgs/Imu straight from their CDR bytes (raw
+subscriptions).
 
 rclpy turns every received Odometry into a tree of Python message objects (measured 39 us per
 message: deserialize_message(bytes, Odometry)); the identifier needs 13 numbers, two strings
@@ -14,7 +15,13 @@ child_frame_id (align 4, same), pose.pose.position x y z, orientation x y z w, p
 encapsulations (XCDR2) and malformed payloads are left to rclpy's deserialize_message (the
 identifier's on_odom_payload); bytes that neither reads become an :class:`UndecodableMessage`,
 which the session rejects as a conversion error like any message without Odometry fields.
+
+sensor_msgs/Imu (:class:`ImuView`, the raw-sensor path's 400 Hz stream; rclpy's conversion
+measured ~30 us): the same header, then (align 8) orientation x y z w, orientation_covariance 9,
+angular_velocity x y z, angular_velocity_covariance 9, linear_acceleration x y z,
+linear_acceleration_covariance 9, all float64.
 """
+import copy
 import struct
 
 import numpy as np
@@ -51,15 +58,11 @@ class OdometryView:
 
     def read(self, payload):
         """Fill the view from CDR bytes; False if they are not XCDR1 or too short."""
-        if len(payload) < _SIZE or payload[0] != 0 or payload[1] not in (0, 1):
+        got = _header(payload, _SIZE)
+        if got is None:
             return False
-        head, length, pose7, twist6, f8 = _LE if payload[1] == 1 else _BE
-        sec, nanosec, n = head.unpack_from(payload, 4)
-        o = 16 + n
-        if n == 0 or o + 4 > len(payload):
-            return False
-        frame_id = payload[16:o - 1]
-        o += -(o - 4) % 4
+        fmt, frame_id, o = got
+        head, length, pose7, twist6, f8 = fmt
         (n,) = length.unpack_from(payload, o)
         o += 4
         child = payload[o:o + n - 1]
@@ -68,7 +71,7 @@ class OdometryView:
         if n == 0 or o + 680 > len(payload):
             return False
         stamp = self.header.stamp
-        stamp.sec, stamp.nanosec = sec, nanosec
+        stamp.sec, stamp.nanosec = head.unpack_from(payload, 4)[:2]
         self.header.frame_id = frame_id.decode('utf-8', 'replace')
         self.child_frame_id = child.decode('utf-8', 'replace')
         p, q = self.pose.pose.position, self.pose.pose.orientation
@@ -77,6 +80,61 @@ class OdometryView:
         lin, ang = self.twist.twist.linear, self.twist.twist.angular
         lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = twist6.unpack_from(payload, o + 344)
         self.twist.covariance = np.frombuffer(payload, f8, 36, o + 392)
+        return True
+
+
+def _header(payload, size):
+    """(formats, frame_id bytes, offset after it aligned to 4) of a std_msgs/Header at the
+    start of XCDR1 ``payload`` of at least ``size`` bytes; None if it is not that."""
+    if len(payload) < size or payload[0] != 0 or payload[1] not in (0, 1):
+        return None
+    fmt = _LE if payload[1] == 1 else _BE
+    n = fmt[0].unpack_from(payload, 4)[2]
+    o = 16 + n
+    frame_id = payload[16:o - 1]
+    o += -(o - 4) % 4
+    if n == 0 or o + 4 > len(payload):
+        return None
+    return fmt, frame_id, o
+
+
+_IMU_SIZE = 4 + 8 + 4 + 296     # without frame_id's bytes and padding
+
+
+class ImuView:
+    """One sensor_msgs/Imu's fields, refilled by :meth:`read` for every message (the
+    attribute paths of the message; the covariances are float64 arrays over the payload)."""
+    __slots__ = ('header', 'orientation', 'orientation_covariance', 'angular_velocity',
+                 'angular_velocity_covariance', 'linear_acceleration',
+                 'linear_acceleration_covariance')
+
+    def __init__(self):
+        self.header = _Fields()
+        self.header.stamp = _Fields()
+        self.header.frame_id = ''
+        self.orientation = _Fields()
+        self.angular_velocity = _Fields()
+        self.linear_acceleration = _Fields()
+
+    def read(self, payload):
+        """Fill the view from CDR bytes; False if they are not XCDR1 or too short."""
+        got = _header(payload, _IMU_SIZE)
+        if got is None:
+            return False
+        (head, _, pose7, twist6, f8), frame_id, o = got
+        o += -(o - 4) % 8
+        if o + 296 > len(payload):
+            return False
+        stamp = self.header.stamp
+        stamp.sec, stamp.nanosec = head.unpack_from(payload, 4)[:2]
+        self.header.frame_id = frame_id.decode('utf-8', 'replace')
+        q, w, a = self.orientation, self.angular_velocity, self.linear_acceleration
+        q.x, q.y, q.z, q.w = pose7.unpack_from(payload, o)[:4]
+        self.orientation_covariance = np.frombuffer(payload, f8, 9, o + 32)
+        w.x, w.y, w.z = twist6.unpack_from(payload, o + 104)[:3]
+        self.angular_velocity_covariance = np.frombuffer(payload, f8, 9, o + 128)
+        a.x, a.y, a.z = twist6.unpack_from(payload, o + 200)[:3]
+        self.linear_acceleration_covariance = np.frombuffer(payload, f8, 9, o + 224)
         return True
 
 
@@ -148,3 +206,18 @@ class PayloadTemplate:
         for (a, b), values in zip(self.offsets, arrays):
             view[a:b] = np.ascontiguousarray(values, dtype='<f8').data.cast('B')
         return bytes(self.buffer)
+
+
+def _setter(name):
+    """setter(msg, values) of a float64 array field of a message (PayloadTemplate.build)."""
+    return lambda m, v: setattr(m, name, v.tolist())
+
+
+def estimate_templates(estimate, covariance, p, serialize):
+    """(~/estimate, ~/covariance) PayloadTemplates of a p-coefficient estimate: a JointState
+    whose position and velocity hold p values, and a Float64MultiArray of p*p, each laid out
+    (names, dimensions) as the messages given (copied); None for one that cannot be built."""
+    return (PayloadTemplate.build(copy.deepcopy(estimate), [(_setter('position'), p),
+                                                            (_setter('velocity'), p)], serialize),
+            PayloadTemplate.build(copy.deepcopy(covariance), [(_setter('data'), p * p)],
+                                  serialize, stamped=False))

@@ -34,7 +34,9 @@ Publications
     ``~/estimate`` sensor_msgs/JointState, one per *good* odometry update (Event.good, the
         last good estimate rule of auv_ident/session/guard.py: fused, finite, positive
         definite, innovations consistent; during a divergence nothing is published, so the
-        latched value stays the last good estimate):
+        latched value stays the last good estimate; with ``publish_rate_hz`` > 0 only the first
+        good update in each 1/rate interval of odometry stamps, session/messages.py
+        PublishGate):
         header.stamp = the odometry stamp; name = coefficient names; position = estimates
         (vehicle file's units); velocity = 1-sigma; effort empty. The names and their number
         are fixed for the run, except once with ``coefficients`` [auto, ...] (below): at the
@@ -172,7 +174,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
-from auv_ident.ros.cdr import OdometryView, PayloadTemplate, UndecodableMessage
+from auv_ident.ros.cdr import (
+    estimate_templates,
+    OdometryView,
+    PayloadTemplate,
+    UndecodableMessage,
+)
 from auv_ident.ros.raw_live import RawLive
 from auv_ident.ros.toolkit import (
     declare_parameters,
@@ -192,6 +199,7 @@ from auv_ident.session.messages import (
     current_twist_fields,
     DEFAULT_FRAME_IDS,
     NS_PER_S,
+    PublishGate,
 )
 from auv_ident.session.raw_session import has_raw_sensors
 from auv_ident.session.session import Event, IdentSession
@@ -256,6 +264,7 @@ class IdentifierNode(Node):
         self._odom_at_last_check = 0
         self._saved_steps = 0
         self._last_autosave = time.monotonic()
+        self._publish_gate = PublishGate(settings.publish_rate_hz)
         self._estimate = JointState()
         self._covariance = Float64MultiArray()
         self._lay_out()
@@ -454,7 +463,7 @@ class IdentifierNode(Node):
             ev = self._internal_error('odom', err)
         if self.session.auto is not None:
             self._follow_choice()
-        if ev.kind == 'update' and ev.good:
+        if ev.kind == 'update' and ev.good and self._publish_gate.due(ev.stamp_ns):
             self.publish_estimate(ev)
         self._report(ev)
         if self.session.notices:
@@ -503,20 +512,14 @@ class IdentifierNode(Node):
         None where the bytes path is not available (the messages are published instead)."""
         if kind in self._templates:
             return self._templates[kind]
-        p = len(self.names)
-        if kind == 'estimate':
-            msg, arrays = copy.deepcopy(self._estimate), [
-                (lambda m, v: setattr(m, 'position', v.tolist()), p),
-                (lambda m, v: setattr(m, 'velocity', v.tolist()), p)]
-        elif kind == 'covariance':
-            msg, arrays = copy.deepcopy(self._covariance), [
-                (lambda m, v: setattr(m, 'data', v.tolist()), p * p)]
-        else:
-            msg = copy.deepcopy(self._current)
-            msg.header.frame_id = kind
-            arrays = [(_set_linear, 3), (lambda m, v: setattr(m.twist, 'covariance', v), 36)]
-        template = PayloadTemplate.build(msg, arrays, serialize_message,
-                                         stamped=kind != 'covariance')
+        if kind in ('estimate', 'covariance'):
+            self._templates['estimate'], self._templates['covariance'] = estimate_templates(
+                self._estimate, self._covariance, len(self.names), serialize_message)
+            return self._templates[kind]
+        msg = copy.deepcopy(self._current)
+        msg.header.frame_id = kind
+        arrays = [(_set_linear, 3), (lambda m, v: setattr(m.twist, 'covariance', v), 36)]
+        template = PayloadTemplate.build(msg, arrays, serialize_message)
         self._templates[kind] = template
         return template
 

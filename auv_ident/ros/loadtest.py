@@ -132,8 +132,10 @@ class _Receiver:
     """The load test's side of the estimates and /diagnostics: per sample k, when its estimate
     arrived (perf_counter and system clock) and its DDS timestamps; the last diagnostics."""
 
-    def __init__(self, n, T_ns):
+    def __init__(self, n, T_ns, every_sample=True):
         self.n, self.T_ns = n, T_ns
+        # False with the identifier's publish_rate_hz: the last sample may not be published
+        self.every_sample = every_sample
         self.recv_t = np.full(n, np.nan)
         self.cb_wall = np.zeros(n, dtype=np.int64)
         self.est_source = np.zeros(n, dtype=np.int64)
@@ -169,7 +171,8 @@ class _Receiver:
         """The last estimate is in, and a /diagnostics report counts every message."""
         d = self.diag
         return (d is not None and int(d['accepted']) + int(d['rejected'])
-                + int(d.get('odom_lost', 0)) >= self.n and self.last_k >= self.n - 1)
+                + int(d.get('odom_lost', 0)) >= self.n
+                and (self.last_k >= self.n - 1 or not self.every_sample))
 
 
 class _RssSampler:
@@ -292,11 +295,13 @@ def _read_json(path):
 def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle='nps_auv2',
                  seed=0, max_backlog=600, compute_samples=5000, env=None, log_dir=None,
                  start_timeout=90.0, drain_timeout=60.0, progress=None, split=False,
-                 samples_path=None):
+                 samples_path=None, publish_rate_hz=0.0):
     """Run the load test (module docstring); returns a dict of figures (format_loadtest).
 
     ``split``: receive the estimates with their MessageInfo, to split the latency at the DDS
     timestamps (module docstring). ``samples_path``: write the per-message times there (.npz).
+    ``publish_rate_hz``: the identifier's setting (0: an estimate per odometry, the latency
+    mode; > 0: the latency is that of the estimates published).
     Raises RuntimeError if the identifier does not start or dies."""
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -330,7 +335,8 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     err = open(err_path, 'w')
     proc = subprocess.Popen(
         [sys.executable, '-m', 'auv_ident', 'run', 'identifier', '--ros-args',
-         '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}'],
+         '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}',
+         '-p', f'publish_rate_hz:={float(publish_rate_hz)!r}'],
         env=env, cwd=REPO, stdout=out, stderr=err)
 
     # Every message serialized before the clock starts: the timed loop only publishes bytes,
@@ -342,7 +348,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     pub_t = np.full(n, np.nan)
     # the same path on the system clock, split at the DDS timestamps of the estimate
     pub_wall = np.zeros(n, dtype=np.int64)
-    receiver = _Receiver(n, int(round(T * 1e9)))
+    receiver = _Receiver(n, int(round(T * 1e9)), every_sample=not publish_rate_hz)
     stop = threading.Event()
 
     ctx = rclpy.context.Context()
@@ -397,6 +403,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
         saved = _read_json(save)
         result = {
             'vehicle': vehicle, 'rate_hz': float(rate_hz), 'sim_seconds': float(run.t[-1]),
+            'publish_rate_hz': float(publish_rate_hz),
             'samples': n, 'real_time_factor': float(real_time_factor),
             'achieved_real_time_factor':
                 float(run.t[-1] / max(pace.t_end - pace.t_start, 1e-9)),
@@ -467,7 +474,9 @@ def format_loadtest(d):
     lat, rss = d['latency_ms'], d['rss_mb']
     lines = [
         f"load test: {d['vehicle']}, {d['samples']} samples = {d['sim_seconds']:.0f} s of "
-        f"simulated time at {d['rate_hz']:g} Hz (odometry + actuator command per sample)",
+        f"simulated time at {d['rate_hz']:g} Hz (odometry + actuator command per sample); "
+        + (f"estimates published at {d['publish_rate_hz']:g} Hz" if d.get('publish_rate_hz')
+           else 'an estimate per odometry'),
         f"pacing: target {d['real_time_factor']:g}x real time, achieved "
         f"{d['achieved_real_time_factor']:.2f}x ({d['wall_publish_s']:.1f} s publishing, "
         f"{d['wall_drain_s']:.1f} s draining; {d['backlog_waits']} backlog waits at "
@@ -527,10 +536,15 @@ def main(argv=None):
                     help='also split the latency at the DDS timestamps of the estimate (receives '
                          'on the SingleThreadedExecutor, which adds to the end-to-end figure)')
     ap.add_argument('--samples', help='write the per-message times as .npz (profiling)')
+    ap.add_argument('--publish-rate', type=float, default=0.0, metavar='HZ',
+                    help="the identifier's publish_rate_hz (default 0: an estimate per "
+                         'odometry, the latency mode; > 0: the latency of the estimates '
+                         'published)')
     args = ap.parse_args(argv)
     d = run_loadtest(rate_hz=args.rate, sim_seconds=args.seconds,
                      real_time_factor=args.rtf, vehicle=args.vehicle, split=args.split,
-                     samples_path=args.samples, max_backlog=args.max_backlog)
+                     samples_path=args.samples, max_backlog=args.max_backlog,
+                     publish_rate_hz=args.publish_rate)
     print(format_loadtest(d))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as fh:

@@ -73,6 +73,28 @@ from auv_ident.core.errors import AuvIdentError
 from auv_ident.core.model.state import CURRENT_NAMES, FINS, Input, N_INPUT
 
 NS_PER_S = 1_000_000_000
+
+
+class PublishGate:
+    """Which good updates the live node publishes: all (``rate_hz`` 0), or the first in each
+    interval of 1/rate_hz s of message stamps (the ``publish_rate_hz`` setting). Message time,
+    not the wall clock, so a bag played at any speed publishes the same updates; a stamp in
+    an earlier interval (a time jump back, a restart) is published and starts over."""
+    __slots__ = ('period_ns', 'slot')
+
+    def __init__(self, rate_hz: float) -> None:
+        self.period_ns = round(NS_PER_S / rate_hz) if rate_hz > 0 else 0
+        self.slot: int | None = None
+
+    def due(self, stamp_ns: int) -> bool:
+        """True if the update stamped ``stamp_ns`` is to be published (then it counts)."""
+        if not self.period_ns:
+            return True
+        slot = int(stamp_ns) // self.period_ns
+        if slot == self.slot:
+            return False
+        self.slot = slot
+        return True
 # A covariance diagonal entry at or above this (state units squared: a 1-sigma of 1000 m, m/s,
 # rad or rad/s) says the message does not measure that channel (an imported log's unmeasured
 # channel, a multi-rate log's sensor without a sample at that row): with noise_source

@@ -129,7 +129,10 @@ def raw_record(entry: InputEntry, msg: Any, t: float,
         c_rate = _cov(msg.angular_velocity_covariance, 3, None if ned else _FLIP)
         cov = None
         if c_att is not None and c_rate is not None:
-            cov = np.block([[c_att, np.zeros((3, 3))], [np.zeros((3, 3)), c_rate]])
+            # filled in place: np.block costs ~20 us per message at 400 Hz
+            cov = np.zeros((6, 6))
+            cov[:3, :3] = c_att
+            cov[3:, 3:] = c_rate
         return RawMeasurement('imu', t, np.concatenate([q, rate]), cov, entry.name)
     if entry.type == DVL:
         v = msg.twist.twist.linear

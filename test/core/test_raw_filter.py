@@ -162,3 +162,17 @@ def test_process_many_is_process_one_by_one_bit_for_bit(quiet_run, model):
         np.testing.assert_array_equal(np.array(one.white[g]), np.array(many.white[g]))
     for g in one.info:
         np.testing.assert_array_equal(one.info[g], many.info[g])
+
+
+def test_imu_messages_without_a_covariance_get_the_default_noise(quiet_run, model):
+    """An IMU stream without covariances (a bag whose driver leaves them -1) is fused with the
+    default IMU noise; the reused noise matrix started as "made of None", so such a stream
+    was fused with zero noise and the filter blew up within 0.1 s."""
+    cfg, run = quiet_run
+    recs = [RawMeasurement('imu', r.t, r.values, None, r.sensor) if r.kind == 'imu' else r
+            for r in run.records if r.t < 5.0]
+    f = RawSensorFilter(model, FilterConfig(), sensors_of(cfg))
+    for r in recs:
+        f.process(r)
+    assert f.fused['imu'] > 400 and f.restarts == 0
+    assert np.all(np.isfinite(f.xf)) and np.all(np.isfinite(f.P))

@@ -553,3 +553,50 @@ def test_payload_template_gives_rclpy_bytes():
     with pytest.raises(ValueError):     # another length: an error, never a resized payload
         t.fill(0, 0, np.zeros(35))
     assert PayloadTemplate.build(Float64MultiArray(), [], serialize_message) is None  # no header
+
+
+def _random_imu(rng, i):
+    from sensor_msgs.msg import Imu
+    ids = ['', 'imu', 'imu_frd', 'imu_link_ned', 'b\u00f6dy', 'x' * (i % 13)]
+    msg = Imu()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(rng.integers(2**31)), int(i * 7919)
+    msg.header.frame_id = ids[i % 6]
+    v = rng.normal(size=37)
+    if i % 7 == 0:
+        v[rng.integers(37)] = (math.nan, math.inf, -math.inf)[i % 3]
+    o = msg.orientation
+    o.x, o.y, o.z, o.w = (float(a) for a in v[:4])
+    msg.orientation_covariance = v[4:13]
+    w = msg.angular_velocity
+    w.x, w.y, w.z = (float(a) for a in v[13:16])
+    msg.angular_velocity_covariance = v[16:25]
+    a = msg.linear_acceleration
+    a.x, a.y, a.z = (float(b) for b in v[25:28])
+    msg.linear_acceleration_covariance = v[28:37]
+    return msg
+
+
+def test_raw_imu_view_reads_what_rclpy_reads_and_refuses_what_it_cannot():
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Imu
+
+    from auv_ident.ros.cdr import ImuView
+    rng = np.random.default_rng(7)
+    view = ImuView()
+    fields = ('orientation', 'angular_velocity', 'linear_acceleration')
+    for i in range(300):
+        payload = serialize_message(_random_imu(rng, i))
+        assert view.read(payload), i
+        msg = deserialize_message(payload, Imu)
+        assert (view.header.stamp.sec, view.header.stamp.nanosec,
+                view.header.frame_id) == (msg.header.stamp.sec, msg.header.stamp.nanosec,
+                                          msg.header.frame_id)
+        for name in fields:
+            axes = ('x', 'y', 'z', 'w') if name == 'orientation' else ('x', 'y', 'z')
+            np.testing.assert_array_equal([getattr(getattr(view, name), k) for k in axes],
+                                          [getattr(getattr(msg, name), k) for k in axes])
+            np.testing.assert_array_equal(getattr(view, name + '_covariance'),
+                                          getattr(msg, name + '_covariance'))
+    assert not view.read(b'\x00\x07' + payload[2:])
+    for cut in range(0, len(payload), 5):
+        assert not view.read(payload[:cut]), cut

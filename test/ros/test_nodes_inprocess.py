@@ -174,6 +174,7 @@ def test_identifier_parameter_overrides(ctx, nodes):
     (IdentifierNode, 'initial', [1.0, 2.0]),
     (IdentifierNode, 'current', 'sideways'),
     (IdentifierNode, 'velocity_reference', 'bottom'),
+    (IdentifierNode, 'publish_rate_hz', -1.0),
     (SimulatorNode, 'current', [0.1]),
     (SimulatorNode, 'velocity_reference', 'bottom'),
 ])
@@ -350,6 +351,34 @@ def test_identifier_reads_odometry_bytes_as_the_messages(ctx, nodes, run):
     ev = ident.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
     assert ev.kind == 'rejected' and ev.code == 'conversion' and 'Undecodable' in ev.reason
     assert ident.session.counters.odom_rejected == 1 and ident.internal_errors == 0
+
+
+def test_publish_rate_thins_the_estimates_not_the_updates(ctx, nodes, run):
+    """publish_rate_hz 2: every message is processed as without it (the same events as
+    IdentSession's), and ~/estimate goes out for the first good update of each 0.5 s of
+    stamps only."""
+    ident = IdentifierNode(context=ctx, parameter_overrides=_params(publish_rate_hz=2.0))
+    nodes.append(ident)
+    published = []
+    ident.publish_estimate = published.append
+    session = IdentSession()
+    good = []
+    for topic, _, msg in _ordered_messages(run):
+        if topic == ACTUATOR_TOPIC:
+            ident.on_actuators(msg)
+            session.on_actuators(msg)
+        elif topic == ODOM_TOPIC:
+            got, expected = ident.on_odom(msg), session.on_odom(msg)
+            assert (got.kind, got.stamp_ns, got.good) == (expected.kind, expected.stamp_ns,
+                                                           expected.good)
+            assert np.array_equal(got.estimate, expected.estimate)
+            if got.kind == 'update' and got.good:
+                good.append(got)
+    firsts = {}
+    for e in good:
+        firsts.setdefault(e.stamp_ns // 500_000_000, e)
+    assert len(good) > 300 and 35 <= len(published) <= 45
+    assert published == list(firsts.values())
 
 
 def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypatch):

@@ -11,6 +11,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure, Imu, JointState
+from std_msgs.msg import Float64MultiArray
 
 from auv_ident.bags.reader import read_bag
 from auv_ident.core.filter.augmented import FilterConfig
@@ -85,8 +86,10 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         subs = {s.topic_name: s.msg_type for s in node.raw.subscriptions}
         assert subs['/imu'] is Imu and subs['/pressure'] is FluidPressure
         assert subs['/actuators'] is JointState and len(subs) == 4
-        estimates, diags = [], []
+        estimates, diags, covariances = [], [], []
         probe.create_subscription(JointState, '/identifier/estimate', estimates.append, LATCHED)
+        probe.create_subscription(Float64MultiArray, '/identifier/covariance',
+                                  covariances.append, LATCHED)
         probe.create_subscription(DiagnosticArray, '/diagnostics', diags.append, 10)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
@@ -96,15 +99,88 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         np.testing.assert_allclose(last.estimate, ref.estimate, rtol=1e-12, atol=0)
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline and not (
-                estimates and list(estimates[-1].position) == list(last.estimate) and diags):
+                estimates and list(estimates[-1].position) == list(last.estimate) and diags
+                and covariances and list(covariances[-1].data) == list(last.cov.ravel())):
             ex.spin_once(timeout_sec=0.05)
         assert list(estimates[-1].name) == NAMES
         assert list(estimates[-1].position) == list(last.estimate)
+        assert list(estimates[-1].velocity) == list(last.std)
+        assert (estimates[-1].header.stamp.sec * 10**9 + estimates[-1].header.stamp.nanosec
+                == last.stamp_ns)
+        assert list(covariances[-1].data) == list(last.cov.ravel())
+        assert [d.label for d in covariances[-1].layout.dim] == ['row:' + ','.join(NAMES),
+                                                                 'col:' + ','.join(NAMES)]
         st = diags[-1].status[0]
         assert st.name == 'auv_ident identifier' and st.message in ('converging', 'converged')
         assert node.shutdown_save()
     finally:
         probe.destroy_node()
+        node.destroy_node()
+
+
+def test_raw_node_publishes_at_the_publish_rate(ctx, raw_example):
+    """publish_rate_hz 5: the same estimates as the session's, published for the first update
+    of each 0.2 s of stamps."""
+    bag, map_path = raw_example
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)), Parameter('coefficients', value=NAMES),
+        Parameter('publish_rate_hz', value=5.0)])
+    try:
+        published = []
+        node.raw.publish_estimate = published.append
+        events = _feed(node.raw.on_input, bag, map_path)
+        s = RawSession(IdentifierSettings.from_values(input_map=str(map_path),
+                                                      coefficients=NAMES))
+        expected = _feed(s.on_input, bag, map_path)
+        updates = [e for e in events if e.kind == 'update']
+        assert [e.stamp_ns for e in updates] == [e.stamp_ns for e in expected
+                                                 if e.kind == 'update']
+        np.testing.assert_array_equal(updates[-1].estimate,
+                                      [e for e in expected if e.kind == 'update'][-1].estimate)
+        firsts = {}
+        for e in updates:
+            firsts.setdefault(e.stamp_ns // 200_000_000, e)
+        assert len(updates) > 500 and 45 <= len(published) <= 55
+        assert published == list(firsts.values())
+    finally:
+        node.destroy_node()
+
+
+def test_node_reads_imu_bytes_as_the_messages(ctx, raw_example):
+    """The IMU subscription is raw (ros/cdr.py ImuView): its callback gives the events the
+    same messages give RawSession; bytes nobody can decode are one rejected message."""
+    from rclpy.serialization import deserialize_message
+    bag, map_path = raw_example
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter('input_map', value=str(map_path)), Parameter('coefficients', value=NAMES)])
+    try:
+        sub = next(s for s in node.raw.subscriptions if s.topic_name == '/imu')
+        assert sub.raw
+        s = RawSession(IdentifierSettings.from_values(input_map=str(map_path),
+                                                      coefficients=NAMES))
+        imap = load_input_map(str(map_path))
+        by_topic = {e.bag_topic: e.name for e in imap.inputs}
+        imu = 0
+        for (topic, log_ns, msg), (_, _, payload) in zip(
+                read_bag(bag, imap.topic_types), read_bag(bag, imap.topic_types, raw=True)):
+            name = by_topic[topic]
+            if name == 'imu':
+                msg = deserialize_message(payload, Imu)
+                got, expected = sub.callback(payload), s.on_input(name, msg)
+                imu += 1
+            else:
+                got, expected = node.raw.on_input(name, msg, log_ns), s.on_input(name, msg,
+                                                                                  log_ns)
+            assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
+                                                            expected.reason)
+            assert np.array_equal(got.estimate, expected.estimate)
+            if imu == 300:
+                break
+        assert node.raw.session.counters.fused['imu'] > 250
+        ev = sub.callback(b'\x00\x01\x00\x00' + b'\xff' * 40)
+        # no header to read a stamp from: RawSession rejects it as any message without one
+        assert ev.kind == 'rejected' and node.raw.session.counters.rejected == 1
+    finally:
         node.destroy_node()
 
 

@@ -30,6 +30,7 @@ from auv_ident.session.messages import (
     joint_state_to_actuators,
     odometry_state,
     odometry_to_state,
+    PublishGate,
     stamp_to_ns,
 )
 from auv_ident.session.session import IdentSession
@@ -576,3 +577,15 @@ def test_lost_odometry_is_on_the_diagnostics(run):
     s2 = IdentSession()
     _feed_messages(s2, messages)
     assert dict(diagnostic_values(s2, s2.health()))['odom_lost'] == '0'
+
+
+def test_publish_gate_publishes_the_first_update_of_each_interval():
+    """publish_rate_hz: the first update in each 1/rate interval of stamps; 0 = every one; a
+    stamp back in an earlier interval (a time jump) is published and starts over."""
+    every = PublishGate(0.0)
+    assert all(every.due(ns) for ns in (5, 5, 6))
+    gate = PublishGate(10.0)                    # 100 ms intervals
+    ms = 1_000_000
+    stamps = [0, 40 * ms, 99 * ms, 100 * ms, 150 * ms, 310 * ms, 320 * ms, 120 * ms, 130 * ms]
+    assert [gate.due(ns) for ns in stamps] == [True, False, False, True, False, True, False,
+                                               True, False]

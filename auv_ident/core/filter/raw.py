@@ -226,7 +226,9 @@ class RawSensorFilter:
         self.noise_scale = {g: float(self.sensors.noise_scale.get(g, 1.0)) for g in GROUPS}
         self.bias_idx = np.array([self.lay.errors.get(e, -1) for e in rs.ERROR_NAMES[:3]],
                                  dtype=np.int64)
-        self._imu_cov_of: np.ndarray | None = None    # the covariance self._imu_R was made of
+        # what self._imu_R was made of: the covariance's bytes (None: the message gave none;
+        # b'': nothing yet)
+        self._imu_cov_key: bytes | None = b''
         self._imu_R = np.zeros((6, 6))
         self.xf: np.ndarray | None = None
         self.P: np.ndarray | None = None
@@ -302,9 +304,7 @@ class RawSensorFilter:
         assert self.xf is not None and self.P is not None and self.t is not None
         m0 = run[0]
         mount = self.sensors.mount(m0.sensor or 'imu')
-        if m0.covariance is not self._imu_cov_of:
-            self._imu_R = self._imu_noise(m0.covariance)
-            self._imu_cov_of = m0.covariance
+        self._imu_noise_of(m0.covariance)
         K = len(run)
         ts = np.fromiter((m.t for m in run), float, K)
         V = np.stack([m.values for m in run])
@@ -506,14 +506,20 @@ class RawSensorFilter:
             Rm[3:, :3] = f * cov[3:, :3]
         return Rm
 
+    def _imu_noise_of(self, cov: np.ndarray | None) -> None:
+        """Set self._imu_R to the IMU noise of ``cov``, reused while consecutive messages
+        carry the same covariance values: the live reader builds an array per message, and
+        the checks and the matrix cost more than the compiled update (tools/node_cost.py)."""
+        key = None if cov is None else cov.tobytes()
+        if key != self._imu_cov_key:
+            self._imu_R = self._imu_noise(cov)
+            self._imu_cov_key = key
+
     def _update_imu_compiled(self, m: RawMeasurement, mount: rs.Mounting) -> None:
-        """Attitude and rates through raw_update.imu_update; the noise matrix is reused while
-        consecutive messages share one covariance array (a reader that builds one per
-        message pays the checks each time)."""
+        """Attitude and rates through raw_update.imu_update, with the noise matrix of
+        :meth:`_imu_noise_of`."""
         assert self.xf is not None and self.P is not None
-        if m.covariance is not self._imu_cov_of:
-            self._imu_R = self._imu_noise(m.covariance)
-            self._imu_cov_of = m.covariance
+        self._imu_noise_of(m.covariance)
         w = np.empty(6)
         st, nis = imu_update(self.xf, self.P, m.values[:4], m.values[4:], mount.rotation,
                              self._imu_R, self.bias_idx, self.P_out, w, self.gain)
