@@ -108,9 +108,9 @@ def test_refinement_agrees_with_minpack(record):
 def test_refinement_never_holds_the_jacobian(record, monkeypatch):
     """The refinement's peak memory (tracemalloc) is a few residual vectors of 12 N values
     (the current and trial residuals, the filter's buffer): its Jacobian (12 N, p), p = 5
-    such vectors, exists a chunk of REFINE_CHUNK samples at a time only (8.8 vectors measured
-    with 64-sample chunks; with the whole record as one chunk, 13.8; MINPACK's lmder held two
-    Jacobians, about 14)."""
+    such vectors, exists a chunk of REFINE_CHUNK samples at a time only (8.9 vectors measured
+    with 64-sample chunks; 26 with the whole record as one chunk, where each difference
+    thread's filter output is a whole run's too)."""
     v, run, cfg = record
     model = Model(v, NAMES)
     runs = [Record(run.t, run.y, run.u)]

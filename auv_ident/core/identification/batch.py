@@ -7,10 +7,11 @@ online; its final estimate and covariance are the online answer.
 Pass 2 (offline, on by default): maximum likelihood over the whole record by the filter-error
 method (Maine & Iliff 1981; Jategaonkar 2015, ch. 5): for a candidate theta, a 12-state EKF with
 theta FIXED produces innovations nu_k and their covariances S_k; theta minimises
-sum_k nu_k^T S_k^-1 nu_k (Levenberg-Marquardt on normal equations summed over chunks of samples,
-levenberg_marquardt.py, started from pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that exceeds 1. Why:
-an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
-shared/method_notes.md); the batch pass uses every sample against one consistent theta.
+sum_k nu_k^T S_k^-1 nu_k (Levenberg-Marquardt on normal equations summed over chunks of
+samples, levenberg_marquardt.py, started from pass 1). Its covariance is (J^T J)^-1 scaled by
+the residual variance when that exceeds 1. Why: an EKF's one pass carries linearisation and
+initial-transient bias (about 2 % on Z_w at 500 rpm, shared/method_notes.md); the batch pass
+uses every sample against one consistent theta.
 
 The water current's identified components (core/model/current.py) are parameters of both passes
 like the coefficients: random-walk states of the augmented EKF, and constants of the
@@ -254,6 +255,7 @@ class FilterErrorResiduals:
         channels copies the state), so its time update and everything after are the
         whole run's, bit for bit. Memory: a chunk's buffers, whatever the record's length."""
         chunk = REFINE_CHUNK if chunk is None else int(chunk)
+        chunk = max(1, min(chunk, max(leg[0].shape[0] for leg in self.legs)))
         cm = self.model.compiled_fixed(theta)
         out = K.new_outputs(N_STATE, chunk + 1, want_white=True)
         y = np.empty((chunk + 1, N_STATE))

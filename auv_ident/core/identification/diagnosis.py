@@ -282,11 +282,12 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
            selection: Selection | None = None) -> Diagnosis:
     """Identifiability and diagnosis of an identification made with
     core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
-    residuals and their information and scores). U (N, 7): the inputs of the record the refinement ran on; dt
-    (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
-    the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
-    lag pairs a residual of one run with an input of another. depth : (N,) the runs' measured
-    z (m, NED; NaN where not measured) for the frame's plausibility, or None.
+    residuals and their Jacobian's information and scores). U (N, 7): the inputs of the record
+    the refinement ran on; dt (s): its sample time. Several runs (fit.bounds, U the runs'
+    inputs stacked as the residuals): the cross-correlation is taken on the runs stacked with
+    NaN gaps longer than its lags, so no lag pairs a residual of one run with an input of
+    another. depth : (N,) the runs' measured z (m, NED; NaN where not measured) for the frame's
+    plausibility, or None.
     information_cov : the covariance of what the run's information alone says (an automatic
     choice's, without the consider covariance of the left-out coefficients): the verdicts are
     judged by it, since a coefficient the run determines well is not 'not excited' because the

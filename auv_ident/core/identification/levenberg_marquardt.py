@@ -124,11 +124,61 @@ def lmpar(A: np.ndarray, g: np.ndarray, diag: np.ndarray, delta: float,
     return par, -x
 
 
+def _gradient_norm(g: np.ndarray, acnorm: np.ndarray, fnorm: float) -> float:
+    """lmder's gnorm: the largest |cos| between r and a column of J (|g_j| / (||J_j|| ||r||)),
+    0 for r = 0; acnorm (p,) the column norms of J."""
+    used = acnorm != 0.0
+    if fnorm == 0.0 or not np.any(used):
+        return 0.0
+    return float(np.max(np.abs(g[used]) / (acnorm[used] * fnorm)))
+
+
+def _reductions(A: np.ndarray, step: np.ndarray, par: float, pnorm: float, fnorm: float,
+                fnorm1: float) -> tuple[float, float, float]:
+    """lmder's (actual, predicted relative reduction of ||r||^2, directional derivative) of a
+    step (p,) of parameter par and scaled length pnorm from ||r|| = fnorm to fnorm1; the
+    predicted one from ||J s||^2 = s^T A s."""
+    actred = 1.0 - (fnorm1 / fnorm) ** 2 if 0.1 * fnorm1 < fnorm else -1.0
+    temp1 = math.sqrt(max(0.0, float(step @ A @ step))) / fnorm
+    temp2 = math.sqrt(par) * pnorm / fnorm
+    return (actred, temp1 * temp1 + temp2 * temp2 / 0.5, -(temp1 * temp1 + temp2 * temp2))
+
+
+def _new_radius(ratio: float, actred: float, dirder: float, fnorm: float, fnorm1: float,
+                delta: float, pnorm: float, par: float) -> tuple[float, float]:
+    """lmder's update of the trust radius and the parameter after a step: (delta, par)."""
+    if ratio <= 0.25:
+        temp = 0.5 if actred >= 0.0 else 0.5 * dirder / (dirder + 0.5 * actred)
+        if 0.1 * fnorm1 >= fnorm or temp < 0.1:
+            temp = 0.1
+        return temp * min(delta, pnorm / 0.1), par / temp
+    if par == 0.0 or ratio >= 0.75:
+        return pnorm / 0.5, 0.5 * par
+    return delta, par
+
+
+def _stop(actred: float, prered: float, ratio: float, delta: float, xnorm: float, gnorm: float,
+          ftol: float, xtol: float, nfev: int, max_nfev: int) -> int:
+    """lmder's info after a step: 1 ftol, 2 xtol, 3 both, 5 evaluations exhausted, 6/7/8 ftol,
+    xtol, gtol below the machine precision; 0 to go on."""
+    small = abs(actred) <= ftol and prered <= ftol and 0.5 * ratio <= 1.0
+    info = (1 if small else 0) + (2 if delta <= xtol * xnorm else 0)
+    if info != 0:
+        return info
+    if nfev >= max_nfev:
+        return 5
+    if abs(actred) <= EPS and prered <= EPS and 0.5 * ratio <= 1.0:
+        return 6
+    if delta <= EPS * xnorm:
+        return 7
+    return 8 if gnorm <= EPS else 0
+
+
 def levenberg_marquardt(residual_norm: Callable[[np.ndarray], float],
                         normal_equations: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
                         x0: np.ndarray, max_nfev: int, ftol: float = 1e-8, xtol: float = 1e-8,
                         gtol: float = 1e-8, factor: float = 100.0,
-                        diag: Optional[np.ndarray] = None) -> Solution:  # noqa: C901
+                        diag: Optional[np.ndarray] = None) -> Solution:
     """Minimise 0.5 ||r(x)||^2 by MINPACK lmder's trust-region Levenberg-Marquardt.
 
     residual_norm : x (p,) -> ||r(x)|| (a finite float; a failed evaluation should return a
@@ -159,18 +209,14 @@ def levenberg_marquardt(residual_norm: Callable[[np.ndarray], float],
                 D = np.where(acnorm == 0.0, 1.0, acnorm)
             xnorm = float(np.linalg.norm(D * x))
             delta = factor * xnorm if xnorm != 0.0 else factor
-        gnorm = 0.0
-        if fnorm != 0.0:
-            used = acnorm != 0.0
-            if np.any(used):
-                gnorm = float(np.max(np.abs(g[used]) / (acnorm[used] * fnorm)))
+        gnorm = _gradient_norm(g, acnorm, fnorm)
         if gnorm <= gtol:
             info = 4
             break
         if not fixed:
             D = np.maximum(D, acnorm)
         ratio = 0.0
-        while ratio < 1e-4:
+        while ratio < 1e-4 and info == 0:
             par, step = lmpar(A, g, D, delta, par)
             x_new = x + step
             pnorm = float(np.linalg.norm(D * step))
@@ -178,42 +224,16 @@ def levenberg_marquardt(residual_norm: Callable[[np.ndarray], float],
                 delta = min(delta, pnorm)
             fnorm1 = float(residual_norm(x_new))
             nfev += 1
-            actred = 1.0 - (fnorm1 / fnorm) ** 2 if 0.1 * fnorm1 < fnorm else -1.0
-            # predicted reduction and directional derivative: ||J s||^2 = s^T A s
-            temp1 = math.sqrt(max(0.0, float(step @ A @ step))) / fnorm
-            temp2 = math.sqrt(par) * pnorm / fnorm
-            prered = temp1 * temp1 + temp2 * temp2 / 0.5
-            dirder = -(temp1 * temp1 + temp2 * temp2)
+            actred, prered, dirder = _reductions(A, step, par, pnorm, fnorm, fnorm1)
             ratio = actred / prered if prered != 0.0 else 0.0
-            if ratio <= 0.25:
-                temp = 0.5 if actred >= 0.0 else 0.5 * dirder / (dirder + 0.5 * actred)
-                if 0.1 * fnorm1 >= fnorm or temp < 0.1:
-                    temp = 0.1
-                delta = temp * min(delta, pnorm / 0.1)
-                par = par / temp
-            elif par == 0.0 or ratio >= 0.75:
-                delta = pnorm / 0.5
-                par = 0.5 * par
+            delta, par = _new_radius(ratio, actred, dirder, fnorm, fnorm1, delta, pnorm, par)
             if ratio >= 1e-4:       # accepted
                 x = x_new
                 xnorm = float(np.linalg.norm(D * x))
                 fnorm = fnorm1
                 it += 1
                 A = g = None        # no longer those of x
-            small = abs(actred) <= ftol and prered <= ftol and 0.5 * ratio <= 1.0
-            info = (1 if small else 0) + (2 if delta <= xtol * xnorm else 0)
-            if info != 0:
-                break
-            if nfev >= max_nfev:
-                info = 5
-            elif abs(actred) <= EPS and prered <= EPS and 0.5 * ratio <= 1.0:
-                info = 6
-            elif delta <= EPS * xnorm:
-                info = 7
-            elif gnorm <= EPS:
-                info = 8
-            if info != 0:
-                break
+            info = _stop(actred, prered, ratio, delta, xnorm, gnorm, ftol, xtol, nfev, max_nfev)
     status = {1: 2, 2: 3, 3: 4, 4: 1, 5: 0, 6: 2, 7: 3, 8: 1}[info]
     return Solution(x=x, cost=0.5 * fnorm * fnorm, status=status, message=MESSAGES[status],
                     nfev=nfev, njev=njev, information=A, gradient=g)
