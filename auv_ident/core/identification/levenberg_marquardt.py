@@ -198,11 +198,12 @@ def levenberg_marquardt(residual_norm: Callable[[np.ndarray], float],
         raise ValueError(f'diag must be {p} positive scales, got {diag!r}')
     fnorm = float(residual_norm(x))
     nfev, njev, it, info = 1, 0, 1, 0
-    A = g = None
     delta = xnorm = par = 0.0
+    at_x = False        # whether A, g are those of x (not after an accepted last step)
     while info == 0:
         A, g = normal_equations(x)
         njev += 1
+        at_x = True
         acnorm = np.sqrt(np.clip(np.diag(A), 0.0, None))
         if it == 1:
             if not fixed:
@@ -232,11 +233,12 @@ def levenberg_marquardt(residual_norm: Callable[[np.ndarray], float],
                 xnorm = float(np.linalg.norm(D * x))
                 fnorm = fnorm1
                 it += 1
-                A = g = None        # no longer those of x
+                at_x = False
             info = _stop(actred, prered, ratio, delta, xnorm, gnorm, ftol, xtol, nfev, max_nfev)
     status = {1: 2, 2: 3, 3: 4, 4: 1, 5: 0, 6: 2, 7: 3, 8: 1}[info]
     return Solution(x=x, cost=0.5 * fnorm * fnorm, status=status, message=MESSAGES[status],
-                    nfev=nfev, njev=njev, information=A, gradient=g)
+                    nfev=nfev, njev=njev, information=A if at_x else None,
+                    gradient=g if at_x else None)
 
 
 def forward_steps(z: np.ndarray, rel_step: float) -> np.ndarray:
@@ -316,7 +318,7 @@ class ChunkedForwardDifferences:
         h = forward_steps(x, self.rel_step)
         dh = (x + h) - x
 
-        def start(i):
+        def start(i: int) -> Iterator[Optional[np.ndarray]]:
             x1 = x.copy()
             x1[i] = x[i] + h[i]
             return self.stream(x1)
