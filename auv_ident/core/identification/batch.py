@@ -319,10 +319,10 @@ class FilterErrorResiduals:
 
 RELATIVE_STEP = 1e-5    # forward-difference step of the refinement, relative to each parameter
 LM_TOLERANCE = 1e-8     # ftol, xtol and gtol of the Levenberg-Marquardt fit (MINPACK lmder's)
-# samples per piece of the refinement's residuals and Jacobian: (p + 1) x 12 x REFINE_CHUNK
-# floats of Jacobian and filter outputs at once (0.7 MB at p = 6) instead of 12 N x p twice
-# (70 MB at N = 60 000); the pieces are synchronised across the difference threads, so
-# shorter ones would cost more waiting
+# samples per piece of the refinement's residuals and Jacobian: 4 p x 12 x REFINE_CHUNK floats
+# of Jacobian and filter buffers at once (2.4 MB at p = 6) instead of 12 N x p twice (70 MB at
+# N = 60 000); the pieces are synchronised across the difference threads, so shorter ones
+# would cost more waiting
 REFINE_CHUNK = 1024
 
 

@@ -336,6 +336,10 @@ class ChunkedForwardDifferences:
                 if piece is None:
                     return i
             rows = next(iter(pieces.values())).size if pieces else min(r0.size - at, 4096 * m)
+            if rows % m or at + rows > r0.size or any(q.size != rows for q in pieces.values()):
+                raise ValueError(f'the streams gave pieces of {[q.size for q in pieces.values()]}'
+                                 f' rows at row {at} of {r0.size}: they must be equal multiples'
+                                 f' of {m} within the residual vector')
             if Jc is None or Jc.shape[0] < rows:
                 Jc = np.empty((rows, p))
             J = Jc[:rows]
