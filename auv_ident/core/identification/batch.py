@@ -7,10 +7,11 @@ online; its final estimate and covariance are the online answer.
 Pass 2 (offline, on by default): maximum likelihood over the whole record by the filter-error
 method (Maine & Iliff 1981; Jategaonkar 2015, ch. 5): for a candidate theta, a 12-state EKF with
 theta FIXED produces innovations nu_k and their covariances S_k; theta minimises
-sum_k nu_k^T S_k^-1 nu_k (Gauss-Newton/Levenberg-Marquardt, scipy least_squares, started from
-pass 1). Its covariance is (J^T J)^-1 scaled by the residual variance when that exceeds 1. Why:
-an EKF's one pass carries linearisation and initial-transient bias (about 2 % on Z_w at 500 rpm,
-shared/method_notes.md); the batch pass uses every sample against one consistent theta.
+sum_k nu_k^T S_k^-1 nu_k (Levenberg-Marquardt on normal equations summed over chunks of
+samples, levenberg_marquardt.py, started from pass 1). Its covariance is (J^T J)^-1 scaled by
+the residual variance when that exceeds 1. Why: an EKF's one pass carries linearisation and
+initial-transient bias (about 2 % on Z_w at 500 rpm, shared/method_notes.md); the batch pass
+uses every sample against one consistent theta.
 
 The water current's identified components (core/model/current.py) are parameters of both passes
 like the coefficients: random-walk states of the augmented EKF, and constants of the
@@ -30,7 +31,6 @@ import threading
 import time
 
 import numpy as np
-from scipy.optimize import _minpack, OptimizeResult
 
 from auv_ident.core.errors import ConfigError, DimensionError, DivergenceError, DomainError
 from auv_ident.core.filter import ekf as K
@@ -40,6 +40,10 @@ from auv_ident.core.filter.timing import (
     DEFAULT_MAX_BRIDGE,
     nominal_sample_time,
     time_steps,
+)
+from auv_ident.core.identification.levenberg_marquardt import (
+    ChunkedForwardDifferences,
+    levenberg_marquardt,
 )
 from auv_ident.core.identification.results import (
     Estimate,
@@ -240,6 +244,49 @@ class FilterErrorResiduals:
         ok, white = self(theta)
         return np.nan_to_num(white.ravel()) if ok else None
 
+    def chunks(self, theta, chunk=None):
+        """The residual vector at theta (what :meth:`vector` gives) in pieces: a generator of
+        the whitened innovations of `chunk` samples at a time (None: REFINE_CHUNK), each
+        (rows * 12,) with NaN as 0, a view of one buffer overwritten by the next piece; it
+        yields None and stops when a filter stops (the model left its domain).
+
+        The filter is run a chunk at a time: the next chunk starts from the posterior of the
+        last sample before it, behind a sample with no measurement (an update without
+        channels copies the state), so its time update and everything after are the
+        whole run's, bit for bit. Memory: a chunk's buffers, whatever the record's length."""
+        chunk = REFINE_CHUNK if chunk is None else int(chunk)
+        chunk = max(1, min(chunk, max(leg[0].shape[0] for leg in self.legs)))
+        cm = self.model.compiled_fixed(theta)
+        out = K.new_outputs(N_STATE, chunk + 1, want_white=True)
+        y = np.empty((chunk + 1, N_STATE))
+        y[0] = np.nan
+        flat = np.empty(chunk * N_STATE)
+        for Y, U, tl, x0, P0 in self.legs:
+            N = Y.shape[0]
+            restarts = np.flatnonzero(tl.n_sub[1:] == 0) + 1
+            for k0 in range(0, N, chunk):
+                k1 = min(N, k0 + chunk)
+                n = k1 - k0
+                if k0 == 0:
+                    K.run_filter(x0, P0, Y[:k1], U[:k1], cm, self.settings,
+                                 K.Timeline(tl.n_sub[:k1], tl.h[:k1], tl.x0, tl.sd0), out)
+                    white = out.white[:n]
+                else:
+                    r = int(np.searchsorted(restarts, k0))  # restarts before sample k0
+                    y[1:n + 1] = Y[k0:k1]
+                    K.run_filter(out.xa.copy(), out.P.copy(), y[:n + 1], U[k0 - 1:k1], cm,
+                                 self.settings, K.Timeline(tl.n_sub[k0 - 1:k1],
+                                                           tl.h[k0 - 1:k1], tl.x0[r:],
+                                                           tl.sd0[r:]), out)
+                    white = out.white[1:n + 1]
+                if out.stats[0] != K.OK:
+                    yield None
+                    return
+                piece = flat[:n * N_STATE]
+                np.copyto(piece, white.reshape(-1))
+                np.nan_to_num(piece, copy=False)
+                yield piece
+
     def forward_differences(self, theta, steps, threads=None):
         """Forward-difference derivatives of the residual vector with respect to each
         parameter: column i = (r(theta + steps[i] e_i) - r(theta)) / steps[i], the columns
@@ -271,100 +318,12 @@ class FilterErrorResiduals:
 
 
 RELATIVE_STEP = 1e-5    # forward-difference step of the refinement, relative to each parameter
-LM_TOLERANCE = 1e-8     # ftol, xtol and gtol of the Levenberg-Marquardt fit (least_squares')
-# scipy.optimize.least_squares' status and messages of its 'lm' method, from MINPACK's info
-_LM_STATUS = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
-_LM_MESSAGES = {
-    -1: 'Improper input parameters status returned from `leastsq`',
-    0: 'The maximum number of function evaluations is exceeded.',
-    1: '`gtol` termination condition is satisfied.',
-    2: '`ftol` termination condition is satisfied.',
-    3: '`xtol` termination condition is satisfied.',
-    4: 'Both `ftol` and `xtol` termination conditions are satisfied.'}
-
-
-class ForwardJacobian:
-    """The Jacobian of a residual vector by forward differences, in one buffer reused by every
-    evaluation (scipy's least_squares(diff_step=...) keeps the p perturbed residual vectors,
-    their differences, their quotients and the Jacobian at once). The numbers are scipy 1.17's
-    2-point rule to the bit: step h_i = rel_step * sign(z_i) * |z_i| (sqrt(eps) * max(1, |z_i|)
-    where that adds nothing to z_i), column i = (r(z + h_i e_i) - r(z)) / ((z_i + h_i) - z_i).
-
-    residuals : z -> (M,) new array; mapper : map-like evaluating the p columns (a thread
-    pool's map); residuals_into : None, or (z, out) -> None writing r(z) into out (M,), the
-    same numbers without a new (M,) array per column (one fewer vector of 12 N values per
-    thread at the refinement's peak, docs/reliability.md bounded memory). :meth:`fun` is the
-    residual function to fit (it remembers its last point and value, the r(z) a Jacobian at
-    that point starts from, as scipy's does); :meth:`rows` gives the Jacobian as (p, M) rows,
-    a call as (M, p) (a Fortran-ordered view, as scipy's); both are the buffer, overwritten by
-    the next evaluation at another point."""
-
-    def __init__(self, residuals, m, p, rel_step=RELATIVE_STEP, mapper=map,
-                 residuals_into=None):
-        self.residuals = residuals
-        self.residuals_into = residuals_into
-        self.rel_step = rel_step
-        self.mapper = mapper
-        self._rows = np.empty((p, m))    # row i: column i of the Jacobian
-        self._at = None                  # the point whose Jacobian the buffer holds
-        self._last = None                # (z, r(z)) of the last fun call
-
-    def fun(self, z):
-        r = self.residuals(z)
-        self._last = (np.array(z, dtype=float), r)
-        return r
-
-    def __call__(self, z):
-        return self.rows(z).T
-
-    def rows(self, z):
-        z = np.array(z, dtype=float)
-        out = self._rows
-        if self._at is not None and np.array_equal(self._at, z):
-            return out
-        if self._last is not None and np.array_equal(self._last[0], z):
-            r0 = self._last[1]
-        else:
-            r0 = self.fun(z)
-        self._at = None                  # being overwritten
-        sign = (z >= 0).astype(float) * 2 - 1
-        h = self.rel_step * sign * np.abs(z)
-        eps_step = np.finfo(float).eps ** 0.5
-        h = np.where(((z + h) - z) == 0, eps_step * sign * np.maximum(1.0, np.abs(z)), h)
-
-        def column(i):
-            z1 = z.copy()
-            z1[i] = z[i] + h[i]
-            if self.residuals_into is None:
-                np.subtract(self.residuals(z1), r0, out=out[i])
-            else:
-                self.residuals_into(z1, out[i])
-                out[i] -= r0
-            out[i] /= (z[i] + h[i]) - z[i]
-
-        for _ in self.mapper(column, range(z.size)):
-            pass
-        self._at = z
-        return out
-
-
-def levenberg_marquardt(jac, z0, max_nfev):
-    """least_squares(jac.fun, z0, jac=jac, method='lm', x_scale=1, max_nfev=max_nfev): the same
-    MINPACK lmder call with the same arguments, without least_squares' copies of the (M, p)
-    Jacobian (five more, 170 MB at M = 720 000, p = 6: measured); the Jacobian goes to MINPACK
-    as the (p, M) rows it is computed in (col_deriv). jac : ForwardJacobian.
-
-    Returns a scipy.optimize.OptimizeResult with x, fun, cost, jac (at x, (M, p): jac's
-    buffer), status, message and nfev as least_squares gives them."""
-    z0 = np.array(z0, dtype=float)
-    x, info, ier = _minpack._lmder(jac.fun, jac.rows, z0, (), True, True, LM_TOLERANCE,
-                                   LM_TOLERANCE, LM_TOLERANCE, max_nfev, 100.0,
-                                   np.ones(z0.size))
-    f, nfev = info['fvec'], int(info['nfev'])
-    del info        # MINPACK's own copy of the Jacobian, no longer needed
-    status = _LM_STATUS[ier]
-    return OptimizeResult(x=x, fun=f, cost=0.5 * np.dot(f, f), jac=jac(x), status=status,
-                          message=_LM_MESSAGES[status], nfev=nfev)
+LM_TOLERANCE = 1e-8     # ftol, xtol and gtol of the Levenberg-Marquardt fit (MINPACK lmder's)
+# samples per piece of the refinement's residuals and Jacobian: 4 p x 12 x REFINE_CHUNK floats
+# of Jacobian and filter buffers at once (2.4 MB at p = 6) instead of 12 N x p twice (70 MB at
+# N = 60 000); the pieces are synchronised across the difference threads, so shorter ones
+# would cost more waiting
+REFINE_CHUNK = 1024
 
 
 def difference_threads():
@@ -394,11 +353,16 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
     residual vector is the runs' whitened innovations stacked in order, and the covariance uses
     all of them. T (s): the nominal sample time (None: the first run's median interval);
     max_step, max_bridge as for run_ekf. Returns a Refinement: theta, cov, the cost per
-    residual, the Jacobian (sum N * 12, p) of the whitened innovations with respect to theta,
-    whether the optimiser converged, its message and evaluations, and with details=True the
-    innovations at the solution, white (sum N, 12) (NaN: no measurement). cov is (J^T J)^-1
-    times the cost per residual when that exceeds 1 (the white-noise covariance;
-    core/identification/uncertainty.py has the one for coloured residuals)."""
+    residual, the information J^T J (p, p) and the per-sample scores J_k^T r_k (sum N, p) of
+    the whitened innovations' Jacobian J with respect to theta, whether the optimiser
+    converged, its message and evaluations, and with details=True the innovations at the
+    solution, white (sum N, 12) (NaN: no measurement). cov is (J^T J)^-1 times the cost per
+    residual when that exceeds 1 (the white-noise covariance; core/identification/
+    uncertainty.py has the one for coloured residuals).
+
+    The fit is MINPACK lmder's Levenberg-Marquardt on normal equations summed a chunk of
+    REFINE_CHUNK samples at a time (core/identification/levenberg_marquardt.py): the
+    Jacobian (12 N, p) is never held, only a chunk of it."""
     p = model.p
     fer = FilterErrorResiduals(model, cfg, runs, T=T, max_step=max_step,
                                max_bridge=max_bridge)
@@ -414,38 +378,37 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
         r = fer.vector(z * scale)
         return np.full(white.size, 1e3) if r is None else r
 
-    def residuals_into(z, out):
-        # residuals(z) written into out (a row of the Jacobian's buffer): the same numbers
-        # (fer.vector is nan_to_num of the thread's innovations) without a new vector
+    def stream(z):
         if progress is not None:
             with lock:
                 progress()
-        ok, w = fer(z * scale)
-        if ok:
-            np.copyto(out, w.reshape(-1))
-            np.nan_to_num(out, copy=False)
-        else:
-            out[:] = 1e3
+        return fer.chunks(z * scale)
 
     z0 = theta_start / scale
     with ThreadPoolExecutor(difference_threads()) as pool:
-        # the Jacobian's columns on the pool's threads, whatever scipy's version
-        jac = ForwardJacobian(residuals, white.size, p, mapper=pool.map,
-                              residuals_into=residuals_into)
-        sol = levenberg_marquardt(jac, z0, max_nfev * p)
-    J = sol.jac         # the Jacobian's own buffer, scaled in place (not another copy)
-    J /= scale[None, :]
-    n_res = np.count_nonzero(sol.fun)
+        # the Jacobian's p columns, a chunk of samples at a time, on the pool's threads
+        fd = ChunkedForwardDifferences(residuals, stream, N_STATE, RELATIVE_STEP,
+                                       mapper=pool.map)
+        # diag ones: the parameters are already scaled by their size (least_squares' x_scale=1)
+        sol = levenberg_marquardt(fd.norm, fd.normal_equations, z0, max_nfev * p,
+                                  LM_TOLERANCE, LM_TOLERANCE, LM_TOLERANCE, diag=np.ones(p))
+        if sol.information is None:     # the last step ended the fit: its sums at x
+            fd.normal_equations(sol.x)
+    assert fd.base is not None and fd.scores is not None
+    r = fd.base[1]                      # the residuals at sol.x
+    information = fd.information / np.outer(scale, scale)     # J^T J in theta's units
+    n_res = np.count_nonzero(r)
     s2 = 2.0 * sol.cost / max(1, n_res - p)
     try:
-        cov = np.linalg.inv(J.T @ J) * max(1.0, s2)
+        cov = np.linalg.inv(information) * max(1.0, s2)
     except np.linalg.LinAlgError:
         raise DivergenceError('batch refinement: the coefficients are not identifiable from '
                               'this run (singular information matrix)') from None
     if details:
         residuals(sol.x)        # the innovations at the solution (the last call may differ)
-    return Refinement(estimate=sol.x * scale, cov=cov, cost=s2, jacobian=J,
-                      converged=sol.status > 0, message=sol.message, nfev=sol.nfev,
+    return Refinement(estimate=sol.x * scale, cov=cov, cost=s2, information=information,
+                      scores=fd.scores / scale, converged=sol.status > 0,
+                      message=sol.message, nfev=sol.nfev,
                       white=white.copy() if details else None)
 
 

@@ -35,7 +35,7 @@ from auv_ident.core.identification.plausibility import (
 )
 from auv_ident.core.identification.results import Diagnosis, percent, Selection, times
 from auv_ident.core.identification.uncertainty import (
-    identifiability,
+    identifiability_from_information,
     input_correlation,
     LJUNG_BOX_LAGS,
     split_rows,
@@ -130,10 +130,11 @@ def weak_notes(verdicts: Verdicts) -> list[str]:
 
 
 def coefficient_verdicts(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray,
-                         J: np.ndarray, cov: np.ndarray | None) -> Verdicts:
-    """identifiability() of the run with the excitation advice for the weak ones."""
-    return with_advice(vehicle, identifiability(J, estimate, names, cov=cov,
-                                                absolute_std=current_std_limits(names)))
+                         information: np.ndarray, cov: np.ndarray | None) -> Verdicts:
+    """identifiability() of the run (from its information J^T J (p, p)) with the excitation
+    advice for the weak ones."""
+    return with_advice(vehicle, identifiability_from_information(
+        information, estimate, names, cov=cov, absolute_std=current_std_limits(names)))
 
 
 BARS_COVER = ('(the error bars include it as far as the residuals allow the left-out '
@@ -281,11 +282,12 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
            selection: Selection | None = None) -> Diagnosis:
     """Identifiability and diagnosis of an identification made with
     core.identification.noise_fit.identify_with_noise_model (its NoiseFit holds the refined
-    residuals and their Jacobian). U (N, 7): the inputs of the record the refinement ran on; dt
-    (s): its sample time. Several runs (fit.bounds, U the runs' inputs stacked as the residuals):
-    the cross-correlation is taken on the runs stacked with NaN gaps longer than its lags, so no
-    lag pairs a residual of one run with an input of another. depth : (N,) the runs' measured
-    z (m, NED; NaN where not measured) for the frame's plausibility, or None.
+    residuals and their Jacobian's information and scores). U (N, 7): the inputs of the record
+    the refinement ran on; dt (s): its sample time. Several runs (fit.bounds, U the runs'
+    inputs stacked as the residuals): the cross-correlation is taken on the runs stacked with
+    NaN gaps longer than its lags, so no lag pairs a residual of one run with an input of
+    another. depth : (N,) the runs' measured z (m, NED; NaN where not measured) for the frame's
+    plausibility, or None.
     information_cov : the covariance of what the run's information alone says (an automatic
     choice's, without the consider covariance of the left-out coefficients): the verdicts are
     judged by it, since a coefficient the run determines well is not 'not excited' because the
@@ -307,7 +309,7 @@ def assess(vehicle: Vehicle, names: Sequence[str], estimate: np.ndarray, cov: np
             white = with_gaps(split_rows(white, fit.bounds), gap)
             U = with_gaps(split_rows(U, fit.bounds), gap)
         xcorr = input_correlation(white, U, lags, STATE_NAMES, vehicle.input_names)
-        verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.jacobian,
+        verdicts = coefficient_verdicts(vehicle, names, np.asarray(estimate), fit.information,
                                         cov if information_cov is None else information_cov)
     diagnosis = Diagnosis(identifiability=verdicts,
                           **diagnose(fit, xcorr, dt, mean_nis_per_dof, verdicts, refined,

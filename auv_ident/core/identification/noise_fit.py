@@ -62,7 +62,7 @@ from auv_ident.core.identification.results import Estimate, FilterPass, NoiseFit
 from auv_ident.core.identification.uncertainty import (
     LJUNG_BOX_LAGS,
     noise_model,
-    sandwich_covariance,
+    sandwich_from_sums,
     with_gaps,
 )
 from auv_ident.core.model.state import STATE_NAMES
@@ -274,11 +274,12 @@ def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_st
                  progress=progress, details=True)
     out.estimate, out.cov = ref.estimate, ref.cov
     fit.refine_converged = bool(ref.converged)
-    fit.white, fit.jacobian = ref.white, ref.jacobian
+    fit.white, fit.information, fit.scores = ref.white, ref.information, ref.scores
     fit.refine_message = str(ref.message)
     fit.refine_cost = float(ref.cost)
     try:
-        sand, sinfo = sandwich_covariance(ref.jacobian, ref.white, bounds=fit.bounds)
+        sand, sinfo = sandwich_from_sums(ref.information, ref.scores, ref.white,
+                                         bounds=fit.bounds)
     except np.linalg.LinAlgError:
         return out
     white_sd = np.sqrt(np.diag(ref.cov))

@@ -77,7 +77,10 @@ class Refinement:
 
     estimate : (p,) theta at the optimum; cov : (p, p) its white-noise covariance
     cost : the cost per residual (its mean whitened square; 1 when the noise model holds)
-    jacobian : (sum N * 12, p) the Jacobian of the whitened innovations with respect to theta
+    information : (p, p) J^T J, J the Jacobian of the whitened innovations with respect to
+        theta (1 / theta's units^2)
+    scores : (sum N, p) J_k^T r_k per sample k (its 12 rows of J and of the innovations r):
+        the sums a sandwich covariance is made of (the whole J is never formed)
     converged, message, nfev : the optimiser's verdict, message and function evaluations
     white : (sum N, 12) the whitened innovations at the optimum (NaN: no measurement), when
         asked for (details)
@@ -86,7 +89,8 @@ class Refinement:
     estimate: np.ndarray
     cov: np.ndarray
     cost: float
-    jacobian: np.ndarray
+    information: np.ndarray
+    scores: np.ndarray
     converged: bool
     message: str
     nfev: int
@@ -113,8 +117,9 @@ class NoiseFit:
     covariance : 'white' ((J^T J)^-1 times the residual variance) or 'sandwich'
     inflation : (p,) sandwich 1-sigma / white 1-sigma of each coefficient
     lags : the sandwich's lag window (samples)
-    white : (N, 12) whitened innovations at the refined solution; jacobian : (N * 12, p) their
-        Jacobian with respect to the parameters
+    white : (N, 12) whitened innovations at the refined solution; information : (p, p) J^T J
+        and scores : (N, p) J_k^T r_k per sample, of their Jacobian J with respect to the
+        parameters
     ekf_run : the EKF pass whose estimate is reported (the configured noise's, or the
         effective noise's when used; None when a pass made elsewhere was kept)
     configured_pass : the EKF pass with the configured noise
@@ -139,7 +144,8 @@ class NoiseFit:
     refine_message: str = ''
     notes: list = field(default_factory=list)
     white: Optional[np.ndarray] = None
-    jacobian: Optional[np.ndarray] = None
+    information: Optional[np.ndarray] = None
+    scores: Optional[np.ndarray] = None
     ekf_run: Optional[FilterPass] = None
     configured_pass: Optional[FilterPass] = None
     configured_q: Optional[np.ndarray] = None

@@ -232,6 +232,26 @@ def sandwich_covariance(J: np.ndarray, white: np.ndarray, lags: int | None = Non
         Jk = J3[k:k + SANDWICH_BLOCK] * ok[k:k + SANDWICH_BLOCK, :, None]
         g[k:k + SANDWICH_BLOCK] = np.einsum('kmp,km->kp', Jk, r[k:k + SANDWICH_BLOCK])
         A += np.einsum('kmp,kmq->pq', Jk, Jk)
+    return sandwich_from_sums(A, g, white, lags=lags, bounds=bounds)
+
+
+def sandwich_from_sums(A: np.ndarray, g: np.ndarray, white: np.ndarray,
+                       lags: int | None = None, bounds: Sequence[int] | None = None
+                       ) -> tuple[np.ndarray, dict[str, Any]]:
+    """:func:`sandwich_covariance` from the sums it is made of, for a Jacobian that is never
+    formed whole (the refinement's, core/identification/levenberg_marquardt.py).
+
+    A : (p, p) J^T J over the rows with a residual; g : (N, p) the per-sample scores
+    g_k = J_k^T r_k; white : (N, m) the residuals (NaN = missing); lags, bounds, and the
+    returned (cov, info): as for sandwich_covariance."""
+    white = np.asarray(white, dtype=float)
+    A = np.asarray(A, dtype=float)
+    g = np.asarray(g, dtype=float)
+    n = white.shape[0]
+    p = A.shape[0]
+    if g.shape != (n, p):
+        raise ValueError(f'scores {g.shape} do not match {n} samples and {p} parameters')
+    r, ok = _finite_channels(white)
     bounds = [0, n] if bounds is None else [int(b) for b in bounds]
     if bounds[0] != 0 or bounds[-1] != n or np.any(np.diff(bounds) < 0):
         raise ValueError(f'bounds {bounds} must rise from 0 to the {n} samples')
@@ -281,7 +301,16 @@ def identifiability(J: np.ndarray, estimate: np.ndarray, names: Sequence[str],
     CORRELATION_WEAK) or 'not excited' (rel_std >= REL_STD_WEAK, or no information)}.
     """
     J = np.asarray(J, dtype=float)
-    F = J.T @ J
+    return identifiability_from_information(J.T @ J, estimate, names, cov=cov,
+                                            absolute_std=absolute_std)
+
+
+def identifiability_from_information(F: np.ndarray, estimate: np.ndarray,
+                                     names: Sequence[str], cov: np.ndarray | None = None,
+                                     absolute_std: np.ndarray | None = None) -> Verdicts:
+    """:func:`identifiability` from the information F = J^T J (p, p) alone (the refinement's
+    normal equations, summed without forming J)."""
+    F = np.asarray(F, dtype=float)
     if cov is None:
         try:
             cov = np.linalg.inv(F)
