@@ -68,6 +68,35 @@ def test_autocorrelation_and_noise_model_read_an_ar1_process():
     assert bandwidth(e) > bandwidth(e[:, :1])
 
 
+def _pair_correlation(x, lag):
+    """The correlation of the pairs (x[k + lag], x[k]) both present, x less its mean, by loop."""
+    z = x - np.nanmean(x)
+    a, b = z[lag:], z[:len(z) - lag]
+    both = np.isfinite(a) & np.isfinite(b)
+    a, b = a[both], b[both]
+    return float(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b)))
+
+
+def test_autocorrelation_with_gaps_is_the_pairs_correlation_and_never_above_1():
+    """A slow channel whose lag-1 pairs all fall in its stretch of large variance (a bag's
+    odometry rows with command rows between them elsewhere): the variance of all samples
+    made lag 1 read 3.0; the pairs' own correlation is below 1, and so is every lag of
+    random gappy series."""
+    rng = np.random.default_rng(5)
+    x = np.concatenate([np.sin(np.arange(2000) * 0.002) * 10.0, rng.normal(size=10000)])
+    x[2001::2] = np.nan             # no lag-1 pairs after the first 2000 samples
+    rho = autocorrelation(x, 4)
+    assert rho[1] == pytest.approx(_pair_correlation(x, 1), abs=1e-9)
+    assert rho[1] <= 1.0 and rho[1] > 0.99
+    for lag in (2, 3, 4):
+        assert rho[lag] == pytest.approx(_pair_correlation(x, lag), abs=1e-9)
+    for seed in range(20):
+        r = np.random.default_rng(seed)
+        y = np.cumsum(r.normal(size=3000)) * r.uniform(0.1, 10.0, size=3000) ** 2
+        y[r.random(3000) < r.uniform(0.1, 0.7)] = np.nan
+        assert np.all(np.abs(autocorrelation(y, 30)[1:]) <= 1.0)
+
+
 def test_identifiability_verdicts():
     rng = np.random.default_rng(3)
     n = 2000
