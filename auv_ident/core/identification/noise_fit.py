@@ -20,9 +20,16 @@ EKF pass with the configured noise (core/identification/uncertainty.py :func:`no
   Measured on NPS AUV II with AR(1) noise, tau 1 s, twice the documented level (600 s, 20 Hz,
   4 seeds): the EKF pass went from errors of 2-28 sigma (Z_q -4 to -60 %) to within 1.9 sigma
   (median |error|/sigma 0.92), the refined estimate kept its accuracy.
-- the refined coefficients' covariance is the sandwich (Newey-West) covariance of
-  core/identification/uncertainty.py, which stays valid whatever correlation is left in the
-  residuals; it is used when it is materially wider than the white-noise one (SANDWICH_WIDER).
+- the refined coefficients' covariance, when the effective noise was used, is the exact one of
+  the fit under AR(1) noise (core/identification/uncertainty.py :func:`ar1_covariance`, each
+  channel's correlation and level read off the refined residuals), not the white-noise
+  (J^T J)^-1 of the effective 1-sigma: that one treats every sensitivity as constant over the
+  noise's correlation time, a bound that held for fin vehicles (NPS AUV II, the noise at 0.1-3
+  s against 5-40 s manoeuvres: the two agree) but put the BlueROV2 Heavy's bars about twice too
+  wide (stick steps and sweeps within correlation times of 1-3 s, and positions correlated over
+  minutes: median |error|/sigma 0.3, NEES 2.5-6.4 against 12 on seeds 3, 5, 7 of
+  offline/independent_rov.py). The Newey-West sandwich of the same module, valid whatever
+  correlation is left, replaces it when it is materially wider (SANDWICH_WIDER).
 
 Model error beyond the configured process noise (a real vehicle: unmodelled forces, filtered
 channels whose stated noise is only their sample-to-sample scatter): when some measured
@@ -60,6 +67,7 @@ from auv_ident.core.filter.timing import nominal_sample_time
 from auv_ident.core.identification.batch import refine, run_ekf
 from auv_ident.core.identification.results import Estimate, FilterPass, NoiseFit
 from auv_ident.core.identification.uncertainty import (
+    ar1_covariance,
     LJUNG_BOX_LAGS,
     noise_model,
     sandwich_covariance,
@@ -281,8 +289,17 @@ def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_st
         sand, sinfo = sandwich_covariance(ref.jacobian, ref.white, bounds=fit.bounds)
     except np.linalg.LinAlgError:
         return out
-    white_sd = np.sqrt(np.diag(ref.cov))
-    fit.inflation = np.sqrt(np.clip(np.diag(sand), 0.0, None)) / white_sd
+    if fit.used:
+        # the effective noise's white covariance is the AR(1) long-run bound, exact only for
+        # sensitivities constant over the correlation time; its exact value under the AR(1)
+        # model (module docstring), with the refined residuals' own correlation and level
+        try:
+            out.cov, _ = ar1_covariance(ref.jacobian, ref.white, bounds=fit.bounds)
+            fit.covariance = 'ar1'
+        except np.linalg.LinAlgError:
+            pass
+    base_sd = np.sqrt(np.clip(np.diag(out.cov), 0.0, None))
+    fit.inflation = np.sqrt(np.clip(np.diag(sand), 0.0, None)) / base_sd
     fit.lags = sinfo['lags']
     if np.any(fit.inflation > SANDWICH_WIDER):
         fit.covariance = 'sandwich'

@@ -110,8 +110,9 @@ class NoiseFit:
         white, samples), from the innovations of the EKF pass with the configured noise
     configured_std, effective_std : (12,) the configured and the effective 1-sigma
     used : True if the effective noise replaced the configured one
-    covariance : 'white' ((J^T J)^-1 times the residual variance) or 'sandwich'
-    inflation : (p,) sandwich 1-sigma / white 1-sigma of each coefficient
+    covariance : 'white' ((J^T J)^-1 times the residual variance), 'ar1' (uncertainty.py
+        ar1_covariance: the effective noise's exact one) or 'sandwich'
+    inflation : (p,) sandwich 1-sigma / white (or ar1) 1-sigma of each coefficient
     lags : the sandwich's lag window (samples)
     white : (N, 12) whitened innovations at the refined solution; jacobian : (N * 12, p) their
         Jacobian with respect to the parameters

@@ -268,6 +268,71 @@ def sandwich_covariance(J: np.ndarray, white: np.ndarray, lags: int | None = Non
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
 
 
+def ar1_covariance(J: np.ndarray, white: np.ndarray,
+                   bounds: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficient covariance of the least-squares fit when each channel's residuals are
+    first-order (AR(1)) noise, its correlation and level read off those residuals.
+
+    The fit's covariance under any noise is ``A^-1 B A^-1``, A = J^T J, B the covariance of the
+    score J^T r. For AR(1) residuals of lag-1 correlation rho_j and mean square v_j per channel
+    B = sum_j v_j J_j^T Gamma_j J_j, Gamma_j[k, l] = rho_j^|k - l| (k, l: channel j's samples
+    within one run). Its two limits: sensitivities constant over the correlation time give
+    J_j^T Gamma_j J_j = (1 + rho_j) / (1 - rho_j) J_j^T J_j, the long-run variance the noise
+    model's effective 1-sigma (core/identification/noise_fit.py) puts in the white-noise
+    covariance (J^T J)^-1, which is then exact; sensitivities that change within it (a
+    thruster vehicle's stick steps against noise correlated over 1-3 s, or position
+    innovations over minutes) carry more information than that bound allows, and B says how
+    much. Unlike :func:`sandwich_covariance` it needs no lag window (the model's correlation
+    reaches every lag) and no estimate of the long-run score covariance, whose Bartlett window
+    reads low when the window is a large part of the run.
+
+    Parameters
+    ----------
+    J : (N * m, p) Jacobian of the stacked residuals (row k * m + j: sample k, channel j)
+    white : (N, m) the residuals at the solution (NaN = missing)
+    bounds : None (one run) or the rows where the stacked runs start and end ([0, ..., N]);
+        the correlation acts within each run only
+
+    Returns
+    -------
+    cov : (p, p) the covariance; rho : (m,) each channel's lag-1 correlation (NaN: no
+    samples); lags count a channel's own samples (its missing rows dropped), as the samples
+    its noise correlates
+    """
+    from scipy.signal import lfilter
+
+    white = np.asarray(white, dtype=float)
+    n, m = white.shape
+    p = J.shape[1]
+    J3 = np.asarray(J, dtype=float).reshape(n, m, p)
+    bounds = [0, n] if bounds is None else [int(b) for b in bounds]
+    A = np.zeros((p, p))
+    B = np.zeros((p, p))
+    rhos = np.full(m, np.nan)
+    for j in range(m):
+        present = np.isfinite(white[:, j])
+        if present.sum() < 3:
+            continue
+        # each run's samples of this channel, consecutive (a command row between two
+        # odometry rows is no step of the channel's noise)
+        runs = [np.flatnonzero(present[a:b]) + a for a, b in zip(bounds[:-1], bounds[1:])]
+        rho = autocorrelation(with_gaps([white[k, j] for k in runs if k.size], 1), 1)[1]
+        rho = float(np.clip(np.nan_to_num(rho), -1.0, 1.0))
+        rhos[j] = rho
+        v = float(np.mean(white[present, j] ** 2))
+        for k in runs:
+            if not k.size:
+                continue
+            X = J3[k, j, :]
+            ahead = lfilter([1.0], [1.0, -rho], X, axis=0)
+            back = lfilter([1.0], [1.0, -rho], X[::-1], axis=0)[::-1]
+            A += X.T @ X
+            B += v * (X.T @ (ahead + back - X))     # Gamma X = both one-sided sums less X
+    A_inv = np.linalg.inv(A)
+    cov = A_inv @ B @ A_inv
+    return 0.5 * (cov + cov.T), rhos
+
+
 def identifiability(J: np.ndarray, estimate: np.ndarray, names: Sequence[str],
                     cov: np.ndarray | None = None,
                     absolute_std: np.ndarray | None = None) -> Verdicts:
