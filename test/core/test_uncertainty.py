@@ -97,6 +97,10 @@ def test_ar1_covariance_is_honest_where_the_long_run_bound_is_too_wide():
     cov, rhos = ar1_covariance(slow, e)
     bound = np.linalg.inv(slow.T @ slow) * np.mean(e ** 2) * (1 + rhos[0]) / (1 - rhos[0])
     np.testing.assert_allclose(np.diag(cov), np.diag(bound), rtol=0.02)
+    # the noise model's own AR(1) (whitened: variance (1 - rho) / (1 + rho)): the bound is
+    # (J^T J)^-1, the white-noise covariance of the effective noise
+    cov, _ = ar1_covariance(slow, e, rho=np.array([0.9]), variance=np.array([0.1 / 1.9]))
+    np.testing.assert_allclose(np.diag(cov), np.diag(np.linalg.inv(slow.T @ slow)), rtol=0.02)
 
 
 def test_ar1_covariance_counts_a_channels_own_samples_and_runs():

@@ -90,13 +90,26 @@ def effective_std(configured_std, model, measured):
     """(12,) 1-sigma carrying the channel's level and AR(1) correlation (module docstring);
     channels without a model (unmeasured, too few samples) keep the configured value."""
     out = np.asarray(configured_std, dtype=float).copy()
+    _, var = model_ar1(model, measured)
+    for j, name in enumerate(STATE_NAMES):
+        if name in model and measured[j]:
+            out[j] *= model[name]['level'] / math.sqrt(var[j])
+    return out
+
+
+def model_ar1(model, measured):
+    """(12,) lag-1 correlation and (12,) variance of the whitened innovations that the
+    effective noise (:func:`effective_std`) assumes: per channel with a model rho (clipped as
+    there) and (1 - rho) / (1 + rho), the AR(1) variance over its long-run variance; the other
+    channels white of unit variance (their configured noise)."""
+    rho, var = np.zeros(len(STATE_NAMES)), np.ones(len(STATE_NAMES))
     for j, name in enumerate(STATE_NAMES):
         d = model.get(name)
         if d is None or not measured[j]:
             continue
-        rho = min(max(d['ar1'], 0.0), MAX_RHO)
-        out[j] *= d['level'] * math.sqrt((1.0 + rho) / (1.0 - rho))
-    return out
+        rho[j] = min(max(d['ar1'], 0.0), MAX_RHO)
+        var[j] = (1.0 - rho[j]) / (1.0 + rho[j])
+    return rho, var
 
 
 def _pass(model, cfg, runs, T, max_step, max_bridge, hist_every):
@@ -293,8 +306,10 @@ def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_st
         # the effective noise's white covariance is the AR(1) long-run bound, exact only for
         # sensitivities constant over the correlation time; its exact value under the AR(1)
         # model (module docstring), with the refined residuals' own correlation and level
+        rho, var = model_ar1(fit.model, np.asarray(cfg.measured, dtype=bool))
         try:
-            out.cov, _ = ar1_covariance(ref.jacobian, ref.white, bounds=fit.bounds)
+            out.cov, _ = ar1_covariance(ref.jacobian, ref.white, bounds=fit.bounds, rho=rho,
+                                        variance=var)
             fit.covariance = 'ar1'
         except np.linalg.LinAlgError:
             pass

@@ -268,10 +268,12 @@ def sandwich_covariance(J: np.ndarray, white: np.ndarray, lags: int | None = Non
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
 
 
-def ar1_covariance(J: np.ndarray, white: np.ndarray,
-                   bounds: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def ar1_covariance(J: np.ndarray, white: np.ndarray, bounds: Sequence[int] | None = None,
+                   rho: np.ndarray | None = None,
+                   variance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Coefficient covariance of the least-squares fit when each channel's residuals are
-    first-order (AR(1)) noise, its correlation and level read off those residuals.
+    first-order (AR(1)) noise, its correlation and level given (the noise model the fit's
+    weights came from) or read off those residuals.
 
     The fit's covariance under any noise is ``A^-1 B A^-1``, A = J^T J, B the covariance of the
     score J^T r. For AR(1) residuals of lag-1 correlation rho_j and mean square v_j per channel
@@ -292,6 +294,9 @@ def ar1_covariance(J: np.ndarray, white: np.ndarray,
     white : (N, m) the residuals at the solution (NaN = missing)
     bounds : None (one run) or the rows where the stacked runs start and end ([0, ..., N]);
         the correlation acts within each run only
+    rho, variance : (m,) or None, each channel's lag-1 correlation and the variance of its
+        residuals (their unit); None or NaN: read off the residuals (lag-1 correlation of the
+        channel's own consecutive samples, mean square)
 
     Returns
     -------
@@ -316,16 +321,20 @@ def ar1_covariance(J: np.ndarray, white: np.ndarray,
         # each run's samples of this channel, consecutive (a command row between two
         # odometry rows is no step of the channel's noise)
         runs = [np.flatnonzero(present[a:b]) + a for a, b in zip(bounds[:-1], bounds[1:])]
-        rho = autocorrelation(with_gaps([white[k, j] for k in runs if k.size], 1), 1)[1]
-        rho = float(np.clip(np.nan_to_num(rho), -1.0, 1.0))
-        rhos[j] = rho
-        v = float(np.mean(white[present, j] ** 2))
+        r1 = math.nan if rho is None else float(rho[j])
+        if not np.isfinite(r1):
+            r1 = autocorrelation(with_gaps([white[k, j] for k in runs if k.size], 1), 1)[1]
+        r1 = float(np.clip(np.nan_to_num(r1), -1.0, 1.0))
+        rhos[j] = r1
+        v = math.nan if variance is None else float(variance[j])
+        if not np.isfinite(v):
+            v = float(np.mean(white[present, j] ** 2))
         for k in runs:
             if not k.size:
                 continue
             X = J3[k, j, :]
-            ahead = lfilter([1.0], [1.0, -rho], X, axis=0)
-            back = lfilter([1.0], [1.0, -rho], X[::-1], axis=0)[::-1]
+            ahead = lfilter([1.0], [1.0, -r1], X, axis=0)
+            back = lfilter([1.0], [1.0, -r1], X[::-1], axis=0)[::-1]
             A += X.T @ X
             B += v * (X.T @ (ahead + back - X))     # Gamma X = both one-sided sums less X
     A_inv = np.linalg.inv(A)
