@@ -21,15 +21,18 @@ EKF pass with the configured noise (core/identification/uncertainty.py :func:`no
   4 seeds): the EKF pass went from errors of 2-28 sigma (Z_q -4 to -60 %) to within 1.9 sigma
   (median |error|/sigma 0.92), the refined estimate kept its accuracy.
 - the refined coefficients' covariance, when the effective noise was used, is the exact one of
-  the fit under AR(1) noise (core/identification/uncertainty.py :func:`ar1_covariance`, each
-  channel's correlation and level read off the refined residuals), not the white-noise
-  (J^T J)^-1 of the effective 1-sigma: that one treats every sensitivity as constant over the
-  noise's correlation time, a bound that held for fin vehicles (NPS AUV II, the noise at 0.1-3
-  s against 5-40 s manoeuvres: the two agree) but put the BlueROV2 Heavy's bars about twice too
-  wide (stick steps and sweeps within correlation times of 1-3 s, and positions correlated over
-  minutes: median |error|/sigma 0.3, NEES 2.5-6.4 against 12 on seeds 3, 5, 7 of
-  offline/independent_rov.py). The Newey-West sandwich of the same module, valid whatever
-  correlation is left, replaces it when it is materially wider (SANDWICH_WIDER).
+  the fit under the AR(1) noise that effective noise stands for (core/identification/
+  uncertainty.py :func:`ar1_covariance` with each channel's rho and, whitened, the variance
+  (1 - rho) / (1 + rho): :func:`model_ar1`), not the white-noise (J^T J)^-1 of the effective
+  1-sigma. That one is its limit for sensitivities constant over the noise's correlation time:
+  a bound that held for the fin vehicles (NPS AUV II, noise of 0.3-1 s against 5-40 s
+  manoeuvres: |error|/sigma within 5 % of the bound's) but put the BlueROV2 Heavy's bars about
+  twice too wide (stick steps and sweeps within noise correlated over 1-3 s, positions over
+  minutes: NEES 2.5-6.4 against 12 on seeds 3, 5, 7 of offline/independent_rov.py; with this
+  covariance seeds 1, 2, 3, 5, 7 give 36 against 60, median |error|/sigma 0.52, all within 3
+  sigma). Read off the refined residuals instead, an AR(1) misses their long-range correlation
+  (the same seeds: median 1.01, NEES 88 of 60). The Newey-West sandwich of the same module,
+  valid whatever correlation is left, replaces it when it is materially wider (SANDWICH_WIDER).
 
 Model error beyond the configured process noise (a real vehicle: unmodelled forces, filtered
 channels whose stated noise is only their sample-to-sample scatter): when some measured

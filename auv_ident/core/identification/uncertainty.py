@@ -286,7 +286,8 @@ def ar1_covariance(J: np.ndarray, white: np.ndarray, bounds: Sequence[int] | Non
     innovations over minutes) carry more information than that bound allows, and B says how
     much. Unlike :func:`sandwich_covariance` it needs no lag window (the model's correlation
     reaches every lag) and no estimate of the long-run score covariance, whose Bartlett window
-    reads low when the window is a large part of the run.
+    reads low when the window is a large part of the run; it holds as far as the AR(1) model
+    does (the sandwich is the check, core/identification/noise_fit.py).
 
     Parameters
     ----------
