@@ -268,9 +268,12 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
         checks['coloured_channels'] = coloured
         notes.extend(fit.notes)
         if fit.covariance == 'sandwich':
+            # with the noise model used, the sandwich was weighed against the AR(1) covariance
+            # (core/identification/noise_fit.py)
             notes.append('error bars from the sandwich covariance (residuals correlated in '
-                         'time; up to {} the white-noise ones)'.format(
-                             times(float(max(fit.inflation)), 2)))
+                         'time; up to {} the {} ones)'.format(
+                             times(float(max(fit.inflation)), 2),
+                             "noise model's AR(1)" if fit.used else 'white-noise'))
     if math.isfinite(mean_nis_per_dof):
         checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
     if verdicts:
