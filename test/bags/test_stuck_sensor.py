@@ -128,3 +128,26 @@ def test_a_channel_correlated_beyond_the_run_is_not_noise():
                                        'lag-1 correlation 1.0000 (time constant inf s), '
                                        'longer than the run (1200 samples): a bias or a '
                                        'missing sensor')
+
+
+def test_position_and_heading_drift_is_noted_not_called_a_missing_sensor():
+    """Position and heading innovations of an EKF are the model error integrated (no restoring
+    force): correlated beyond the run on a good BlueROV2 bag (x 0.99995 of 11999 samples). A
+    note, not NOT consistent; an attitude channel correlated so is still not noise."""
+    from auv_ident.core.identification.diagnosis import drifting_channels
+
+    model = {'u': _channel(0.95, 11999), 'x': _channel(0.99995, 11999),
+             'psi': _channel(0.99995, 11999)}
+    assert not not_noise_channels(model)
+    assert [n for n, _ in drifting_channels(model)] == ['x', 'psi']
+
+    class Fit:
+        used, covariance, notes, refine_converged = True, 'white', [], True
+    Fit.model = model
+    d = diagnose(Fit(), refined=False)
+    assert d['consistent'] and d['checks']['not_noise_channels'] == []
+    assert any(m.startswith('the x innovations drift (lag-1 correlation 0.99995')
+               for m in d['messages'])
+    Fit.model = {**model, 'theta': _channel(0.99995, 11999)}
+    d = diagnose(Fit(), refined=False)
+    assert not d['consistent'] and d['checks']['not_noise_channels'] == ['theta']

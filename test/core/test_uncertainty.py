@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from auv_ident.core.identification.uncertainty import (
+    ar1_covariance,
     autocorrelation,
     bandwidth,
     identifiability,
@@ -68,6 +69,88 @@ def test_autocorrelation_and_noise_model_read_an_ar1_process():
     assert bandwidth(e) > bandwidth(e[:, :1])
 
 
+def test_ar1_covariance_is_honest_where_the_long_run_bound_is_too_wide():
+    """AR(1) noise correlated over 50 samples, sensitivities that switch every 20 (a pilot's
+    stick steps against slow sensor noise): the white-noise bars of the long-run variance (the
+    noise model's effective 1-sigma) are far too wide, the AR(1) covariance's are honest
+    (median |error|/sigma near 0.67, the truth within 3 sigma). Sensitivities constant over
+    the correlation time: the two agree."""
+    rng = np.random.default_rng(11)
+    n, rho = 3000, 0.98
+    k = np.arange(n)
+    z_ar1, z_bound = [], []
+    for _ in range(60):
+        X = np.stack([np.sign(np.sin(2 * np.pi * k / 40.0)),
+                      np.repeat(rng.choice([-1.0, 1.0], n // 20), 20)], axis=1)
+        e = _ar1(rng, n, 1, rho)
+        est = np.linalg.lstsq(X, e[:, 0], rcond=None)[0]       # the truth is 0
+        r = e - (X @ est)[:, None]
+        cov, rhos = ar1_covariance(X, r)
+        bound = np.linalg.inv(X.T @ X) * np.mean(r ** 2) * (1 + rhos[0]) / (1 - rhos[0])
+        z_ar1.append(np.abs(est) / np.sqrt(np.diag(cov)))
+        z_bound.append(np.abs(est) / np.sqrt(np.diag(bound)))
+    z_ar1, z_bound = np.concatenate(z_ar1), np.concatenate(z_bound)
+    assert 0.5 < np.median(z_ar1) < 0.85 and np.mean(z_ar1 < 3.0) >= 0.97
+    assert np.median(z_bound) < 0.3
+    slow = np.stack([np.ones(n), np.linspace(0.0, 1.0, n)], axis=1)
+    e = _ar1(rng, n, 1, 0.9)
+    cov, rhos = ar1_covariance(slow, e)
+    bound = np.linalg.inv(slow.T @ slow) * np.mean(e ** 2) * (1 + rhos[0]) / (1 - rhos[0])
+    np.testing.assert_allclose(np.diag(cov), np.diag(bound), rtol=0.02)
+    # the noise model's own AR(1) (whitened: variance (1 - rho) / (1 + rho)): the bound is
+    # (J^T J)^-1, the white-noise covariance of the effective noise
+    cov, _ = ar1_covariance(slow, e, rho=np.array([0.9]), variance=np.array([0.1 / 1.9]))
+    np.testing.assert_allclose(np.diag(cov), np.diag(np.linalg.inv(slow.T @ slow)), rtol=0.02)
+
+
+def test_ar1_covariance_counts_a_channels_own_samples_and_runs():
+    """Rows where a channel is missing (another topic's rows) are no step of its noise: the
+    covariance is that of the channel's samples alone; two runs are independent."""
+    rng = np.random.default_rng(2)
+    n = 400
+    X = rng.normal(size=(n, 2))
+    e = _ar1(rng, n, 1, 0.9)
+    cov, rhos = ar1_covariance(X, e)
+    rows = np.full((2 * n, 1), np.nan)           # a missing row after every sample
+    rows[::2] = e
+    Xr = np.zeros((2 * n, 2))
+    Xr[::2] = X
+    cov_gaps, rhos_gaps = ar1_covariance(Xr, rows)
+    np.testing.assert_allclose(cov_gaps, cov, rtol=1e-10)
+    assert rhos_gaps[0] == pytest.approx(rhos[0])
+    split, _ = ar1_covariance(X, e, bounds=[0, n // 2, n])    # no pair across the runs
+    assert not np.allclose(split, cov, rtol=1e-6)
+
+
+def _pair_correlation(x, lag):
+    """The correlation of the pairs (x[k + lag], x[k]) both present, x less its mean, by loop."""
+    z = x - np.nanmean(x)
+    a, b = z[lag:], z[:len(z) - lag]
+    both = np.isfinite(a) & np.isfinite(b)
+    a, b = a[both], b[both]
+    return float(np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b)))
+
+
+def test_autocorrelation_with_gaps_is_the_pairs_correlation_and_never_above_1():
+    """A slow channel whose lag-1 pairs all fall in its stretch of large variance (a bag's
+    odometry rows with command rows between them elsewhere): the variance of all samples
+    made lag 1 read 3.0; the pairs' own correlation is below 1, and so is every lag of
+    random gappy series."""
+    rng = np.random.default_rng(5)
+    x = np.concatenate([np.sin(np.arange(2000) * 0.002) * 10.0, rng.normal(size=10000)])
+    x[2001::2] = np.nan             # no lag-1 pairs after the first 2000 samples
+    rho = autocorrelation(x, 4)
+    assert rho[1] == pytest.approx(_pair_correlation(x, 1), abs=1e-9)
+    assert rho[1] <= 1.0 and rho[1] > 0.99
+    for lag in (2, 3, 4):
+        assert rho[lag] == pytest.approx(_pair_correlation(x, lag), abs=1e-9)
+    for seed in range(20):
+        r = np.random.default_rng(seed)
+        y = np.cumsum(r.normal(size=3000)) * r.uniform(0.1, 10.0, size=3000) ** 2
+        y[r.random(3000) < r.uniform(0.1, 0.7)] = np.nan
+        assert np.all(np.abs(autocorrelation(y, 30)[1:]) <= 1.0)
+
+
 def test_identifiability_verdicts():
     rng = np.random.default_rng(3)
     n = 2000
@@ -83,3 +166,29 @@ def test_identifiability_verdicts():
     assert out['clear']['rel_std'] == pytest.approx(1.0 / np.sqrt(n), rel=0.1)
     weak = identifiability(J[:, 3:], np.array([0.1]), ['small'])['small']
     assert weak['verdict'] == 'weak' and weak['correlated_with'] is None
+
+
+def test_ar1_score_sums_in_chunks_are_the_whole_jacobians():
+    """The refinement streams its Jacobian a chunk at a time (it never holds it): the AR(1)
+    covariance summed over chunks cut anywhere (inside runs, at a run's start, one sample)
+    equals the one of the whole Jacobian, gaps and runs included."""
+    from auv_ident.core.identification.uncertainty import Ar1ScoreSums
+    rng = np.random.default_rng(1)
+    n, m, p = 500, 4, 3
+    white = rng.normal(size=(n, m))
+    white[rng.random((n, m)) < 0.2] = np.nan
+    J3 = rng.normal(size=(n, m, p))
+    J3[~np.isfinite(white)] = 0.0
+    bounds = [0, 170, 333, n]
+    rho, var = np.array([0.3, 0.9, -0.2, 0.0]), np.array([1.0, 0.5, 2.0, 1.2])
+    whole, _ = ar1_covariance(J3.reshape(n * m, p), white, bounds=bounds, rho=rho,
+                              variance=var)
+    sums = Ar1ScoreSums(rho, var, bounds, p)
+    sums.add(0, J3[:5], np.isfinite(white[:5]))     # a pass that is then started again
+    sums.start()
+    for a, b in [(0, 97), (97, 170), (170, 171), (171, 400), (400, n)]:
+        sums.add(a, J3[a:b], np.isfinite(white[a:b]))
+    J = J3.reshape(n * m, p)
+    np.testing.assert_allclose(sums.covariance(J.T @ J), whole, rtol=1e-12, atol=0)
+    # not a white-noise covariance: the correlation matters
+    assert not np.allclose(whole, np.linalg.inv(J.T @ J) * 1.0, rtol=0.05)

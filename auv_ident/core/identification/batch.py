@@ -52,6 +52,7 @@ from auv_ident.core.identification.results import (
     Record,
     Refinement,
 )
+from auv_ident.core.identification.uncertainty import Ar1ScoreSums
 from auv_ident.core.model.hydrodynamics import Model, STATUS_TEXT
 from auv_ident.core.model.state import Input, N_INPUT, N_STATE
 
@@ -345,7 +346,7 @@ def difference_threads():
 
 
 def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFAULT_MAX_BRIDGE,
-           max_nfev=60, progress=None, details=False):
+           max_nfev=60, progress=None, details=False, ar1=None):
     """Pass 2: filter-error maximum likelihood for theta, started at theta_start (p), over one
     run or several of one vehicle: one theta for all of them.
 
@@ -358,7 +359,10 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
     converged, its message and evaluations, and with details=True the innovations at the
     solution, white (sum N, 12) (NaN: no measurement). cov is (J^T J)^-1 times the cost per
     residual when that exceeds 1 (the white-noise covariance; core/identification/
-    uncertainty.py has the one for coloured residuals).
+    uncertainty.py has the one for coloured residuals). ar1: None, or (rho (12,), variance
+    (12,)) of the whitened innovations' AR(1) noise model: then also ar1_cov, the fit's
+    covariance under that noise (uncertainty.ar1_covariance), from one more pass of the
+    Jacobian at the solution, a chunk at a time (uncertainty.Ar1ScoreSums).
 
     The fit is MINPACK lmder's Levenberg-Marquardt on normal equations summed a chunk of
     REFINE_CHUNK samples at a time (core/identification/levenberg_marquardt.py): the
@@ -394,6 +398,10 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
                                   LM_TOLERANCE, LM_TOLERANCE, LM_TOLERANCE, diag=np.ones(p))
         if sol.information is None:     # the last step ended the fit: its sums at x
             fd.normal_equations(sol.x)
+        ar1_cov = None
+        if ar1 is not None:
+            # one more pass at sol.x: fd's sums stay those of the solution
+            ar1_cov = _ar1_covariance(fd, residuals, white, sol.x, ar1, fer.bounds, scale)
     assert fd.base is not None and fd.scores is not None
     r = fd.base[1]                      # the residuals at sol.x
     information = fd.information / np.outer(scale, scale)     # J^T J in theta's units
@@ -409,7 +417,30 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
     return Refinement(estimate=sol.x * scale, cov=cov, cost=s2, information=information,
                       scores=fd.scores / scale, converged=sol.status > 0,
                       message=sol.message, nfev=sol.nfev,
-                      white=white.copy() if details else None)
+                      white=white.copy() if details else None, ar1_cov=ar1_cov)
+
+
+def _ar1_covariance(fd, residuals, white, z, ar1, bounds, scale):
+    """refine's ar1_cov (its docstring): the Jacobian at the solution z (scaled parameters)
+    streamed through Ar1ScoreSums over the samples the innovations at z have; theta's units.
+    None where the information is singular."""
+    residuals(z)                        # white: the innovations at the solution
+    present = np.isfinite(white)
+    p = z.size
+    sums = Ar1ScoreSums(ar1[0], ar1[1], bounds, p)
+
+    class _Observer:
+        start = sums.start
+
+        @staticmethod
+        def add(k, J, r):
+            J3 = J.reshape(-1, N_STATE, p)
+            sums.add(k, J3, present[k:k + J3.shape[0]])
+    fd.normal_equations(z, observer=_Observer)
+    try:
+        return sums.covariance(fd.information) * np.outer(scale, scale)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def parameter_scale(model, theta):

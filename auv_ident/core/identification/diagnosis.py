@@ -17,7 +17,8 @@ Checks, in the order a user needs them:
    correlation, whiteness per channel), and what was done about it
    (core/identification/noise_fit.py). A channel whose correlation time exceeds the run (or
    which is constant: lag-1 correlation 1) is not noise but a bias or a missing sensor: NOT
-   consistent, naming it (:func:`not_noise_channels`).
+   consistent, naming it (:func:`not_noise_channels`); position and heading, which the model
+   only integrates, drift with the model error and are noted instead.
 4. Identifiability: per coefficient the relative 1-sigma the run supports, correlations, and a
    verdict with the excitation that would help.
 """
@@ -166,24 +167,53 @@ def inadequacy_remedy(vehicle: Vehicle, selection: Selection | None) -> str:
             + '; '.join(moves))
 
 
+# The measured channels the model only integrates: position (x y z) and heading (psi) have no
+# restoring force or moment, so an EKF's innovations in them are the run's model error
+# integrated (a current, unmodelled forces, the velocity's own noise between updates): a drift
+# whose correlation time grows with the run whatever the sensor. The run-length rule cannot
+# tell that from a missing sensor there; a field never filled repeats exactly and is the
+# stuck-value check's (session/stuck.py, #27 item 1), a sensor bias is absorbed by the state.
+INTEGRATED_CHANNELS = ('x', 'y', 'z', 'psi')
+
+
 def not_noise_channels(model: dict[str, dict[str, Any]]) -> list[tuple[str, str]]:
     """[(channel, why)] of the channels of a noise model (core/identification/uncertainty.py
     noise_model, per channel its lag-1 correlation 'ar1' over 'samples' innovations) whose
     correlation time exceeds the run: ar1 >= exp(-1 / samples), i.e. -dt / ln(ar1) >= samples
     x dt (a constant channel has ar1 1, time constant inf). Such innovations are not noise
     that averages out over the run but a bias or a sensor that is not there (a field a driver
-    never fills); no error bar covers them, so the result is NOT consistent."""
-    out = []
-    for name, d in model.items():
-        n = int(d.get('samples', 0))
-        if n and d['ar1'] >= math.exp(-1.0 / n):
-            tau = d.get('tau_s', math.inf)
-            out.append((name, f'the {name} innovations are not noise: lag-1 correlation '
-                              f'{d["ar1"]:.4f} (time constant {tau:.3g} s), longer than the '
-                              f'run ({n} samples): a bias or a missing sensor (a field the '
-                              'driver never fills); check that channel, or leave it out '
-                              '(--measured)'))
-    return out
+    never fills); no error bar covers them, so the result is NOT consistent. The channels the
+    model only integrates (INTEGRATED_CHANNELS) are not judged by this rule
+    (:func:`drifting_channels`)."""
+    return [(name, f'the {name} innovations are not noise: lag-1 correlation '
+                   f'{d["ar1"]:.4f} (time constant {_tau(d):.3g} s), longer than the run '
+                   f'({d["samples"]} samples): a bias or a missing sensor (a field the driver '
+                   'never fills); check that channel, or leave it out (--measured)')
+            for name, d in _beyond_the_run(model) if name not in INTEGRATED_CHANNELS]
+
+
+def drifting_channels(model: dict[str, dict[str, Any]]) -> list[tuple[str, str]]:
+    """[(channel, note)] of the INTEGRATED_CHANNELS whose innovations are correlated beyond
+    the run (the rule of :func:`not_noise_channels`): the model error integrated, said in a
+    note, not a verdict."""
+    return [(name, f'the {name} innovations drift (lag-1 correlation {d["ar1"]:.5f}, time '
+                   f'constant {_tau(d):.3g} s, longer than the run): the model error '
+                   f'integrated into a channel without restoring force, not judged as noise '
+                   '(a field never filled is caught as a stuck sensor)')
+            for name, d in _beyond_the_run(model) if name in INTEGRATED_CHANNELS]
+
+
+def _beyond_the_run(model: dict[str, dict[str, Any]]) -> list[tuple[str, dict[str, Any]]]:
+    """The (name, channel) of a noise model whose lag-1 correlation is at least
+    exp(-1 / samples)."""
+    return [(name, d) for name, d in model.items()
+            if int(d.get('samples', 0)) and d['ar1'] >= math.exp(-1.0 / int(d['samples']))]
+
+
+def _tau(d: dict[str, Any]) -> float:
+    """A noise-model channel's time constant (s; inf for a constant or unit correlation)."""
+    tau = d.get('tau_s', math.inf)
+    return math.inf if tau is None else float(tau)
 
 
 def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = None,
@@ -232,15 +262,19 @@ def diagnose(fit: Any = None, xcorr: list[tuple[float, str, str, int]] | None = 
         not_noise = not_noise_channels(fit.model)
         checks['not_noise_channels'] = [n for n, _ in not_noise]
         problems.extend(text for _, text in not_noise)
+        notes.extend(text for _, text in drifting_channels(fit.model))
         checks['noise_model_used'] = bool(fit.used)
         checks['covariance'] = fit.covariance
         coloured = [n for n, d in fit.model.items() if not d['white']]
         checks['coloured_channels'] = coloured
         notes.extend(fit.notes)
         if fit.covariance == 'sandwich':
+            # with the noise model used, the sandwich was weighed against the AR(1) covariance
+            # (core/identification/noise_fit.py)
             notes.append('error bars from the sandwich covariance (residuals correlated in '
-                         'time; up to {} the white-noise ones)'.format(
-                             times(float(max(fit.inflation)), 2)))
+                         'time; up to {} the {} ones)'.format(
+                             times(float(max(fit.inflation)), 2),
+                             "noise model's AR(1)" if fit.used else 'white-noise'))
     if math.isfinite(mean_nis_per_dof):
         checks['mean_nis_per_dof'] = float(mean_nis_per_dof)
     if verdicts:

@@ -295,23 +295,28 @@ class ChunkedForwardDifferences:
         self.r = self.residuals(self.at)
         return float(np.linalg.norm(self.r))
 
-    def normal_equations(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def normal_equations(self, x: np.ndarray,
+                         observer: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """(A = J^T J (p, p), g = J^T r (p,)) at x, J by forward differences; they are also
         kept (self.information, self.gradient) with self.base = (x, r(x)) and self.scores
         (M / m, p): row k = J_k^T r_k over group k's m rows (the per-sample scores of a sandwich
-        covariance)."""
+        covariance). observer: None, or an object whose start() is called at each pass over
+        the chunks and add(group, J, r) with each chunk (its first group's index, its rows of
+        J and of r): other sums of the same Jacobian, a chunk at a time."""
         x = np.array(x, dtype=float)
         if self.at is None or not np.array_equal(self.at, x):
             self.norm(x)
         failed: set[int] = set()
         while True:
-            out = self._sweep(x, failed)
+            out = self._sweep(x, failed, observer)
             if isinstance(out, tuple):
                 return out
             failed.add(out)     # a column's model failed part-way: again, with it constant
 
-    def _sweep(self, x: np.ndarray, failed: set[int]) -> Any:
+    def _sweep(self, x: np.ndarray, failed: set[int], observer: Any = None) -> Any:
         """One pass over the chunks: (A, g), or the index of a column whose stream failed."""
+        if observer is not None:
+            observer.start()
         r0 = self.r
         assert r0 is not None
         p, m = x.size, self.m
@@ -352,6 +357,8 @@ class ChunkedForwardDifferences:
             g += J.T @ base
             scores[at // m:(at + rows) // m] = np.einsum(
                 'kmp,km->kp', J.reshape(-1, m, p), base.reshape(-1, m))
+            if observer is not None:
+                observer.add(at // m, J, base)
             at += rows
         self.base, self.information, self.gradient, self.scores = (x, r0), A, g, scores
         return A, g

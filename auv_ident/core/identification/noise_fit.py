@@ -20,9 +20,20 @@ EKF pass with the configured noise (core/identification/uncertainty.py :func:`no
   Measured on NPS AUV II with AR(1) noise, tau 1 s, twice the documented level (600 s, 20 Hz,
   4 seeds): the EKF pass went from errors of 2-28 sigma (Z_q -4 to -60 %) to within 1.9 sigma
   (median |error|/sigma 0.92), the refined estimate kept its accuracy.
-- the refined coefficients' covariance is the sandwich (Newey-West) covariance of
-  core/identification/uncertainty.py, which stays valid whatever correlation is left in the
-  residuals; it is used when it is materially wider than the white-noise one (SANDWICH_WIDER).
+- the refined coefficients' covariance, when the effective noise was used, is the exact one of
+  the fit under the AR(1) noise that effective noise stands for (core/identification/
+  uncertainty.py :func:`ar1_covariance` with each channel's rho and, whitened, the variance
+  (1 - rho) / (1 + rho): :func:`model_ar1`), not the white-noise (J^T J)^-1 of the effective
+  1-sigma. That one is its limit for sensitivities constant over the noise's correlation time:
+  a bound nearly met by the fin vehicles (NPS AUV II, AR(1) noise of 0.1-3 s against 5-40 s
+  manoeuvres: |error|/sigma within 5 % of the bound's on 3 of 4 seeds, 13 % above on the
+  fourth) but put the BlueROV2 Heavy's bars about
+  twice too wide (stick steps and sweeps within noise correlated over 1-3 s, positions over
+  minutes: NEES 2.5-6.4 against 12 on seeds 3, 5, 7 of offline/independent_rov.py; with this
+  covariance seeds 1, 2, 3, 5, 7 give 36 against 60, median |error|/sigma 0.52, all within 3
+  sigma). Read off the refined residuals instead, an AR(1) misses their long-range correlation
+  (the same seeds: median 1.01, NEES 88 of 60). The Newey-West sandwich of the same module,
+  valid whatever correlation is left, replaces it when it is materially wider (SANDWICH_WIDER).
 
 Model error beyond the configured process noise (a real vehicle: unmodelled forces, filtered
 channels whose stated noise is only their sample-to-sample scatter): when some measured
@@ -82,13 +93,26 @@ def effective_std(configured_std, model, measured):
     """(12,) 1-sigma carrying the channel's level and AR(1) correlation (module docstring);
     channels without a model (unmeasured, too few samples) keep the configured value."""
     out = np.asarray(configured_std, dtype=float).copy()
+    _, var = model_ar1(model, measured)
+    for j, name in enumerate(STATE_NAMES):
+        if name in model and measured[j]:
+            out[j] *= model[name]['level'] / math.sqrt(var[j])
+    return out
+
+
+def model_ar1(model, measured):
+    """(12,) lag-1 correlation and (12,) variance of the whitened innovations that the
+    effective noise (:func:`effective_std`) assumes: per channel with a model rho (clipped as
+    there) and (1 - rho) / (1 + rho), the AR(1) variance over its long-run variance; the other
+    channels white of unit variance (their configured noise)."""
+    rho, var = np.zeros(len(STATE_NAMES)), np.ones(len(STATE_NAMES))
     for j, name in enumerate(STATE_NAMES):
         d = model.get(name)
         if d is None or not measured[j]:
             continue
-        rho = min(max(d['ar1'], 0.0), MAX_RHO)
-        out[j] *= d['level'] * math.sqrt((1.0 + rho) / (1.0 - rho))
-    return out
+        rho[j] = min(max(d['ar1'], 0.0), MAX_RHO)
+        var[j] = (1.0 - rho[j]) / (1.0 + rho[j])
+    return rho, var
 
 
 def _pass(model, cfg, runs, T, max_step, max_bridge, hist_every):
@@ -270,8 +294,12 @@ def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_st
                    cov=ekf_cov, noise=fit)
     if not refine_pass or model.p == 0:
         return out
+    # with the noise model used, also the fit's covariance under its AR(1) noise: the
+    # effective noise's white covariance is the AR(1) long-run bound, exact only for
+    # sensitivities constant over the correlation time (module docstring)
+    ar1 = model_ar1(fit.model, np.asarray(cfg.measured, dtype=bool)) if fit.used else None
     ref = refine(model, cfg_eff, runs, ekf_est, T=T, max_step=max_step, max_bridge=max_bridge,
-                 progress=progress, details=True)
+                 progress=progress, details=True, ar1=ar1)
     out.estimate, out.cov = ref.estimate, ref.cov
     fit.refine_converged = bool(ref.converged)
     fit.white, fit.information, fit.scores = ref.white, ref.information, ref.scores
@@ -282,8 +310,11 @@ def identify_with_noise_model(model, cfg, runs, T=None, refine_pass=True, max_st
                                          bounds=fit.bounds)
     except np.linalg.LinAlgError:
         return out
-    white_sd = np.sqrt(np.diag(ref.cov))
-    fit.inflation = np.sqrt(np.clip(np.diag(sand), 0.0, None)) / white_sd
+    if ref.ar1_cov is not None:
+        out.cov = ref.ar1_cov
+        fit.covariance = 'ar1'
+    base_sd = np.sqrt(np.clip(np.diag(out.cov), 0.0, None))
+    fit.inflation = np.sqrt(np.clip(np.diag(sand), 0.0, None)) / base_sd
     fit.lags = sinfo['lags']
     if np.any(fit.inflation > SANDWICH_WIDER):
         fit.covariance = 'sandwich'

@@ -84,6 +84,8 @@ class Refinement:
     converged, message, nfev : the optimiser's verdict, message and function evaluations
     white : (sum N, 12) the whitened innovations at the optimum (NaN: no measurement), when
         asked for (details)
+    ar1_cov : (p, p) the covariance under the innovations' AR(1) noise model, when asked for
+        (refine's ar1)
     """
 
     estimate: np.ndarray
@@ -95,6 +97,7 @@ class Refinement:
     message: str
     nfev: int
     white: Optional[np.ndarray] = None
+    ar1_cov: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -114,8 +117,9 @@ class NoiseFit:
         white, samples), from the innovations of the EKF pass with the configured noise
     configured_std, effective_std : (12,) the configured and the effective 1-sigma
     used : True if the effective noise replaced the configured one
-    covariance : 'white' ((J^T J)^-1 times the residual variance) or 'sandwich'
-    inflation : (p,) sandwich 1-sigma / white 1-sigma of each coefficient
+    covariance : 'white' ((J^T J)^-1 times the residual variance), 'ar1' (uncertainty.py
+        ar1_covariance: the effective noise's exact one) or 'sandwich'
+    inflation : (p,) sandwich 1-sigma / white (or ar1) 1-sigma of each coefficient
     lags : the sandwich's lag window (samples)
     white : (N, 12) whitened innovations at the refined solution; information : (p, p) J^T J
         and scores : (N, p) J_k^T r_k per sample, of their Jacobian J with respect to the

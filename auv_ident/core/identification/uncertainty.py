@@ -69,8 +69,14 @@ def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
 
     Returns
     -------
-    (max_lag + 1,) autocorrelation, rho[0] = 1 (all NaN if the channel has under 3 samples);
-    lag l averages the products of the pairs of samples l apart that are both present
+    (max_lag + 1,) autocorrelation, rho[0] = 1 (all NaN if the channel has under 3 samples or
+    is constant); lag l is the correlation of the pairs of samples l apart that are both
+    present: sum z[k + l] z[k] over the pairs, divided by the root of the product of the two
+    members' own sums of squares over the same pairs (z: x less its mean). By Cauchy-Schwarz
+    |rho[l]| <= 1 whatever the gaps; dividing by the variance of all samples instead (the
+    textbook estimator, exact without gaps) reads above 1 when the pairs are the samples of
+    larger variance (a bag's odometry rows between command rows: lag-1 correlation 1.03-1.13
+    for a channel whose pairs correlate 0.994).
     """
     x = np.asarray(x, dtype=float)
     ok = np.isfinite(x)
@@ -78,15 +84,21 @@ def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
     if ok.sum() < 3:
         return out
     z = np.where(ok, x - x[ok].mean(), 0.0)
-    c0 = float(np.dot(z, z)) / ok.sum()
-    if c0 <= 0.0:
+    if not np.any(z != 0.0):
         return out
     lags = min(max_lag, len(z) - 1)
     okf = ok.astype(float)
     pairs = np.rint(_lagged_products(okf, okf, lags))
     sums = _lagged_products(z, z, lags)
+    z2 = z * z
+    later = _lagged_products(z2, okf, lags)      # sum z[k + l]^2 over the pairs
+    earlier = _lagged_products(okf, z2, lags)    # sum z[k]^2 over the pairs
+    norm = np.sqrt(np.clip(later, 0.0, None) * np.clip(earlier, 0.0, None))
+    # the FFT's rounding (1e-16 of the whole sum) must not carry a ratio past +-1
+    tiny = 1e-12 * float(np.dot(z, z))
     with np.errstate(invalid='ignore', divide='ignore'):
-        out[:lags + 1] = np.where(pairs > 0, sums / np.maximum(pairs, 1.0) / c0, np.nan)
+        out[:lags + 1] = np.where((pairs > 0) & (norm > tiny),
+                                  np.clip(sums / norm, -1.0, 1.0), np.nan)
     out[0] = 1.0
     return out
 
@@ -274,6 +286,124 @@ def sandwich_from_sums(A: np.ndarray, g: np.ndarray, white: np.ndarray,
     with np.errstate(invalid='ignore', divide='ignore'):
         inflation = np.sqrt(np.diag(cov) / np.diag(A_inv))
     return cov, {'lags': lags, 'naive_cov': A_inv * s2, 'inflation': inflation}
+
+
+def ar1_covariance(J: np.ndarray, white: np.ndarray, bounds: Sequence[int] | None = None,
+                   rho: np.ndarray | None = None,
+                   variance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficient covariance of the least-squares fit when each channel's residuals are
+    first-order (AR(1)) noise, its correlation and level given (the noise model the fit's
+    weights came from) or read off those residuals.
+
+    The fit's covariance under any noise is ``A^-1 B A^-1``, A = J^T J, B the covariance of the
+    score J^T r. For AR(1) residuals of lag-1 correlation rho_j and mean square v_j per channel
+    B = sum_j v_j J_j^T Gamma_j J_j, Gamma_j[k, l] = rho_j^|k - l| (k, l: channel j's samples
+    within one run). Its two limits: sensitivities constant over the correlation time give
+    J_j^T Gamma_j J_j = (1 + rho_j) / (1 - rho_j) J_j^T J_j, the long-run variance the noise
+    model's effective 1-sigma (core/identification/noise_fit.py) puts in the white-noise
+    covariance (J^T J)^-1, which is then exact; sensitivities that change within it (a
+    thruster vehicle's stick steps against noise correlated over 1-3 s, or position
+    innovations over minutes) carry more information than that bound allows, and B says how
+    much. Unlike :func:`sandwich_covariance` it needs no lag window (the model's correlation
+    reaches every lag) and no estimate of the long-run score covariance, whose Bartlett window
+    reads low when the window is a large part of the run; it holds as far as the AR(1) model
+    does (the sandwich is the check, core/identification/noise_fit.py).
+
+    Parameters
+    ----------
+    J : (N * m, p) Jacobian of the stacked residuals (row k * m + j: sample k, channel j)
+    white : (N, m) the residuals at the solution (NaN = missing)
+    bounds : None (one run) or the rows where the stacked runs start and end ([0, ..., N]);
+        the correlation acts within each run only
+    rho, variance : (m,) or None, each channel's lag-1 correlation and the variance of its
+        residuals (their unit); None or NaN: read off the residuals (lag-1 correlation of the
+        channel's own consecutive samples, mean square)
+
+    Returns
+    -------
+    cov : (p, p) the covariance; rho : (m,) each channel's lag-1 correlation (NaN: no
+    samples); lags count a channel's own samples (its missing rows dropped), as the samples
+    its noise correlates
+    """
+    white = np.asarray(white, dtype=float)
+    n, m = white.shape
+    p = J.shape[1]
+    J3 = np.asarray(J, dtype=float).reshape(n, m, p)
+    bounds = [0, n] if bounds is None else [int(b) for b in bounds]
+    present = np.isfinite(white)
+    rhos = np.full(m, np.nan)
+    var = np.ones(m)
+    for j in range(m):
+        if present[:, j].sum() < 3:
+            continue
+        r1 = math.nan if rho is None else float(rho[j])
+        if not np.isfinite(r1):
+            runs = [np.flatnonzero(present[a:b, j]) + a for a, b in zip(bounds[:-1], bounds[1:])]
+            r1 = autocorrelation(with_gaps([white[k, j] for k in runs if k.size], 1), 1)[1]
+        rhos[j] = float(np.clip(np.nan_to_num(r1), -1.0, 1.0))
+        v = math.nan if variance is None else float(variance[j])
+        var[j] = v if np.isfinite(v) else float(np.mean(white[present[:, j], j] ** 2))
+    sums = Ar1ScoreSums(np.nan_to_num(rhos), var, bounds, p)
+    sums.add(0, J3, present & np.isfinite(rhos)[None, :])
+    A = np.einsum('kjp,kjq->pq', J3 * present[:, :, None], J3 * present[:, :, None])
+    return sums.covariance(A), rhos
+
+
+class Ar1ScoreSums:
+    """The score covariance B of :func:`ar1_covariance` summed a chunk of samples at a time
+    (the refinement never holds the whole Jacobian: core/identification/levenberg_marquardt.py).
+
+    B = sum_j v_j (S_j + S_j^T - X_j^T X_j), S_j = sum_k X_jk^T a_jk with a_jk = X_jk +
+    rho_j a_j(k-1) the causal AR(1) filter of channel j's rows X_jk (p,) over its own present
+    samples within a run (Gamma X = the causal plus the anti-causal sum less X, and the
+    anti-causal one's products are the causal one's transposed); the filter's state is carried
+    from chunk to chunk and reset where a run starts.
+
+    rho, variance : (m,) each channel's lag-1 correlation and residual variance; bounds : the
+    sample rows where the stacked runs start and end ([0, ..., N]); p : the parameters."""
+
+    def __init__(self, rho: np.ndarray, variance: np.ndarray, bounds: Sequence[int], p: int):
+        self.rho = np.asarray(rho, dtype=float)
+        self.variance = np.asarray(variance, dtype=float)
+        self.starts = {int(b) for b in bounds}
+        self.p = p
+        self.start()
+
+    def start(self) -> None:
+        """Empty sums (a new pass over the samples)."""
+        m, p = self.rho.size, self.p
+        self.S = np.zeros((m, p, p))
+        self.XX = np.zeros((m, p, p))
+        self.state = np.zeros((m, p))
+
+    def add(self, at: int, J3: np.ndarray, present: np.ndarray) -> None:
+        """Samples at .. at + K - 1: J3 (K, m, p) their rows of the Jacobian, present (K, m)
+        which of them are measured (the others skipped: no step of the channel's noise)."""
+        from scipy.signal import lfilter
+        K = J3.shape[0]
+        cuts = sorted(k - at for k in self.starts if at <= k < at + K)
+        for j in range(self.rho.size):
+            r1 = self.rho[j]
+            for a, b in zip([0] + cuts, cuts + [K]):
+                if a > 0 or at in self.starts:
+                    self.state[j] = 0.0     # a run starts: its noise owes nothing to the last
+                X = J3[a:b, j, :][present[a:b, j]]
+                if not X.shape[0]:
+                    continue
+                # a_k = X_k + rho a_(k-1), from the carried a (lfilter: y_0 = x_0 + zi)
+                ahead, _ = lfilter([1.0], [1.0, -r1], X, axis=0,
+                                   zi=(r1 * self.state[j])[None, :])
+                self.state[j] = ahead[-1]
+                self.S[j] += X.T @ ahead
+                self.XX[j] += X.T @ X
+
+    def covariance(self, A: np.ndarray) -> np.ndarray:
+        """A^-1 B A^-1 for the information A = J^T J (p, p); LinAlgError if A is singular."""
+        B = np.einsum('j,jpq->pq', self.variance,
+                      self.S + np.transpose(self.S, (0, 2, 1)) - self.XX)
+        A_inv = np.linalg.inv(A)
+        cov = A_inv @ B @ A_inv
+        return 0.5 * (cov + cov.T)
 
 
 def identifiability(J: np.ndarray, estimate: np.ndarray, names: Sequence[str],
