@@ -253,15 +253,19 @@ class _McapFile:
             return set()
         return {i.compression for i in self.summary.chunk_indexes}
 
-    def _count_chunk(self, index):
-        """{channel_id: messages} of one chunk, counted by reading it."""
+    def _chunk_messages(self, index):
+        """The Message records of one chunk, its CRC checked (BagError if it fails)."""
         chunk = _read_chunk(self.fh, index, self.path)
         try:
             records = breakup_chunk(chunk, validate_crc=True)
         except Exception as exc:  # CRC mismatch, bad compression, ...
             raise BagError(f'{self.path}: corrupted MCAP chunk ({type(exc).__name__}: '
                            f'{exc})') from exc
-        return Counter(r.channel_id for r in records if isinstance(r, Message))
+        return [r for r in records if isinstance(r, Message)]
+
+    def _count_chunk(self, index):
+        """{channel_id: messages} of one chunk, counted by reading it."""
+        return Counter(r.channel_id for r in self._chunk_messages(index))
 
     def _iter_indexed(self, topics):
         """Yield (channel, message) through the index in log-time order (ties: the file's
@@ -281,13 +285,7 @@ class _McapFile:
         wanted = {cid for cid, c in self.channels.items()
                   if topics is None or c.topic in topics}
         for index in chunks:
-            chunk = _read_chunk(self.fh, index, self.path)
-            try:
-                records = breakup_chunk(chunk, validate_crc=True)
-            except Exception as exc:  # CRC mismatch, bad compression, ...
-                raise BagError(f'{self.path}: corrupted MCAP chunk ({type(exc).__name__}: '
-                               f'{exc})') from exc
-            messages = [r for r in records if isinstance(r, Message) and r.channel_id in wanted]
+            messages = [r for r in self._chunk_messages(index) if r.channel_id in wanted]
             messages.sort(key=lambda m: m.log_time)
             for m in messages:
                 yield self.channels[m.channel_id], m
