@@ -412,7 +412,7 @@ def refine(model, cfg, runs, theta_start, T=None, max_step=None, max_bridge=DEFA
     except np.linalg.LinAlgError:
         raise DivergenceError('batch refinement: the coefficients are not identifiable from '
                               'this run (singular information matrix)') from None
-    if details:
+    if details and ar1 is None:  # (the AR(1) pass left white at the solution already)
         residuals(sol.x)        # the innovations at the solution (the last call may differ)
     return Refinement(estimate=sol.x * scale, cov=cov, cost=s2, information=information,
                       scores=fd.scores / scale, converged=sol.status > 0,
