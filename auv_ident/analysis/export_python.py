@@ -98,6 +98,18 @@ def _term_lines(v, c):
     return lines
 
 
+def _coriolis_lines(v, c):
+    """The added-mass Coriolis terms the model computes from the added mass (a vehicle file's
+    `added_mass_coriolis: fossen`, vehicle.ca_i) as source lines, in the kernel's order."""
+    lines = []
+    for (eq, ci, a, b), s in zip(getattr(v, 'ca_i', ()), getattr(v, 'ca_s', ())):
+        lines.append(f'    F[{int(eq)}] += {_r(float(s) * float(c[int(ci)]))} * '
+                     f'{FACTOR_CODE[FACTORS[int(a)]]} * {FACTOR_CODE[FACTORS[int(b)]]}'
+                     f'   # {EQUATIONS[int(eq)]}: added-mass Coriolis of '
+                     f'{v.coefficients[int(ci)].name}')
+    return lines
+
+
 def _used_factors(v):
     return {FACTORS[int(f)] for row in v.terms_i for f in row[2:] if f >= 0}
 
@@ -290,8 +302,11 @@ def _header(saved, model, day):
         'rigid-body Coriolis terms) + propulsion + cross-flow drag + restoring forces'
         + (' + thrusters' if ts else '') + ';',
         'nu_dot = MINV F, MINV the inverse the identification used (M = M_RB + M_A is given',
-        'too). Added mass enters through M only: its Coriolis part is in the monomial terms',
-        'where the vehicle file has it.',
+        *(('too). Added mass enters through M and its Coriolis terms -C_A(nu) nu (Fossen',
+           '2021, eq. 6.43), which F computes from it (the lines "added-mass Coriolis").')
+          if len(getattr(v, 'ca_i', ())) else
+          ('too). Added mass enters through M only: its Coriolis part is in the monomial terms',
+           'where the vehicle file has it.')),
     ]
     if held:
         lines += [f'Degrees of freedom: the states {", ".join(held)} are held (read as 0, their',
@@ -338,6 +353,7 @@ def python_text(saved):
     if FACTORS[Z_EPS] in used and int(par[P_PROP]) != 1:
         body.append('    eps = 0.0   # no Healey-Lienard propeller')
     body += _term_lines(v, model.c)
+    body += _coriolis_lines(v, model.c)
     body += thr_code
     body += _restoring_lines(par)
     body += _crossflow_lines(par)

@@ -35,7 +35,8 @@ def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
     doc = json.loads(model.read_text())
     chosen, left = doc['selection']['chosen'], doc['selection']['left_out']
     assert set(TANK) <= set(chosen), left
-    assert left['X_vr'] == HOVER_CROSS_TERM and left['N_uv'] == HOVER_CROSS_TERM
+    # the file's added-mass Coriolis follows its added mass: it has no cross terms to leave out
+    assert HOVER_CROSS_TERM not in left.values()
     for name, c in doc['coefficients'].items():
         t = truth[name]
         assert abs(c['estimate'] - t) <= 0.05 * abs(t), (name, c['estimate'], t)

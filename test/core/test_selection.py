@@ -4,6 +4,7 @@ stepwise pass on a linear problem whose answer is known, and a short simulated r
 differs from the vehicle file in a few coefficients."""
 import numpy as np
 import pytest
+from rov_munk import fixed_munk_file
 
 from auv_ident.core.errors import ConfigError
 from auv_ident.core.filter.augmented import FilterConfig
@@ -28,6 +29,7 @@ from auv_ident.core.identification.selection import (
     tank_groups,
 )
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
@@ -209,15 +211,22 @@ def test_a_group_that_is_determined_together_enters_together():
     assert {s['group'] for s in steps} == {'A_udot,A_u,A_uu'}
 
 
-def test_a_hovering_vehicle_chooses_among_its_diagonal_terms_and_thrust_gains():
+def test_a_hovering_vehicle_chooses_among_its_diagonal_terms_and_thrust_gains(tmp_path):
     """BlueROV2 Heavy: the candidates are the thrust gains and the diagonal added mass and
-    damping (the cross terms, the Coriolis of the added mass, left out with the reason), in
-    groups per degree of freedom; a fin vehicle's candidates and groups are as before."""
+    damping (cross terms, such as the Coriolis of the added mass written as fixed coefficients,
+    left out with the reason), in groups per degree of freedom; a fin vehicle's candidates and
+    groups are as before."""
     v = load_vehicle('bluerov2_heavy')
     cands, left = candidate_coefficients(v, 'exact')
     assert set(v.identify_default) <= set(cands)
-    assert {left[n] for n in ('X_vr', 'Y_ur', 'N_uv', 'K_vw', 'M_uw')} == {HOVER_CROSS_TERM}
     assert set(cands) | set(left) == set(v.names) and not set(cands) & set(left)
+    # the shipped file's added-mass Coriolis follows its added mass (no coefficients of its
+    # own); the file that writes it as fixed cross terms gets those left out
+    assert HOVER_CROSS_TERM not in left.values()
+    fixed = vehicle_from_file(str(fixed_munk_file(tmp_path / 'fixed.yaml')))
+    f_cands, f_left = candidate_coefficients(fixed, 'exact')
+    assert f_cands == cands
+    assert {f_left[n] for n in ('X_vr', 'Y_ur', 'N_uv', 'K_vw', 'M_uw')} == {HOVER_CROSS_TERM}
     idx = list(range(len(cands)))
     groups = [[cands[i] for i in g] for g in tank_groups(cands, v, idx)]
     assert ['thrust_gain_fwd', 'thrust_gain_rev'] in groups

@@ -137,7 +137,7 @@ kernel = cached_njit(_nrt=False)
 # structref, can be read by the kernels compiled without reference counting.
 CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
                                             'Minv recompute_minv M_RB theta_pos current n_coef '
-                                            'held thr gain_idx')
+                                            'held thr gain_idx ca_i ca_s')
 CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
 
 c0 : (n_coef + 3,) coefficient values (the file's units) for the coefficients not in theta,
@@ -161,6 +161,10 @@ thr : (n, thrusters.THR_COLS + 3 K_max) the thrusters and their tables (empty fo
     vehicle); their commands are u_in[N_INPUT:N_INPUT + n]
 gain_idx : (2, 6) int, per curve side (forward, reverse) and equation the index in c0 of
     its thrust gain, or -1 (gain 1)
+ca_i : (nc, 4) int, the added-mass Coriolis terms the model computes (vehicle.ca_i:
+    [equation, added-mass coefficient index in c0, nu factor, nu factor]; empty when the file
+    writes its own)
+ca_s : (nc,) the scale of each
 """
 
 OK, ERR_NONFINITE, ERR_U_ZERO, ERR_EPS_COMPLEX, ERR_THETA_90, ERR_M_SINGULAR = 0, 1, 2, 3, 4, 5
@@ -307,6 +311,30 @@ def _thrusters(ui, c, cm, want_jac, xdot, Bt):
                 j = cm.theta_pos[gi]
                 if want_jac and j >= 0:
                     Bt[e, j] += tau
+
+
+@kernel
+def _added_mass_coriolis(xv, c, cm, want_jac, xdot, A, Bt):
+    """-C_A(nu) nu of the added-mass coefficients (vehicle.added_mass_coriolis_terms) into
+    xdot[0:6]: per term s c[ci] nu_a nu_b, its derivatives by nu_a and nu_b into A and by the
+    added-mass coefficient, s nu_a nu_b, into Bt when it is identified (one coefficient has
+    terms in several equations, so these are not the monomial kernel's one term per
+    coefficient). xv holds nu_r with a current."""
+    ca_i = cm.ca_i
+    ca_s = cm.ca_s
+    for t in range(ca_i.shape[0]):
+        eq = ca_i[t, 0]
+        ci = ca_i[t, 1]
+        a = xv[ca_i[t, 2]]
+        b = xv[ca_i[t, 3]]
+        k = ca_s[t] * c[ci]
+        xdot[eq] += k * a * b
+        if want_jac:
+            A[eq, ca_i[t, 2]] += k * b
+            A[eq, ca_i[t, 3]] += k * a
+            j = cm.theta_pos[ci]
+            if j >= 0:
+                Bt[eq, j] += ca_s[t] * a * b
 
 
 @kernel
@@ -644,6 +672,8 @@ def state_derivative(x, ui, c, Minv, cm, want_jac, xdot, A, Bt, zz, dprod):  # n
             eq = theta_terms[j, 0]
             if eq >= 0:
                 Bt[eq, j] += dprod[theta_terms[j, 1]]
+    if cm.ca_i.shape[0] > 0:
+        _added_mass_coriolis(xv, c, cm, want_jac, xdot, A, Bt)
     if cm.thr.shape[0] > 0:
         _thrusters(ui, c, cm, want_jac, xdot, Bt)
     _restoring(par, sph, cph, sth, cth, want_jac, xdot, A)
@@ -779,7 +809,8 @@ class Model:
         v = self.vehicle
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
                              self.Minv, self.recompute_minv, v.M_RB, theta_pos,
-                             self.current_mode, self.n_coef, self.held, v.thr, v.gain_idx)
+                             self.current_mode, self.n_coef, self.held, v.thr, v.gain_idx,
+                             v.ca_i, v.ca_s)
 
     def _c_ext(self, theta: ArrayLike | None) -> np.ndarray:
         """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""

@@ -139,6 +139,12 @@ class Vehicle:
     # (2, 6) int, per curve side (forward, reverse) and equation X..N the index of the
     # coefficient scaling that side's thruster force in that equation (a thrust gain), or -1
     gain_idx: np.ndarray = field(default_factory=lambda: -np.ones((2, N_NU), dtype=np.int64))
+    # the added-mass Coriolis terms -C_A(nu) nu the model computes from the added-mass
+    # coefficients (`added_mass_coriolis: fossen`, added_mass_coriolis_terms): per term
+    # [equation, added-mass coefficient index, nu factor, nu factor] and its scale; empty when
+    # the file writes its own (`none`, the default)
+    ca_i: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
+    ca_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -324,6 +330,76 @@ def rigid_body_terms(mass: float, r_G: np.ndarray,
     return [e for e in t if e[1] != 0.0]
 
 
+# `added_mass_coriolis:` the added-mass Coriolis and centripetal forces -C_A(nu) nu are either
+# written by the file as coefficients of their own (`none`, the default: the torpedo files' Munk
+# moments X_vr, M_uw, ... lump them with viscous parts) or computed by the model from the file's
+# added-mass coefficients (`fossen`), so that they follow an identified added mass
+ADDED_MASS_CORIOLIS = ('none', 'fossen')
+
+
+def _levi_civita(m: int, k: int, n: int) -> int:
+    """eps_mkn: +1 for a cyclic (m, k, n) of (0, 1, 2), -1 for an anticyclic one, else 0."""
+    return (m - k) * (k - n) * (n - m) // 2
+
+
+def added_mass_coriolis_terms(am_i: np.ndarray,
+                              am_s: np.ndarray) -> list[tuple[int, int, float, int, int]]:
+    """-C_A(nu) nu (Fossen 2021, eq. 6.43 for a symmetric M_A; eq. 6.51 when it is diagonal) as
+    bilinear terms of the added-mass coefficients: (equation, coefficient index, scale, nu
+    factor, nu factor) per term, each adding scale * c[coefficient] * nu_a * nu_b to its equation.
+
+    With a = M_A nu = [a1; a2] and nu = [v; omega], -C_A(nu) nu = [a1 x omega; a1 x v + a2 x
+    omega]. An added-mass coefficient c at (equation i, column j) of scale s puts -s c into
+    M_A[i, j] (M[i, j] -= s c), so a_i gains -s c nu_j, and (e_k x w)_m = eps_mkn w_n gives its
+    terms. The diagonal X_udot (a1 = -X_udot): Y += X_udot u r, Z -= X_udot u q,
+    M += X_udot u w, N -= X_udot u v, i.e. -a1 u r, a1 u q, -a1 u w, a1 u v."""
+    terms = []
+    for (eq, col, ci), s in zip(am_i, am_s):
+        eq, col, ci = int(eq), int(col), int(ci)
+        k = eq % 3
+        for m in range(3):
+            for n in range(3):
+                e = _levi_civita(m, k, n)
+                if e == 0:
+                    continue
+                if eq < 3:      # a1: a1 x omega in the force, a1 x v in the moment
+                    terms.append((m, ci, -float(s) * e, col, 3 + n))
+                    terms.append((3 + m, ci, -float(s) * e, col, n))
+                else:           # a2: a2 x omega in the moment
+                    terms.append((3 + m, ci, -float(s) * e, col, 3 + n))
+    return terms
+
+
+def _added_mass_coriolis(raw: dict, where: str, coefs: list[Coefficient], am_i: list,
+                         am_s: list) -> tuple[np.ndarray, np.ndarray]:
+    """(ca_i, ca_s) of the file's `added_mass_coriolis:` (ADDED_MASS_CORIOLIS): the terms of
+    added_mass_coriolis_terms for `fossen`, none for `none`. A coefficient of the file whose
+    term is one of them (same equation, same two velocities) would count it twice: refused by
+    name."""
+    mode = raw.get('added_mass_coriolis', 'none')
+    if mode not in ADDED_MASS_CORIOLIS:
+        raise ConfigError(f'{where}: added_mass_coriolis = {mode!r}; use none (the file writes '
+                          'its own added-mass Coriolis terms, if any) or fossen (the model '
+                          'computes -C_A(nu) nu from the added-mass coefficients)')
+    if mode == 'none':
+        return np.zeros((0, 4), dtype=np.int64), np.zeros(0)
+    if not am_i:
+        raise ConfigError(f'{where}: added_mass_coriolis: fossen needs added-mass '
+                          'coefficients (multiplier udot .. rdot); the file has none')
+    terms = added_mass_coriolis_terms(np.array(am_i).reshape(-1, 3), np.array(am_s))
+    generated = {(eq, tuple(sorted((a, b)))) for eq, _, _, a, b in terms}
+    for c in coefs:
+        if (c.has_monomial and len(c.factors) == 2
+                and (c.equation, tuple(sorted(c.factors))) in generated):
+            raise ConfigError(
+                f'{where}: coefficient {c.name} ({EQUATIONS[c.equation]}, '
+                f'{"*".join(FACTORS[f] for f in c.factors)}) is a term of the added-mass '
+                'Coriolis forces, which added_mass_coriolis: fossen computes from the added '
+                'mass: it would count twice; remove it, or the key')
+    return (np.array([[eq, ci, a, b] for eq, ci, _, a, b in terms], dtype=np.int64),
+            np.array([s for _, _, s, _, _ in terms], dtype=float))
+
+
 def rigid_body_mass_matrix(mass: float, r_G: np.ndarray, I: Sequence[float]) -> np.ndarray:
     """M_RB = [[m I3, -m S(r_G)], [m S(r_G), I_g]] (Fossen 2021, eq. 3.44), (6, 6)."""
     Ix, Iy, Iz, Ixy, Iyz, Ixz = I
@@ -427,6 +503,7 @@ def _build(raw: object, path: str) -> Vehicle:
     if any(FACTOR_INDEX['U'] in c.factors for c in coefs):
         par[P_SPEED_FACTOR] = 1.0
     terms_i, terms_s, am_i, am_s = _term_tables(coefs, rigid_body_terms(mass, r_G, I))
+    ca_i, ca_s = _added_mass_coriolis(raw, where, coefs, am_i, am_s)
     mass_inverse, Minv_literal = _mass_inverse(raw, where, free)
 
     v = Vehicle(
@@ -442,7 +519,7 @@ def _build(raw: object, path: str) -> Vehicle:
                     else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
         free_states=free, thrusters=tuple(thrusters), thr=thruster_table(thrusters),
-        gain_idx=_gain_index(coefs, where))
+        gain_idx=_gain_index(coefs, where), ca_i=ca_i, ca_s=ca_s)
     if v.gain_idx.max() >= 0 and not thrusters:
         raise ConfigError(f'{where}: a thrust gain (multiplier `thrusters`) without a '
                           '`thrusters:` list scales nothing')
