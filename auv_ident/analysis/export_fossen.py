@@ -1,4 +1,5 @@
-"""Fossen-form simulator exports (``export --format uuv|gz``, docs/export.md).
+"""Fossen-form simulator exports (``export --format gz|uuv|urdf-hydrodynamics``: docs/export.md
+and the pages export_gz.md, export_uuv.md, export_urdf_hydrodynamics.md).
 
 Both targets hold M_RB nu_dot + M_A nu_dot + C_A(nu) nu + D(nu) nu + ... = tau with a few fixed
 damping terms; our model (core/model/hydrodynamics.py) has others (cross-flow integrals, fin

@@ -69,6 +69,7 @@ from auv_ident.core.errors import DivergenceError, DomainError
 from auv_ident.core.filter.augmented import AugmentedEKF
 from auv_ident.core.filter.timing import nominal_sample_time
 from auv_ident.core.identification.batch import refine, run_ekf
+from auv_ident.core.identification.plausibility import DEFAULT_Z, is_self_damping
 from auv_ident.core.identification.results import Estimate, FilterPass, NoiseFit
 from auv_ident.core.identification.uncertainty import (
     LJUNG_BOX_LAGS,
@@ -191,6 +192,20 @@ def match_process_noise(model, cfg, runs, T, first, max_step=None, max_bridge=0.
     return ProcessMatch(q, last, passes, levels)
 
 
+def wrong_signs(model, filter_pass):
+    """The identified self-damping and diagonal added-mass coefficients (plausibility.
+    is_self_damping) that an EKF pass ended with positive beyond DEFAULT_Z of its own 1-sigma:
+    a pass that chased noise far above its configured level into a model no vehicle has. Such
+    a pass can complete where another diverges (which one is a matter of the start and of the
+    model's couplings: a BlueROV2 whose added-mass Coriolis follows its added mass took its
+    X_udot and Y_vdot positive on a simulated tank session with twice the noise), so it is
+    retried with more noise as a divergence is."""
+    v = model.vehicle
+    sd = np.sqrt(np.clip(np.diag(filter_pass.theta_cov), 0.0, None))
+    return [name for name, est, s in zip(model.theta_names[:model.p_coef], filter_pass.theta, sd)
+            if is_self_damping(v.coefficients[v.index(name)]) and est > DEFAULT_Z * s]
+
+
 def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_every=0):
     """Noise model of one run or several (runs: list of Record, as
     core.identification.batch.run_ekf takes them) from an EKF pass over them in turn with the
@@ -200,26 +215,37 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
     whether the process noise was matched to the data, effective_q the result).
 
     If that pass leaves the model's domain or diverges (noise far above the configured level
-    makes an over-confident filter chase it, e.g. into a negative surge speed), the pass is
-    made again with the noise scaled by RETRY_NOISE_FACTORS in turn, the noise model is read
-    off the first pass that completes (its levels relative to that scaled noise), and a note
-    says so; only if every pass fails is the last error raised. Innovations more than
+    makes an over-confident filter chase it, e.g. into a negative surge speed), or completes
+    with a damping or added mass of the wrong sign (wrong_signs), the pass is made again with
+    the noise scaled by RETRY_NOISE_FACTORS in turn, the noise model is read off the first
+    pass that completes with the right signs (its levels relative to that scaled noise), and a
+    note says so; if none does, the first that completed is used, and only if every pass
+    diverges is the last error raised. Innovations more than
     PROCESS_NOISE_LEVEL times their predicted level: the process noise is matched first
     (module docstring) and the measurement noise model read off the matched pass."""
     T = nominal_sample_time(runs[0].t) if T is None else T
     conf = np.asarray(cfg.noise_std, dtype=float)
     measured = np.asarray(cfg.measured, dtype=bool)
     failures = []
+    wild = None     # the first pass that completed with wrong signs, if every one fails
     for factor in (1.0,) + RETRY_NOISE_FACTORS:
         base = conf * factor
         cfg_base = cfg if factor == 1.0 else replace(cfg, noise_std=base)
         try:
             first = _pass(model, cfg_base, runs, T, max_step, max_bridge, hist_every)
-            break
         except (DomainError, DivergenceError) as err:
             failures.append((factor, err))
+            continue
+        wrong = wrong_signs(model, first)
+        if not wrong:
+            break
+        failures.append((factor, f'it ended with {", ".join(wrong)} positive: a damping or '
+                                 'added mass that gives the motion energy'))
+        wild = wild or (factor, base, cfg_base, first)
     else:
-        raise failures[-1][1]
+        if wild is None:
+            raise failures[-1][1]
+        factor, base, cfg_base, first = wild
     levels0 = _levels(_pooled(first), measured)
     q_conf = np.asarray(cfg.q_state, dtype=float)
     q, last, passes = q_conf.copy(), first, 0
@@ -235,11 +261,15 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
                    used=used, configured_pass=first, configured_q=q_conf,
                    effective_q=q, process_used=passes > 0, process_levels=levels0)
-    if failures:
+    if failures and factor != 1.0:
         fit.notes.append(
             f'the EKF with the configured noise failed ({failures[0][1]}): the noise is far '
             f'above the configured level; the noise model was read off a pass with {factor:g}x '
             'the configured noise')
+    elif failures:
+        fit.notes.append(
+            f'the EKF with the configured noise ended implausible ({failures[0][1]}) and so '
+            'did every pass with more noise; the noise model was read off the configured one')
     if passes:
         big = [j for j in np.flatnonzero(measured) if np.isfinite(levels0[j])]
         fit.notes.append(
