@@ -65,6 +65,7 @@ THERMAL_MODELS = {
                                                          'thermal_expansion'), None, True)}
 # what the dives are asked about beyond what ours identifies
 EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
+BIAS_GOAL = 0.005       # m/s: issue #31's goal for the speed-through-water bias
 
 
 def _flight(cal, record):
@@ -153,9 +154,9 @@ def _cm_std(v, std):
     return f'{_cm(v)} ({100.0 * std:.2f})' if np.isfinite(std) else _cm(v)
 
 
-SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s (1-sigma) | U RMS cm/s | '
-                'U fit % | U bias (DVL-consistent dives) | U RMS (consistent) | '
-                'U fit % (consistent) | dz/dt RMS cm/s | fit s (wall) |',
+SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s, all dives (1-sigma) | '
+                'U RMS cm/s, all dives | U fit %, all dives | U bias, flagged dives out | '
+                'U RMS, flagged out | U fit %, flagged out | dz/dt RMS cm/s | fit s (wall) |',
                 '|---|---|---|---|---|---|---|---|---|---|---|']
 
 
@@ -188,12 +189,15 @@ def versus_row(label, run):
 
 
 def format_campaign(result):
-    """Markdown lines of the campaign's table (module docstring)."""
-    L = list(SCORE_HEADER)
+    """Markdown lines of the campaign (module docstring): first the dives the data-quality
+    check flagged (:func:`format_flagged`) and the goals (:func:`format_goals`), then the
+    tables."""
+    L = format_flagged(result['dvl_check'], result['split'])
+    L += ['', *format_goals(result), '', *SCORE_HEADER]
     for label, model in result['models'].items():
         for run in model['runs'].values():
             L.append(score_row(label, run))
-    L += ['', 'Each model against ours on the same DVL samples (the consistent dives), paired '
+    L += ['', 'Each model against ours on the same DVL samples (flagged dives out), paired '
           'dive by dive:', '', *VERSUS_HEADER]
     for label, model in result['models'].items():
         if label != 'dynamic':
@@ -216,24 +220,97 @@ def format_campaign(result):
     return L + format_dvl_check(result['dvl_check'])
 
 
+def _utc(t):
+    return str(np.datetime64(int(t), 's'))
+
+
+def format_flagged(check, split=None):
+    """The first lines of a glider run's output: the dives the data-quality check
+    (core/glider/validation.py consistent_dvl, its as_dict) flagged, each named by its start
+    (UTC) and, given the split (s since 1970), its half, with the evidence: its DVL speed
+    against the speed its depth rate and pitch imply at the other dives' angle of attack, and
+    how far the other dives' DVL speeds are from theirs."""
+    dives = check['dives']
+    if not np.isfinite(check['z_limit']):
+        return [f'data quality: {len(dives)} DVL dives, too few to judge the DVL against the '
+                'pressure and the pitch: none flagged; every figure is over every dive']
+    flagged = [d for d in dives if not d['kept']]
+    ratios = [d['dvl_speed'] / d['implied_speed'] - 1.0 for d in dives if d['kept']]
+    L = [f'data quality: {len(flagged)} of {len(dives)} DVL dives flagged'
+         + (': ' + ', '.join(_utc(d['start']) for d in flagged) if flagged else '')
+         + " (the DVL's speed against the speed the depth rate and the pitch imply, beyond "
+         f"the other dives' spread: |z| > {check['z_limit']:.2f}, at which any of "
+         f"{len(dives)} consistent dives is flagged with {100 * check['false_rejection']:g} % "
+         "chance)"]
+    for d in flagged:
+        half = ''
+        if split is not None:
+            half = ' (first half)' if d['start'] < split else ' (second half)'
+        L.append(f"  flagged: the dive from {_utc(d['start'])}{half}: DVL {d['dvl_speed']:.3f} "
+                 f"m/s where its depth rate {d['depth_rate']:.3f} m/s and pitch "
+                 f"{d['pitch_deg']:.1f} deg imply {d['implied_speed']:.3f} m/s at the dives' "
+                 f"angle of attack {check['centre_deg']:.2f} deg "
+                 f"({100 * (d['dvl_speed'] / d['implied_speed'] - 1.0):+.0f} %; the other "
+                 f"dives {100 * min(ratios):+.0f}..{100 * max(ratios):+.0f} %); its implied "
+                 f"angle of attack {d['median_aoa_deg']:.2f} deg, z = {d['z']:+.1f}")
+    L.append("  the figures 'all dives' count every DVL sample, the flagged dives' too; "
+             "'flagged out' leave the flagged dives out (dive by dive: the last table of "
+             'tools/glider_campaign.py)')
+    return L
+
+
+def _met(ok):
+    return 'met' if ok else 'not met'
+
+
+def format_goals(result):
+    """Lines saying, for ours on each half it did not see, which figure meets issue #31's
+    goals: the speed bias within :data:`BIAS_GOAL` over every dive and with the flagged dives
+    out, and the speed RMS (flagged dives out) against the steady calibration and
+    gliderflight's example problem solved to its minimum, paired on the same samples."""
+    ours = result['models']['dynamic']['runs']
+    L = ['goals (issue #31), ours (dynamic) on the half it did not see:']
+    for run in ours.values():
+        a, c = run['validation']['all'], run['validation']['consistent']
+        where = f"  fitted on the {run['fitted_on']} half, validated on the {run['validated_on']}"
+        L.append(f"{where}: speed bias within {100 * BIAS_GOAL:.1f} cm/s: flagged dives out "
+                 f"{_cm_std(c['speed_bias'], c['speed_bias_std'])} cm/s: "
+                 f"{_met(abs(c['speed_bias']) <= BIAS_GOAL)}; all dives "
+                 f"{_cm_std(a['speed_bias'], a['speed_bias_std'])} cm/s: "
+                 f"{_met(abs(a['speed_bias']) <= BIAS_GOAL)}")
+        for label in ('steady (gliderflight style)', "dynamic (gliderflight's example)"):
+            other = result['models'].get(label)
+            if other is None:
+                continue
+            v = other['runs'][run['fitted_on']]['versus_ours']
+            below = v['difference'] > 0.0
+            told = abs(v['difference']) > 2.0 * v['difference_std']
+            L.append(f"{where}: speed RMS (flagged out) {100 * v['rms_b']:.2f} cm/s against "
+                     f"{label} {100 * v['rms_a']:.2f}: {'below' if below else 'not below'}, "
+                     f"by {_cm_std(v['difference'], v['difference_std'])} cm/s paired over "
+                     f"{v['dives']} dives ({'more' if told else 'less'} than twice its 1-sigma)")
+    return L
+
+
 def format_dvl_check(check):
     """Markdown lines of the instruments' consistency check (core/glider/validation.py)."""
     dives = check['dives']
     failed = [d for d in dives if not d['kept']]
-    L = ['', f"The DVL against the pressure and the pitch, dive by dive: {len(dives)} dives, "
+    L = ['', 'The data-quality check, the DVL against the pressure and the pitch, dive by dive: '
+         f"{len(dives)} dives, "
          f"median implied angle of attack {check['centre_deg']:.2f} deg, dive-to-dive spread "
          f"(1.4826 MAD) {check['spread_deg']:.2f} deg; a dive fails at |z| > "
          f"{check['z_limit']:.2f} ({100 * check['false_rejection']:g} % chance of failing any "
          f"of {len(dives)} consistent dives); failed: {len(failed)}", '',
          '| dive start (UTC) | DVL samples | pumped cc | pitch deg | depth rate m/s | '
-         'DVL speed m/s | median implied angle of attack deg (s.e.) | z | passes |',
-         '|---|---|---|---|---|---|---|---|---|']
+         'DVL speed m/s | implied speed m/s | median implied angle of attack deg (s.e.) | z | '
+         'flagged |', '|---|---|---|---|---|---|---|---|---|---|']
     for d in dives:
-        L.append(f"| {np.datetime64(int(d['start']), 's')} | {d['samples']} | "
+        L.append(f"| {_utc(d['start'])} | {d['samples']} | "
                  f"{d['pumped_cc']:.0f} | {d['pitch_deg']:.1f} | {d['depth_rate']:.3f} | "
-                 f"{d['dvl_speed']:.3f} | "
+                 f"{d['dvl_speed']:.3f} | {d['implied_speed']:.3f} | "
                  f"{d['median_aoa_deg']:.2f} ({d['stderr_deg']:.2f}) | {d['z']:+.1f} | "
-                 f"{'yes' if d['kept'] else 'no'} |")
+                 f"{'no' if d['kept'] else 'FLAGGED'} |")
     return L
 
 
