@@ -135,6 +135,17 @@ def test_calibration_recovers_known_parameters_within_its_error_bars(seed):
     assert abs(s.speed_bias) < 0.01 and s.speed_rms < 0.01 and s.speed_fit > 75.0
 
 
+def test_a_trial_step_beyond_the_physical_values_is_refused_not_raised():
+    """From a prior far off (a lift slope of 4 against 7.5), Levenberg-Marquardt's first step
+    (up to 100 scale units) lands on a negative C_D0: the step is refused and the fit goes on
+    below that of V_g alone, rather than the parameter check's error escaping the fit."""
+    rec = synthetic_dives(TRUE, 6)
+    start = replace(PRIOR, lift_slope=4.0)
+    volume_only = calibrate(rec, start, 'dynamic', ('hull_volume',))
+    cal = calibrate(rec, start, 'dynamic', ('hull_volume', 'drag_zero_lift'))
+    assert cal.params.drag_zero_lift > 0.0 and cal.rms < volume_only.rms
+
+
 def test_what_constant_pitch_dives_cannot_identify():
     rec = synthetic_dives(TRUE, 4)
     cal = calibrate(rec, PRIOR, 'dynamic', ('hull_volume', 'drag_zero_lift'))
