@@ -145,6 +145,112 @@ def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
     return out
 
 
+def _delayed(x, t, lag):
+    """(N,) x read lag s later than logged (x at t - lag; negative: earlier), held at the ends."""
+    return np.interp(t - lag, t, x)
+
+
+def hull_temperature(record: GliderRecord, tau: float) -> np.ndarray:
+    """(N,) degC: the hull's temperature lagging the water's with time constant tau (s), a
+    first-order lag integrated exactly on the sample steps from the water's first value."""
+    water = record.temperature
+    out = np.empty(len(water))
+    out[0] = water[0]
+    decay = np.exp(-np.diff(record.t) / tau)
+    for k in range(1, len(water)):
+        out[k] = decay[k - 1] * out[k - 1] + (1.0 - decay[k - 1]) * water[k]
+    return out
+
+
+HULL_LAG = 400.0    # s: the hull's temperature lag tried (a dive is ~600 s; tried 60-3200 s)
+# terms ours leaves out, each added alone to ours (V_g, C_D0 from the depth rate) and judged
+# on the half not fitted: label -> (the record as this variant reads it, parameters freed
+# beyond ours, values replacing the prior's, fit window m); the hull temperature only when
+# the record holds the water's (the variant freeing thermal_expansion)
+VARIANTS = {
+    'pitch delayed 4 s': (lambda r: replace(r, pitch=_delayed(r.pitch, r.t, 4.0)), (), {},
+                          DEPTH_WINDOW),
+    'pitch advanced 4 s': (lambda r: replace(r, pitch=_delayed(r.pitch, r.t, -4.0)), (), {},
+                           DEPTH_WINDOW),
+    'pump delayed 5 s': (lambda r: replace(
+        r, pumped_volume=_delayed(r.pumped_volume, r.t, 5.0)), (), {}, DEPTH_WINDOW),
+    'pump advanced 5 s': (lambda r: replace(
+        r, pumped_volume=_delayed(r.pumped_volume, r.t, -5.0)), (), {}, DEPTH_WINDOW),
+    'compressibility freed': (lambda r: r, ('compressibility',), {}, DEPTH_WINDOW),
+    "mass 70 kg (gliderflight's)": (lambda r: r, (), {'mass': 70.0}, DEPTH_WINDOW),
+    'fit window 5-40 m': (lambda r: r, (), {}, (5.0, 40.0)),
+    f'hull temperature lagging the water by {HULL_LAG:.0f} s, alpha_T fitted': (
+        lambda r: replace(r, temperature=hull_temperature(r, HULL_LAG)),
+        ('thermal_expansion',), {}, DEPTH_WINDOW)}
+
+
+def run_variants(record: GliderRecord, prior: GliderParameters, split=None):
+    """Each of :data:`VARIANTS` calibrated on one half of a record and judged on the other,
+    both ways, beside ours (run_campaign's split): per variant and half fitted on, the
+    depth-rate RMS the fit reached (m/s; ours' beside it: what the fit itself can prefer),
+    the estimates, the scores with the flagged dives out, and its RMS against ours on the same
+    samples, paired dive by dive (JSON-ready dict)."""
+    t_split = 0.5 * (record.t[0] + record.t[-1]) if split is None else float(split)
+    kept_times = record.t[consistent_dvl(record).keep]
+    model, free, density, _ = OURS
+    out = {'split': t_split, 'variants': {}}
+    ours = {}
+    for label, (read, extra, start, window) in VARIANTS.items():
+        thermal = 'thermal_expansion' in extra
+        if thermal and record.temperature is None:
+            continue
+        rec = read(record)
+        if not thermal:
+            rec = replace(rec, temperature=None)
+        halves = dict(zip(('first', 'second'), rec.split(t_split)))
+        params = prior
+        if 'mass' in start:         # neutral with nothing pumped, as the prior
+            params = replace(prior, hull_volume=prior.hull_volume * start['mass'] / prior.mass)
+        params = replace(params, **start)
+        runs = {}
+        for fit_name, val_name in (('first', 'second'), ('second', 'first')):
+            if fit_name not in ours:
+                base = replace(record, temperature=None).split(t_split)
+                base_halves = dict(zip(('first', 'second'), base))
+                cal0 = calibrate(base_halves[fit_name], prior, model, free,
+                                 depth_rate_density=density)
+                ours[fit_name] = (cal0.rms, FLIGHT_MODELS[model](cal0.params,
+                                                                 base_halves[val_name]).speed)
+            cal = calibrate(halves[fit_name], params, model, free + tuple(extra),
+                            window=window, depth_rate_density=density)
+            val = halves[val_name]
+            speed = FLIGHT_MODELS[model](cal.params, val).speed
+            runs[fit_name] = {
+                'fitted_on': fit_name, 'validated_on': val_name,
+                'depth_rate_rms_fit': cal.rms, 'ours_depth_rate_rms_fit': ours[fit_name][0],
+                'estimates': {n: list(v) for n, v in cal.estimates().items()},
+                'validation': judge(FLIGHT_MODELS[model](cal.params, val), val, kept_times,
+                                    cal.window)['consistent'],
+                'versus_ours': versus(speed, ours[fit_name][1], val, kept_times),
+                'seconds': cal.seconds}
+        out['variants'][label] = runs
+    return out
+
+
+def format_variants(result):
+    """Markdown lines of :func:`run_variants`."""
+    L = ['| variant | fitted on | dz/dt RMS on the fit half cm/s (ours) | U bias cm/s, '
+         'flagged out (1-sigma) | U RMS, flagged out | its - ours (1-sigma over the dives) | '
+         'estimates (1-sigma) |', '|---|---|---|---|---|---|---|']
+    for label, runs in result['variants'].items():
+        for run in runs.values():
+            v, c = run['validation'], run['versus_ours']
+            est = ', '.join(f'{n} {x:.4g} ({sd:.2g})' for n, (x, sd) in run['estimates'].items()
+                            if n not in OURS[1])
+            L.append(f"| {label} | {run['fitted_on']} half | "
+                     f"{100 * run['depth_rate_rms_fit']:.3f} "
+                     f"({100 * run['ours_depth_rate_rms_fit']:.3f}) | "
+                     f"{_cm_std(v['speed_bias'], v['speed_bias_std'])} | "
+                     f"{100 * v['speed_rms']:.2f} | "
+                     f"{_cm_std(c['difference'], c['difference_std'])} | {est} |")
+    return L
+
+
 def _cm(v):
     return f'{100.0 * v:+.2f}' if np.isfinite(v) else 'n/a'
 
