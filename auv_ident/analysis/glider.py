@@ -176,6 +176,10 @@ VARIANTS = {
         r, pumped_volume=_delayed(r.pumped_volume, r.t, 5.0)), (), {}, DEPTH_WINDOW),
     'pump advanced 5 s': (lambda r: replace(
         r, pumped_volume=_delayed(r.pumped_volume, r.t, -5.0)), (), {}, DEPTH_WINDOW),
+    # the CTD's density read late through the pycnocline (its sensors' lag): the glider's
+    # water is the one measured a few seconds on
+    'density advanced 8 s': (lambda r: replace(r, density=_delayed(r.density, r.t, -8.0)),
+                             (), {}, DEPTH_WINDOW),
     'compressibility freed': (lambda r: r, ('compressibility',), {}, DEPTH_WINDOW),
     "mass 70 kg (gliderflight's)": (lambda r: r, (), {'mass': 70.0}, DEPTH_WINDOW),
     'fit window 5-40 m': (lambda r: r, (), {}, (5.0, 40.0)),
