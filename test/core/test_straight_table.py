@@ -4,10 +4,9 @@ thrust, read by the package's loader and kernel, is the straight line between th
 points at every integer PWM inside those intervals (where the file's own cubic is not: 0.054 N
 against 0.098 N at 1529 us) and the file's curve elsewhere, but for a few mN in the table's
 intervals next to them."""
-import importlib.util
-from pathlib import Path
 import sys
 
+from helpers import load_tool
 import numpy as np
 import pytest
 
@@ -15,16 +14,11 @@ from auv_ident.core.model.thrusters import steady_thrusts
 from auv_ident.core.model.vehicle import vehicle_from_file
 from auv_ident.vehicles import resolve_vehicle_path
 
-TOOL = Path(__file__).resolve().parents[2] / 'tools' / 'straight_table.py'
-
 
 @pytest.fixture
 def tool(monkeypatch):
     monkeypatch.setattr(sys, 'path', list(sys.path))       # the tool inserts the package root
-    spec = importlib.util.spec_from_file_location('straight_table', TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool('straight_table')
 
 
 def _thrust(vehicle, pwm):
