@@ -2,6 +2,7 @@
 import array
 from contextlib import contextmanager
 import dataclasses
+import importlib.util
 import os
 import signal
 import subprocess
@@ -13,6 +14,16 @@ import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
+
+
+def load_tool(name):
+    """The module of tools/NAME.py, loaded from its file (the tools are scripts, not a
+    package; one that inserts the package root into sys.path does so here too)."""
+    spec = importlib.util.spec_from_file_location(name, os.path.join(REPO, 'tools',
+                                                                     f'{name}.py'))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 def spawn_node(node, ros_args, env, log_dir, name=None):
     """Start `python -m auv_ident run NODE --ros-args ...` with stdout/stderr in log_dir.

@@ -6,7 +6,7 @@ steady-state calibration in gliderflight's style on the same split; prints the m
     python -m auv_ident import --format npy \\
         ../shared/realdata/slocum_comet/gliderflight_data.npy --out /tmp/comet
     PYTHONPATH=. .venv/bin/python tools/glider_campaign.py /tmp/comet [--json OUT.json] \\
-        [--plot PNG] [--vehicle slocum_comet]
+        [--plot PNG] [--vehicle slocum_comet] [--variants]
 
 The prior is the glider file's (--vehicle, a name in config/ or a path; config/slocum_comet.yaml).
 """
@@ -20,8 +20,10 @@ sys.path.insert(0, str(REPO))
 
 from auv_ident.analysis.glider import (  # noqa: E402
     format_campaign,
+    format_variants,
     plot_campaign,
     run_campaign,
+    run_variants,
 )
 from auv_ident.core.errors import AuvIdentError  # noqa: E402
 from auv_ident.core.glider.vehicle import glider_from_file  # noqa: E402
@@ -34,6 +36,9 @@ def main(argv=None):
     ap.add_argument('bag', help='a glider bag written by import --format npy')
     ap.add_argument('--json', help='write the campaign here')
     ap.add_argument('--plot', metavar='PNG', help='draw the campaign here')
+    ap.add_argument('--variants', action='store_true',
+                    help='also the terms ours leaves out, each added alone (analysis/glider.py '
+                         'VARIANTS), judged as ours')
     ap.add_argument('--vehicle', default='slocum_comet',
                     help='the glider file of the prior (a name in config/ or a path)')
     a = ap.parse_args(argv)
@@ -41,10 +46,15 @@ def main(argv=None):
         glider = glider_from_file(resolve_vehicle_path(a.vehicle))
         record = read_glider_bag(a.bag)
         result = run_campaign(record, glider.params)
+        if a.variants:
+            result['variants'] = run_variants(record, glider.params, result['split'])
     except AuvIdentError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     print('\n'.join(format_campaign(result)))
+    if a.variants:
+        print('\nThe terms ours leaves out, each added alone, on the half not fitted:\n')
+        print('\n'.join(format_variants(result['variants'])))
     if a.plot:
         plot_campaign(record, result, a.plot)
     if a.json:

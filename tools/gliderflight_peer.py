@@ -42,6 +42,7 @@ sys.path.insert(0, str(REPO))
 import numpy as np  # noqa: E402
 
 from auv_ident.analysis.glider import (  # noqa: E402
+    format_flagged,
     judge,
     OURS,
     SCORE_HEADER,
@@ -147,10 +148,11 @@ def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None, xto
     'models'), whose values and wall times are judged again without calibrating anew."""
     t_split = 0.5 * (record.t[0] + record.t[-1])
     halves = dict(zip(('first', 'second'), record.split(t_split)))
-    kept_times = record.t[consistent_dvl(record).keep]
+    check = consistent_dvl(record)
+    kept_times = record.t[check.keep]
     ours = ours_speeds(halves, prior) if prior is not None else None
     out = {'split': t_split, 'gliderflight': getattr(gf, '__version__', '?'), 'free': free,
-           'xtol': xtol, 'models': {}}
+           'xtol': xtol, 'models': {}, 'dvl_check': check.as_dict()}
     for kind in kinds:
         runs = {}
         for fit_name in fitted_on:
@@ -175,9 +177,9 @@ def run_peer(gf, record, kinds=('steady', 'dynamic'), free=FREE, prior=None, xto
 def format_peer(result):
     free = result['free']
     xtol = result.get('xtol')
-    L = [f"gliderflight {result['gliderflight']}, calibrating {' '.join(free)}"
-         + (f', xtol {xtol:g}' if xtol is not None else ''), '',
-         *SCORE_HEADER]
+    L = [*format_flagged(result['dvl_check'], result['split']), '',
+         f"gliderflight {result['gliderflight']}, calibrating {' '.join(free)}"
+         + (f', xtol {xtol:g}' if xtol is not None else ''), '', *SCORE_HEADER]
     for label, runs in result['models'].items():
         L += [score_row(label, run) for run in runs.values()]
     if all('versus_ours' in run for runs in result['models'].values() for run in runs.values()):

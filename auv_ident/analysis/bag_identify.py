@@ -25,6 +25,7 @@ from auv_ident.core.identification.results import (
     Identification,
     PassEstimate,
     SelectionRequest,
+    Start,
 )
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import N_CURRENT
@@ -271,9 +272,13 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
         # kept; several bags were replayed each on its own, not in turn
         kept = (PassEstimate(first.estimate, first.cov)
                 if len(paths) == 1 and replays.again is None else None)
+        # the user's start (--initial, a warm start) is where the identification starts, as
+        # the replay did; its noise model is read off a pass from the file's values + offset
+        start = (Start(first.initial[:model.p_coef], first.theta_cov0)
+                 if settings.initial or settings.warm_start else None)
         res = identify_with_diagnosis(model, cfg, replays.records(), T=first.T,
                                       refine_pass=refine_pass, progress=progress,
-                                      ekf_pass=kept, judge_nis='reported')
+                                      ekf_pass=kept, judge_nis='reported', start=start)
     res = replace(res, truth=(res.model.theta_true[:res.model.p_coef]
                               if all(_simulated(m) for m in metas) else None),
                   initial=_initial(res, first), steps=replays.accepted,

@@ -65,6 +65,7 @@ THERMAL_MODELS = {
                                                          'thermal_expansion'), None, True)}
 # what the dives are asked about beyond what ours identifies
 EXTRA = ('compressibility', 'lift_slope', 'induced_drag', 'mass')
+BIAS_GOAL = 0.005       # m/s: issue #31's goal for the speed-through-water bias
 
 
 def _flight(cal, record):
@@ -144,6 +145,116 @@ def run_campaign(record: GliderRecord, prior: GliderParameters, split=None,
     return out
 
 
+def _delayed(x, t, lag):
+    """(N,) x read lag s later than logged (x at t - lag; negative: earlier), held at the ends."""
+    return np.interp(t - lag, t, x)
+
+
+def hull_temperature(record: GliderRecord, tau: float) -> np.ndarray:
+    """(N,) degC: the hull's temperature lagging the water's with time constant tau (s), a
+    first-order lag integrated exactly on the sample steps from the water's first value."""
+    water = record.temperature
+    out = np.empty(len(water))
+    out[0] = water[0]
+    decay = np.exp(-np.diff(record.t) / tau)
+    for k in range(1, len(water)):
+        out[k] = decay[k - 1] * out[k - 1] + (1.0 - decay[k - 1]) * water[k]
+    return out
+
+
+HULL_LAG = 400.0    # s: the hull's temperature lag tried (a dive is ~600 s; tried 60-3200 s)
+# terms ours leaves out, each added alone to ours (V_g, C_D0 from the depth rate) and judged
+# on the half not fitted: label -> (the record as this variant reads it, parameters freed
+# beyond ours, values replacing the prior's, fit window m); the hull temperature only when
+# the record holds the water's (the variant freeing thermal_expansion)
+VARIANTS = {
+    'pitch delayed 4 s': (lambda r: replace(r, pitch=_delayed(r.pitch, r.t, 4.0)), (), {},
+                          DEPTH_WINDOW),
+    'pitch advanced 4 s': (lambda r: replace(r, pitch=_delayed(r.pitch, r.t, -4.0)), (), {},
+                           DEPTH_WINDOW),
+    'pump delayed 5 s': (lambda r: replace(
+        r, pumped_volume=_delayed(r.pumped_volume, r.t, 5.0)), (), {}, DEPTH_WINDOW),
+    'pump advanced 5 s': (lambda r: replace(
+        r, pumped_volume=_delayed(r.pumped_volume, r.t, -5.0)), (), {}, DEPTH_WINDOW),
+    # the CTD's density read late through the pycnocline (its sensors' lag): the glider's
+    # water is the one measured a few seconds on
+    'density advanced 8 s': (lambda r: replace(r, density=_delayed(r.density, r.t, -8.0)),
+                             (), {}, DEPTH_WINDOW),
+    'compressibility freed': (lambda r: r, ('compressibility',), {}, DEPTH_WINDOW),
+    "mass 70 kg (gliderflight's)": (lambda r: r, (), {'mass': 70.0}, DEPTH_WINDOW),
+    'fit window 5-40 m': (lambda r: r, (), {}, (5.0, 40.0)),
+    f'hull temperature lagging the water by {HULL_LAG:.0f} s, alpha_T fitted': (
+        lambda r: replace(r, temperature=hull_temperature(r, HULL_LAG)),
+        ('thermal_expansion',), {}, DEPTH_WINDOW)}
+
+
+def run_variants(record: GliderRecord, prior: GliderParameters, split=None):
+    """Each of :data:`VARIANTS` calibrated on one half of a record and judged on the other,
+    both ways, beside ours (run_campaign's split): per variant and half fitted on, the
+    depth-rate RMS the fit reached (m/s; ours' beside it: what the fit itself can prefer),
+    the estimates, the scores with the flagged dives out, and its RMS against ours on the same
+    samples, paired dive by dive (JSON-ready dict)."""
+    t_split = 0.5 * (record.t[0] + record.t[-1]) if split is None else float(split)
+    kept_times = record.t[consistent_dvl(record).keep]
+    model, free, density, _ = OURS
+    out = {'split': t_split, 'variants': {}}
+    ours = {}
+    for label, (read, extra, start, window) in VARIANTS.items():
+        thermal = 'thermal_expansion' in extra
+        if thermal and record.temperature is None:
+            continue
+        rec = read(record)
+        if not thermal:
+            rec = replace(rec, temperature=None)
+        halves = dict(zip(('first', 'second'), rec.split(t_split)))
+        params = prior
+        if 'mass' in start:         # neutral with nothing pumped, as the prior
+            params = replace(prior, hull_volume=prior.hull_volume * start['mass'] / prior.mass)
+        params = replace(params, **start)
+        runs = {}
+        for fit_name, val_name in (('first', 'second'), ('second', 'first')):
+            if fit_name not in ours:
+                base = replace(record, temperature=None).split(t_split)
+                base_halves = dict(zip(('first', 'second'), base))
+                cal0 = calibrate(base_halves[fit_name], prior, model, free,
+                                 depth_rate_density=density)
+                ours[fit_name] = (cal0.rms, FLIGHT_MODELS[model](cal0.params,
+                                                                 base_halves[val_name]).speed)
+            cal = calibrate(halves[fit_name], params, model, free + tuple(extra),
+                            window=window, depth_rate_density=density)
+            val = halves[val_name]
+            speed = FLIGHT_MODELS[model](cal.params, val).speed
+            runs[fit_name] = {
+                'fitted_on': fit_name, 'validated_on': val_name,
+                'depth_rate_rms_fit': cal.rms, 'ours_depth_rate_rms_fit': ours[fit_name][0],
+                'estimates': {n: list(v) for n, v in cal.estimates().items()},
+                'validation': judge(FLIGHT_MODELS[model](cal.params, val), val, kept_times,
+                                    cal.window)['consistent'],
+                'versus_ours': versus(speed, ours[fit_name][1], val, kept_times),
+                'seconds': cal.seconds}
+        out['variants'][label] = runs
+    return out
+
+
+def format_variants(result):
+    """Markdown lines of :func:`run_variants`."""
+    L = ['| variant | fitted on | dz/dt RMS on the fit half cm/s (ours) | U bias cm/s, '
+         'flagged out (1-sigma) | U RMS, flagged out | its - ours (1-sigma over the dives) | '
+         'estimates (1-sigma) |', '|---|---|---|---|---|---|---|']
+    for label, runs in result['variants'].items():
+        for run in runs.values():
+            v, c = run['validation'], run['versus_ours']
+            est = ', '.join(f'{n} {x:.4g} ({sd:.2g})' for n, (x, sd) in run['estimates'].items()
+                            if n not in OURS[1])
+            L.append(f"| {label} | {run['fitted_on']} half | "
+                     f"{100 * run['depth_rate_rms_fit']:.3f} "
+                     f"({100 * run['ours_depth_rate_rms_fit']:.3f}) | "
+                     f"{_cm_std(v['speed_bias'], v['speed_bias_std'])} | "
+                     f"{100 * v['speed_rms']:.2f} | "
+                     f"{_cm_std(c['difference'], c['difference_std'])} | {est} |")
+    return L
+
+
 def _cm(v):
     return f'{100.0 * v:+.2f}' if np.isfinite(v) else 'n/a'
 
@@ -153,9 +264,9 @@ def _cm_std(v, std):
     return f'{_cm(v)} ({100.0 * std:.2f})' if np.isfinite(std) else _cm(v)
 
 
-SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s (1-sigma) | U RMS cm/s | '
-                'U fit % | U bias (DVL-consistent dives) | U RMS (consistent) | '
-                'U fit % (consistent) | dz/dt RMS cm/s | fit s (wall) |',
+SCORE_HEADER = ['| model | fitted on | validated on | U bias cm/s, all dives (1-sigma) | '
+                'U RMS cm/s, all dives | U fit %, all dives | U bias, flagged dives out | '
+                'U RMS, flagged out | U fit %, flagged out | dz/dt RMS cm/s | fit s (wall) |',
                 '|---|---|---|---|---|---|---|---|---|---|---|']
 
 
@@ -188,12 +299,15 @@ def versus_row(label, run):
 
 
 def format_campaign(result):
-    """Markdown lines of the campaign's table (module docstring)."""
-    L = list(SCORE_HEADER)
+    """Markdown lines of the campaign (module docstring): first the dives the data-quality
+    check flagged (:func:`format_flagged`) and the goals (:func:`format_goals`), then the
+    tables."""
+    L = format_flagged(result['dvl_check'], result['split'])
+    L += ['', *format_goals(result), '', *SCORE_HEADER]
     for label, model in result['models'].items():
         for run in model['runs'].values():
             L.append(score_row(label, run))
-    L += ['', 'Each model against ours on the same DVL samples (the consistent dives), paired '
+    L += ['', 'Each model against ours on the same DVL samples (flagged dives out), paired '
           'dive by dive:', '', *VERSUS_HEADER]
     for label, model in result['models'].items():
         if label != 'dynamic':
@@ -216,24 +330,97 @@ def format_campaign(result):
     return L + format_dvl_check(result['dvl_check'])
 
 
+def _utc(t):
+    return str(np.datetime64(int(t), 's'))
+
+
+def format_flagged(check, split=None):
+    """The first lines of a glider run's output: the dives the data-quality check
+    (core/glider/validation.py consistent_dvl, its as_dict) flagged, each named by its start
+    (UTC) and, given the split (s since 1970), its half, with the evidence: its DVL speed
+    against the speed its depth rate and pitch imply at the other dives' angle of attack, and
+    how far the other dives' DVL speeds are from theirs."""
+    dives = check['dives']
+    if not np.isfinite(check['z_limit']):
+        return [f'data quality: {len(dives)} DVL dives, too few to judge the DVL against the '
+                'pressure and the pitch: none flagged; every figure is over every dive']
+    flagged = [d for d in dives if not d['kept']]
+    ratios = [d['dvl_speed'] / d['implied_speed'] - 1.0 for d in dives if d['kept']]
+    L = [f'data quality: {len(flagged)} of {len(dives)} DVL dives flagged'
+         + (': ' + ', '.join(_utc(d['start']) for d in flagged) if flagged else '')
+         + " (the DVL's speed against the speed the depth rate and the pitch imply, beyond "
+         f"the other dives' spread: |z| > {check['z_limit']:.2f}, at which any of "
+         f"{len(dives)} consistent dives is flagged with {100 * check['false_rejection']:g} % "
+         "chance)"]
+    for d in flagged:
+        half = ''
+        if split is not None:
+            half = ' (first half)' if d['start'] < split else ' (second half)'
+        L.append(f"  flagged: the dive from {_utc(d['start'])}{half}: DVL {d['dvl_speed']:.3f} "
+                 f"m/s where its depth rate {d['depth_rate']:.3f} m/s and pitch "
+                 f"{d['pitch_deg']:.1f} deg imply {d['implied_speed']:.3f} m/s at the dives' "
+                 f"angle of attack {check['centre_deg']:.2f} deg "
+                 f"({100 * (d['dvl_speed'] / d['implied_speed'] - 1.0):+.0f} %; the other "
+                 f"dives {100 * min(ratios):+.0f}..{100 * max(ratios):+.0f} %); its implied "
+                 f"angle of attack {d['median_aoa_deg']:.2f} deg, z = {d['z']:+.1f}")
+    L.append("  the figures 'all dives' count every DVL sample, the flagged dives' too; "
+             "'flagged out' leave the flagged dives out (dive by dive: the last table of "
+             'tools/glider_campaign.py)')
+    return L
+
+
+def _met(ok):
+    return 'met' if ok else 'not met'
+
+
+def format_goals(result):
+    """Lines saying, for ours on each half it did not see, which figure meets issue #31's
+    goals: the speed bias within :data:`BIAS_GOAL` over every dive and with the flagged dives
+    out, and the speed RMS (flagged dives out) against the steady calibration and
+    gliderflight's example problem solved to its minimum, paired on the same samples."""
+    ours = result['models']['dynamic']['runs']
+    L = ['goals (issue #31), ours (dynamic) on the half it did not see:']
+    for run in ours.values():
+        a, c = run['validation']['all'], run['validation']['consistent']
+        where = f"  fitted on the {run['fitted_on']} half, validated on the {run['validated_on']}"
+        L.append(f"{where}: speed bias within {100 * BIAS_GOAL:.1f} cm/s: flagged dives out "
+                 f"{_cm_std(c['speed_bias'], c['speed_bias_std'])} cm/s: "
+                 f"{_met(abs(c['speed_bias']) <= BIAS_GOAL)}; all dives "
+                 f"{_cm_std(a['speed_bias'], a['speed_bias_std'])} cm/s: "
+                 f"{_met(abs(a['speed_bias']) <= BIAS_GOAL)}")
+        for label in ('steady (gliderflight style)', "dynamic (gliderflight's example)"):
+            other = result['models'].get(label)
+            if other is None:
+                continue
+            v = other['runs'][run['fitted_on']]['versus_ours']
+            below = v['difference'] > 0.0
+            told = abs(v['difference']) > 2.0 * v['difference_std']
+            L.append(f"{where}: speed RMS (flagged out) {100 * v['rms_b']:.2f} cm/s against "
+                     f"{label} {100 * v['rms_a']:.2f}: {'below' if below else 'not below'}, "
+                     f"by {_cm_std(v['difference'], v['difference_std'])} cm/s paired over "
+                     f"{v['dives']} dives ({'more' if told else 'less'} than twice its 1-sigma)")
+    return L
+
+
 def format_dvl_check(check):
     """Markdown lines of the instruments' consistency check (core/glider/validation.py)."""
     dives = check['dives']
     failed = [d for d in dives if not d['kept']]
-    L = ['', f"The DVL against the pressure and the pitch, dive by dive: {len(dives)} dives, "
+    L = ['', 'The data-quality check, the DVL against the pressure and the pitch, dive by dive: '
+         f"{len(dives)} dives, "
          f"median implied angle of attack {check['centre_deg']:.2f} deg, dive-to-dive spread "
          f"(1.4826 MAD) {check['spread_deg']:.2f} deg; a dive fails at |z| > "
          f"{check['z_limit']:.2f} ({100 * check['false_rejection']:g} % chance of failing any "
          f"of {len(dives)} consistent dives); failed: {len(failed)}", '',
          '| dive start (UTC) | DVL samples | pumped cc | pitch deg | depth rate m/s | '
-         'DVL speed m/s | median implied angle of attack deg (s.e.) | z | passes |',
-         '|---|---|---|---|---|---|---|---|---|']
+         'DVL speed m/s | implied speed m/s | median implied angle of attack deg (s.e.) | z | '
+         'flagged |', '|---|---|---|---|---|---|---|---|---|---|']
     for d in dives:
-        L.append(f"| {np.datetime64(int(d['start']), 's')} | {d['samples']} | "
+        L.append(f"| {_utc(d['start'])} | {d['samples']} | "
                  f"{d['pumped_cc']:.0f} | {d['pitch_deg']:.1f} | {d['depth_rate']:.3f} | "
-                 f"{d['dvl_speed']:.3f} | "
+                 f"{d['dvl_speed']:.3f} | {d['implied_speed']:.3f} | "
                  f"{d['median_aoa_deg']:.2f} ({d['stderr_deg']:.2f}) | {d['z']:+.1f} | "
-                 f"{'yes' if d['kept'] else 'no'} |")
+                 f"{'no' if d['kept'] else 'FLAGGED'} |")
     return L
 
 

@@ -78,6 +78,8 @@ class ReplayResult:
     # the stuck-sensor faults of the replay (session/stuck.py StuckSpan; their samples were
     # not fed)
     stuck: list = field(default_factory=list)
+    # (p_coef, p_coef) the warm start's coefficient covariance, None without one
+    theta_cov0: np.ndarray | None = None
 
     def document(self, stamp_ns=None):
         """The estimate file's dict of the final estimate."""
@@ -178,7 +180,8 @@ def session_result(session, updates, settings=None):
         T=session.T, settings=dict(settings or {}),
         noise_std=median_noise_std(session.variances.array, session.noise_default),
         time_origin_ns=int(session.time_origin_ns or 0),
-        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model, stuck=list(session.stuck.spans))
+        t_cmd=t_cmd, U_cmd=U_cmd, model=session.model, stuck=list(session.stuck.spans),
+        theta_cov0=None if session.warm_cov is None else np.array(session.warm_cov))
 
 def bag_settings(path):
     """Raw identifier settings a bag's metadata custom_data carries (bag_custom_data): the

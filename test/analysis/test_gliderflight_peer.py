@@ -3,26 +3,20 @@
 and exits 77 having run nothing; with it (importable, or its site-packages in the
 GLIDERFLIGHT_PATH environment variable) its steady calibration is checked on the real record.
 Skipped where neither applies."""
-import importlib.util
 import os
-from pathlib import Path
 import sys
 
+from helpers import load_tool
 import pytest
 import slocum_data
 
 from auv_ident.cli import main as cli_main
 
-TOOL = Path(__file__).resolve().parents[2] / 'tools' / 'gliderflight_peer.py'
-
 
 @pytest.fixture
 def peer(monkeypatch):
     monkeypatch.setattr(sys, 'path', list(sys.path))       # the tool may append to it
-    spec = importlib.util.spec_from_file_location('gliderflight_peer', TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool('gliderflight_peer')
 
 
 def test_without_gliderflight_the_peer_is_skipped_clearly(peer, tmp_path, capsys):

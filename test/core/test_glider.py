@@ -135,6 +135,17 @@ def test_calibration_recovers_known_parameters_within_its_error_bars(seed):
     assert abs(s.speed_bias) < 0.01 and s.speed_rms < 0.01 and s.speed_fit > 75.0
 
 
+def test_a_trial_step_beyond_the_physical_values_is_refused_not_raised():
+    """From a prior far off (a lift slope of 4 against 7.5), Levenberg-Marquardt's first step
+    (up to 100 scale units) lands on a negative C_D0: the step is refused and the fit goes on
+    below that of V_g alone, rather than the parameter check's error escaping the fit."""
+    rec = synthetic_dives(TRUE, 6)
+    start = replace(PRIOR, lift_slope=4.0)
+    volume_only = calibrate(rec, start, 'dynamic', ('hull_volume',))
+    cal = calibrate(rec, start, 'dynamic', ('hull_volume', 'drag_zero_lift'))
+    assert cal.params.drag_zero_lift > 0.0 and cal.rms < volume_only.rms
+
+
 def test_what_constant_pitch_dives_cannot_identify():
     rec = synthetic_dives(TRUE, 4)
     cal = calibrate(rec, PRIOR, 'dynamic', ('hull_volume', 'drag_zero_lift'))
@@ -170,6 +181,14 @@ def test_the_dvl_consistency_check_fails_the_dive_where_the_instruments_disagree
     assert [d.kept for d in check.dives] == [i != 3 for i in range(6)]
     assert check.dives[3].z > check.z_limit + 1.0 and check.dives[3].median_aoa_deg > 10.0
     assert not check.keep[start:stop].any() and check.keep[stop:].any()
+    assert check.flagged == [check.dives[3]]
+    # the evidence: the speed the dive's depth rate and pitch imply at the others' angle of
+    # attack, which the DVL reads on the other dives to within the heave's +-5 % of the depth
+    # rate; on the slow dive a quarter below what the others read against theirs
+    ratios = np.array([d.dvl_speed / d.implied_speed for d in check.dives])
+    others = np.delete(ratios, 3)
+    assert np.all(np.abs(others - 1.0) < 0.15) and np.ptp(others) < 0.12
+    assert abs(ratios[3] / np.median(others) - 0.75) < 0.05
     # too few dives for a spread: none judged, every one kept
     few = consistent_dvl(replace(rec, speed_through_water=np.where(
         rec.t < check.dives[3].start, slow, np.nan)))

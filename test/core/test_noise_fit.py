@@ -1,14 +1,17 @@
 """The noise model read off the data (core/identification/noise_fit.py) on records that carry
-no innovation information (#27 item 6: 'ValueError: math domain error' when a level is 0)."""
+no innovation information (#27 item 6: 'ValueError: math domain error' when a level is 0), and
+read off the reference start whatever the run's own start."""
 import numpy as np
 import pytest
 
+from auv_ident.analysis.results import make_config
 from auv_ident.core.errors import DivergenceError
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.identification.batch import run_ekf
-from auv_ident.core.identification.noise_fit import fit_noise
-from auv_ident.core.identification.results import Record
+from auv_ident.core.identification.noise_fit import fit_noise, identify_with_noise_model
+from auv_ident.core.identification.results import Record, Start
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.sensors import ar1_noise, DEFAULT_NOISE_STD
 from auv_ident.core.simulation.simulate import simulate
 from auv_ident.vehicles import load_vehicle
 
@@ -80,3 +83,29 @@ def test_a_pass_that_ends_with_a_wrong_sign_is_retried_with_more_noise(monkeypat
     assert 'it ended with Z_w positive' in text
     assert (f'read off a pass with {factor:g}x' in text if factor != 1.0
             else 'read off the configured one' in text)
+
+
+def test_the_noise_model_is_read_off_the_reference_start_not_the_runs():
+    # a run's own start (--initial, a warm start, the automatic choice's pruned set at its first
+    # estimates) moves its EKF pass and refinement, not the noise model: that is read off a pass
+    # from cfg's guesses (with too small a configured noise the filter chases the noise and its
+    # innovation levels, which decide the process-noise matching, depend on the start)
+    v = load_vehicle('nps_auv2')
+    names = list(v.identify_default)
+    m = Model(v, names)
+    run = simulate(Model(v), 'ident', duration=120.0, seed=2, noise_std=np.zeros(12))
+    y = run.y + ar1_noise(np.random.default_rng([2, 1]), len(run.t), 3 * DEFAULT_NOISE_STD,
+                          1.0, run.T)
+    cfg = make_config(names)
+    rec = [Record(run.t, y, run.u)]
+    ref = identify_with_noise_model(m, cfg, rec, T=run.T)
+    start = Start(0.9 * m.theta_file[:m.p_coef])
+    moved = identify_with_noise_model(m, cfg, rec, T=run.T, start=start)
+    assert ref.noise.used
+    assert moved.noise.process_used == ref.noise.process_used
+    np.testing.assert_array_equal(moved.noise.effective_std, ref.noise.effective_std)
+    np.testing.assert_array_equal(moved.noise.configured_pass.theta0,
+                                  ref.noise.configured_pass.theta0)
+    np.testing.assert_allclose(moved.noise.reported_pass.theta0[:m.p_coef], start.initial)
+    sd = np.sqrt(np.diag(ref.cov))
+    assert np.all(np.abs(moved.estimate - ref.estimate) < 0.1 * sd)

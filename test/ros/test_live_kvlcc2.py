@@ -17,6 +17,7 @@ from conftest import require_loopback_dds
 import numpy as np
 import pytest
 
+from auv_ident.ros.raw_loadtest import _cmd as _node_cmd
 from auv_ident.session.settings import IdentifierSettings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -28,13 +29,6 @@ RUN = 'Z_20_10_S'
 NOISE_STD = [0.003, 0.003, 1, 1, 1, 5e-4, 0.005, 0.005, 1, 1, 1, 0.001]   # docs/kvlcc2.md
 Q_STATE = [2e-4, 2e-4, 0, 0, 0, 2e-4, 1e-4, 1e-4, 0, 0, 0, 1e-5]
 RATE = 4.0          # playback speed: 190 s of the run in ~48 s
-
-
-def _node_cmd(node, *params):
-    cmd = [sys.executable, '-m', 'auv_ident', 'run', node, '--ros-args']
-    for p in params:
-        cmd += ['-p', p]
-    return cmd
 
 
 def _spawn(cmd, env):

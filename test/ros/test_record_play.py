@@ -34,6 +34,7 @@ from auv_ident.bags.reader import message_counts, read_bag
 from auv_ident.bags.repair import repair_bag
 from auv_ident.bags.schema import BagError
 from auv_ident.offline.sim_bag import bag_sample_messages, SIM_EPOCH_NS, TOPIC_TYPES, write_run_bag
+from auv_ident.ros.raw_loadtest import _cmd as _node_cmd
 from auv_ident.session.messages import sec_to_ns, stamp_to_ns
 
 pytestmark = pytest.mark.slow     # record, play and publisher processes over DDS
@@ -58,13 +59,6 @@ def sim_run():
     from auv_ident.vehicles import load_vehicle
     return simulate(Model(load_vehicle('nps_auv2'), ()), 'zigzag', duration=2.0, T=0.05,
                     seed=3)
-
-
-def _node_cmd(node, *params):
-    cmd = [sys.executable, '-m', 'auv_ident', 'run', node, '--ros-args']
-    for p in params:
-        cmd += ['-p', p]
-    return cmd
 
 
 def _spawn(cmd, env, **kw):

@@ -46,6 +46,7 @@ SCALES = {'mass': 0.1, 'hull_volume': 1e-4, 'drag_zero_lift': 0.01, 'compressibi
 DEPTH_WINDOW = (10.0, 35.0)     # m: deeper than the surface layer, above the inflections
 DIFF_STEP = 1e-4                # finite-difference step, in units of the scales
 MIN_SAMPLES = 50
+OUT_OF_DOMAIN = 10.0            # m/s: the residual of parameters no glider has
 
 
 @dataclass
@@ -123,7 +124,13 @@ def residual_function(record: GliderRecord, start: GliderParameters, names: Sequ
     scale = np.array([SCALES[n] for n in names])
 
     def f(x: np.ndarray) -> np.ndarray:
-        params = start.with_values(names, x0 + np.asarray(x) * scale)
+        try:
+            params = start.with_values(names, x0 + np.asarray(x) * scale)
+        except ConfigError:
+            # a trial step beyond the physical values (a negative C_D0: Levenberg-Marquardt's
+            # first step may be 100 scale units long): a residual far above any flight's, so
+            # the step is refused and the trust region shrinks
+            return np.where(mask, OUT_OF_DOMAIN, np.nan)
         r = flight(params, record).depth_rate - measured
         return np.where(mask, r, np.nan)
 

@@ -26,6 +26,7 @@ from auv_ident.core.identification.results import (
     PassEstimate,
     Record,
     SelectionRequest,
+    Start,
 )
 from auv_ident.core.identification.selection import identify_auto
 from auv_ident.core.model.hydrodynamics import Model
@@ -40,7 +41,8 @@ def identify_with_diagnosis(model: Model | None, cfg: FilterConfig, runs: list[R
                             ekf_pass: PassEstimate | None = None,
                             auto: SelectionRequest | None = None,
                             judge_nis: str | None = 'configured',
-                            truth: np.ndarray | None = None) -> Identification:
+                            truth: np.ndarray | None = None,
+                            start: Start | None = None) -> Identification:
     """Identify with the noise model from the data, judge, split the current off.
 
     model : the Model identified (None with `auto`)
@@ -56,6 +58,9 @@ def identify_with_diagnosis(model: Model | None, cfg: FilterConfig, runs: list[R
         ('configured': what the live node would see), of the EKF pass reported ('reported'),
         or none (None)
     truth : the true coefficients (p_coef,) when known
+    start : Start: where the identification starts when not at cfg's guesses (the user's
+        --initial, a warm start); the noise model is still read off a pass from cfg's
+        (identify_with_noise_model); not with `auto`, which starts at the file's values
 
     Returns an Identification whose histories (hist_every), R_final, Q_final, initial and steps
     are those of the EKF pass whose estimate is reported, and whose mean_nis_per_dof is that of
@@ -70,7 +75,7 @@ def identify_with_diagnosis(model: Model | None, cfg: FilterConfig, runs: list[R
     if auto is None:
         est = identify_with_noise_model(model, cfg, runs, T=T, refine_pass=refine_pass,
                                         progress=progress, ekf_pass=ekf_pass,
-                                        hist_every=hist_every)
+                                        hist_every=hist_every, start=start)
     else:
         est = identify_auto(auto.make_model, cfg, runs, named=auto.named, T=T,
                             refine_pass=refine_pass, progress=progress, hist_every=hist_every)

@@ -358,6 +358,22 @@ class Choice:
 
 
 @dataclass(frozen=True)
+class Start:
+    """Where an identification starts when that is not where its noise model is read off
+    (core/identification/noise_fit.py :func:`identify_with_noise_model`): the user's guesses
+    (`--initial`), a warm start's estimate and covariance, or the automatic choice's first
+    estimates for its pruned re-identification.
+
+    initial : (p_coef,) the coefficients' start (their units)
+    theta_cov0 : (p_coef, p_coef) their initial covariance, or None for the configured
+        diag((p0_rel |initial|)^2)
+    """
+
+    initial: np.ndarray
+    theta_cov0: Optional[np.ndarray] = None
+
+
+@dataclass(frozen=True)
 class SelectionRequest:
     """Choose the coefficients from the data (`--coefficients auto[,NAME,...]`).
 

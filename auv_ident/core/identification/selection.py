@@ -76,6 +76,7 @@ from auv_ident.core.identification.results import (
     percent,
     readable,
     Selection,
+    Start,
 )
 from auv_ident.core.identification.uncertainty import (
     bandwidth,
@@ -708,15 +709,18 @@ def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
     vehicle = make_model([]).vehicle
     chosen, left_out = sel.chosen, dict(sel.left_out)
 
-    def run(coefs, initial):
-        c = replace(cfg, coefficients=list(coefs), initial=np.asarray(initial, dtype=float))
+    def run(coefs, start=None):
+        # the noise model is read off a pass from the file's values, as the choice was made
+        # (identify_with_noise_model's `start`): the pruned re-identification starts at the
+        # first estimates, but its noise model must not depend on that start
+        c = replace(cfg, coefficients=list(coefs),
+                    initial=np.array([vehicle.values[vehicle.index(n)] for n in coefs]))
         return identify_with_noise_model(make_model(coefs), c, runs, T=T,
                                          refine_pass=refine_pass, max_step=max_step,
                                          max_bridge=max_bridge, progress=progress,
-                                         hist_every=hist_every)
+                                         hist_every=hist_every, start=start)
 
-    start = [vehicle.values[vehicle.index(n)] for n in chosen]
-    out = run(chosen, start)
+    out = run(chosen)
     # a hovering vehicle's tank terms are judged by their relative 1-sigma alone, as they
     # were chosen (_identifiable_part): measured, the correlation limit dropped N_rr (0.981
     # with thrust_gain_fwd) and N_rdot (0.954 with N_rr), determined within 2 %
@@ -726,8 +730,8 @@ def identify_auto(make_model, cfg, runs, named=(), T=None, refine_pass=True,
     if dropped:
         left_out.update(dropped)
         kept_coefs = [n for n in kept if n not in CURRENT_NAMES]
-        start = [out.estimate[out.model.theta_names.index(n)] for n in kept_coefs]
-        out = run(kept_coefs, start)
+        first = [out.estimate[out.model.theta_names.index(n)] for n in kept_coefs]
+        out = run(kept_coefs, Start(np.array(first)))
         chosen = kept_coefs
     # error bars that cover the coefficients left at the file's values (consider analysis),
     # as far off as the residuals allow them to be
