@@ -4,7 +4,11 @@ rest of the truth the file's values): the choice is what the tank manoeuvres ide
 thrust gains and the diagonal added mass and damping of surge, sway, heave and yaw (and roll
 and pitch where the run determines them), each near the truth; the cross terms are left out
 with their reason (core/identification/selection.py HOVER_CROSS_TERM). Before, it chose
-thrust_gain_fwd alone: every other term "would not lower the expected error"."""
+thrust_gain_fwd alone: every other term "would not lower the expected error". Later, with the
+T200 table in the file, it dropped X_udot (relative 1-sigma 5.4 %) and the pruned set ended X_u
+45 % off at 4.5 sigma; since the file's added-mass Coriolis forces follow its added mass
+(`added_mass_coriolis: fossen`) X_udot is kept (measured: 16 chosen, all within 2.6 % and
+0.85 sigma)."""
 import json
 
 import pytest
@@ -18,11 +22,6 @@ TANK = ['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Y_vdot', 'Z_wdot', 'N_r
 
 
 @pytest.mark.slow       # a 600 s bag and 17 sensitivities over it: ~4-5 min on 2 cores
-@pytest.mark.xfail(strict=True, reason=(
-    'a known defect, docs/vehicles.md: since the file states the T200 table, auto drops '
-    'X_udot after the first identification (relative 1-sigma 5.4 % >= 5 %), and the pruned '
-    "set's identification ends X_u 45 % off at 4.5 sigma while the verdict says consistent; "
-    'the same 15 coefficients named are within 5.4 % and 2.1 sigma'))
 def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
     out = tmp_path / 'rov'
     assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve',
