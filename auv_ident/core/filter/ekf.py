@@ -126,7 +126,7 @@ def new_workspace(n, n_coef, n_thr=0):
                      np.zeros(N_INPUT + (N_LAG_ROWS + 1) * n_thr))
 
 
-def workspace_for(n, cm):
+def workspace_for(n: int, cm: Any) -> Any:
     """new_workspace for an augmented state of size n and the model cm (CompiledModel): the
     lag state sized when its thrusters lag."""
     return new_workspace(n, cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
