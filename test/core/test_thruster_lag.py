@@ -232,3 +232,14 @@ def test_live_filter_carries_the_lag_as_the_compiled_loop(tmp_path):
         assert abs(h.xa[N_STATE + 3] - f.xa[N_STATE + 3]) > 1e-3
     except DivergenceError:
         pass                            # the settled thrust's filter does not even finish
+
+
+def test_equation_error_refuses_the_time_constant_and_the_advice_names_steps(tmp_path):
+    """The equation error's regression is of F at one instant: it refuses the time constant
+    (the thrust depends on the command history through it); the diagnosis advises stick
+    steps for it, not a surge manoeuvre (its equation letter is only a placeholder)."""
+    from auv_ident.core.identification.diagnosis import excitation_advice, PILOT_LAG
+    from auv_ident.core.identification.equation_error import refusals
+    v = vehicle_from_file(_rov_file(tmp_path))
+    assert 'command history' in refusals(Model(v, [LAG, 'X_u']), np.ones(12, bool))[LAG]
+    assert excitation_advice(v, LAG) == PILOT_LAG
