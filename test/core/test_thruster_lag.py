@@ -243,3 +243,19 @@ def test_equation_error_refuses_the_time_constant_and_the_advice_names_steps(tmp
     v = vehicle_from_file(_rov_file(tmp_path))
     assert 'command history' in refusals(Model(v, [LAG, 'X_u']), np.ones(12, bool))[LAG]
     assert excitation_advice(v, LAG) == PILOT_LAG
+
+
+def test_export_gives_every_thruster_the_identified_time_constant(tmp_path):
+    """uuv_simulator's thrusters get the time constant of c (the identified one) as FirstOrder
+    dynamics; the shipped file (no lag) stays ZeroOrder."""
+    from auv_ident.analysis.export_gz_thrusters import uuv_thruster_lines, with_gains
+    v = vehicle_from_file(_rov_file(tmp_path))
+    c = v.values.copy()
+    c[v.lag_idx] = 0.123
+    thrusters, _ = with_gains(v, c)
+    assert [t.time_constant for t in thrusters] == [0.123] * 8
+    text = '\n'.join(uuv_thruster_lines(thrusters)[1])
+    assert text.count('<timeConstant>0.123</timeConstant>') == 8
+    v0 = load_vehicle('bluerov2_heavy')
+    text0 = '\n'.join(uuv_thruster_lines(with_gains(v0, v0.values)[0])[1])
+    assert 'FirstOrder' not in text0 and text0.count('ZeroOrder') == 8
