@@ -208,19 +208,14 @@ def test_live_filter_carries_the_lag_as_the_compiled_loop(tmp_path):
     identify run the same lagged filter, the time constant identified: the thrust settled at the
     first command, carried over each step, moved at each update by dP/dtau dtau. Without the
     carried thrust (a settled one every step) the two differ."""
+    from test_ekf import per_message_and_loop
+
     from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
-    from auv_ident.core.identification.batch import run_ekf
     v = vehicle_from_file(_rov_file(tmp_path))
     run = simulate(Model(v), 'tank', duration=30.0, seed=4)
-    names = ['thrust_gain_fwd', 'X_udot', 'X_u', LAG]
-    m = Model(v, names)
-    cfg = FilterConfig(coefficients=names, initial_offset=0.5)
-    f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, [Record(run.t, run.y, run.u)])
-    g = AugmentedEKF(m, cfg, run.T)
-    g.start(run.y[0], run.u[0, 5])
-    for k in range(1, len(run.t)):
-        g.step(run.u[k - 1], run.y[k])
+    m = Model(v, ['thrust_gain_fwd', 'X_udot', 'X_u', LAG])
+    g, f = per_message_and_loop(m, run)
+    cfg = FilterConfig(coefficients=m.theta_names, initial_offset=0.5)
     np.testing.assert_allclose(g.xa, f.xa, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(g.P, f.P, rtol=1e-7, atol=1e-15)
     h = AugmentedEKF(m, cfg, run.T)
