@@ -215,7 +215,7 @@ class RawSensorFilter:
         self.q_rate = np.concatenate([np.diag(self.base.Q0) / self.base.T,
                                       np.array([walk[e] ** 2 for e in self.err_names])])
         self._q_cache: dict[float, np.ndarray] = {}
-        self.ws = ekf.new_workspace(self.nb, model.n_coef)
+        self.ws = ekf.workspace_for(self.nb, model.compiled)
         self.F12 = np.zeros((N_STATE, n))
         self.M = np.empty((N_STATE, n))
         self.O = np.empty((N_STATE, N_STATE))

@@ -15,6 +15,7 @@ from auv_ident.core.filter import ekf
 from auv_ident.core.filter.timing import time_step
 from auv_ident.core.model.raw_sensors import rotation, rotation_of_quaternion
 from auv_ident.core.model.state import COEFFICIENTS, N_STATE, State
+from auv_ident.core.model.thruster_lag import lag_advance
 
 OK = 0
 ERR_NOT_PD = 1
@@ -101,6 +102,8 @@ def propagate_steps(xf, P, ui, cm, h, steps, Q, xb, F12, M, O, P_out, ws):
         st = ekf.rk4_step_into(xf[:nb], ui, cm, h, True, xb, ws.Fa, ws)
         if st != ekf.OK:
             return st
+        if cm.lagged:       # the delivered thrust at the end of the step (thruster_lag.py)
+            lag_advance(cm, ws.c, ui, ws.lag, ws.lag_ok, h)
         for i in range(N_STATE):
             for j in range(nb):
                 F12[i, j] = ws.Fa[i, j]
