@@ -20,7 +20,9 @@ odometry callback; of that, the session's on_input (IdentSession) and publish_es
 (offline/raw_example.py: IMU at --imu-rate Hz, 5 Hz DVL, 10 Hz pressure, commands on change,
 --seconds long), each IMU message handed to the node's raw IMU callback as its CDR bytes from
 the bag (what its raw subscription gives), the others as the bag's decoded messages to
-RawLive.on_input; us per message, of which RawSession.on_input and publishing.
+RawLive.on_input; us per message, of which RawSession.on_input and publishing, and of the
+session the IMU messages' filter step (RawSensorFilter.process_imu, the compiled step with its
+Python around it; per message of all kinds).
 ``--publish-rate`` sets the node's publish_rate_hz (both paths).
 """
 import argparse
@@ -113,10 +115,10 @@ def main(argv=None):
 
 def _timed(fn, parts, key):
     """``fn`` adding its thread CPU time to ``parts[key]`` (s)."""
-    def timed(*args):
+    def timed(*args, **kwargs):
         t0 = time.thread_time()
         try:
-            return fn(*args)
+            return fn(*args, **kwargs)
         finally:
             parts[key] += time.thread_time() - t0
     return timed
@@ -130,6 +132,7 @@ def raw_cost(a):
     from rclpy.parameter import Parameter
 
     from auv_ident.bags.reader import read_bag
+    from auv_ident.core.filter.raw import RawSensorFilter
     from auv_ident.offline.raw_example import write_raw_example
     from auv_ident.ros.identifier_node import IdentifierNode
     from auv_ident.session.input_map import IMU, load_input_map
@@ -155,9 +158,12 @@ def raw_cost(a):
         else:
             feed.append((raw.on_input, (e.name, m, ns)))
     clock = time.thread_time
-    parts = {'session': 0.0, 'publish': 0.0}
+    parts = {'session': 0.0, 'publish': 0.0, 'filter': 0.0}
     raw.session.on_input = _timed(raw.session.on_input, parts, 'session')
     raw.publish_estimate = _timed(raw.publish_estimate, parts, 'publish')
+    # the IMU's filter step (on the class: a filter restart makes a new filter)
+    if hasattr(RawSensorFilter, 'process_imu'):
+        RawSensorFilter.process_imu = _timed(RawSensorFilter.process_imu, parts, 'filter')
     n, warm = len(feed), len(feed) // 10
     total = 0.0
     prof = cProfile.Profile() if a.profile else None
@@ -177,6 +183,7 @@ def raw_cost(a):
     print(f'  total (callback)                 {total * us:7.1f}')
     print(f'  of it: RawSession.on_input       {parts["session"] * us:7.1f}')
     print(f'  of it: publish                   {parts["publish"] * us:7.1f}')
+    print(f'  of the session: IMU filter step  {parts["filter"] * us:7.1f}')
     if prof is not None:
         pstats.Stats(prof).sort_stats('tottime').print_stats(35)
     node.destroy_node()

@@ -75,7 +75,7 @@ def _model_loop(X, U, theta, cm, T):
     xa[N_STATE:] = theta
     x1 = np.empty(n)
     Fa = np.empty((n, n))
-    ws = new_workspace(n, cm.c0.shape[0])
+    ws = new_workspace(n, cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
     for k in range(X.shape[0]):
         xa[:N_STATE] = X[k]
         rk4_step_into(xa, U[k], cm, T, True, x1, Fa, ws)

@@ -45,6 +45,7 @@ from auv_ident.core.identification.results import Record
 from auv_ident.core.identification.ukf import run_ukf
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import State, STATE_NAMES
+from auv_ident.core.model.thruster_lag import derivative
 from auv_ident.core.simulation.prediction import angle_channels, fit_percent, free_run
 from auv_ident.session.settings import IdentifierSettings
 
@@ -128,7 +129,7 @@ def validation_fit(model, theta, t, Y, U):
                           'to start the free run from')
     k = ok[0]
     x0 = np.where(np.isfinite(Y[k]), Y[k], 0.0)
-    X = free_run(lambda x, u: model.f(x, u, theta), t[k:], U[k:], x0)
+    X = free_run(derivative(model, theta), t[k:], U[k:], x0)   # a lagged thrust carried
     Ym, Xm = angle_channels(Y[k:], X)
     return {name: fit_percent(Ym[:, i], Xm[:, i]) for i, name in enumerate(STATE_NAMES)}
 

@@ -42,7 +42,8 @@ class GainError(AuvIdentError):
 
 def with_gains(v, c):
     """The vehicle's thrusters with its thrust gains (values c, the file's coefficient order:
-    the identified ones in place) folded into their curves: the model applies gain * f per
+    the identified ones in place) folded into their curves, and the file's `thruster_lag`
+    coefficient (c's value) as each one's time_constant: the model applies gain * f per
     equation and curve side (core/model/hydrodynamics.py _thrusters), which is one thruster's
     curve side times the gain when that gain is the same in every equation the thruster
     pushes in (a gain of all six, or of XYN with horizontal thrusters only). Since
@@ -78,7 +79,9 @@ def with_gains(v, c):
             reverse=(gr * t.reverse[0], gr * t.reverse[1]),
             table=None if t.table is None else _scaled_table(t.table, gf, gr),
             thrust_max_forward=gf * t.thrust_max_forward,
-            thrust_max_reverse=gr * t.thrust_max_reverse))
+            thrust_max_reverse=gr * t.thrust_max_reverse,
+            # the shared time constant (multiplier thruster_lag), identified or the file's
+            time_constant=float(c[v.lag_idx]) if v.lag_idx >= 0 else t.time_constant))
     return out, sides_text(v, c)
 
 

@@ -41,6 +41,7 @@ from auv_ident.core.model.state import (
     STATE_NAMES,
     STATE_UNITS,
 )
+from auv_ident.core.model.thruster_lag import derivative
 from auv_ident.core.model.trim import initial_state
 from auv_ident.core.simulation.prediction import (
     angle_channels,
@@ -346,8 +347,7 @@ def validate_on_run(vehicle, names, estimate, current, run_t, run_Y, run_U, sour
 
     free, k_step, failed = {}, {K: {} for K in horizons}, {}
     for name, m in models.items():
-        def f(x, u, m=m):
-            return m.f(x, u)
+        f = derivative(m)           # m.f, or its lagged thrust's stepper
         free[name] = free_run(f, t, U, x0, max_step)
         failed[name] = _failed_at(t, Y, free[name])
         for K in horizons:

@@ -106,11 +106,28 @@ def _thruster_checks(vehicle, check):
                   if max(t.thrust_max_reverse, t.thrust_max_forward) < math.inf else '')
         curves.setdefault(curve_text(t) + limits, []).append(t.name)
     check.facts += [f'thrust curves: {" ".join(names)}: {text}' for text, names in curves.items()]
+    check.facts.append(_lag_text(vehicle))
+    torque = [f'{t.name} {t.torque_ratio:+g}' for t in vehicle.thrusters if t.torque_ratio]
+    if torque:
+        check.facts.append('propeller torque about each axis, N m per N (torque_ratio): '
+                           + ', '.join(torque))
     missing = [d for d in dofs if d not in alone]
     if missing:
         check.warnings.append(f'the thrusters cannot push {" ".join(missing)} alone (each '
                               'only with other motion): check r and d of each thruster (FRD) '
                               'if the vehicle is meant to')
+
+
+def _lag_text(vehicle):
+    """One line saying the thrusters' lag (core/model/thruster_lag.py)."""
+    if vehicle.lag_idx >= 0:
+        c = vehicle.coefficients[vehicle.lag_idx]
+        return (f'thruster lag: first order, tau = {c.value:g} s for every thruster (coefficient '
+                f'{c.name}, identifiable)')
+    own = [f'{t.name} {t.time_constant:g}' for t in vehicle.thrusters if t.time_constant > 0]
+    if own:
+        return f'thruster lag: first order, fixed time constants (s): {", ".join(own)}'
+    return 'thruster lag: none (the thrust follows the commands at once)'
 
 
 def _eigen_text(eig):

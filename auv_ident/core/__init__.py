@@ -18,7 +18,8 @@ from auv_ident.core.compiled_cache import register
 # is complete.
 COMPILED_SOURCES = ('errors.py', 'model/state.py', 'model/vehicle.py', 'model/monomials.py',
                     'model/current_terms.py', 'model/planar.py', 'model/hydrodynamics.py',
-                    'model/raw_sensors.py', 'model/thrusters.py', 'vehicle_files.py',
+                    'model/raw_sensors.py', 'model/thrusters.py', 'model/thruster_lag.py',
+                    'vehicle_files.py',
                     'filter/ekf.py', 'filter/timing.py', 'filter/propagation.py',
                     'filter/raw_update.py', 'glider/flight.py', 'glider/record.py')
 

@@ -153,9 +153,13 @@ class RovTruth:
     def B(self):
         return self.rho * self.g * self.volume
 
-    def coefficients(self, thrust_gain):
-        """The truth under the names of config/bluerov2_heavy.yaml (its sign convention)."""
+    def coefficients(self, thrust_gain, motor_lag=0.0):
+        """The truth under the names of config/bluerov2_heavy.yaml (its sign convention), and
+        with a motor lag (s) its time constant under the name docs/vehicles.md gives the
+        file's `thruster_lag` coefficient, thrust_time_constant."""
         out = {'thrust_gain_fwd': thrust_gain, 'thrust_gain_rev': thrust_gain}
+        if motor_lag > 0:
+            out['thrust_time_constant'] = float(motor_lag)
         for names, values in ((('X_udot', 'Y_vdot', 'Z_wdot', 'K_pdot', 'M_qdot', 'N_rdot'),
                                self.added_mass),
                               (('X_u', 'Y_v', 'Z_w', 'K_p', 'M_q', 'N_r'), self.linear_damping),
@@ -638,7 +642,7 @@ def generate(cfg, out_dir, overwrite=False, truth=None):
         'bag': str(out_dir / 'bag'),
         'vehicle': 'bluerov2_heavy',
         'source': 'von Benzon et al. 2022, J. Mar. Sci. Eng. 10(12):1898, Table 3',
-        'coefficients': truth.coefficients(gain),
+        'coefficients': truth.coefficients(gain, cfg.motor_lag),
         'truth_model': jsonable(dataclasses.asdict(truth)),
         'W': truth.W, 'B': truth.B,
         'thrusters': {'names': list(THRUSTER_NAMES), 'r_frd': THRUSTER_R.tolist(),

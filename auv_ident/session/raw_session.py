@@ -25,13 +25,16 @@ from auv_ident.core.errors import DivergenceError, DomainError
 from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorFilter
 from auv_ident.core.model.hydrodynamics import Model
-from auv_ident.core.model.state import COEFFICIENTS, Input, N_INPUT
+from auv_ident.core.model.state import Input, N_INPUT
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.guard import Event, Health
-from auv_ident.session.input_map import InputMap, InputMapError, load_input_map, NAVSAT
+from auv_ident.session.input_map import IMU, InputMap, InputMapError, load_input_map, NAVSAT
 from auv_ident.session.inputs import CommandHolder
 from auv_ident.session.messages import ConversionError, header_stamp_ns
 from auv_ident.session.raw_messages import (
+    imu_covariance,
+    imu_vectors,
+    is_ned,
     navsat_origin,
     raw_record,
     raw_sensor_config,
@@ -126,10 +129,13 @@ class RawSession:
         self.counters = RawCounters()
         self.time_origin_ns: int | None = None
         self.last_good: Event | None = None
+        # per IMU input: (what its covariance was made of, the (6, 6) made: _imu_covariance)
+        self._imu_cov: dict[str, tuple[tuple, np.ndarray | None]] = {}
         self.filter = self._new_filter()
 
     def _new_filter(self) -> RawSensorFilter:
-        return RawSensorFilter(self.model, FilterConfig(), self.sensors)
+        # the whitened innovations are identify_raw's; kept here they grew without end
+        return RawSensorFilter(self.model, FilterConfig(), self.sensors, keep_white=False)
 
     def warm_up(self) -> None:
         """Load (or compile) the filter's steps now, before the first message: a throwaway
@@ -173,6 +179,8 @@ class RawSession:
         stamp = receive_ns if stamp is None else stamp
         if stamp is None:
             return self._reject(name, 'no stamp', 'no stamp', None)
+        if e.type == IMU:
+            return self._on_imu(name, e, msg, stamp)
         try:
             if e.role == 'command':
                 u = self.holder.update(e, msg, stamp)
@@ -189,10 +197,39 @@ class RawSession:
             return self._reject(name, 'conversion', f'{type(err).__name__}: {err}', stamp)
         return self.process(name, m, stamp)
 
-    def process(self, name: str, m: RawMeasurement, stamp_ns: int | None) -> Event:
-        """One RawMeasurement through the filter (on_input's second half)."""
+    def _on_imu(self, name: str, e, msg, stamp: int) -> Event:
+        """An IMU message (most of the messages: 400 Hz) straight into
+        RawSensorFilter.process_imu, its covariance converted once while it repeats; the same
+        filter step and Event as raw_record then :meth:`process`."""
+        t = self._t(stamp)
         try:
-            what = self.filter.process(m)
+            ned = is_ned(e, msg)
+            q, rates = imu_vectors(msg, ned)
+            cov = self._imu_covariance(name, msg, ned)
+        except (ConversionError, ValueError, TypeError, AttributeError) as err:
+            return self._reject(name, 'conversion', f'{type(err).__name__}: {err}', stamp)
+        return self.process(name, None, stamp, (t, q, rates, cov))
+
+    def _imu_covariance(self, name: str, msg, ned: bool) -> np.ndarray | None:
+        """raw_messages.imu_covariance of the message, the same array while the message's two
+        covariances repeat (a driver sends fixed ones): the filter then reuses its noise
+        matrix, and the conversion (~15 us) is not redone per message."""
+        key = (ned, np.asarray(msg.orientation_covariance, dtype=float).tobytes(),
+               np.asarray(msg.angular_velocity_covariance, dtype=float).tobytes())
+        held = self._imu_cov.get(name)
+        if held is not None and held[0] == key:
+            return held[1]
+        cov = imu_covariance(msg, ned)
+        self._imu_cov[name] = (key, cov)
+        return cov
+
+    def process(self, name: str, m: RawMeasurement | None, stamp_ns: int | None,
+                imu: tuple | None = None) -> Event:
+        """One RawMeasurement through the filter (on_input's second half); with m None, the
+        IMU message imu = (t, q, rates, covariance) through RawSensorFilter.process_imu."""
+        try:
+            what = (self.filter.process(m) if m is not None
+                    else self.filter.process_imu(*imu, sensor=name))
         except (DivergenceError, DomainError) as err:
             self.counters.errors += 1
             self.counters.last_error = f'{name}: {err}'
@@ -204,15 +241,12 @@ class RawSession:
         if what != 'fused':
             self.counters.skipped[what] = self.counters.skipped.get(what, 0) + 1
             return Event('rejected', f'{name}: {what}', stamp_ns, code=what)
-        self.counters.fused[m.kind] = self.counters.fused.get(m.kind, 0) + 1
-        f = self.filter
-        c, p = COEFFICIENTS.start, f.p
-        est = f.xf[c:c + p].copy()
-        cov = f.P[c:c + p, c:c + p].copy()
-        if not (np.isfinite(est).all() and np.isfinite(cov).all()):
+        kind = 'imu' if m is None else m.kind
+        self.counters.fused[kind] = self.counters.fused.get(kind, 0) + 1
+        est, std, cov, finite = self.filter.coefficient_block()
+        if not finite:
             return self.process_fault(name, stamp_ns)
-        ev = Event('update', '', stamp_ns, est, np.sqrt(np.clip(np.diag(cov), 0, None)), cov,
-                   good=True)
+        ev = Event('update', '', stamp_ns, est, std, cov, good=True)
         self.last_good = ev
         return ev
 

@@ -176,3 +176,20 @@ def test_file_curve_is_the_vehicle_files_thrust_and_is_chosen_by_curve():
     assert rov.RovConfig().curve == 'table'
     with pytest.raises(ValueError, match='curve'):
         rov.RovConfig(curve='spline').validate()
+
+
+def test_motor_lag_is_a_first_order_thrust_and_is_in_the_truth(tmp_path):
+    """--motor-lag: the truth's thrust rises as 1 - e^(-t/tau) after a step of the command (its
+    own ODE states), and truth.json names the time constant as the file's lag coefficient."""
+    model = rov.RovModel(rov.RovTruth(), lag=0.15)
+    model.thrust_cmd = rov.t200_thrust(np.full(8, 1700.0))
+    y0 = np.zeros(20)
+    y0[8] = 1.5
+    out = rov.integrate(model, y0, np.array([0.0]), np.array([np.full(8, 1700.0)]), 1.0,
+                        np.array([0.15]), 0.15, 1e-10)
+    np.testing.assert_allclose(out[0, 12:20], rov.t200_thrust(np.full(8, 1700.0))
+                               * (1.0 - np.exp(-1.0)), rtol=1e-6)
+    doc = rov.generate(rov.RovConfig(duration=2.0, seed=1, motor_lag=0.15), tmp_path / 'lag')
+    assert doc['coefficients']['thrust_time_constant'] == 0.15
+    assert 'thrust_time_constant' not in rov.generate(
+        rov.RovConfig(duration=2.0, seed=1), tmp_path / 'nolag')['coefficients']

@@ -455,6 +455,20 @@ def test_a_cached_caller_is_recompiled_when_only_its_callee_file_changes(tmp_pat
     assert len(groups) == 2 and all(list(g.rglob('caller.f-*.nbi')) for g in groups)
 
 
+def per_message_and_loop(m, run):
+    """(g, f): the filter of model m over a simulated run stepped message by message
+    (AugmentedEKF.step, the live node's way) and run by the compiled loop (run_ekf), both from
+    the file's values +50 %."""
+    cfg = FilterConfig(coefficients=m.theta_names, initial_offset=0.5)
+    f = AugmentedEKF(m, cfg, run.T)
+    run_ekf(f, [Record(run.t, run.y, run.u)])
+    g = AugmentedEKF(m, cfg, run.T)
+    g.start(run.y[0], run.u[0, 5])
+    for k in range(1, len(run.t)):
+        g.step(run.u[k - 1], run.y[k])
+    return g, f
+
+
 def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     """The per-message API (one Workspace reused by every step) and the compiled loop (its own
     Workspace) run the same filter: same estimates to rounding."""
@@ -462,13 +476,6 @@ def test_workspace_reuse_gives_the_same_filter_as_fresh_scratch():
     names = list(v.identify_default)
     truth = Model(v)
     run = simulate(truth, 'ident', duration=20.0, seed=5)
-    m = Model(v, names)
-    cfg = FilterConfig(coefficients=names, initial_offset=0.5)
-    f = AugmentedEKF(m, cfg, run.T)
-    run_ekf(f, [Record(run.t, run.y, run.u)])
-    g = AugmentedEKF(m, cfg, run.T)
-    g.start(run.y[0], run.u[0, 5])
-    for k in range(1, len(run.t)):
-        g.step(run.u[k - 1], run.y[k])
+    g, f = per_message_and_loop(Model(v, names), run)
     np.testing.assert_allclose(g.xa, f.xa, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(g.P, f.P, rtol=1e-7, atol=1e-15)

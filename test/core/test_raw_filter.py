@@ -11,6 +11,7 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorConfig, RawSensorFilter
 from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
+from auv_ident.core.model.state import COEFFICIENTS
 from auv_ident.offline.independent_data import DataConfig, generate_raw, RawConfig
 from auv_ident.vehicles import load_vehicle
 
@@ -135,12 +136,11 @@ def test_bottom_and_water_track_with_a_current(dvl):
         assert np.all(res.std[5:] > 0.1)
 
 
-def test_process_many_is_process_one_by_one_bit_for_bit(quiet_run, model):
-    """The compiled IMU runs (raw_update.imu_run) do what process does message by message, the
-    messages it leaves to Python included: a gap to restart after, a non-finite IMU rate, an
-    IMU message stamped before the estimate, a covariance array changing mid-run."""
-    cfg, run = quiet_run
-    recs = [r for r in run.records if not 5.0 < r.t < 5.5]          # a 0.5 s silence
+def _awkward_records(run):
+    """The run's records with what the compiled IMU steps leave to Python: a 0.5 s silence (a
+    restart), a non-finite IMU rate, an IMU message stamped before the estimate, and the IMU
+    covariance array changing after 12 s."""
+    recs = [r for r in run.records if not 5.0 < r.t < 5.5]
     k = next(i for i, r in enumerate(recs) if r.kind == 'imu' and r.t > 8.0)
     recs[k] = RawMeasurement('imu', recs[k].t, np.r_[recs[k].values[:4], np.nan, 0.0, 0.0])
     k2 = next(i for i, r in enumerate(recs) if r.kind == 'imu' and r.t > 9.0)
@@ -148,20 +148,61 @@ def test_process_many_is_process_one_by_one_bit_for_bit(quiet_run, model):
     for i, r in enumerate(recs):
         if r.kind == 'imu' and r.t > 12.0:
             recs[i] = RawMeasurement('imu', r.t, r.values, np.diag([1e-4] * 3 + [1e-5] * 3))
+    return recs
+
+
+def _assert_same_pass(a, b):
+    """Two filters over _awkward_records: the same restart, skips, counts, state, covariance,
+    NIS and information sums, to the bit."""
+    assert a.restarts == b.restarts == 1
+    assert a.skipped == b.skipped and a.skipped['out of order'] == 1
+    assert a.fused == b.fused
+    np.testing.assert_array_equal(a.xf, b.xf)
+    np.testing.assert_array_equal(a.P, b.P)
+    assert a.nis_sum == b.nis_sum and a.dof_sum == b.dof_sum
+    for g in a.info:
+        np.testing.assert_array_equal(a.info[g], b.info[g])
+
+
+def test_process_many_is_process_one_by_one_bit_for_bit(quiet_run, model):
+    """The compiled IMU runs (raw_update.imu_run) do what process does message by message, the
+    messages it leaves to Python included: a gap to restart after, a non-finite IMU rate, an
+    IMU message stamped before the estimate, a covariance array changing mid-run."""
+    cfg, run = quiet_run
+    recs = _awkward_records(run)
     one, many = (RawSensorFilter(model, FilterConfig(), sensors_of(cfg)) for _ in range(2))
     for r in recs:
         one.process(r)
     many.process_many(recs)
-    assert one.restarts == many.restarts == 1
-    assert one.skipped == many.skipped and one.skipped['out of order'] == 1
-    assert one.fused == many.fused
-    np.testing.assert_array_equal(one.xf, many.xf)
-    np.testing.assert_array_equal(one.P, many.P)
-    assert one.nis_sum == many.nis_sum and one.dof_sum == many.dof_sum
+    _assert_same_pass(one, many)
     for g in one.white:
         np.testing.assert_array_equal(np.array(one.white[g]), np.array(many.white[g]))
-    for g in one.info:
-        np.testing.assert_array_equal(one.info[g], many.info[g])
+
+
+def test_process_imu_is_process_bit_for_bit(quiet_run, model):
+    """The live node's one-message IMU step (process_imu: the compiled run of one, no record
+    built) gives what process gives the same message, bit for bit, over the messages it
+    leaves to Python too (the start, a gap, a non-finite rate, one stamped before the
+    estimate, a covariance changing); and a filter that keeps no whitened innovations
+    (keep_white False, the live node's) has the same estimates and figures."""
+    cfg, run = quiet_run
+    recs = _awkward_records(run)
+    one = RawSensorFilter(model, FilterConfig(), sensors_of(cfg))
+    live = RawSensorFilter(model, FilterConfig(), sensors_of(cfg), keep_white=False)
+    for r in recs:
+        what = one.process(r)
+        if r.kind == 'imu':
+            got = live.process_imu(r.t, tuple(r.values[:4]), tuple(r.values[4:]), r.covariance,
+                                   r.sensor)
+        else:
+            got = live.process(r)
+        assert got == what, r
+    _assert_same_pass(one, live)
+    assert one.white and not live.white
+    est, std, cov, finite = live.coefficient_block()
+    c = slice(COEFFICIENTS.start, COEFFICIENTS.start + model.p)
+    assert finite and np.array_equal(est, one.xf[c]) and np.array_equal(cov, one.P[c, c])
+    np.testing.assert_array_equal(std, np.sqrt(np.diag(one.P[c, c])))
 
 
 def test_imu_messages_without_a_covariance_get_the_default_noise(quiet_run, model):

@@ -344,8 +344,8 @@ def test_table_curve_is_the_monotone_cubic_through_its_points():
     the ends beyond the range; the compiled kernel evaluates the same numbers."""
     from scipy.interpolate import PchipInterpolator
 
-    from auv_ident.core.model.hydrodynamics import _thrust
-    from auv_ident.core.model.thrusters import thruster_table
+    from auv_ident.core.model.hydrodynamics import thrust_of
+    from auv_ident.core.model.thrusters import THR_COLS, thruster_table
     th, problems = thrusters_from_file([TABLE, PWM], 'test')
     assert problems == []
     t = th[0]
@@ -359,9 +359,9 @@ def test_table_curve_is_the_monotone_cubic_through_its_points():
     assert np.all(np.diff(ours) >= 0.0)
     assert np.all(ours[(cmd >= 1472) & (cmd <= 1528)] == 0.0)
     thr = thruster_table(th)
-    assert thr.shape == (2, 17 + 3 * 8)
+    assert thr.shape == (2, THR_COLS + 3 * 8)
     for i, th_i in enumerate(th):
-        assert [_thrust(thr, i, c) for c in cmd[::7]] == pytest.approx(
+        assert [thrust_of(thr, i, c) for c in cmd[::7]] == pytest.approx(
             [th_i.thrust(c) for c in cmd[::7]], rel=1e-14, abs=1e-14)
 
 

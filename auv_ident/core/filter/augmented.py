@@ -28,6 +28,7 @@ from auv_ident.core.model.state import (
     State,
     VEHICLE,
 )
+from auv_ident.core.model.thruster_lag import lag_advance, lag_correct
 from auv_ident.core.model.trim import trim_speed
 
 # Per-step process-noise 1-sigma of the 12 states in the EKF, in the states' units. Small: the
@@ -240,7 +241,8 @@ class AugmentedEKF:
         p = model.p
         n = N_STATE + p
         self.n = n
-        self.ws = ekf.new_workspace(n, model.n_coef)   # scratch reused by every step
+        # scratch reused by every step (and a lagged vehicle's delivered thrust)
+        self.ws = ekf.workspace_for(n, model.compiled)
         self.R0 = np.diag(np.asarray(cfg.noise_std, dtype=float) ** 2)
         # measurement 1-sigma the start-up covariance of the measured states is taken from
         # (a caller with per-message noise, e.g. the session's message covariances, updates it)
@@ -266,6 +268,7 @@ class AugmentedEKF:
 
     def reset(self) -> None:
         self.gated = False
+        self.ws.lag_ok[0] = 0       # a new record: the thrust settles at its first command
         self.Q = self.Q0.copy()
         self.R = self.R0.copy()
         self.xa = None
@@ -388,6 +391,7 @@ class AugmentedEKF:
         xa, P = self.xa.copy(), self.P.copy()
         ekf.restart_states(xa, P, x0, sd0)
         self.xa, self.P = xa, P
+        self.ws.lag_ok[0] = 0       # the thrust settled over the gap
         self._update(y0)
 
     def _check(self, st: int, what: str) -> None:
@@ -416,6 +420,10 @@ class AugmentedEKF:
         ekf.adapt(self.mode, self.gamma, self.cfg.lam, self.T, self.cfg.r_bound, self.cfg.q_floor,
                 theta_prev, xa_b, self.innov, self.S_diag, self.P, self.Q, self.R, self.Q0,
                 self.R0)
+        cm = self.model.compiled
+        if cm.lagged and cm.lag_idx >= 0 and cm.theta_pos[cm.lag_idx] >= 0:
+            j = int(cm.theta_pos[cm.lag_idx])     # the thrust follows the time constant's update
+            lag_correct(self.ws.lag, xa_b[N_STATE + j] - theta_prev[j])
         self.xa, self.P = xa_b, P_b
         self.nis, self.dof = nis, m
         self.steps += 1
@@ -432,6 +440,8 @@ class AugmentedEKF:
         P_b = np.empty((self.n, self.n))
         st = ekf.predict(self.xa, self.P, u_prev, self.Q, m.compiled, T, xa_b, P_b, self.ws)
         self._check(st, 'time update')
+        if m.compiled.lagged:       # the delivered thrust at the end of the step
+            lag_advance(m.compiled, self.ws.c, u_prev, self.ws.lag, self.ws.lag_ok, T)
         self.xa, self.P = xa_b, P_b
 
     def update(self, y: np.ndarray) -> None:

@@ -46,7 +46,14 @@ from auv_ident.core.model.hydrodynamics import (
     state_derivative,
     ZZ_LEN,
 )
-from auv_ident.core.model.state import N_CURRENT, N_NU, N_STATE, State
+from auv_ident.core.model.state import N_CURRENT, N_INPUT, N_NU, N_STATE, State
+from auv_ident.core.model.thruster_lag import (
+    lag_advance,
+    lag_correct,
+    lag_inputs,
+    lag_settle,
+    N_LAG_ROWS,
+)
 
 MODE_FIXED, MODE_PAPER, MODE_PAPER_Q, MODE_MATCHING = 0, 1, 2, 3
 MODES = {'fixed': MODE_FIXED, 'paper': MODE_PAPER, 'paper_q': MODE_PAPER_Q,
@@ -96,13 +103,17 @@ def new_outputs(n: int, N: int, hist_every: int = 0, want_white: bool = False) -
 
 # Scratch arrays of one filter, allocated once and reused at every step (allocating them per
 # step cost about a tenth of the step; a fresh n x n Fa per step made the BLAS products slower).
-Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new Fa M O idx kpg')
+# lag (4, n_thr), lag_ok (1,): a lagged vehicle's delivered thrust at the start of the next
+# step (core/model/thruster_lag.py), ui_ext the extended inputs of one RK4 stage.
+Workspace = namedtuple('Workspace', 'c dprod Minv M6 zz xs k acc A Bt dk dk_new Fa M O idx kpg '
+                                    'lag lag_ok ui_ext')
 
 
 @cached_njit()
-def new_workspace(n, n_coef):
+def new_workspace(n, n_coef, n_thr=0):
     """Workspace for an augmented state of size n and a vehicle with n_coef coefficients (the
-    coefficient arrays hold the water current after them; a caller may pass n_coef + 3)."""
+    coefficient arrays hold the water current after them; a caller may pass n_coef + 3) and
+    n_thr thrusters (their lag state; 0 for a vehicle without a lag)."""
     p = n - N_STATE
     return Workspace(np.empty(n_coef + N_CURRENT), np.empty(n_coef + N_CURRENT),
                      np.empty((N_NU, N_NU)), np.empty((N_NU, N_NU)), np.empty(ZZ_LEN),
@@ -110,13 +121,22 @@ def new_workspace(n, n_coef):
                      np.empty(N_STATE), np.empty(N_STATE), np.empty((N_STATE, N_STATE)),
                      np.empty((N_STATE, p)), np.empty((N_STATE, n)), np.empty((N_STATE, n)),
                      np.empty((n, n)), np.empty((N_STATE, n)), np.empty((N_STATE, N_STATE)),
-                     np.empty(N_STATE, dtype=np.int64), np.empty((3, n)))
+                     np.empty(N_STATE, dtype=np.int64), np.empty((3, n)),
+                     np.zeros((N_LAG_ROWS, n_thr)), np.zeros(1, dtype=np.int64),
+                     np.zeros(N_INPUT + (N_LAG_ROWS + 1) * n_thr))
+
+
+def workspace_for(n: int, cm: Any) -> Any:
+    """new_workspace for an augmented state of size n and the model cm (CompiledModel): the
+    lag state sized when its thrusters lag."""
+    return new_workspace(n, cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
 
 
 @cached_njit()
 def rk4_jacobian_step(xa, ui, cm, T, want_jac, xa_next, Fa):
-    """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into)."""
-    ws = new_workspace(xa.shape[0], cm.c0.shape[0])
+    """x*_{k+1} = Phi(x*_k) and Fa = dPhi/dx* with scratch of its own (see rk4_step_into; a
+    lagged vehicle's thrust settled at ui)."""
+    ws = new_workspace(xa.shape[0], cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
     return rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws)
 
 
@@ -130,6 +150,9 @@ def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):  # noqa: C901
     Fa = I + T/6 sum_s w_s dk_s/dx* on the vehicle rows (the parameter rows are [0 I]). f does
     not depend on the position x, y, z (no depth effects in the model), so those columns of A_s
     are zero and the product skips them; then Fa's position columns are identity columns.
+    A lagged vehicle's stages read the delivered thrust from ws.lag (its start of step,
+    settled at ui if the record has just started; the caller carries it on with
+    thruster_lag.lag_advance once the step is taken).
     """
     c0 = cm.c0
     theta_idx = cm.theta_idx
@@ -170,7 +193,13 @@ def rk4_step_into(xa, ui, cm, T, want_jac, xa_next, Fa, ws):  # noqa: C901
         wt = (1.0, 2.0, 2.0, 1.0)[s]
         for i in range(N_STATE):
             xs[i] = xa[i] + a * k[i]
-        st = state_derivative(xs, ui, c, Mi, cm, want_jac, k, A, Bt, zz, ws.dprod)
+        if cm.lagged:
+            if ws.lag_ok[0] == 0:
+                lag_settle(cm, ui, ws.lag, ws.lag_ok)
+            lag_inputs(cm, c, ui, ws.lag, a, ws.ui_ext)
+            st = state_derivative(xs, ws.ui_ext, c, Mi, cm, want_jac, k, A, Bt, zz, ws.dprod)
+        else:
+            st = state_derivative(xs, ui, c, Mi, cm, want_jac, k, A, Bt, zz, ws.dprod)
         if st != OK:
             return st
         for i in range(N_STATE):
@@ -579,7 +608,9 @@ def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):  # noqa: C901
     R = R0.copy()
     xa_b = xa0.copy()             # the prior of sample 0
     P_b = P0.copy()
-    ws = new_workspace(n, cm.c0.shape[0])
+    ws = new_workspace(n, cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
+    # a time constant in theta: its position (the lagged thrust follows its updates)
+    j_lag = cm.theta_pos[cm.lag_idx] if cm.lagged and cm.lag_idx >= 0 else -1
     innov = np.empty(N_STATE)
     S_diag = np.empty(N_STATE)
     white = np.empty(N_STATE)
@@ -602,6 +633,7 @@ def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):  # noqa: C901
                 P_b[:, :] = P
                 restart_states(xa_b, P_b, timeline.x0[r], timeline.sd0[r])
                 r += 1
+                ws.lag_ok[0] = 0       # the thrust settled over the gap
             for s in range(n_sub[k]):
                 if s > 0:              # the prior so far is the start of the next step
                     xa, xa_b = xa_b, xa
@@ -609,6 +641,8 @@ def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):  # noqa: C901
                 st = predict(xa, P, U[k - 1], Q, cm, h_sub[k], xa_b, P_b, ws)
                 if st != OK:
                     break
+                if cm.lagged:
+                    lag_advance(cm, ws.c, U[k - 1], ws.lag, ws.lag_ok, h_sub[k])
             if st != OK:
                 status = st
                 break
@@ -624,6 +658,8 @@ def run_filter(xa0, P0, Y, U, cm, settings, timeline, out):  # noqa: C901
             break
         adapt(mode, settings.gamma, settings.lam, T, settings.r_bound, settings.q_floor,
               theta_prev, xa, innov, S_diag, P_b, Q, R, Q0, R0)
+        if j_lag >= 0:
+            lag_correct(ws.lag, xa[N_STATE + j_lag] - theta_prev[j_lag])
         if m > 0:
             sum_nis += nis
             sum_dof += m

@@ -11,12 +11,14 @@ from auv_ident.core.compiled_cache import cached_njit
 from auv_ident.core.filter import ekf
 from auv_ident.core.model.hydrodynamics import OK
 from auv_ident.core.model.state import N_STATE
+from auv_ident.core.model.thruster_lag import lag_advance
 
 
 @cached_njit()
 def propagate_sigma_points(X, ui, cm, h, X_out, ws):
     """X_out[i] = one RK4 step of h seconds of sigma point X[i] ((2n+1, n) rows, augmented
-    states) with the inputs ui held; cm the model's CompiledModel, ws its ekf.Workspace.
+    states) with the inputs ui held; cm the model's CompiledModel, ws its ekf.Workspace (a
+    lagged vehicle's thrust: every point starts from ws.lag, carried on by the caller).
     Returns OK or the first failing point's status code."""
     for i in range(X.shape[0]):
         st = ekf.rk4_step_into(X[i], ui, cm, h, False, X_out[i], ws.Fa, ws)
@@ -35,7 +37,7 @@ def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
     left the model's domain."""
     p = theta.shape[0]
     n = N_STATE + p
-    ws = ekf.new_workspace(n, cm.c0.shape[0])
+    ws = ekf.new_workspace(n, cm.c0.shape[0], cm.thr.shape[0] if cm.lagged else 0)
     xa = np.empty(n)
     xb = np.empty(n)
     for j in range(p):
@@ -49,6 +51,7 @@ def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
             if current >= 0:
                 for i in range(N_STATE):
                     xa[i] = X0[current, i]
+                ws.lag_ok[0] = 0        # a lagged thrust settles at the segment's command
             active = current >= 0
         elif active:
             for s in range(n_sub[k]):
@@ -57,6 +60,8 @@ def simulate_segments(theta, X0, U, seg, n_sub, h, cm, X):
                     active = False
                     failed += 1
                     break
+                if cm.lagged:
+                    lag_advance(cm, ws.c, U[k - 1], ws.lag, ws.lag_ok, h[k])
                 xa, xb = xb, xa
         for i in range(N_STATE):
             X[k, i] = xa[i] if active else np.nan

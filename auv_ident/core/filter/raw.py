@@ -51,6 +51,7 @@ from auv_ident.core.errors import ConfigError, DataError, DivergenceError, Domai
 from auv_ident.core.filter import ekf
 from auv_ident.core.filter.augmented import AugmentedEKF, FilterConfig
 from auv_ident.core.filter.raw_update import (
+    coefficient_block,
     imu_run,
     imu_update,
     joseph_update,
@@ -190,11 +191,16 @@ class RawSensorFilter:
     model : the Model identified (its theta_names); cfg : FilterConfig (priors, process noise;
     its noise_std and measured are not used: each message brings its own); sensors :
     RawSensorConfig; T : s, the nominal step the FilterConfig's per-step noise refers to.
+    keep_white : keep every update's whitened innovations in :attr:`white` (what
+    identify_raw's error bars are made of); a live filter that runs for hours passes False
+    (they grew by ~390 B a message, 0.56 GB an hour at 400 Hz, and nothing read them).
     """
 
     def __init__(self, model: Model, cfg: FilterConfig, sensors: RawSensorConfig | None = None,
-                 T: float = DEFAULT_T, errors0: np.ndarray | None = None) -> None:
+                 T: float = DEFAULT_T, errors0: np.ndarray | None = None,
+                 keep_white: bool = True) -> None:
         self.model = model
+        self.keep_white = keep_white
         self.sensors = sensors or RawSensorConfig()
         self.base = AugmentedEKF(model, cfg, T)
         self.err_names = self.sensors.error_names()
@@ -215,7 +221,7 @@ class RawSensorFilter:
         self.q_rate = np.concatenate([np.diag(self.base.Q0) / self.base.T,
                                       np.array([walk[e] ** 2 for e in self.err_names])])
         self._q_cache: dict[float, np.ndarray] = {}
-        self.ws = ekf.new_workspace(self.nb, model.n_coef)
+        self.ws = ekf.workspace_for(self.nb, model.compiled)
         self.F12 = np.zeros((N_STATE, n))
         self.M = np.empty((N_STATE, n))
         self.O = np.empty((N_STATE, N_STATE))
@@ -242,6 +248,9 @@ class RawSensorFilter:
         self.nis_sum: dict[str, float] = {}
         self.dof_sum: dict[str, int] = {}
         self.white: dict[str, list[np.ndarray]] = {}
+        # one IMU message's stamp, orientation, rates and whitened innovation (process_imu)
+        self._one_t, self._one_q, self._one_rate = np.empty(1), np.empty((1, 4)), np.empty((1, 3))
+        self._one_w = np.empty((1, 6))
         p = model.p
         self.info: dict[str, np.ndarray] = {}
         self.p = p
@@ -298,23 +307,53 @@ class RawSensorFilter:
                 done = 1
             i += done
 
+    def process_imu(self, t: float, q: Sequence[float], rates: Sequence[float],
+                    covariance: np.ndarray | None = None, sensor: str = '') -> str:
+        """One IMU message (t s, q the orientation x y z w, rates p q r rad/s, covariance and
+        sensor as RawMeasurement's) taken as :meth:`process` takes
+        ``RawMeasurement('imu', t, [*q, *rates], covariance, sensor)``: the same arithmetic,
+        counts and figures; while the filter runs, through the compiled raw_update.imu_run
+        without building the record (the live node's 400 Hz stream: its Python per message
+        was most of the node's CPU). Returns what process returns."""
+        if self.xf is not None and not self.need_restart:
+            self._one_t[0] = t
+            self._one_q[0] = q
+            self._one_rate[0] = rates
+            if self._imu_compiled(sensor, covariance, self._one_t, self._one_q, self._one_rate,
+                                  self._one_w):
+                return 'fused'
+        # the start, a gap, a stamp before the estimate's or a non-finite value: Python's
+        return self.process(RawMeasurement('imu', t, np.array([*q, *rates], dtype=float),
+                                           covariance, sensor))
+
+    def coefficient_block(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """(estimate (p,), 1-sigma (p,), covariance (p, p), all finite) of the coefficients,
+        new arrays (raw_update.coefficient_block); the filter must have started."""
+        assert self.xf is not None and self.P is not None
+        return coefficient_block(self.xf, self.P, COEFFICIENTS.start, self.p)
+
     def _imu_run(self, run: Sequence[RawMeasurement]) -> int:
         """raw_update.imu_run over IMU messages of one mounting and covariance; the number
         done (the rest: process_many goes on with them)."""
-        assert self.xf is not None and self.P is not None and self.t is not None
         m0 = run[0]
-        mount = self.sensors.mount(m0.sensor or 'imu')
-        self._imu_noise_of(m0.covariance)
         K = len(run)
         ts = np.fromiter((m.t for m in run), float, K)
         V = np.stack([m.values for m in run])
-        W = np.empty((K, 6))
+        return self._imu_compiled(m0.sensor, m0.covariance, ts, np.ascontiguousarray(V[:, :4]),
+                                  np.ascontiguousarray(V[:, 4:]), np.empty((K, 6)))
+
+    def _imu_compiled(self, sensor: str, covariance: np.ndarray | None, ts: np.ndarray,
+                      qs: np.ndarray, rates: np.ndarray, W: np.ndarray) -> int:
+        """raw_update.imu_run over K IMU messages of one mounting and covariance (ts (K,),
+        qs (K, 4), rates (K, 3); W (K, 6) gets their whitened innovations); the number done."""
+        assert self.xf is not None and self.P is not None and self.t is not None
+        mount = self.sensors.mount(sensor or 'imu')
+        self._imu_noise_of(covariance)
         info = self.info.get('attitude+gyro')
         info = np.zeros(self.p) if info is None else info.copy()
         nis = np.array([self.nis_sum.get('imu', 0.0)])
-        done, st, t = imu_run(self.xf, self.P, self.u, self.model.compiled, self.t, ts,
-                              np.ascontiguousarray(V[:, :4]), np.ascontiguousarray(V[:, 4:]),
-                              mount.rotation, self._imu_R, self.bias_idx, self.q_rate,
+        done, st, t = imu_run(self.xf, self.P, self.u, self.model.compiled, self.t, ts, qs,
+                              rates, mount.rotation, self._imu_R, self.bias_idx, self.q_rate,
                               self.sensors.max_step, self.sensors.max_bridge, self.xb,
                               self.F12, self.M, self.O, self.P_out, self.ws, W,
                               self.gain, info, nis)
@@ -329,8 +368,9 @@ class RawSensorFilter:
             self.nis_sum['imu'] = float(nis[0])
             self.dof_sum['imu'] = self.dof_sum.get('imu', 0) + 6 * done
             self.fused['imu'] = self.fused.get('imu', 0) + done
-            self.white.setdefault('attitude', []).extend(W[:done, :3])
-            self.white.setdefault('gyro', []).extend(W[:done, 3:])
+            if self.keep_white:
+                self.white.setdefault('attitude', []).extend(W[:done, :3].copy())
+                self.white.setdefault('gyro', []).extend(W[:done, 3:].copy())
         return int(done)
 
     def _skip(self, reason: str) -> str:
@@ -441,10 +481,11 @@ class RawSensorFilter:
         c = COEFFICIENTS.start
         info_group = groups[0][0] if len(groups) == 1 else '+'.join(g for g, _ in groups)
         self.info[info_group] = self.info.get(info_group, 0.0) + self.gain[c:c + self.p]
-        i = 0
-        for g, k in groups:
-            self.white.setdefault(g, []).append(w[i:i + k])
-            i += k
+        if self.keep_white:
+            i = 0
+            for g, k in groups:
+                self.white.setdefault(g, []).append(w[i:i + k])
+                i += k
         self.nis_sum[kind] = self.nis_sum.get(kind, 0.0) + nis
         self.dof_sum[kind] = self.dof_sum.get(kind, 0) + m
 

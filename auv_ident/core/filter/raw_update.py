@@ -15,6 +15,7 @@ from auv_ident.core.filter import ekf
 from auv_ident.core.filter.timing import time_step
 from auv_ident.core.model.raw_sensors import rotation, rotation_of_quaternion
 from auv_ident.core.model.state import COEFFICIENTS, N_STATE, State
+from auv_ident.core.model.thruster_lag import lag_advance
 
 OK = 0
 ERR_NOT_PD = 1
@@ -101,6 +102,8 @@ def propagate_steps(xf, P, ui, cm, h, steps, Q, xb, F12, M, O, P_out, ws):
         st = ekf.rk4_step_into(xf[:nb], ui, cm, h, True, xb, ws.Fa, ws)
         if st != ekf.OK:
             return st
+        if cm.lagged:       # the delivered thrust at the end of the step (thruster_lag.py)
+            lag_advance(cm, ws.c, ui, ws.lag, ws.lag_ok, h)
         for i in range(N_STATE):
             for j in range(nb):
                 F12[i, j] = ws.Fa[i, j]
@@ -207,3 +210,21 @@ def imu_run(xf, P, ui, cm, t0, ts, qs, rates, Rs, Rm, bias_idx, q_rate, max_step
             W[k, j] = w[j]
         nis_sum[0] += nis
     return K, OK, t
+
+
+@cached_njit()
+def coefficient_block(xf, P, c, p):
+    """The coefficients' estimate (p,), 1-sigma (p,) and covariance (p, p) at c.. of xf and P,
+    as new arrays, and whether every value of the estimate and its covariance is finite: what a
+    live update publishes, in one call (numpy's copies, checks and square roots cost ~15 us a
+    message at 400 Hz). The 1-sigma of a negative variance is 0."""
+    est = xf[c:c + p].copy()
+    cov = P[c:c + p, c:c + p].copy()
+    std = np.empty(p)
+    finite = True
+    for i in range(p):
+        finite = finite and math.isfinite(est[i])
+        for j in range(p):
+            finite = finite and math.isfinite(cov[i, j])
+        std[i] = math.sqrt(max(cov[i, i], 0.0))
+    return est, std, cov, finite

@@ -78,6 +78,8 @@ PILOT_EXCITATION = {
 PILOT_ADDED_MASS = 'quick stick reversals and a sweep (0.05-0.5 Hz) of that stick (accelerations)'
 PILOT_GAIN = ("each stick both ways (the forward and the reverse side of every thruster's "
               'curve), at several sizes')
+PILOT_LAG = ('quick stick steps and reversals (the thrust rises over the time constant after '
+             'each change of command), measured at a rate well above 1 / tau')
 
 
 CURRENT_EXCITATION = ('turns: the current is separable from the coefficients only through '
@@ -92,6 +94,8 @@ def excitation_advice(vehicle: Vehicle, name: str) -> str:
     c = vehicle.coefficients[vehicle.index(name)]
     if c.is_thrust_gain:
         return PILOT_GAIN
+    if c.is_thrust_lag:
+        return PILOT_LAG
     if c.is_added_mass:
         return PILOT_ADDED_MASS if vehicle.hovers else ADDED_MASS_EXCITATION
     return (PILOT_EXCITATION if vehicle.hovers else EXCITATION).get(

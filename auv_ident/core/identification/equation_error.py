@@ -73,6 +73,11 @@ def refusals(model: Model, measured: np.ndarray) -> dict[str, str]:
                          'error assumes still water)')
             continue
         c = v.coefficients[v.index(name)]
+        if c.is_thrust_lag:
+            out[name] = ("the thrusters' time constant: the thrust at an instant depends on the "
+                         'command history through it, not a term of F at that instant; use '
+                         'the EKF (identify) or output error')
+            continue
         if c.is_added_mass:
             out[name] = (f'added mass: an entry of the mass matrix M (it multiplies '
                          f'{STATE_NAMES[c.added_mass_col]}_dot), not a monomial of the force '

@@ -167,9 +167,10 @@ HOVER_CROSS_TERM = ('a cross term of a hovering thruster vehicle (the Coriolis o
 
 def _tank_term(c):
     """Whether coefficient c is a term a tank session identifies (HOVER_CROSS_TERM): a thrust
-    gain, a diagonal added mass (its column its equation), or a diagonal damping (the
-    equation's own velocity, linear or times its magnitude: X_u, X_uu, ..., N_rr)."""
-    if c.is_thrust_gain:
+    gain or the thrusters' time constant, a diagonal added mass (its column its equation), or
+    a diagonal damping (the equation's own velocity, linear or times its magnitude: X_u, X_uu,
+    ..., N_rr)."""
+    if c.is_thrust_gain or c.is_thrust_lag:
         return True
     if c.is_added_mass:
         return c.added_mass_col == c.equation
@@ -475,7 +476,9 @@ def tank_groups(names, vehicle, indices):
     by = {}
     for i in indices:
         c = vehicle.coefficients[vehicle.index(names[i])]
-        by.setdefault('gain' if c.is_thrust_gain else c.equation, []).append(i)
+        # the time constant goes with the gains: it scales nothing of one equation
+        by.setdefault('gain' if c.is_thrust_gain or c.is_thrust_lag else c.equation,
+                      []).append(i)
     return [g for g in by.values() if len(g) > 1]
 
 

@@ -51,6 +51,7 @@ from auv_ident.core.filter.timing import DEFAULT_MAX_BRIDGE, nominal_sample_time
 from auv_ident.core.identification.batch import _record, _timeline
 from auv_ident.core.model.hydrodynamics import Model, OK, STATUS_TEXT
 from auv_ident.core.model.state import EULER, Input, N_STATE
+from auv_ident.core.model.thruster_lag import lag_advance
 
 
 @dataclass
@@ -181,7 +182,7 @@ def run_ukf(model: Model, cfg: FilterConfig, t: np.ndarray, Y: np.ndarray, U: np
     lam, Wm, Wc = (unscented or UnscentedSettings()).weights(n)
     gamma = math.sqrt(n + lam)
     Q, R, measured = settings.Q0, settings.R0, np.asarray(settings.measured, dtype=bool)
-    ws = ekf.new_workspace(n, model.compiled.c0.shape[0])
+    ws = ekf.workspace_for(n, model.compiled)
     X_out = np.empty((2 * n + 1, n))
     kalman_update = MeasurementUpdate(n, ws)
     cm = model.compiled
@@ -194,6 +195,7 @@ def run_ukf(model: Model, cfg: FilterConfig, t: np.ndarray, Y: np.ndarray, U: np
                 if timeline.n_sub[k] == 0:       # a gap: restart the vehicle states
                     xa, P = xa.copy(), P.copy()
                     ekf.restart_states(xa, P, timeline.x0[r], timeline.sd0[r])
+                    ws.lag_ok[0] = 0             # the thrust settled over the gap
                     r += 1
                 for _ in range(timeline.n_sub[k]):
                     X = sigma_points(xa, P, gamma)
@@ -202,6 +204,10 @@ def run_ukf(model: Model, cfg: FilterConfig, t: np.ndarray, Y: np.ndarray, U: np
                         raise DomainError(f'UKF stopped at sample {k} (t = {t[k]:.2f} s): a '
                                           f"sigma point left the model's domain: "
                                           f'{STATUS_TEXT[st]}')
+                    if cm.lagged:    # the thrust carried on at the mean's time constant
+                        th = xa[N_STATE:]
+                        c = np.concatenate([model.coefficients_with(th), model.current_with(th)])
+                        lag_advance(cm, c, U[k - 1], ws.lag, ws.lag_ok, timeline.h[k])
                     xa, P = unscented_mean_cov(X_out, Wm, Wc)
                     P = P + Q
             xa, P, nis, m = kalman_update(xa, P, Y[k], measured, R)

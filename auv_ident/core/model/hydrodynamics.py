@@ -137,7 +137,7 @@ kernel = cached_njit(_nrt=False)
 # structref, can be read by the kernels compiled without reference counting.
 CompiledModel = namedtuple('CompiledModel', 'c0 theta_idx par mono_addr theta_terms am_i am_s '
                                             'Minv recompute_minv M_RB theta_pos current n_coef '
-                                            'held thr gain_idx ca_i ca_s')
+                                            'held thr gain_idx lag_idx lagged ca_i ca_s')
 CompiledModel.__doc__ = """The compiled model's data (one filter's view of a Model).
 
 c0 : (n_coef + 3,) coefficient values (the file's units) for the coefficients not in theta,
@@ -161,6 +161,10 @@ thr : (n, thrusters.THR_COLS + 3 K_max) the thrusters and their tables (empty fo
     vehicle); their commands are u_in[N_INPUT:N_INPUT + n]
 gain_idx : (2, 6) int, per curve side (forward, reverse) and equation the index in c0 of
     its thrust gain, or -1 (gain 1)
+lag_idx : int, index in c0 of the thrusters' shared time constant (multiplier thruster_lag),
+    or -1 (each thruster's own, thrusters.T_TAU)
+lagged : bool, the thrusters lag (Vehicle.lagged): the filters carry the delivered thrust
+    (core/model/thruster_lag.py) and give the model the extended inputs
 ca_i : (nc, 4) int, the added-mass Coriolis terms the model computes (vehicle.ca_i:
     [equation, added-mass coefficient index in c0, nu factor, nu factor]; empty when the file
     writes its own)
@@ -257,7 +261,7 @@ def _table_thrust(thr, i, c):
 
 
 @kernel
-def _thrust(thr, i, cmd):
+def thrust_of(thr, i, cmd):
     """Steady thrust (N, along the thruster's direction) of thruster i (row of thr) for its
     command cmd: thrusters.Thruster.thrust, compiled (the same curve, dead band and
     saturations)."""
@@ -283,34 +287,53 @@ def _thrust(thr, i, cmd):
 
 
 @kernel
-def _thrusters(ui, c, cm, want_jac, xdot, Bt):
+def _thrusters(ui, c, cm, want_jac, xdot, Bt):  # noqa: C901 (steady and lagged, each side)
     """The thrusters' wrench tau = T f(commands) (thrusters.py) into xdot[0:6]: per equation
     the forward thrusts' part times its gain and the reverse thrusts' part times its gain
     (cm.gain_idx; 1 where none), and d/d(gain) = that part into Bt for a gain in theta. The
-    commands are inputs, so there is no df/dx."""
+    commands are inputs, so there is no df/dx. An extended input vector (a lagged vehicle's,
+    core/model/thruster_lag.py: u_in, then the delivered forward and reverse thrusts and their
+    derivatives by the time constant) gives the delivered thrust in place of the curve's
+    value, and d/d(tau) = g_fwd T S_P + g_rev T S_N into Bt for a time constant in theta; the
+    plain inputs give the steady thrust (a trim, a settled state)."""
     thr = cm.thr
     n = thr.shape[0]
+    lagged = ui.shape[0] > N_INPUT + n
+    o = N_INPUT + n                 # the extended part: P (n), N (n), S_P (n), S_N (n)
+    jl = cm.theta_pos[cm.lag_idx] if want_jac and lagged and cm.lag_idx >= 0 else -1
     for e in range(N_NU):
         tau_f = 0.0
         tau_r = 0.0
+        s_f = 0.0
+        s_r = 0.0
         for i in range(n):
             col = thr[i, e]
             if col != 0.0:
-                f = _thrust(thr, i, ui[N_INPUT + i])
-                if f > 0.0:
-                    tau_f += col * f
+                if lagged:
+                    tau_f += col * ui[o + i]
+                    tau_r += col * ui[o + n + i]
+                    s_f += col * ui[o + 2 * n + i]
+                    s_r += col * ui[o + 3 * n + i]
                 else:
-                    tau_r += col * f
+                    f = thrust_of(thr, i, ui[N_INPUT + i])
+                    if f > 0.0:
+                        tau_f += col * f
+                    else:
+                        tau_r += col * f
         for side in range(2):
             tau = tau_f if side == 0 else tau_r
             gi = cm.gain_idx[side, e]
+            g = 1.0
             if gi < 0:
                 xdot[e] += tau
             else:
-                xdot[e] += c[gi] * tau
+                g = c[gi]
+                xdot[e] += g * tau
                 j = cm.theta_pos[gi]
                 if want_jac and j >= 0:
                     Bt[e, j] += tau
+            if jl >= 0:
+                Bt[e, jl] += g * (s_f if side == 0 else s_r)
 
 
 @kernel
@@ -810,7 +833,7 @@ class Model:
         return CompiledModel(c0, theta_idx, v.par, self.mono_addr, theta_terms, v.am_i, v.am_s,
                              self.Minv, self.recompute_minv, v.M_RB, theta_pos,
                              self.current_mode, self.n_coef, self.held, v.thr, v.gain_idx,
-                             v.ca_i, v.ca_s)
+                             v.lag_idx, v.lagged, v.ca_i, v.ca_s)
 
     def _c_ext(self, theta: ArrayLike | None) -> np.ndarray:
         """[coefficients (n_coef), current (3)] with theta (p,) in place (None: the model's)."""
@@ -823,6 +846,12 @@ class Model:
     def n_inputs(self) -> int:
         """Length of the input vector: N_INPUT, then one command per thruster."""
         return self.vehicle.n_inputs
+
+    @property
+    def n_inputs_lagged(self) -> int:
+        """Length of the extended input vector of a lagged vehicle (u_in, then the delivered
+        thrusts and their derivatives, core/model/thruster_lag.py)."""
+        return self.vehicle.n_inputs + 4 * len(self.vehicle.thrusters)
 
     def compiled_fixed(self, theta: ArrayLike) -> CompiledModel:
         """CompiledModel of a filter over the 12 vehicle states only, with this model's
@@ -861,7 +890,9 @@ class Model:
                   want_jac: bool) -> tuple[int, np.ndarray, np.ndarray, Any, Any, Any]:
         x = np.ascontiguousarray(x, dtype=float)
         ui = np.ascontiguousarray(ui, dtype=float)
-        if ui.shape != (self.n_inputs,):     # the kernel reads them unchecked
+        if ui.shape != (self.n_inputs,) and not (
+                self.vehicle.lagged and ui.shape == (self.n_inputs_lagged,)):
+            # the kernel reads them unchecked
             raise DimensionError(f'inputs must have {self.n_inputs} entries (state.Input, then '
                                  f'one per thruster), got {ui.shape}')
         c = self._c_ext(theta)

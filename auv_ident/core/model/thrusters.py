@@ -52,9 +52,24 @@ thrust is in its `unit` (kgf: x 9.80665, as Blue Robotics publishes it; lbf x
 The thrust is finally saturated to [-thrust_max_reverse, thrust_max_forward] (N) when the file
 gives them.
 
-First-order lag (`time_constant`, s, optional): the thrust the ESC and motor deliver follows
-the curve's value f_ss with tau_m f_dot = f_ss - f (Fossen 2021, sec. 9.3); a zero or absent
-time constant is an instantaneous thruster.
+First-order lag (`time_constant`, s, optional, per thruster; or one coefficient of the file
+with the multiplier `thruster_lag` shared by every thruster, which can be identified): the
+thrust the ESC and motor deliver follows the curve's value f_ss with tau_m f_dot = f_ss - f
+(Fossen 2021, sec. 9.3); a zero or absent time constant is an instantaneous thruster. The
+model lags the curve's forward part max(f_ss, 0) and its reverse part min(f_ss, 0) apart (the
+thrust gains scale the two sides, and a lag is linear, so lag(g_fwd f_fwd + g_rev f_rev) =
+g_fwd lag(f_fwd) + g_rev lag(f_rev)); how the filter carries the lagged thrust:
+core/model/thruster_lag.py.
+
+Propeller torque (`torque_ratio`, N m per N, optional, 0 by default): a spinning propeller
+turns the vehicle the other way about its shaft with a torque about proportional to its thrust
+(both go as n|n|, Fossen 2021, sec. 9.3: Q / T = K_Q D / K_T at one advance ratio), so the
+thruster's moment about its own axis is k_q f d: its column of T becomes [d; r x d + k_q d].
+The sign is the propeller's handedness: the reaction turns the vehicle against the propeller's
+rotation, so a propeller turning clockwise seen from behind (looking along d) while it pushes
+along d gives k_q < 0, and reversing the command reverses thrust and torque together. The ratio
+is K_Q D / K_T from the propeller's open-water coefficients at bollard pull, or a measured torque
+over thrust; the file gives it or the torque is left out (0).
 
 Units: SI, command units as named; frames body FRD.
 """
@@ -141,14 +156,17 @@ class Thruster:
     thrust_max_forward: float = math.inf    # N
     thrust_max_reverse: float = math.inf    # N (positive number; f >= -this)
     time_constant: float = 0.0              # s, first-order lag; 0 instantaneous
+    torque_ratio: float = 0.0               # m (N m of torque about d per N of thrust)
     # (3, K) the table's command, thrust (N) and slope (N per unit) at each point, or None:
     # the polynomial above (module docstring)
     table: np.ndarray | None = None
 
     @property
     def column(self) -> np.ndarray:
-        """(6,) this thruster's column of the configuration matrix [d; r x d] (N, N m per N)."""
-        return np.concatenate([self.direction, np.cross(self.position, self.direction)])
+        """(6,) this thruster's column of the configuration matrix [d; r x d + k_q d] (N, N m
+        per N; k_q the torque_ratio, module docstring)."""
+        return np.concatenate([self.direction, np.cross(self.position, self.direction)
+                               + self.torque_ratio * self.direction])
 
     def thrust(self, command: float) -> float:
         """Steady thrust (N, along d) for a command in this thruster's unit."""
@@ -168,15 +186,17 @@ class Thruster:
 
 
 # Columns of the thruster table the compiled model reads (one row per thruster, the file's
-# order; hydrodynamics._thrusters): its configuration column [d; r x d], whether it follows a
-# thrust curve (1) or takes the force itself (0), and the curve's constants; a table's K
+# order; hydrodynamics._thrusters): its configuration column [d; r x d + k_q d], whether it
+# follows a thrust curve (1) or takes the force itself (0), the curve's constants and its own
+# time constant (s; the lag coefficient replaces it when the file has one); a table's K
 # points (T_NTAB = K, 0 for the polynomial) follow from column THR_COLS on: K commands, K
 # thrusts (N), K slopes (the row is as long as the longest table; shorter ones end in zeros)
 T_COL = 0               # 0..5
 T_CURVE, T_NEUTRAL, T_CMAX, T_DEAD = 6, 7, 8, 9
 T_FWD1, T_FWD2, T_REV1, T_REV2, T_FMAX_FWD, T_FMAX_REV = 10, 11, 12, 13, 14, 15
 T_NTAB = 16
-THR_COLS = 17
+T_TAU = 17
+THR_COLS = 18
 
 
 def thruster_table(thrusters: Sequence[Thruster]) -> np.ndarray:
@@ -198,6 +218,7 @@ def thruster_table(thrusters: Sequence[Thruster]) -> np.ndarray:
         out[i, T_REV1], out[i, T_REV2] = t.reverse
         out[i, T_FMAX_FWD] = t.thrust_max_forward
         out[i, T_FMAX_REV] = t.thrust_max_reverse
+        out[i, T_TAU] = t.time_constant
     return out
 
 
@@ -309,7 +330,8 @@ def _thruster(entry: object, where: str) -> Thruster:  # noqa: C901 (one check p
         command_max=cmax, dead_band=dead, forward=fwd, reverse=rev,
         thrust_max_forward=_number(entry, 'thrust_max_forward', w, math.inf, nonnegative=True),
         thrust_max_reverse=_number(entry, 'thrust_max_reverse', w, math.inf, nonnegative=True),
-        time_constant=_number(entry, 'time_constant', w, 0.0, nonnegative=True), table=table)
+        time_constant=_number(entry, 'time_constant', w, 0.0, nonnegative=True),
+        torque_ratio=_number(entry, 'torque_ratio', w, 0.0), table=table)
 
 
 def _numbers(raw: object) -> np.ndarray | None:

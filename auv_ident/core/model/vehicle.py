@@ -92,6 +92,9 @@ class Coefficient:
     # core/model/thrusters.py); empty for every other coefficient
     gain_rows: tuple = ()
     gain_sides: tuple = ()      # the curve sides it scales: 0 forward, 1 reverse
+    # the thrusters' shared first-order time constant (s, multiplier `thruster_lag`,
+    # core/model/thruster_lag.py) rather than a term of an equation
+    is_thrust_lag: bool = False
 
     @property
     def is_added_mass(self) -> bool:
@@ -104,8 +107,8 @@ class Coefficient:
     @property
     def has_monomial(self) -> bool:
         """Whether the coefficient is a term of the monomial table (not added mass, not a
-        thrust gain)."""
-        return not (self.is_added_mass or self.is_thrust_gain)
+        thrust gain, not the thrusters' time constant)."""
+        return not (self.is_added_mass or self.is_thrust_gain or self.is_thrust_lag)
 
 
 @dataclass
@@ -145,6 +148,16 @@ class Vehicle:
     # the file writes its own (`none`, the default)
     ca_i: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
     ca_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # index of the coefficient that is every thruster's time constant (multiplier
+    # `thruster_lag`), or -1: then each thruster's own `time_constant` (0: no lag)
+    lag_idx: int = -1
+
+    @property
+    def lagged(self) -> bool:
+        """Whether the thrusters' thrust lags their commands (a `thruster_lag` coefficient, of
+        any value, or a thruster's time_constant > 0): the filters then carry the lagged
+        thrust (core/model/thruster_lag.py)."""
+        return self.lag_idx >= 0 or any(t.time_constant > 0.0 for t in self.thrusters)
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -215,8 +228,8 @@ class Vehicle:
         """(rho/2) L^k of a coefficient (L^k for a thrust term, _term_scale): its dimensional
         value is scale * prime value."""
         c = self.coefficients[self.index(name)]
-        if c.is_thrust_gain:
-            return 1.0          # a ratio to the file's thrust curves in either scaling
+        if c.is_thrust_gain or c.is_thrust_lag:
+            return 1.0          # a ratio to the file's thrust curves, a time in s: either scaling
         return _term_scale(self.par[P_RHO], self.par[P_L], c.k, c.factors, 'nondimensional')
 
 
@@ -519,7 +532,8 @@ def _build(raw: object, path: str) -> Vehicle:
                     else 500.0),
         cruise_thrust=(_num(raw, 'cruise_thrust', where) if 'cruise_thrust' in raw else 0.0),
         free_states=free, thrusters=tuple(thrusters), thr=thruster_table(thrusters),
-        gain_idx=_gain_index(coefs, where), ca_i=ca_i, ca_s=ca_s)
+        gain_idx=_gain_index(coefs, where), lag_idx=_lag_index(coefs, thrusters, where),
+        ca_i=ca_i, ca_s=ca_s)
     if v.gain_idx.max() >= 0 and not thrusters:
         raise ConfigError(f'{where}: a thrust gain (multiplier `thrusters`) without a '
                           '`thrusters:` list scales nothing')
@@ -616,7 +630,43 @@ def _gain_index(coefs: list[Coefficient], where: str) -> np.ndarray:
     return gain
 
 
+def _lag_index(coefs: list[Coefficient], thrusters: list[Thruster], where: str) -> int:
+    """Index of the `thruster_lag` coefficient (every thruster's time constant), or -1; one
+    ConfigError for a second one, one without thrusters or beside a thruster's own
+    `time_constant`."""
+    lag = [i for i, c in enumerate(coefs) if c.is_thrust_lag]
+    if not lag:
+        return -1
+    names = ', '.join(coefs[i].name for i in lag)
+    if len(lag) > 1:
+        raise ConfigError(f"{where}: coefficients {names} are each the thrusters' time "
+                          'constant (multiplier thruster_lag): keep one')
+    if not thrusters:
+        raise ConfigError(f'{where}: coefficient {names} (multiplier thruster_lag) without a '
+                          '`thrusters:` list delays nothing')
+    own = [t.name for t in thrusters if t.time_constant > 0.0]
+    if own:
+        raise ConfigError(f"{where}: coefficient {names} is every thruster's time constant, "
+                          f'and thrusters {", ".join(own)} give their own time_constant: state '
+                          'the lag one way')
+    return lag[0]
+
+
+def _thrust_lag(name: str, value: float, eq: object, k: object, cw: str) -> Coefficient:
+    """The thrusters' shared time constant `NAME: [tau, XYZKMN, 0, thruster_lag]` (s, >= 0):
+    the delivered thrust of every thruster follows its curve's value through tau f_dot =
+    f_ss - f (core/model/thruster_lag.py); 0 is no lag."""
+    if str(eq) != 'XYZKMN' or k != 0:
+        raise ConfigError(f"{cw}: the thrusters' time constant delays their whole wrench: "
+                          f'give [tau_s, XYZKMN, 0, thruster_lag], got equation {eq!r}, k {k!r}')
+    if value < 0.0:
+        raise ConfigError(f'{cw}: time constant {value!r} s must be >= 0 (0: no lag)')
+    return Coefficient(name, value, 0, 0, (), 1.0, is_thrust_lag=True)
+
+
 GAIN_SIDES = ('forward', 'reverse')
+# the multiplier of the thrusters' shared time constant (s)
+LAG_MULTIPLIER = 'thruster_lag'
 # a thrust gain's multiplier -> the curve sides it scales
 GAIN_MULTIPLIERS = {'thrusters': (0, 1), 'thrusters_forward': (0,), 'thrusters_reverse': (1,)}
 
@@ -647,6 +697,8 @@ def _coefficient(name: str, entry: object, cw: str, rho: float, L: float, scalin
         raise ConfigError(f'{cw}: value {value!r} is not finite')
     if str(mult).strip() in GAIN_MULTIPLIERS:
         return _thrust_gain(name, value, eq, GAIN_MULTIPLIERS[str(mult).strip()], cw)
+    if str(mult).strip() == LAG_MULTIPLIER:
+        return _thrust_lag(name, value, eq, k, cw)
     if eq not in EQUATIONS:
         raise ConfigError(f'{cw}: equation {eq!r} not one of {" ".join(EQUATIONS)}')
     if not isinstance(k, int) or not 0 <= k <= 6:
@@ -671,7 +723,7 @@ def _term_tables(
         if c.is_added_mass:
             am_i.append((c.equation, c.added_mass_col, ci))
             am_s.append(c.scale)
-        elif c.is_thrust_gain:
+        elif c.is_thrust_gain or c.is_thrust_lag:
             continue            # applied by the thruster kernel (hydrodynamics._thrusters)
         else:
             f = list(c.factors) + [-1] * (MAX_FACTORS - len(c.factors))

@@ -94,7 +94,9 @@ def free_run(f: Callable[[np.ndarray, np.ndarray], np.ndarray], t: ArrayLike, U:
 
     Parameters
     ----------
-    f : callable (x (12,), u) -> x_dot (12,), e.g. ``lambda x, u: model.f(x, u, theta)``
+    f : callable (x (12,), u) -> x_dot (12,), e.g. ``lambda x, u: model.f(x, u, theta)``;
+        one with a ``step(x, u, h)`` and ``reset()`` (thruster_lag.derivative of a vehicle
+        whose thrusters lag) is stepped by it, its thrust settled at U[0]
     t : (N,) s, strictly increasing (need not be uniform)
     U : (N, m) inputs, U[k] held over [t_k, t_k+1)
     x0 : (12,) state at t[0]
@@ -115,13 +117,16 @@ def free_run(f: Callable[[np.ndarray, np.ndarray], np.ndarray], t: ArrayLike, U:
     X = np.full((len(t), N_STATE), np.nan)
     x = np.array(x0, dtype=float)
     X[0] = x
+    step = getattr(f, 'step', None)
+    if step is not None:
+        f.reset()                    # type: ignore[attr-defined]
     for k in range(len(t) - 1):
         dt = t[k + 1] - t[k]
         n = max(1, int(np.ceil(dt / max_step - 1e-9)))
         h = dt / n
         try:
             for _ in range(n):
-                x = rk4_step(f, x, U[k], h)
+                x = rk4_step(f, x, U[k], h) if step is None else step(x, U[k], h)
         except DomainError:
             break
         if not np.all(np.isfinite(x)):

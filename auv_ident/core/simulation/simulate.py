@@ -29,6 +29,7 @@ from auv_ident.core.model.state import (
     STATE_NAMES,
     VELOCITY_REFERENCES,
 )
+from auv_ident.core.model.thruster_lag import LaggedDerivative
 from auv_ident.core.model.trim import initial_state
 from auv_ident.core.model.vehicle import P_FIN
 from auv_ident.core.simulation import maneuvers
@@ -128,10 +129,13 @@ def simulate(model: Model, maneuver: str = 'zigzag', duration: float = 200.0, T:
         x[0] = x0
     h = T / substeps
     f = model.f
+    # a vehicle whose thrusters lag: its RK4 steps carry the delivered thrust (from rest:
+    # settled at the first command)
+    lagged = LaggedDerivative(model) if model.vehicle.lagged else None
     for k in range(n - 1):
         xk = x[k]
         for _ in range(substeps):
-            xk = rk4_step(f, xk, u[k], h)
+            xk = rk4_step(f, xk, u[k], h) if lagged is None else lagged.step(xk, u[k], h)
         if process_std is not None:
             # white acceleration over one sample: velocity increment ~ N(0, (sigma^2) T)
             xk = xk.copy()
