@@ -9,7 +9,9 @@ c = every coefficient of the vehicle file in the file's units (prime values if n
 
 F = sum of monomial terms (hydrodynamic/control coefficients and rigid-body Coriolis, see
 vehicle.py; compiled per vehicle from its term table by monomials.py) + restoring g(eta) +
-propulsion + cross-flow drag. A vehicle with fewer degrees of freedom holds the others
+propulsion + cross-flow drag (+ the added mass's Coriolis forces -C_A(nu) nu computed from the
+added-mass coefficients, for a file with `added_mass_coriolis: fossen`: _added_mass_coriolis).
+A vehicle with fewer degrees of freedom holds the others
 (core/model/planar.py). The Jacobians are analytic: each monomial is differentiated
 factor by factor, and propulsion, cross-flow, restoring and kinematics have hand-derived
 derivatives (all checked against finite differences in the tests).
