@@ -191,6 +191,33 @@ def match_process_noise(model, cfg, runs, T, first, max_step=None, max_bridge=0.
     return ProcessMatch(q, last, passes, levels)
 
 
+def noise_only_levels(model, cfg, runs, T, levels, max_step=None, max_bridge=0.25):
+    """(12,) innovation levels of an EKF pass whose measurement noise is cfg's times each
+    measured channel's level (levels: cfg's pass's, NaN: kept) and whose process noise is
+    cfg's: the measurement noise alone as the explanation of the levels (module docstring).
+    None if that pass leaves the model's domain or diverges."""
+    scale = np.where(np.asarray(cfg.measured, dtype=bool) & np.isfinite(levels), levels, 1.0)
+    cfg_noise = replace(cfg, noise_std=np.asarray(cfg.noise_std, dtype=float) * scale)
+    try:
+        trial = _pass(model, cfg_noise, runs, T, max_step, max_bridge, 0)
+    except (DomainError, DivergenceError):
+        return None
+    return _levels(_pooled(trial), np.asarray(cfg.measured, dtype=bool))
+
+
+def _noise_explains_note(levels0, noise_only, measured):
+    """The note of a run whose innovation levels crossed PROCESS_NOISE_LEVEL but were
+    explained by the measurement noise alone (fit_noise)."""
+    big = [j for j in np.flatnonzero(measured) if np.nan_to_num(levels0[j]) > PROCESS_NOISE_LEVEL]
+    top = max((j for j in np.flatnonzero(measured) if np.isfinite(noise_only[j])),
+              key=lambda j: noise_only[j])
+    return ('innovations ' + ', '.join(f'{STATE_NAMES[j]} {levels0[j]:.3g}x' for j in big)
+            + f' their predicted level (over {PROCESS_NOISE_LEVEL:g}x), but measurement noise '
+            f'at those levels explains them (a pass with it: largest level {STATE_NAMES[top]} '
+            f'{noise_only[top]:.2g}x): the process noise was not matched (coloured '
+            'measurement noise, not model error)')
+
+
 def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_every=0):
     """Noise model of one run or several (runs: list of Record, as
     core.identification.batch.run_ekf takes them) from an EKF pass over them in turn with the
@@ -222,11 +249,13 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
         raise failures[-1][1]
     levels0 = _levels(_pooled(first), measured)
     q_conf = np.asarray(cfg.q_state, dtype=float)
-    q, last, passes = q_conf.copy(), first, 0
+    q, last, passes, noise_only = q_conf.copy(), first, 0, None
     if np.any(np.nan_to_num(levels0) > PROCESS_NOISE_LEVEL):
-        matched = match_process_noise(model, cfg_base, runs, T, first, max_step, max_bridge,
-                                      hist_every)
-        q, last, passes = matched.q_state, matched.last, matched.passes
+        noise_only = noise_only_levels(model, cfg_base, runs, T, levels0, max_step, max_bridge)
+        if noise_only is None or np.any(np.nan_to_num(noise_only) > PROCESS_NOISE_LEVEL):
+            matched = match_process_noise(model, cfg_base, runs, T, first, max_step,
+                                          max_bridge, hist_every)
+            q, last, passes = matched.q_state, matched.last, matched.passes
     nm = _informative(noise_model(_pooled(last), T, STATE_NAMES))
     eff = effective_std(base, nm, measured)
     ratio = (eff / conf) ** 2
@@ -234,7 +263,8 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
                 or np.any((ratio > NOISE_MODEL_CHANGE) | (ratio < 1.0 / NOISE_MODEL_CHANGE)))
     fit = NoiseFit(model=nm, configured_std=conf, effective_std=eff if used else conf.copy(),
                    used=used, configured_pass=first, configured_q=q_conf,
-                   effective_q=q, process_used=passes > 0, process_levels=levels0)
+                   effective_q=q, process_used=passes > 0, process_levels=levels0,
+                   noise_only_levels=noise_only)
     if failures:
         fit.notes.append(
             f'the EKF with the configured noise failed ({failures[0][1]}): the noise is far '
@@ -249,6 +279,8 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
             f'innovations in {passes} EKF passes (' + ', '.join(
                 f'{STATE_NAMES[j]} {q[j]:.2g}' for j in big if q[j] != q_conf[j])
             + ", the states' units per step)")
+    if noise_only is not None and not passes:
+        fit.notes.append(_noise_explains_note(levels0, noise_only, measured))
     if used and nm:
         worst = max(nm, key=lambda n: abs(math.log(ratio[STATE_NAMES.index(n)])))
         d = nm[worst]
