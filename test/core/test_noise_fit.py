@@ -56,22 +56,26 @@ def test_a_divergence_advises_what_is_not_set_already(mode, advice, not_advised)
     assert advice in str(info.value) and not_advised not in str(info.value)
 
 
+def _coloured_run(duration, level):
+    """NPS AUV II's default set (Model), its 'ident' run (seed 2) with AR(1) noise of 1 s at
+    level x the documented 1-sigma ([Record]) and the sample time (s)."""
+    v = load_vehicle('nps_auv2')
+    run = simulate(Model(v), 'ident', duration=duration, seed=2, noise_std=np.zeros(12))
+    y = run.y + ar1_noise(np.random.default_rng([2, 1]), len(run.t),
+                          level * DEFAULT_NOISE_STD, 1.0, run.T)
+    return Model(v, list(v.identify_default)), [Record(run.t, y, run.u)], run.T
+
+
 def test_the_noise_model_is_read_off_the_reference_start_not_the_runs():
     # a run's own start (--initial, a warm start, the automatic choice's pruned set at its first
     # estimates) moves its EKF pass and refinement, not the noise model: that is read off a pass
     # from cfg's guesses (with too small a configured noise the filter chases the noise and its
     # innovation levels, which decide the process-noise matching, depend on the start)
-    v = load_vehicle('nps_auv2')
-    names = list(v.identify_default)
-    m = Model(v, names)
-    run = simulate(Model(v), 'ident', duration=120.0, seed=2, noise_std=np.zeros(12))
-    y = run.y + ar1_noise(np.random.default_rng([2, 1]), len(run.t), 3 * DEFAULT_NOISE_STD,
-                          1.0, run.T)
-    cfg = make_config(names)
-    rec = [Record(run.t, y, run.u)]
-    ref = identify_with_noise_model(m, cfg, rec, T=run.T)
+    m, rec, T = _coloured_run(120.0, 3.0)
+    cfg = make_config(m.theta_names[:m.p_coef])
+    ref = identify_with_noise_model(m, cfg, rec, T=T)
     start = Start(0.9 * m.theta_file[:m.p_coef])
-    moved = identify_with_noise_model(m, cfg, rec, T=run.T, start=start)
+    moved = identify_with_noise_model(m, cfg, rec, T=T, start=start)
     assert ref.noise.used
     assert moved.noise.process_used == ref.noise.process_used
     np.testing.assert_array_equal(moved.noise.effective_std, ref.noise.effective_std)
@@ -88,15 +92,11 @@ def test_coloured_measurement_noise_over_the_threshold_is_not_taken_for_model_er
     # levels explains them (a pass with it: levels 0.9-1.1), so the process noise is not
     # matched: matched, the filter followed the coloured noise (a BlueROV2 bag: X_u 45 % off
     # at 4.5 sigma under 'consistent')
-    v = load_vehicle('nps_auv2')
-    names = list(v.identify_default)
-    m = Model(v, names)
-    run = simulate(Model(v), 'ident', duration=60.0, seed=2, noise_std=np.zeros(12))
-    y = run.y + ar1_noise(np.random.default_rng([2, 1]), len(run.t), 10 * DEFAULT_NOISE_STD,
-                          1.0, run.T)
-    est = identify_with_noise_model(m, make_config(names), [Record(run.t, y, run.u)], T=run.T)
+    m, rec, T = _coloured_run(60.0, 10.0)
+    cfg = make_config(m.theta_names[:m.p_coef])
+    est = identify_with_noise_model(m, cfg, rec, T=T)
     fit = est.noise
-    measured = np.asarray(make_config(names).measured, dtype=bool)
+    measured = np.asarray(cfg.measured, dtype=bool)
     assert np.nanmax(fit.process_levels[measured]) > PROCESS_NOISE_LEVEL
     assert np.nanmax(fit.noise_only_levels[measured]) < 1.5
     assert fit.used and not fit.process_used
