@@ -86,3 +86,23 @@ def test_coloured_noise_over_the_threshold_is_not_matched_by_process_noise(tmp_p
     assert np.nanmax(fit.process_levels[measured]) > PROCESS_NOISE_LEVEL
     assert not fit.process_used
     assert np.nanmax(fit.noise_only_levels[measured]) < 1.0
+
+
+@pytest.mark.slow       # a 600 s bag and the automatic choice over it: ~2-3 min on 2 cores
+def test_a_consistent_auto_result_without_the_noise_parameter_covers_the_truth(tmp_path):
+    # seed 2 with the messages' covariances (10x too small): the sandwich was chosen for
+    # X_udot (1.21x its AR(1) 1-sigma) and replaced every bar, the others 0.62-0.97x theirs:
+    # Z_w 3.37, Y_vdot 3.23 sigma off under 'consistent'. It no longer narrows a bar
+    # (noise_fit.never_narrower): every term within 2.4 sigma.
+    out = tmp_path / 'rov'
+    assert generate(['--out', str(out), '--seed', '2', '--duration', '600', '--curve',
+                     'file']) == 0
+    truth = json.loads((out / 'truth.json').read_text())['coefficients']
+    model = tmp_path / 'm.json'
+    cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(out / 'bag'),
+              '--input-map', 'bluerov2_heavy', '--coefficients', 'auto', '--json',
+              str(model)])
+    doc = json.loads(model.read_text())
+    assert doc['diagnosis']['consistent']
+    for name, c in doc['coefficients'].items():
+        assert abs(c['estimate'] - truth[name]) < 3.0 * c['std'], (name, c)
