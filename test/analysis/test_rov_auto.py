@@ -21,17 +21,23 @@ TANK = ['thrust_gain_fwd', 'thrust_gain_rev', 'X_udot', 'Y_vdot', 'Z_wdot', 'N_r
         'Z_w', 'X_uu', 'Y_vv', 'Z_ww', 'N_rr']
 
 
-@pytest.mark.slow       # a 600 s bag and 17 sensitivities over it: ~4-5 min on 2 cores
-def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
+def _auto(tmp_path, seed, *options):
+    """The independent generator's 600 s bag of seed (--curve file) through `identify
+    --coefficients auto` with options: (its JSON, the truth's coefficients)."""
     out = tmp_path / 'rov'
-    assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve',
+    assert generate(['--out', str(out), '--seed', str(seed), '--duration', '600', '--curve',
                      'file']) == 0
-    truth = json.loads((out / 'truth.json').read_text())['coefficients']
     model = tmp_path / 'm.json'
     cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(out / 'bag'),
-              '--input-map', 'bluerov2_heavy', '--noise-source', 'parameter',
-              '--coefficients', 'auto', '--json', str(model)])
-    doc = json.loads(model.read_text())
+              '--input-map', 'bluerov2_heavy', *options, '--coefficients', 'auto', '--json',
+              str(model)])
+    return (json.loads(model.read_text()),
+            json.loads((out / 'truth.json').read_text())['coefficients'])
+
+
+@pytest.mark.slow       # a 600 s bag and 17 sensitivities over it: ~4-5 min on 2 cores
+def test_auto_chooses_the_tank_terms_of_the_bluerov2(tmp_path):
+    doc, truth = _auto(tmp_path, 3, '--noise-source', 'parameter')
     chosen, left = doc['selection']['chosen'], doc['selection']['left_out']
     # a tank term is chosen, or dropped after the first identification for its relative
     # 1-sigma (X_udot: 5.5 % on this bag; kept at the file's value, its error in the consider
@@ -94,15 +100,7 @@ def test_a_consistent_auto_result_without_the_noise_parameter_covers_the_truth(t
     # X_udot (1.21x its AR(1) 1-sigma) and replaced every bar, the others 0.62-0.97x theirs:
     # Z_w 3.37, Y_vdot 3.23 sigma off under 'consistent'. It no longer narrows a bar
     # (noise_fit.never_narrower): every term within 2.4 sigma.
-    out = tmp_path / 'rov'
-    assert generate(['--out', str(out), '--seed', '2', '--duration', '600', '--curve',
-                     'file']) == 0
-    truth = json.loads((out / 'truth.json').read_text())['coefficients']
-    model = tmp_path / 'm.json'
-    cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(out / 'bag'),
-              '--input-map', 'bluerov2_heavy', '--coefficients', 'auto', '--json',
-              str(model)])
-    doc = json.loads(model.read_text())
+    doc, truth = _auto(tmp_path, 2)
     assert doc['diagnosis']['consistent']
     for name, c in doc['coefficients'].items():
         assert abs(c['estimate'] - truth[name]) < 3.0 * c['std'], (name, c)
