@@ -131,7 +131,9 @@ class NoiseFit:
         states' units) and the one used (the matched one when process_used)
     process_used : True if the process noise was matched to the innovations
         (core/identification/noise_fit.py); process_levels : (12,) the innovation levels of the
-        configured pass
+        configured pass; noise_only_levels : (12,) those of the pass with the measurement noise
+        at these levels and the configured process noise, made when a level crossed the
+        process-noise threshold (None: not made, or it failed)
     bounds : the runs' first rows in the stacked refined residuals ([0, N_1, ..., sum N])
     refine_cost : the refinement's cost per residual (its mean whitened square; 1 when the
         noise model holds)
@@ -156,6 +158,7 @@ class NoiseFit:
     effective_q: Optional[np.ndarray] = None
     process_used: bool = False
     process_levels: Optional[np.ndarray] = None
+    noise_only_levels: Optional[np.ndarray] = None
     bounds: Optional[list] = None
     refine_cost: float = math.nan
 
@@ -178,6 +181,8 @@ class NoiseFit:
             'configured_q_state': _floats(self.configured_q),
             'effective_q_state': _floats(self.effective_q),
             'process_noise_used': bool(self.process_used),
+            'process_levels': _levels_doc(self.process_levels),
+            'noise_only_levels': _levels_doc(self.noise_only_levels),
             'runs': 1 if self.bounds is None else len(self.bounds) - 1,
             'configured_mean_nis_per_dof': (None if self.configured_pass is None else
                                             _finite(self.configured_pass.mean_nis_per_dof)),
@@ -228,6 +233,11 @@ def _finite(x: float | None) -> float | None:
 
 def _floats(a: ArrayLike | None) -> list[float] | None:
     return None if a is None else [float(v) for v in np.asarray(a, dtype=float)]
+
+
+def _levels_doc(a: ArrayLike | None) -> list[float | None] | None:
+    """(12,) innovation levels for JSON: None for a channel without one (NaN)."""
+    return None if a is None else [_finite(float(v)) for v in np.asarray(a, dtype=float)]
 
 
 @dataclass
