@@ -110,7 +110,14 @@ class RecordNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        self._read_parameters()
+        try:
+            self._read_parameters()
+        except BaseException:
+            # run_node never gets this node to destroy: release its DDS entities before
+            # rclpy shuts down (a record with a bad input map once printed its error and
+            # did not exit within 30 s in CI)
+            self.destroy_node()
+            raise
         self.writer = None
         self.counts = {}
         self.received = 0
