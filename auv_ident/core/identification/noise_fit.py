@@ -290,7 +290,9 @@ def fit_noise(model, cfg, runs, T=None, max_step=None, max_bridge=0.25, hist_eve
     the noise scaled by RETRY_NOISE_FACTORS in turn, the noise model is read off the first
     pass that completes with the right signs (its levels relative to that scaled noise), and a
     note says so; if none does, the first that completed is used, and only if every pass
-    diverges is the last error raised. Innovations more than
+    diverges is the last error raised. A configured pass with wrong signs stands when the pass
+    with more noise finds the noise at the configured level (_noise_as_configured): it did
+    not chase noise, its signs are the data's. Innovations more than
     PROCESS_NOISE_LEVEL times their predicted level: the process noise is matched first
     (module docstring) and the measurement noise model read off the matched pass."""
     T = nominal_sample_time(runs[0].t) if T is None else T
