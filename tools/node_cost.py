@@ -148,7 +148,8 @@ def raw_cost(a):
         Parameter('coefficients', value=['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']),
         Parameter('publish_rate_hz', value=a.publish_rate)])
     raw = node.raw
-    imu_callback = {s.topic_name: s.callback for s in raw.subscriptions if s.raw}
+    imu_callback = {s.topic_name: raw.intake.callbacks[s.topic_name]
+                    for s in raw.subscriptions if s.raw}
     feed = []
     for (topic, ns, m), (_, _, payload) in zip(read_bag(bag, imap.topic_types),
                                                read_bag(bag, imap.topic_types, raw=True)):

@@ -15,17 +15,19 @@ is the odometry path.
 Subscriptions (RELIABLE, KEEP_LAST depth 1000, VOLATILE: no loss at 200 Hz while the callback
 is busy, see shared/ros_stack.md section 2; a BEST_EFFORT publisher cannot feed these): the
 topics of the input map (parameter ``input_map``, session/input_map.py, docs/your_data.md), each
-with the map's message type. The default map, odom_actuators:
+with the map's message type, taken as ``intake_period_s`` says (ros/intake.py: every 20 ms by
+default, a batch at a time in the order they were published; 0: each as it arrives). The
+default map, odom_actuators:
     ``actuators`` sensor_msgs/JointState: commands (conversions.py layout). The command inputs
         are created before the odometry, so when both are waiting the executor takes the
         command first. Commands of other forms (JointState with other joint names,
         Float64MultiArray by index, one Float64 per actuator, in other units) hold each
         actuator's last value (session/inputs.py); a message without a header is stamped
-        with its receive time: the system time, or with ``use_sim_time`` the last ``/clock``
-        taken before it (a played bag: the player's ``publish_clock`` gives each message's
-        log time, so the node stamps it as replay_bag does).
+        with its receive time: when DDS received it, or with ``use_sim_time`` the last
+        ``/clock`` taken before it (a played bag: the player's ``publish_clock`` gives each
+        message's log time, so the node stamps it as replay_bag does).
     ``/clock`` rosgraph_msgs/Clock, with ``use_sim_time`` only: the node's own subscription
-        (RELIABLE, depth 1000), taken in arrival order with the inputs (EventsExecutor).
+        (RELIABLE, depth 1000), taken in arrival order with the inputs (ros/intake.py).
     ``odom`` nav_msgs/Odometry: measured state, in the convention of ``frame``; the message
         covariances are the measurement noise (``noise_source`` 'message', the default) or
         ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
@@ -166,10 +168,8 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
-from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
@@ -180,6 +180,7 @@ from auv_ident.ros.cdr import (
     PayloadTemplate,
     UndecodableMessage,
 )
+from auv_ident.ros.intake import Intake, IntakeNode
 from auv_ident.ros.raw_live import RawLive
 from auv_ident.ros.toolkit import (
     declare_parameters,
@@ -235,7 +236,7 @@ _LIST_TYPES = {'strings': Parameter.Type.STRING_ARRAY, 'floats': Parameter.Type.
 _PARAMETERS = tuple(_parameter(f) for f in settings_fields()) + (Param(*SAVE_PATH),)
 
 
-class IdentifierNode(Node):
+class IdentifierNode(IntakeNode):
     """Identify coefficients online from ``odom`` and ``actuators`` (module docstring)."""
 
     def __init__(self, **kwargs):
@@ -300,15 +301,21 @@ class IdentifierNode(Node):
 
     def _subscribe_inputs(self):
         """One subscription per input of the input map (session/input_map.py), with its
-        type: the commands first, so that when a command and an odometry message are both
-        waiting the executor takes the command first; the odometry read raw, from its CDR
-        bytes into one reused view (ros/cdr.py)."""
+        type, taken as ``intake_period_s`` says (ros/intake.py): the commands first, so that
+        when a command and an odometry message arrive together the command is taken first;
+        the odometry read raw, from its CDR bytes into one reused view (ros/cdr.py)."""
         imap = self.session.input_map
+        # With use_sim_time, a command without a header is stamped with the /clock value
+        # taken last before it (ros/intake.py): a played bag's commands get their log times
+        self.intake = Intake(self, self.session.settings.intake_period_s,
+                             sim_clock=self.get_parameter('use_sim_time').value and any(
+                                 not e.stamped for e in imap.commands))
         self.sub_commands = []
         for entry in imap.commands:
             cls = message_class(entry.type, entry.topic)
-            self.sub_commands.append(self.create_subscription(
-                cls, entry.topic, lambda msg, name=entry.name: self.on_input(name, msg),
+            self.sub_commands.append(self.intake.subscribe(
+                cls, entry.topic,
+                lambda msg, receive_ns, name=entry.name: self.on_input(name, msg, receive_ns),
                 STREAM_QOS))
         self.sub_actuators = self.sub_commands[0]
         self._command_name = imap.commands[0].name
@@ -316,32 +323,10 @@ class IdentifierNode(Node):
         self._odom_view = OdometryView()
         # the middleware's message-lost event is counted too, but Fast DDS does not raise it
         # when the queue overflows (measured): the stamps' gaps are what tell (check_lost)
-        self.sub_odom = self.create_subscription(
-            Odometry, imap.odometry.topic, self.on_odom_payload, STREAM_QOS, raw=True,
+        self.sub_odom = self.intake.subscribe(
+            Odometry, imap.odometry.topic, lambda payload, _: self.on_odom_payload(payload),
+            STREAM_QOS, raw=True,
             event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_message_lost))
-        # With use_sim_time, a command without a header is stamped with the /clock value
-        # taken last before it. rclpy's time source subscribes /clock BEST_EFFORT depth 1:
-        # while the executor is busy it keeps only the newest value, so a command taken
-        # after a backlog got a later message's time (measured on a played BlueROV2 bag:
-        # 73 of 543 commands up to 107 ms late, and estimates 0.1-2 % off the replay's).
-        # This subscription keeps every /clock and the events executor takes them in
-        # arrival order with the inputs: each command gets its own log time.
-        self._sim_clock_ns = None
-        self.sub_clock = None
-        if self.get_parameter('use_sim_time').value and any(
-                not e.stamped for e in imap.commands):
-            self.sub_clock = self.create_subscription(ClockMessage, '/clock',
-                                                      self._on_clock, STREAM_QOS)
-
-    def _on_clock(self, msg):
-        self._sim_clock_ns = msg.clock.sec * NS_PER_S + msg.clock.nanosec
-
-    def _receive_ns(self):
-        """The receive time of a message without a header (int ns): the last /clock taken
-        (use_sim_time; the node's clock until the first), else the system time."""
-        if self._sim_clock_ns is not None:
-            return self._sim_clock_ns
-        return self.get_clock().now().nanoseconds
 
     def _lay_out(self):
         """Names and layout of the published estimate and covariance, from the session's
@@ -436,12 +421,12 @@ class IdentifierNode(Node):
 
     def on_input(self, name, msg, receive_ns=None):
         """A command message of the input map's input `name`; returns the session's Event.
-        receive_ns : the stamp of a message without a header (default: the node's clock now,
-        the receive time: system time, or /clock with use_sim_time)."""
+        receive_ns : the stamp of a message without a header (default: its receive time as
+        ros/intake.py gives it, taken now)."""
         self.taken += 1
         try:
             if receive_ns is None and not self.session.input_map_entry(name).stamped:
-                receive_ns = self._receive_ns()
+                receive_ns = self.intake.receive_ns()
             ev = self.session.on_input(name, msg, receive_ns)
         except Exception as err:                 # noqa: BLE001 - a bug must not stop the node
             return self._internal_error(name, err)
@@ -656,6 +641,7 @@ class IdentifierNode(Node):
         return True, f'wrote {path} ({doc["steps"]} updates)'
 
     def on_save(self, request, response):
+        self.intake.take()      # what arrived before the request is in the file
         response.success, response.message = self.save()
         if response.success:
             self.get_logger().info(response.message)
@@ -664,6 +650,7 @@ class IdentifierNode(Node):
         return response
 
     def on_reset(self, request, response):
+        self.intake.take()      # what arrived before the request goes to the filter it had
         self.session.reset()
         response.success = True
         response.message = 'filter restarted from the start-up configuration'

@@ -51,6 +51,8 @@ import time
 
 import numpy as np
 
+from auv_ident.session.settings import DEFAULT_INTAKE_PERIOD_S
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RSS_PERIOD_S = 0.25
 ESTIMATE_TOPIC = '/identifier/estimate'
@@ -295,13 +297,14 @@ def _read_json(path):
 def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle='nps_auv2',
                  seed=0, max_backlog=600, compute_samples=5000, env=None, log_dir=None,
                  start_timeout=90.0, drain_timeout=60.0, progress=None, split=False,
-                 samples_path=None, publish_rate_hz=0.0):
+                 samples_path=None, publish_rate_hz=0.0, intake_period_s=DEFAULT_INTAKE_PERIOD_S):
     """Run the load test (module docstring); returns a dict of figures (format_loadtest).
 
     ``split``: receive the estimates with their MessageInfo, to split the latency at the DDS
     timestamps (module docstring). ``samples_path``: write the per-message times there (.npz).
     ``publish_rate_hz``: the identifier's setting (0: an estimate per odometry, the latency
-    mode; > 0: the latency is that of the estimates published).
+    mode; > 0: the latency is that of the estimates published). ``intake_period_s``: the
+    identifier's setting (ros/intake.py; 0: each message as it arrives, the lowest latency).
     Raises RuntimeError if the identifier does not start or dies."""
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -336,7 +339,8 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
     proc = subprocess.Popen(
         [sys.executable, '-m', 'auv_ident', 'run', 'identifier', '--ros-args',
          '-p', f'vehicle:={vehicle}', '-p', f'sample_time:={T!r}', '-p', f'save_path:={save}',
-         '-p', f'publish_rate_hz:={float(publish_rate_hz)!r}'],
+         '-p', f'publish_rate_hz:={float(publish_rate_hz)!r}',
+         '-p', f'intake_period_s:={float(intake_period_s)!r}'],
         env=env, cwd=REPO, stdout=out, stderr=err)
 
     # Every message serialized before the clock starts: the timed loop only publishes bytes,
@@ -404,6 +408,7 @@ def run_loadtest(rate_hz=200.0, sim_seconds=300.0, real_time_factor=1.0, vehicle
         result = {
             'vehicle': vehicle, 'rate_hz': float(rate_hz), 'sim_seconds': float(run.t[-1]),
             'publish_rate_hz': float(publish_rate_hz),
+            'intake_period_s': float(intake_period_s),
             'samples': n, 'real_time_factor': float(real_time_factor),
             'achieved_real_time_factor':
                 float(run.t[-1] / max(pace.t_end - pace.t_start, 1e-9)),
@@ -469,6 +474,15 @@ def _tail(path, n=5):
         return '(no log)'
 
 
+def intake_text(period_s):
+    """How the identifier took its inputs (setting intake_period_s), for a report line."""
+    if period_s is None:
+        return 'inputs taken as configured'
+    if period_s == 0:
+        return 'inputs taken as they arrive'
+    return f'inputs taken in batches every {1e3 * period_s:g} ms'
+
+
 def format_loadtest(d):
     """A printable report of run_loadtest's dict."""
     lat, rss = d['latency_ms'], d['rss_mb']
@@ -476,7 +490,7 @@ def format_loadtest(d):
         f"load test: {d['vehicle']}, {d['samples']} samples = {d['sim_seconds']:.0f} s of "
         f"simulated time at {d['rate_hz']:g} Hz (odometry + actuator command per sample); "
         + (f"estimates published at {d['publish_rate_hz']:g} Hz" if d.get('publish_rate_hz')
-           else 'an estimate per odometry'),
+           else 'an estimate per odometry') + '; ' + intake_text(d.get('intake_period_s')),
         f"pacing: target {d['real_time_factor']:g}x real time, achieved "
         f"{d['achieved_real_time_factor']:.2f}x ({d['wall_publish_s']:.1f} s publishing, "
         f"{d['wall_drain_s']:.1f} s draining; {d['backlog_waits']} backlog waits at "
@@ -540,11 +554,15 @@ def main(argv=None):
                     help="the identifier's publish_rate_hz (default 0: an estimate per "
                          'odometry, the latency mode; > 0: the latency of the estimates '
                          'published)')
+    ap.add_argument('--intake-period', type=float, default=DEFAULT_INTAKE_PERIOD_S,
+                    metavar='S', help="the identifier's intake_period_s (default "
+                                      f'{DEFAULT_INTAKE_PERIOD_S:g}; 0: each message as it '
+                                      'arrives, the lowest latency)')
     args = ap.parse_args(argv)
     d = run_loadtest(rate_hz=args.rate, sim_seconds=args.seconds,
                      real_time_factor=args.rtf, vehicle=args.vehicle, split=args.split,
                      samples_path=args.samples, max_backlog=args.max_backlog,
-                     publish_rate_hz=args.publish_rate)
+                     publish_rate_hz=args.publish_rate, intake_period_s=args.intake_period)
     print(format_loadtest(d))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as fh:

@@ -3,7 +3,9 @@ pose; docs/raw_sensors.md) makes ros/identifier_node.py hand its work to :class:
 which drives a session/raw_session.py :class:`RawSession` message by message.
 
 Subscriptions: one per input of the map, with its type (RELIABLE, KEEP_LAST 1000, as the
-odometry path's), the commands first; an IMU's raw, its bytes read by ros/cdr.py ImuView.
+odometry path's), the commands first, taken as ``intake_period_s`` says (ros/intake.py: in
+batches every 20 ms by default, in the order they were published); an IMU's raw, its bytes read
+by ros/cdr.py ImuView.
 Publications as the odometry path's: ``~/estimate``
 (JointState: names, estimates, 1-sigma) and ``~/covariance`` (Float64MultiArray, p x p) after
 every fused sensor message (with ``publish_rate_hz`` > 0: the first in each 1/rate interval of
@@ -23,6 +25,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from auv_ident.ros.cdr import estimate_templates, ImuView, UndecodableMessage
+from auv_ident.ros.intake import Intake
 from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.input_map import IMU
@@ -58,16 +61,21 @@ class RawLive:
         self.pub_diagnostics = node.create_publisher(DiagnosticArray, '/diagnostics',
                                                      DIAGNOSTICS_QOS)
         imap = self.session.input_map
+        inputs = imap.commands + imap.sensors
+        self.intake = Intake(node, settings.intake_period_s,
+                             sim_clock=node.get_parameter('use_sim_time').value and any(
+                                 not e.stamped for e in inputs))
         self.subscriptions = []
-        for entry in imap.commands + imap.sensors:
+        for entry in inputs:
             cls = message_class(entry.type, entry.topic)
             if entry.type == IMU:
                 # the fast stream read from its CDR bytes (ros/cdr.py ImuView)
                 callback, raw = self._imu_callback(entry.name, cls), True
             else:
-                callback, raw = lambda msg, name=entry.name: self.on_input(name, msg), False
-            self.subscriptions.append(node.create_subscription(cls, entry.topic, callback,
-                                                               STREAM_QOS, raw=raw))
+                callback, raw = (lambda msg, receive_ns, name=entry.name:
+                                 self.on_input(name, msg, receive_ns)), False
+            self.subscriptions.append(self.intake.subscribe(cls, entry.topic, callback,
+                                                            STREAM_QOS, raw=raw))
         self.srv_reset = node.create_service(Trigger, '~/reset', self.on_reset)
         self.srv_save = node.create_service(Trigger, '~/save', self.on_save)
         self.timer = node.create_timer(1.0, self.publish_diagnostics,
@@ -82,14 +90,14 @@ class RawLive:
         rclpy, and bytes neither reads are one rejected conversion."""
         view = ImuView()
 
-        def on_payload(payload):
+        def on_payload(payload, receive_ns=None):
             if view.read(payload):
-                return self.on_input(name, view)
+                return self.on_input(name, view, receive_ns)
             try:
                 msg = deserialize_message(payload, cls)
             except Exception as err:             # noqa: BLE001 - undecodable bytes
                 msg = UndecodableMessage(f'{type(err).__name__}: {err}')
-            return self.on_input(name, msg)
+            return self.on_input(name, msg, receive_ns)
         return on_payload
 
     def on_input(self, name, msg, receive_ns=None):
@@ -97,7 +105,7 @@ class RawLive:
         self.taken += 1
         s = self.session
         if receive_ns is None and not s.input_entry(name).stamped:
-            receive_ns = self.node.get_clock().now().nanoseconds
+            receive_ns = self.intake.receive_ns()
         ev = s.on_input(name, msg, receive_ns)
         if ev.kind == 'update' and self._publish_gate.due(ev.stamp_ns):
             self.publish_estimate(ev)
@@ -147,6 +155,7 @@ class RawLive:
         self.pub_diagnostics.publish(arr)
 
     def on_reset(self, request, response):
+        self.intake.take()      # what arrived before the request goes to the filter it had
         self.session.reset()
         response.success = True
         response.message = 'raw-sensor filter restarted from the start-up configuration'
@@ -165,6 +174,7 @@ class RawLive:
         return True, f'wrote {out} ({doc["steps"]} updates)'
 
     def on_save(self, request, response):
+        self.intake.take()      # what arrived before the request is in the file
         response.success, response.message = self.save()
         return response
 

@@ -1,7 +1,7 @@
 """Load test of the identifier node with raw sensors (the raw mode of the load test):
 
     python -m auv_ident.ros.raw_loadtest [--seconds 60] [--imu-rate 400] [--rate 1.0]
-        [--publish-rate HZ] [--json OUT]
+        [--publish-rate HZ] [--intake-period S] [--json OUT]
 
 A raw example run (offline/raw_example.py: the independent generator's IMU at --imu-rate Hz,
 5 Hz DVL with dropouts, 10 Hz pressure, commands on change) is written as a bag with its input
@@ -29,10 +29,10 @@ from auv_ident.core.identification.raw import identify_raw
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.raw_example import write_raw_example
-from auv_ident.ros.loadtest import _cpu_s, loopback_env
+from auv_ident.ros.loadtest import _cpu_s, intake_text, loopback_env
 from auv_ident.session.input_map import load_input_map
 from auv_ident.session.raw_session import RawSession
-from auv_ident.session.settings import IdentifierSettings
+from auv_ident.session.settings import DEFAULT_INTAKE_PERIOD_S, IdentifierSettings
 from auv_ident.vehicles import load_vehicle
 
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
@@ -58,9 +58,11 @@ def compute_per_message(bag, map_path):
     return (time.perf_counter() - t0) / len(msgs), len(msgs)
 
 
-def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publish_rate_hz=0.0):
-    """The figures (module docstring) as a dict; ``publish_rate_hz``: the identifier's setting
-    (0: an estimate after every fused message)."""
+def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publish_rate_hz=0.0,
+                     intake_period_s=DEFAULT_INTAKE_PERIOD_S):
+    """The figures (module docstring) as a dict; ``publish_rate_hz`` and ``intake_period_s``:
+    the identifier's settings (0: an estimate after every fused message; each message taken as
+    it arrives)."""
     env = loopback_env()
     work = tempfile.mkdtemp(prefix='auv_ident_rawload_') if folder is None else str(folder)
     bag, map_path = write_raw_example(work, duration=seconds, seed=5, imu_rate=imu_rate)
@@ -73,7 +75,8 @@ def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publis
     out = f'{work}/estimate.json'
     ident = subprocess.Popen(_cmd('identifier', f'input_map:={map_path}',
                                   f'coefficients:=[{",".join(NAMES)}]', f'save_path:={out}',
-                                  f'publish_rate_hz:={float(publish_rate_hz)!r}'),
+                                  f'publish_rate_hz:={float(publish_rate_hz)!r}',
+                                  f'intake_period_s:={float(intake_period_s)!r}'),
                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                              text=True)
     try:
@@ -112,6 +115,7 @@ def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publis
     cpu = (cpu1 - cpu0) if cpu0 is not None else float('nan')
     return {'seconds': seconds, 'imu_rate_hz': imu_rate, 'rate': rate, 'played': played,
             'publish_rate_hz': float(publish_rate_hz),
+            'intake_period_s': float(intake_period_s),
             'fused': doc['fused'], 'expected_fused': expected, 'not_fused': doc['not_fused'],
             'every_message_processed': doc['fused'] == expected and not doc['not_fused'],
             'identifier_cpu_s': cpu, 'wall_s': (wall1 - wall0) if wall0 else float('nan'),
@@ -131,7 +135,7 @@ def format_raw_loadtest(d):
         f'raw-sensor load: {d["seconds"]:g} s bag, IMU {d["imu_rate_hz"]:g} Hz + DVL 5 Hz + '
         f'pressure 10 Hz + commands, played at {d["rate"]:g}x: {d["played"]} messages; '
         + (f'estimates published at {d["publish_rate_hz"]:g} Hz' if d.get('publish_rate_hz')
-           else 'an estimate per fused message'),
+           else 'an estimate per fused message') + '; ' + intake_text(d.get('intake_period_s')),
         f'fused {d["fused"]} (offline pass: {d["expected_fused"]}); not fused {d["not_fused"]};'
         f' every message processed: {d["every_message_processed"]}',
         f'identifier CPU {d["identifier_cpu_s"]:.2f} s over {d["wall_s"]:.1f} s wall: '
@@ -146,9 +150,13 @@ def main(argv=None):
     ap.add_argument('--rate', type=float, default=1.0)
     ap.add_argument('--publish-rate', type=float, default=0.0, metavar='HZ',
                     help="the identifier's publish_rate_hz (default 0: after every message)")
+    ap.add_argument('--intake-period', type=float, default=DEFAULT_INTAKE_PERIOD_S, metavar='S',
+                    help="the identifier's intake_period_s (default "
+                         f'{DEFAULT_INTAKE_PERIOD_S:g}; 0: each message as it arrives)')
     ap.add_argument('--json', default=None)
     a = ap.parse_args(argv)
-    d = run_raw_loadtest(a.seconds, a.imu_rate, a.rate, publish_rate_hz=a.publish_rate)
+    d = run_raw_loadtest(a.seconds, a.imu_rate, a.rate, publish_rate_hz=a.publish_rate,
+                         intake_period_s=a.intake_period)
     print(format_raw_loadtest(d))
     if a.json:
         with open(a.json, 'w', encoding='utf-8') as fh:

@@ -794,17 +794,19 @@ def test_a_headerless_command_takes_the_clock_taken_before_it_with_sim_time(ctx,
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(
         vehicle='bluerov2_heavy', input_map='bluerov2_heavy', use_sim_time=True))
     nodes.append(ident)
-    assert ident.sub_clock is not None and ident.sub_clock.topic_name == '/clock'
-    assert ident.sub_clock.qos_profile.depth == 1000
+    clock = ident.intake.sub_clock
+    assert clock is not None and clock.topic_name == '/clock'
+    assert clock.qos_profile.depth == 1000
     pwm = Float64MultiArray(data=[1500.0] * 8)
-    ident._on_clock(Clock(clock=Time(sec=1758031200, nanosec=4353801)))
+    on_clock = ident.intake.callbacks['/clock']
+    on_clock(Clock(clock=Time(sec=1758031200, nanosec=4353801)), 0)
     ev = ident.on_input('thrusters', pwm)
     assert ev.stamp_ns == 1758031200004353801
-    ident._on_clock(Clock(clock=Time(sec=1758031201, nanosec=0)))
+    on_clock(Clock(clock=Time(sec=1758031201, nanosec=0)), 0)
     assert ident.on_input('thrusters', pwm).stamp_ns == 1758031201000000000
     plain = IdentifierNode(context=ctx, parameter_overrides=_params(
         vehicle='bluerov2_heavy', input_map='bluerov2_heavy'))
     nodes.append(plain)
-    assert plain.sub_clock is None
+    assert plain.intake.sub_clock is None
     before = time.time_ns()
     assert before <= plain.on_input('thrusters', pwm).stamp_ns <= time.time_ns()

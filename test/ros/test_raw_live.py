@@ -166,7 +166,7 @@ def test_node_reads_imu_bytes_as_the_messages(ctx, raw_example):
             name = by_topic[topic]
             if name == 'imu':
                 msg = deserialize_message(payload, Imu)
-                got, expected = sub.callback(payload), s.on_input(name, msg)
+                got, expected = node.raw.intake.callbacks['/imu'](payload), s.on_input(name, msg)
                 imu += 1
             else:
                 got, expected = node.raw.on_input(name, msg, log_ns), s.on_input(name, msg,
@@ -177,7 +177,7 @@ def test_node_reads_imu_bytes_as_the_messages(ctx, raw_example):
             if imu == 300:
                 break
         assert node.raw.session.counters.fused['imu'] > 250
-        ev = sub.callback(b'\x00\x01\x00\x00' + b'\xff' * 40)
+        ev = node.raw.intake.callbacks['/imu'](b'\x00\x01\x00\x00' + b'\xff' * 40)
         # no header to read a stamp from: RawSession rejects it as any message without one
         assert ev.kind == 'rejected' and node.raw.session.counters.rejected == 1
     finally:
