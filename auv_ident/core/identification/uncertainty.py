@@ -165,8 +165,9 @@ def noise_model(white: np.ndarray, dt: float,
     m = white.shape[1]
     names = list(names) if names is not None else [f'c{j}' for j in range(m)]
     out = {}
+    channels = np.ascontiguousarray(white.T)   # each channel's samples side by side: faster
     for j in range(m):
-        x = white[:, j]
+        x = channels[j]
         ok = np.isfinite(x)
         n = int(ok.sum())
         if n < LJUNG_BOX_LAGS + 2:
