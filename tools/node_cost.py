@@ -13,7 +13,9 @@ executor's take and the middleware). Figures are us per sample (command + odomet
 mean over the samples after the first 10 % (warm-up), with process CPU time (thread_time).
 
 Parts, each timed alone: rclpy's JointState deserialization; the command callback; the
-odometry callback; of that, the session's on_input (IdentSession) and publish_estimate.
+odometry callback; of that, the session's on_input (IdentSession, commands and odometry) and
+publish_estimate; of the session, IdentSession.on_odom (per odometry message, the noise
+learner's periodic fits included).
 ``--profile`` prints a cProfile of the whole loop (cumulative, top 35).
 
 ``--raw`` measures the raw-sensor path instead (ros/raw_live.py): the example raw bag
@@ -73,9 +75,10 @@ def main(argv=None):
     rclpy.init(context=ctx)
     node = IdentifierNode(context=ctx, parameter_overrides=[
         Parameter('sample_time', value=T), Parameter('publish_rate_hz', value=a.publish_rate)])
-    parts = {'deserialize': 0.0, 'session': 0.0, 'publish': 0.0}
+    parts = {'deserialize': 0.0, 'session': 0.0, 'on_odom': 0.0, 'publish': 0.0}
     clock = time.thread_time
     node.session.on_input = _timed(node.session.on_input, parts, 'session')
+    node.session.on_odom = _timed(node.session.on_odom, parts, 'on_odom')
     node.publish_estimate = _timed(node.publish_estimate, parts, 'publish')
     cmd_t = odom_t = 0.0
     prof = cProfile.Profile() if a.profile else None
@@ -107,6 +110,7 @@ def main(argv=None):
     print(f'  odometry: raw callback           {odom_t * us:7.1f}')
     print(f'  of the callbacks: session        {parts["session"] * us:7.1f}')
     print(f'  of the callbacks: publish        {parts["publish"] * us:7.1f}')
+    print(f'  of the session: on_odom          {parts["on_odom"] * us:7.1f}')
     if prof is not None:
         pstats.Stats(prof).sort_stats('cumulative').print_stats(35)
     node.destroy_node()

@@ -16,7 +16,7 @@ def wrap_angle(a: Any) -> Any:
     does not move them); others are reduced modulo 2 pi. A number gives a float, an array an
     array.
     """
-    if np.ndim(a) == 0:
+    if isinstance(a, float) or np.ndim(a) == 0:    # a float first: np.ndim costs ~1 us
         a = float(a)
         if -math.pi < a <= math.pi:
             return a

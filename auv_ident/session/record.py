@@ -41,7 +41,11 @@ class Rows:
         row = self._a[self._n]
         i = 0
         for part in parts:
-            x = np.ravel(part)
+            if isinstance(part, (float, int)) and i < row.size:   # no array made (~1 us)
+                row[i] = part
+                i += 1
+                continue
+            x = part if isinstance(part, np.ndarray) and part.ndim == 1 else np.ravel(part)
             row[i:i + x.size] = x
             i += x.size
         if i != row.size:

@@ -1,8 +1,11 @@
 """Tests of core/identification/uncertainty.py on problems with a known answer (linear least
 squares)."""
+import math
+
 import numpy as np
 import pytest
 
+from auv_ident.core.identification import uncertainty
 from auv_ident.core.identification.uncertainty import (
     ar1_covariance,
     autocorrelation,
@@ -149,6 +152,48 @@ def test_autocorrelation_with_gaps_is_the_pairs_correlation_and_never_above_1():
         y = np.cumsum(r.normal(size=3000)) * r.uniform(0.1, 10.0, size=3000) ** 2
         y[r.random(3000) < r.uniform(0.1, 0.7)] = np.nan
         assert np.all(np.abs(autocorrelation(y, 30)[1:]) <= 1.0)
+
+
+def _pair_autocorrelation(x, max_lag):
+    """autocorrelation's definition sample by sample: per lag the pairs both present, z = x
+    less the mean of all samples present (NaN where a lag has no pairs)."""
+    ok = np.isfinite(x)
+    z = np.where(ok, x - x[ok].mean(), 0.0)
+    out = np.full(max_lag + 1, np.nan)
+    for lag in range(min(max_lag, len(x) - 1) + 1):
+        both = ok[lag:] & ok[:len(x) - lag]
+        a, b = z[lag:][both], z[:len(x) - lag][both]
+        if both.any():
+            out[lag] = math.fsum(a * b) / math.sqrt(math.fsum(a * a) * math.fsum(b * b))
+    return out
+
+
+@pytest.mark.parametrize('gaps', [0.0, 0.3])
+def test_autocorrelation_of_few_lags_by_slices_is_the_definition_and_the_ffts(gaps,
+                                                                              monkeypatch):
+    """Up to DIRECT_MAX_LAG lags the four pair sums are dot products over shifted slices (the
+    live noise learner's fits, noise_model's 20 lags); beyond, the FFT. Both give the
+    definition, and each other to the FFT's rounding, with gaps and without (with none the
+    squares' sums are the total less the ends a lag leaves out)."""
+    rng = np.random.default_rng(11)
+    e = rng.normal(size=6000)
+    x = np.empty_like(e)
+    x[0] = e[0]
+    for k in range(1, len(e)):
+        x[k] = 0.9 * x[k - 1] + e[k]
+    x = 3.0 + 1e-3 * x          # an offset and a small scale: the mean must come off exactly
+    x[rng.random(len(x)) < gaps] = np.nan
+    lags = uncertainty.DIRECT_MAX_LAG
+    direct = autocorrelation(x, lags)
+    monkeypatch.setattr(uncertainty, 'DIRECT_MAX_LAG', -1)
+    by_fft = autocorrelation(x, lags)
+    exact = _pair_autocorrelation(x, lags)
+    np.testing.assert_allclose(direct, exact, rtol=0.0, atol=1e-14)
+    np.testing.assert_allclose(by_fft, direct, rtol=0.0, atol=1e-13)
+    assert direct[1] == pytest.approx(0.9, abs=0.02)
+    short = np.array([1.0, np.nan, 2.0, 4.0, np.nan, 3.0])    # fewer samples than lags
+    np.testing.assert_array_equal(np.isnan(autocorrelation(short, 8)),
+                                  np.isnan(_pair_autocorrelation(short, 8)))
 
 
 def test_identifiability_verdicts():

@@ -2,6 +2,7 @@
 level and AR(1) colour from its own innovations and re-runs its filter with it, so that its
 error bars hold on coloured noise; white noise of the configured level changes nothing and is
 never called NOT consistent."""
+from collections import deque
 from concurrent.futures import Future
 import math
 
@@ -14,6 +15,7 @@ from auv_ident.core.simulation.simulate import simulate
 from auv_ident.session.auto_choice import COMMAND, COMMAND_REJECTED, ODOMETRY
 from auv_ident.session.noise_learning import (
     HOLDS,
+    InnovationWindow,
     LEARN_MIN_UPDATES,
     log_factor_sd,
     NoiseLearner,
@@ -101,6 +103,24 @@ def test_the_learner_keeps_the_record_and_says_when_to_fit():
     off = NoiseLearner(np.ones(12, dtype=bool), T, enabled=False)
     off.keep_odometry(0.0, 0, np.zeros(12), None, '')
     assert not off.kept and not off.innovations(np.zeros(12)) and off.state == 'off'
+
+
+def test_the_innovation_window_holds_the_last_rows_in_order():
+    """The preallocated window the fits read gives what a deque of the last `size` rows
+    would, across the moves of its rows to the front and a clear."""
+    window, ref = InnovationWindow(5, width=2), deque(maxlen=5)
+    assert window.rows().shape == (0, 2)
+    rng = np.random.default_rng(3)
+    for k in range(40):
+        if k == 23:
+            window.clear()
+            ref.clear()
+        row = rng.normal(size=2)
+        window.append(row)
+        ref.append(row.copy())
+        row[:] = np.nan             # the caller's array is reused (the filter's white)
+        assert len(window) == len(ref)
+        np.testing.assert_array_equal(window.rows(), np.array(ref))
 
 
 def test_the_record_gives_back_what_was_kept_in_order_and_stays_compact():

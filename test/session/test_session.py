@@ -589,3 +589,23 @@ def test_publish_gate_publishes_the_first_update_of_each_interval():
     stamps = [0, 40 * ms, 99 * ms, 100 * ms, 150 * ms, 310 * ms, 320 * ms, 120 * ms, 130 * ms]
     assert [gate.due(ns) for ns in stamps] == [True, False, False, True, False, True, False,
                                                True, False]
+
+
+def test_a_repeated_message_covariance_gives_the_same_variances_and_notices():
+    """The variances of a message whose covariance repeats the last message's are taken
+    again without the checks: every R and every notice is that of checking each message."""
+    cached, checked = IdentSession(), IdentSession()
+    good = cached.noise_default * 2.0
+    absurd = good.copy()
+    absurd[2] = good[2] * 1e-20     # beyond PLAUSIBLE_VARIANCE_RATIO
+    unstated = good.copy()
+    unstated[[0, 7]] = [np.nan, -1.0]
+    unmeasured = good.copy()
+    unmeasured[9] = 1e9
+    for v in (good, good, good, absurd, absurd, good, unstated, unstated, absurd, unmeasured,
+              unmeasured, good):
+        r = cached._measurement_variances(v.copy())
+        np.testing.assert_array_equal(r, checked._checked_variances(v.copy()))
+        assert cached.notices == checked.notices
+        r[:] = -5.0                 # the caller's to change: the next message's R is not
+    assert len(cached.notices) == 3

@@ -39,6 +39,7 @@ CORRELATION_WEAK = 0.95         # |correlation| with another coefficient above t
 LJUNG_BOX_LAGS = 20             # lags of the whiteness test
 WHITENESS_P = 1e-3              # p-value below which a channel's residuals are not white
 MAX_BANDWIDTH_FRACTION = 0.1    # the sandwich's lag window is at most this fraction of N
+DIRECT_MAX_LAG = 32             # autocorrelation by shifted dot products up to this lag, then FFT
 SANDWICH_BLOCK = 4096           # samples of the Jacobian masked at once (sandwich_covariance)
 
 # per coefficient name, its verdict (identifiability(): the 1-sigma, correlations, ...)
@@ -57,6 +58,33 @@ def _lagged_products(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     nfft = 1 << int(2 * n - 1).bit_length()
     spec = np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft))
     return np.fft.irfft(spec, nfft)[:max_lag + 1]
+
+
+def _pair_sums_direct(z: np.ndarray, ok: np.ndarray,
+                      lags: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`autocorrelation`'s four sums over the pairs l = 0..lags apart, by dot products
+    over shifted slices: (pairs, sum z[k + l] z[k], sum z[k + l]^2, sum z[k]^2), each
+    (lags + 1,). z: (N,) with 0 where missing, ok: (N,) bool, the samples present.
+
+    For the few lags of the whiteness test this is ~40x faster than the FFT's four products
+    of the padded length (N = 6000, 20 lags: 35 us against 1.3 ms a channel; the live noise
+    learner fits 12 channels every 100 updates) and exact to the FFT's rounding. With no
+    sample missing the pairs are N - l and the squares' sums the total less the few samples
+    a lag leaves out at either end (one dot product a lag)."""
+    n = z.shape[0]
+    shifts = range(lags + 1)
+    sums = np.array([np.dot(z[k:], z[:n - k]) for k in shifts])
+    z2 = z * z
+    if ok.all():
+        total = float(np.sum(z2))
+        head = np.concatenate(([0.0], np.cumsum(z2[:lags])))       # sum of the first l
+        tail = np.concatenate(([0.0], np.cumsum(z2[::-1][:lags])))  # sum of the last l
+        return n - np.arange(lags + 1.0), sums, total - head, total - tail
+    okf = ok.astype(float)
+    pairs = np.array([np.dot(okf[k:], okf[:n - k]) for k in shifts])
+    later = np.array([np.dot(z2[k:], okf[:n - k]) for k in shifts])
+    earlier = np.array([np.dot(okf[k:], z2[:n - k]) for k in shifts])
+    return pairs, sums, later, earlier
 
 
 def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
@@ -87,12 +115,15 @@ def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
     if not np.any(z != 0.0):
         return out
     lags = min(max_lag, len(z) - 1)
-    okf = ok.astype(float)
-    pairs = np.rint(_lagged_products(okf, okf, lags))
-    sums = _lagged_products(z, z, lags)
-    z2 = z * z
-    later = _lagged_products(z2, okf, lags)      # sum z[k + l]^2 over the pairs
-    earlier = _lagged_products(okf, z2, lags)    # sum z[k]^2 over the pairs
+    if lags <= DIRECT_MAX_LAG:
+        pairs, sums, later, earlier = _pair_sums_direct(z, ok, lags)
+    else:
+        okf = ok.astype(float)
+        pairs = np.rint(_lagged_products(okf, okf, lags))
+        sums = _lagged_products(z, z, lags)
+        z2 = z * z
+        later = _lagged_products(z2, okf, lags)      # sum z[k + l]^2 over the pairs
+        earlier = _lagged_products(okf, z2, lags)    # sum z[k]^2 over the pairs
     norm = np.sqrt(np.clip(later, 0.0, None) * np.clip(earlier, 0.0, None))
     # the FFT's rounding (1e-16 of the whole sum) must not carry a ratio past +-1
     tiny = 1e-12 * float(np.dot(z, z))
@@ -134,8 +165,9 @@ def noise_model(white: np.ndarray, dt: float,
     m = white.shape[1]
     names = list(names) if names is not None else [f'c{j}' for j in range(m)]
     out = {}
+    channels = np.ascontiguousarray(white.T)   # each channel's samples side by side: faster
     for j in range(m):
-        x = white[:, j]
+        x = channels[j]
         ok = np.isfinite(x)
         n = int(ok.sum())
         if n < LJUNG_BOX_LAGS + 2:
