@@ -53,7 +53,7 @@ CONVERGED_REL_STD = 0.05     # every coefficient's 1-sigma below this fraction o
 # What the raw-sensor filter takes of the identifier settings: frames, mountings, rates and
 # units come from the input map, the noise from the filter's own configuration; any other
 # setting given would be silently ignored (a frame or a current the user believes applied)
-RAW_SETTINGS = ('vehicle', 'coefficients', 'input_map', 'publish_rate_hz')
+RAW_SETTINGS = ('vehicle', 'coefficients', 'input_map', 'publish_rate_hz', 'intake_period_s')
 
 
 def check_raw_settings(settings: IdentifierSettings) -> None:

@@ -118,6 +118,30 @@ def test_node_with_a_raw_map_subscribes_and_publishes_the_offline_pass(ctx, raw_
         node.destroy_node()
 
 
+def test_raw_node_takes_its_inputs_as_the_intake_period_says(ctx, raw_example):
+    """intake_period_s is a setting of the raw path too: 0 gives the executor the input
+    subscriptions (each message as it arrives); the default takes them in batches."""
+    _, map_path = raw_example
+    nodes = []
+    try:
+        for period in (0.0, None):
+            params = [Parameter('input_map', value=str(map_path)),
+                      Parameter('coefficients', value=NAMES)]
+            if period is not None:
+                params.append(Parameter('intake_period_s', value=period))
+            node = IdentifierNode(context=ctx, parameter_overrides=params)
+            nodes.append(node)
+            given = {s.topic_name for s in node.subscriptions}
+            inputs = {s.topic_name for s in node.raw.subscriptions}
+            if period == 0.0:
+                assert node.raw.intake.timer is None and inputs <= given
+            else:
+                assert node.raw.intake.period_s == 0.02 and not inputs & given
+    finally:
+        for node in nodes:
+            node.destroy_node()
+
+
 def test_raw_node_publishes_at_the_publish_rate(ctx, raw_example):
     """publish_rate_hz 5: the same estimates as the session's, published for the first update
     of each 0.2 s of stamps."""
