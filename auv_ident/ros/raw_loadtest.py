@@ -9,7 +9,9 @@ map; a real identifier process with that map gets it from the player (ros/play_n
 the map) at --rate x real time. Figures: every message processed (the identifier's estimate
 file, written on SIGINT, counts the fused messages per sensor; compared with the offline
 pass's counts), the identifier's CPU time (user + system, all threads, from /proc) from just
-before playback to its end, per message played, and the per-message work alone
+before playback to its end, per message played, the same over the steady part of playback
+(:func:`steady_cpu_per_message`: without the player's start and the last queue's work-off),
+and the per-message work alone
 (session/raw_session.py RawSession.on_input, no ROS) timed in this process.
 
 DDS stays on this machine: every process runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
@@ -36,6 +38,7 @@ from auv_ident.session.settings import DEFAULT_INTAKE_PERIOD_S, IdentifierSettin
 from auv_ident.vehicles import load_vehicle
 
 NAMES = ['Z_ds', 'Z_q', 'Z_w', 'M_ds', 'K_v']
+STEADY_SETTLE_S = 3.0   # s after the CPU window's start before the steady figure's window
 
 
 def _cmd(node, *params):
@@ -90,9 +93,12 @@ def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publis
         # the identifier's start-up (imports, compile, discovery) is not the load: its CPU is
         # counted from the moment the player starts publishing (the subscriptions matched)
         cpu0, wall0 = None, None
+        trace = []          # (monotonic s, identifier CPU s) while the player plays
         while player.poll() is None:
             if cpu0 is None and _cpu_s(player.pid) > 0 and _matched(player):
                 cpu0, wall0 = _cpu_s(ident.pid), time.monotonic()
+            if cpu0 is not None:
+                trace.append((time.monotonic(), _cpu_s(ident.pid)))
             time.sleep(0.05)
         # the player exits once the identifier acknowledged every message (in its DDS queue);
         # a second of it working off the queue is in the CPU figure, the rest is drained at
@@ -113,6 +119,7 @@ def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publis
     expected = {k: n for k, n in ref.fused.items() if k != 'command'}
     per_msg, n_msgs = compute_per_message(bag, map_path)
     cpu = (cpu1 - cpu0) if cpu0 is not None else float('nan')
+    steady = steady_cpu_per_message(trace, played / (seconds / rate))
     return {'seconds': seconds, 'imu_rate_hz': imu_rate, 'rate': rate, 'played': played,
             'publish_rate_hz': float(publish_rate_hz),
             'intake_period_s': float(intake_period_s),
@@ -120,7 +127,25 @@ def run_raw_loadtest(seconds=60.0, imu_rate=400.0, rate=1.0, folder=None, publis
             'every_message_processed': doc['fused'] == expected and not doc['not_fused'],
             'identifier_cpu_s': cpu, 'wall_s': (wall1 - wall0) if wall0 else float('nan'),
             'cpu_ms_per_message': 1e3 * cpu / played,
+            'steady_cpu_ms_per_message': 1e3 * steady,
             'compute_ms_per_message': 1e3 * per_msg, 'compute_messages': n_msgs}
+
+
+def steady_cpu_per_message(trace, messages_per_s, settle_s=STEADY_SETTLE_S):
+    """The identifier's CPU (s) per message in the steady part of playback: from
+    ``settle_s`` after the CPU window's start to the player's last second, over the messages
+    the player published meanwhile at its steady rate ``messages_per_s`` (the bag's messages
+    over its length, at the played rate); NaN when the run is too short. The whole window's
+    figure also holds the identifier's share of the player's start (matching its endpoints)
+    and of the last queue's work-off."""
+    if not trace:
+        return float('nan')
+    t_start, t_end = trace[0][0] + settle_s, trace[-1][0] - 1.0
+    inside = [(t, c) for t, c in trace if t_start <= t <= t_end]
+    if len(inside) < 2 or inside[-1][0] - inside[0][0] < 5.0:
+        return float('nan')
+    (ta, ca), (tb, cb) = inside[0], inside[-1]
+    return (cb - ca) / ((tb - ta) * messages_per_s)
 
 
 def _matched(player):
@@ -139,8 +164,9 @@ def format_raw_loadtest(d):
         f'fused {d["fused"]} (offline pass: {d["expected_fused"]}); not fused {d["not_fused"]};'
         f' every message processed: {d["every_message_processed"]}',
         f'identifier CPU {d["identifier_cpu_s"]:.2f} s over {d["wall_s"]:.1f} s wall: '
-        f'{d["cpu_ms_per_message"]:.3f} ms per message; the session alone '
-        f'{d["compute_ms_per_message"]:.3f} ms per message'])
+        f'{d["cpu_ms_per_message"]:.3f} ms per message; steady playback (from '
+        f'{STEADY_SETTLE_S:g} s in to the last second) {d["steady_cpu_ms_per_message"]:.3f} ms '
+        f'per message; the session alone {d["compute_ms_per_message"]:.3f} ms per message'])
 
 
 def main(argv=None):
