@@ -330,11 +330,12 @@ def format_campaign(result):
     return L + format_dvl_check(result['dvl_check'])
 
 
-def _utc(t):
+def utc_text(t):
+    """s since 1970 -> '2016-06-23T19:55:00' (UTC)."""
     return str(np.datetime64(int(t), 's'))
 
 
-def format_flagged(check, split=None):
+def format_flagged(check, split=None, dive_table='the last table of tools/glider_campaign.py'):
     """The first lines of a glider run's output: the dives the data-quality check
     (core/glider/validation.py consistent_dvl, its as_dict) flagged, each named by its start
     (UTC) and, given the split (s since 1970), its half, with the evidence: its DVL speed
@@ -347,7 +348,7 @@ def format_flagged(check, split=None):
     flagged = [d for d in dives if not d['kept']]
     ratios = [d['dvl_speed'] / d['implied_speed'] - 1.0 for d in dives if d['kept']]
     L = [f'data quality: {len(flagged)} of {len(dives)} DVL dives flagged'
-         + (': ' + ', '.join(_utc(d['start']) for d in flagged) if flagged else '')
+         + (': ' + ', '.join(utc_text(d['start']) for d in flagged) if flagged else '')
          + " (the DVL's speed against the speed the depth rate and the pitch imply, beyond "
          f"the other dives' spread: |z| > {check['z_limit']:.2f}, at which any of "
          f"{len(dives)} consistent dives is flagged with {100 * check['false_rejection']:g} % "
@@ -356,16 +357,15 @@ def format_flagged(check, split=None):
         half = ''
         if split is not None:
             half = ' (first half)' if d['start'] < split else ' (second half)'
-        L.append(f"  flagged: the dive from {_utc(d['start'])}{half}: DVL {d['dvl_speed']:.3f} "
-                 f"m/s where its depth rate {d['depth_rate']:.3f} m/s and pitch "
-                 f"{d['pitch_deg']:.1f} deg imply {d['implied_speed']:.3f} m/s at the dives' "
-                 f"angle of attack {check['centre_deg']:.2f} deg "
+        L.append(f"  flagged: the dive from {utc_text(d['start'])}{half}: DVL "
+                 f"{d['dvl_speed']:.3f} m/s where its depth rate {d['depth_rate']:.3f} m/s "
+                 f"and pitch {d['pitch_deg']:.1f} deg imply {d['implied_speed']:.3f} m/s at "
+                 f"the dives' angle of attack {check['centre_deg']:.2f} deg "
                  f"({100 * (d['dvl_speed'] / d['implied_speed'] - 1.0):+.0f} %; the other "
                  f"dives {100 * min(ratios):+.0f}..{100 * max(ratios):+.0f} %); its implied "
                  f"angle of attack {d['median_aoa_deg']:.2f} deg, z = {d['z']:+.1f}")
     L.append("  the figures 'all dives' count every DVL sample, the flagged dives' too; "
-             "'flagged out' leave the flagged dives out (dive by dive: the last table of "
-             'tools/glider_campaign.py)')
+             f"'flagged out' leave the flagged dives out (dive by dive: {dive_table})")
     return L
 
 
@@ -416,7 +416,7 @@ def format_dvl_check(check):
          'DVL speed m/s | implied speed m/s | median implied angle of attack deg (s.e.) | z | '
          'flagged |', '|---|---|---|---|---|---|---|---|---|---|']
     for d in dives:
-        L.append(f"| {_utc(d['start'])} | {d['samples']} | "
+        L.append(f"| {utc_text(d['start'])} | {d['samples']} | "
                  f"{d['pumped_cc']:.0f} | {d['pitch_deg']:.1f} | {d['depth_rate']:.3f} | "
                  f"{d['dvl_speed']:.3f} | {d['implied_speed']:.3f} | "
                  f"{d['median_aoa_deg']:.2f} ({d['stderr_deg']:.2f}) | {d['z']:+.1f} | "

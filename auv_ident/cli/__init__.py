@@ -9,13 +9,14 @@ and report.md say why.
 
 The commands live by family, each module with its subcommands' options next to their code:
 identify.py (simulate, identify, montecarlo, campaign), reports.py (report, compare-methods,
-bench, export), data.py (bag, import, derivatives, vehicle check); common.py holds what they
-share. `run` (a node, as `ros2 run`) and `loadtest` are handed over before argparse.
+bench, export), data.py (bag, import, derivatives, vehicle check), glider.py (glider calibrate,
+glider validate); common.py holds what they share. `run` (a node, as `ros2 run`) and
+`loadtest` are handed over before argparse.
 """
 import argparse
 import sys
 
-from auv_ident.cli import data, identify, reports
+from auv_ident.cli import data, glider, identify, reports
 from auv_ident.cli.common import EXIT_UNTRUSTED, option_name
 from auv_ident.core.errors import AuvIdentError
 from auv_ident.session.settings import ParameterError
@@ -39,7 +40,7 @@ def run_node(argv):
 def build_parser():
     p = argparse.ArgumentParser(prog='python -m auv_ident', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
-    for family in (identify, reports, data):
+    for family in (identify, reports, data, glider):
         family.add_commands(sub)
     return p
 

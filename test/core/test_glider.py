@@ -5,8 +5,8 @@ known values recovered within the sandwich error bars, the unidentifiable terms 
 input named."""
 from dataclasses import replace
 import math
-from pathlib import Path
 
+from glider_dives import dvl_on_descents, PRIOR, synthetic_dives, TRUE
 import numpy as np
 import pytest
 
@@ -17,55 +17,13 @@ from auv_ident.core.glider.flight import (
     dynamic_flight,
     steady_flight,
 )
-from auv_ident.core.glider.record import G, GliderRecord
+from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.glider.validation import (
     compare_speeds,
     consistent_dvl,
     dive_groups,
     score,
 )
-from auv_ident.core.glider.vehicle import glider_from_file
-
-# the published prior, the glider file's
-PRIOR = glider_from_file(str(Path(__file__).resolve().parents[2] / 'config'
-                             / 'slocum_comet.yaml')).params
-TRUE = replace(PRIOR, hull_volume=0.05966, drag_zero_lift=0.17, compressibility=5e-10)
-
-
-def _density(depth):
-    """kg/m^3, a Baltic summer profile: 1004.5 above, 1007 below a pycnocline at 20 m."""
-    return 1004.5 + 1.25 * (1.0 + np.tanh((depth - 20.0) / 4.0))
-
-
-def synthetic_dives(params, seed, n_cycles=6, half_period=300.0, dt=1.0, heave_std=0.5,
-                    pressure_noise=50.0):
-    """A GliderRecord of yo-yos from 10 m to ~45 m and back flown by the dynamic model with params:
-    pump +-230 cc and pitch -+0.38 rad switched (20 s ramps) every half_period s; the water
-    heaves the glider (AR(1) displacement, heave_std m, 120 s: coloured depth-rate errors of
-    ~0.6 cm/s); the pressure read with white noise (Pa). The pressure the model needs
-    (density, compressibility) is found by iterating flight and depth to a fixed point."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, 2 * n_cycles * half_period, dt)
-    # +1 diving, -1 climbing, ~20 s ramps between
-    phase = np.clip(10.0 * np.sin(np.pi * t / half_period), -1.0, 1.0)
-    pumped = -230e-6 * phase
-    pitch = -0.38 * phase
-    rho_w = math.exp(-dt / 120.0)
-    heave = np.zeros(len(t))          # m, the water's vertical displacement (internal waves)
-    for k in range(1, len(t)):
-        heave[k] = rho_w * heave[k - 1] + heave_std * math.sqrt(1 - rho_w ** 2) * rng.normal()
-    depth = np.full(len(t), 10.0)
-    for _ in range(8):
-        rec = GliderRecord(t=t, pressure=_density(depth) * G * depth, pitch=pitch,
-                           pumped_volume=pumped, density=_density(depth))
-        rate = dynamic_flight(params, rec).depth_rate
-        depth = 10.0 + heave + np.concatenate(([0.0],
-                                               np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)))
-    assert depth.min() > 1.0 and 30.0 < depth.max() < 60.0      # yo-yos under the surface
-    pressure = _density(depth) * G * depth + rng.normal(0.0, pressure_noise, len(t))
-    speed = dynamic_flight(params, rec).speed
-    return GliderRecord(t=t + 1.5e9, pressure=pressure, pitch=pitch, pumped_volume=pumped,
-                        density=_density(depth), speed_through_water=speed)
 
 
 def test_steady_glide_balances_the_forces():
@@ -159,15 +117,8 @@ def test_what_constant_pitch_dives_cannot_identify():
     assert verdicts['mass']['max_correlation'] > 0.99
 
 
-def _dvl_on_descents(rec):
-    """The record with its DVL speed only where a glider's DVL is valid: descending, deeper
-    than 12 m (the comet's processed file)."""
-    valid = (rec.pitch < -0.3) & (rec.depth > 12.0)
-    return replace(rec, speed_through_water=np.where(valid, rec.speed_through_water, np.nan))
-
-
 def test_the_dvl_consistency_check_fails_the_dive_where_the_instruments_disagree():
-    rec = _dvl_on_descents(synthetic_dives(TRUE, 6))
+    rec = dvl_on_descents(synthetic_dives(TRUE, 6))
     check = consistent_dvl(rec)
     assert len(check.dives) == 6 and all(d.kept for d in check.dives)
     assert abs(check.centre_deg) < 6.0 and 3.0 < check.z_limit < 4.0
@@ -199,7 +150,7 @@ def test_the_scores_error_bars_count_dives_not_samples():
     """A model off by a different constant on each dive (a current's, the DVL's per-dive
     processing): its bias's 1-sigma is the spread of the dive means over the dives (the
     cluster-robust one), not the samples' (200 a dive: ~15 times narrower)."""
-    rec = _dvl_on_descents(synthetic_dives(TRUE, 6))
+    rec = dvl_on_descents(synthetic_dives(TRUE, 6))
     use = np.isfinite(rec.speed_through_water)
     groups = dive_groups(rec, use)
     offsets = np.array([0.004, -0.006, 0.011, 0.001, -0.003, 0.008])      # m/s, per dive

@@ -1,0 +1,215 @@
+"""A user's glider, from a bag to a calibrated glider file and back to a verdict: the work of
+``python -m auv_ident glider calibrate`` and ``glider validate`` (docs/glider.md, "Your
+glider: calibrate and validate").
+
+- :func:`calibrate_glider`: the flight model of a glider file calibrated on a bag's dives (the
+  depth rate; :mod:`auv_ident.core.glider.calibration`), the parameters left at the file's
+  values asked what the dives could say of them (identifiability), and
+  :func:`format_calibration`'s lines, the first of which is the verdict;
+- :func:`calibrated_file_text`: the glider file with the identified values, loadable by
+  ``vehicle check`` and by both commands (as the prior of a later calibration too);
+- :func:`validate_glider`: a glider file's dynamic flight judged against the DVL speed of
+  dives (bias with its 1-sigma over the dives, RMS, fit %; the depth rate), after the
+  instruments' consistency check over every dive of the bag (a dive whose DVL disagrees with
+  its own pressure and pitch is flagged on the first line and its figures given apart).
+
+Times are s since 1970-01-01 UTC; speeds m/s (printed in cm/s).
+"""
+from dataclasses import asdict
+import math
+
+import numpy as np
+
+from auv_ident.analysis.glider import EXTRA, format_dvl_check, format_flagged, judge, utc_text
+from auv_ident.core.errors import ConfigError, DataError
+from auv_ident.core.glider.calibration import calibrate, identifiability
+from auv_ident.core.glider.flight import dynamic_flight
+from auv_ident.core.glider.record import GliderRecord
+from auv_ident.core.glider.validation import consistent_dvl, dvl_dives
+from auv_ident.core.glider.vehicle import GliderVehicle, NUMBERS, TEXTS
+
+# what ours identifies on a Slocum's dives (docs/glider.md, "What the dives identify")
+DEFAULT_FREE = ('hull_volume', 'drag_zero_lift')
+IDENTIFIED = 'identifiable'
+
+
+def utc(t: float) -> str:
+    return utc_text(t) + 'Z'
+
+
+def time_window(record: GliderRecord, start: float | None, end: float | None) -> GliderRecord:
+    """The samples of a record from ``start`` (inclusive) to ``end`` (exclusive), s since
+    1970, either None for the record's own end; DataError naming the window when it holds
+    fewer than 3 samples."""
+    keep = np.ones(len(record), dtype=bool)
+    if start is not None:
+        keep &= record.t >= start
+    if end is not None:
+        keep &= record.t < end
+    if keep.sum() < 3:
+        raise DataError(f'the window {utc(start) if start is not None else "start"} .. '
+                        f'{utc(end) if end is not None else "end"} holds {int(keep.sum())} '
+                        f'samples of the bag ({utc(record.t[0])} .. {utc(record.t[-1])})')
+    return record.select(keep)
+
+
+def calibrate_glider(record: GliderRecord, vehicle: GliderVehicle,
+                     free: tuple[str, ...] = DEFAULT_FREE) -> dict:
+    """Calibrate a glider file's dynamic flight model on a record (its temperature left out:
+    docs/glider.md says why). Returns {'calibration': Calibration, 'others': name -> verdict
+    dict of each parameter of EXTRA not freed, had it alone been freed beside them, 'dives': the
+    number of dives, 'untrusted': the freed parameters the dives did not identify}."""
+    if 'thermal_expansion' in free:
+        raise ConfigError("thermal_expansion: the flight model leaves the hull's thermal "
+                          "expansion out (with the water's temperature as the hull's it is "
+                          'refuted: docs/glider.md)')
+    record = GliderRecord(**{**_columns(record), 'temperature': None})
+    cal = calibrate(record, vehicle.params, 'dynamic', free)
+    # each alone beside the freed ones, as docs/glider.md's table: what freeing it would cost
+    others = {n: identifiability(record, cal, (n,))[n] for n in EXTRA if n not in free}
+    return {'calibration': cal, 'others': others,
+            'dives': _dives(record),
+            'untrusted': [n for n in free if cal.verdicts[n]['verdict'] != IDENTIFIED]}
+
+
+def _columns(record: GliderRecord) -> dict:
+    return {n: getattr(record, n) for n in ('t', 'pressure', 'pitch', 'pumped_volume',
+                                            'density', 'temperature', 'speed_through_water')}
+
+
+def _dives(record: GliderRecord, top: float = 10.0, hysteresis: float = 5.0) -> int:
+    """The glider's dives in the record: descents from above ``top`` m (the fit window's top)
+    to below ``top + hysteresis`` m (the hysteresis: a glider heaved about the top by the
+    water is not diving again)."""
+    count, shallow = 0, True
+    for z in record.depth:
+        if shallow and z > top + hysteresis:
+            count, shallow = count + 1, False
+        elif z < top:
+            shallow = True
+    return count
+
+
+def _value(v: float) -> str:
+    return f'{v:.6g}'
+
+
+def format_calibration(result: dict, vehicle: GliderVehicle, record: GliderRecord) -> list:
+    """The lines `glider calibrate` prints; the first is the verdict."""
+    cal = result['calibration']
+    where = (f'{vehicle.name} calibrated on {result["dives"]} dives, {utc(record.t[0])} .. '
+             f'{utc(record.t[-1])}, {cal.samples} samples of the depth rate at '
+             f'{cal.window[0]:g}-{cal.window[1]:g} m')
+    if result['untrusted']:
+        first = (f'NOT identified: {", ".join(result["untrusted"])} '
+                 '(the dives do not fix them: see the verdicts below): ' + where)
+    else:
+        first = 'identified: ' + where
+    L = [first, '',
+         '| parameter | file | calibrated | 1-sigma | verdict |', '|---|---|---|---|---|']
+    for name, (value, std) in cal.estimates().items():
+        L.append(f'| {name} | {_value(getattr(vehicle.params, name))} | {_value(value)} | '
+                 f'{std:.2g} | {cal.verdicts[name]["verdict"]} |')
+    L += ['', f'depth-rate RMS {100 * cal.rms:.2f} cm/s; error bars: sandwich covariance, '
+          f'residuals correlated over {cal.lags} samples; {cal.seconds:.2f} s']
+    if result['others']:
+        L += ['', "held at the file's values; each freed alone beside them, the dives would "
+              'say:', '',
+              '| parameter | file | 1-sigma | max correlation (with) | verdict |',
+              '|---|---|---|---|---|']
+        for name, v in result['others'].items():
+            L.append(f'| {name} | {_value(getattr(vehicle.params, name))} | '
+                     f'{v["crb_std"]:.3g} | {_correlation(v)} | {v["verdict"]} |')
+    return L
+
+
+def _correlation(v: dict) -> str:
+    c = v.get('max_correlation')
+    return '-' if c is None or not math.isfinite(c) else f'{c:.3f} ({v.get("correlated_with")})'
+
+
+def calibrated_file_text(raw: dict, vehicle: GliderVehicle, result: dict, source: str) -> str:
+    """The glider file (YAML text) of ``raw`` (the file as read) with the calibration's
+    values; ``source`` says where they come from (the bag, the window, the command). The
+    model's lift slope is the hull's plus the wings': a calibrated one changes the hull's."""
+    cal = result['calibration']
+    values = {k: raw[k] for k in NUMBERS}
+    notes = {}
+    for name, (value, std) in cal.estimates().items():
+        key = 'lift_slope_hull' if name == 'lift_slope' else name
+        values[key] = value - raw['lift_slope_wings'] if name == 'lift_slope' else value
+        notes[key] = (f'calibrated, 1-sigma {std:.2g} ({cal.verdicts[name]["verdict"]}); '
+                      f'the file had {raw[key]!r}')
+    prior = (f'{vehicle.prior}; {", ".join(cal.free)} calibrated by auv_ident on {source}')
+    L = [f'# {vehicle.name}: a glider file (kind: glider, docs/glider.md) written by '
+         f'`python -m auv_ident glider calibrate`', f'# from {vehicle.path}; {source}.',
+         "# Each calibrated value's 1-sigma beside it; the others are that file's.",
+         'kind: glider', f'name: {_quoted(raw["name"])}', f'prior: {_quoted(prior)}',
+         f'pitch_source: {raw["pitch_source"]}']
+    for key in NUMBERS:
+        if key in notes:
+            L.append(f'# {notes[key]}')
+        L.append(f'{key}: {float(values[key])!r}')
+    assert set(raw) <= set(NUMBERS) | set(TEXTS)
+    return '\n'.join(L) + '\n'
+
+
+def _quoted(text: str) -> str:
+    """A YAML double-quoted scalar (JSON's string syntax is YAML's)."""
+    import json
+    return json.dumps(str(text))
+
+
+def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderVehicle) -> dict:
+    """A glider file's dynamic flight over ``window`` (a part of ``record``) judged against
+    the DVL speed; the consistency check runs over every dive of ``record`` (more dives, a
+    firmer spread). Returns {'check': DvlConsistency dict or None (no DVL speed), 'scores':
+    judge()'s {'all', 'consistent'} or None, 'flagged': flagged dives in the window}."""
+    window = GliderRecord(**{**_columns(window), 'temperature': None})
+    flight = dynamic_flight(vehicle.params, window)
+    if not np.isfinite(record.speed_through_water).any():
+        return {'check': None, 'scores': {'all': judge(flight, window, window.t)['all']},
+                'flagged': [], 'dives': _dives(window)}
+    check = consistent_dvl(record)
+    scores = judge(flight, window, record.t[check.keep])
+    starts = {float(window.t[idx[0]]) for idx in dvl_dives(window)}
+    flagged = [d for d in check.as_dict()['dives']
+               if not d['kept'] and window.t[0] <= d['start'] <= window.t[-1]]
+    return {'check': check.as_dict(), 'scores': scores, 'flagged': flagged,
+            'dives': _dives(window), 'dvl_dives': len(starts)}
+
+
+def format_validation(result: dict, vehicle: GliderVehicle, window: GliderRecord) -> list:
+    """The lines `glider validate` prints; the first is the verdict (the instruments' check)."""
+    span = f'{utc(window.t[0])} .. {utc(window.t[-1])}'
+    if result['check'] is None:
+        s = result['scores']['all']
+        return [f'{vehicle.name} on {result["dives"]} dives, {span}: no DVL speed in the bag: '
+                'the speed through water is not judged',
+                f'depth rate (10-35 m) bias {100 * s["depth_rate_bias"]:+.2f} cm/s, RMS '
+                f'{100 * s["depth_rate_rms"]:.2f} cm/s']
+    L = format_flagged(result['check'], dive_table='the last table below')
+    L[0] += f' (of the bag; {len(result["flagged"])} in this window)'
+    L += ['', f'{vehicle.name} on {result["dvl_dives"]} DVL dives, {span}: speed through water '
+          'against the DVL, depth rate against the pressure', '',
+          '| dives | U bias cm/s (1-sigma over the dives) | U RMS cm/s | U fit % | DVL samples '
+          '| dz/dt bias cm/s | dz/dt RMS cm/s |', '|---|---|---|---|---|---|---|']
+    for label, key in (('all', 'all'), ('flagged out', 'consistent')):
+        s = result['scores'][key]
+        L.append(f'| {label} | {100 * s["speed_bias"]:+.2f} ({100 * s["speed_bias_std"]:.2f}) | '
+                 f'{100 * s["speed_rms"]:.2f} | {s["speed_fit"]:.1f} | {s["speed_samples"]} | '
+                 f'{100 * s["depth_rate_bias"]:+.2f} | {100 * s["depth_rate_rms"]:.2f} |')
+    return L + format_dvl_check(result['check'])
+
+
+def calibration_json(result: dict, vehicle: GliderVehicle, record: GliderRecord) -> dict:
+    """The JSON document of a calibration (`glider calibrate --json`)."""
+    cal = result['calibration']
+    return {'vehicle': vehicle.path, 'start': float(record.t[0]), 'end': float(record.t[-1]),
+            'dives': result['dives'], 'window_m': list(cal.window), 'samples': cal.samples,
+            'estimates': {n: list(v) for n, v in cal.estimates().items()},
+            'verdicts': {n: v['verdict'] for n, v in cal.verdicts.items()},
+            'untrusted': result['untrusted'], 'depth_rate_rms': cal.rms, 'lags': cal.lags,
+            'others': {n: {'std': v['crb_std'], 'verdict': v['verdict']}
+                       for n, v in result['others'].items()},
+            'params': asdict(cal.params), 'seconds': cal.seconds}
