@@ -25,7 +25,11 @@ from auv_ident.core.errors import ConfigError, DataError
 from auv_ident.core.glider.calibration import calibrate, identifiability
 from auv_ident.core.glider.flight import dynamic_flight
 from auv_ident.core.glider.record import GliderRecord
-from auv_ident.core.glider.validation import consistent_dvl, dvl_dives
+from auv_ident.core.glider.validation import (
+    angle_of_attack_agreement,
+    consistent_dvl,
+    dvl_dives,
+)
 from auv_ident.core.glider.vehicle import GliderVehicle, NUMBERS, TEXTS
 
 # what ours identifies on a Slocum's dives (docs/glider.md, "What the dives identify")
@@ -171,12 +175,16 @@ def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderV
         return {'check': None, 'scores': {'all': judge(flight, window, window.t)['all']},
                 'flagged': [], 'dives': _dives(window)}
     check = consistent_dvl(record)
-    scores = judge(flight, window, record.t[check.keep])
+    kept_times = record.t[check.keep]
+    scores = judge(flight, window, kept_times)
     starts = {float(window.t[idx[0]]) for idx in dvl_dives(window)}
     flagged = [d for d in check.as_dict()['dives']
                if not d['kept'] and window.t[0] <= d['start'] <= window.t[-1]]
+    agreement = angle_of_attack_agreement(flight, window, check, kept_times)
     return {'check': check.as_dict(), 'scores': scores, 'flagged': flagged,
-            'dives': _dives(window), 'dvl_dives': len(starts)}
+            'dives': _dives(window), 'dvl_dives': len(starts),
+            'angle_of_attack': None if agreement is None else asdict(agreement),
+            'untrusted': bool(flagged) or bool(agreement and agreement.disagrees)}
 
 
 def format_validation(result: dict, vehicle: GliderVehicle, window: GliderRecord) -> list:
@@ -190,6 +198,18 @@ def format_validation(result: dict, vehicle: GliderVehicle, window: GliderRecord
                 f'{100 * s["depth_rate_rms"]:.2f} cm/s']
     L = format_flagged(result['check'], dive_table='the last table below')
     L[0] += f' (of the bag; {len(result["flagged"])} in this window)'
+    a = result['angle_of_attack']
+    if a is not None:
+        line = (f"angle of attack: the model flies at {a['model_deg']:.2f} deg where the DVL, "
+                f"the pressure and the pitch imply {a['implied_deg']:.2f} deg (the dives' "
+                f"spread {a['spread_deg']:.2f} deg, z = {a['z']:+.1f}, limit "
+                f"{a['z_limit']:.2f}): a speed about {100 * a['speed_error']:+.1f} "
+                f"cm/s off for the same depth rate at its glide angle {a['glide_deg']:.1f} deg")
+        if a['disagrees']:
+            L.insert(0, 'NOT consistent: ' + line + '; is the pitch calibrated (import '
+                     '--pitch-correction), the lift slope right? (docs/glider.md)')
+        else:
+            L.append(line + ": within the dives' scatter")
     L += ['', f'{vehicle.name} on {result["dvl_dives"]} DVL dives, {span}: speed through water '
           'against the DVL, depth rate against the pressure', '',
           '| dives | U bias cm/s (1-sigma over the dives) | U RMS cm/s | U fit % | DVL samples '

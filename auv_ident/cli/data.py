@@ -31,8 +31,11 @@ def cmd_import(args):
                                 f'--format {args.format}: glider logs carry their own times '
                                 'and layout')
         print('\n'.join(import_glider_files(args.format, args.file, args.out,
-                                             'python -m auv_ident ' + ' '.join(sys.argv[1:]))))
+                                             'python -m auv_ident ' + ' '.join(sys.argv[1:]),
+                                             _pitch_correction(args.pitch_correction))))
         return 0
+    if args.pitch_correction is not None:
+        raise AuvIdentError(f'--pitch-correction is for --format slocum, not {args.format}')
     if len(args.file) != 1:
         raise AuvIdentError(f'--format {args.format} reads one file, not {len(args.file)}')
     args.file = args.file[0]
@@ -50,6 +53,21 @@ def cmd_import(args):
                        input_map=args.input_map)
     _print_import(run, args)
     return 0
+
+
+def _pitch_correction(text):
+    """--pitch-correction SCALE,OFFSET -> (scale, offset rad), or None."""
+    if text is None:
+        return None
+    try:
+        scale, offset = (float(v) for v in text.split(','))
+    except ValueError:
+        raise AuvIdentError(f'--pitch-correction {text!r}: SCALE,OFFSET, two numbers (e.g. '
+                            '0.86,-0.004)') from None
+    if not (0.5 <= scale <= 1.5) or not abs(offset) <= 0.2:
+        raise AuvIdentError(f'--pitch-correction {text!r}: a scale within 0.5-1.5 and an '
+                            'offset within 0.2 rad are an inclinometer calibration; this is not')
+    return scale, offset
 
 
 def _print_import(run, args):
@@ -167,6 +185,9 @@ def add_commands(sub):
                     help='write the bag in the topics and message forms of this input map '
                          '(config/inputs/NAME.yaml or a path; docs/your_data.md) instead of '
                          '/odom and /actuators')
+    sp.add_argument('--pitch-correction', metavar='SCALE,OFFSET', default=None,
+                    help="slocum: the inclinometer's calibration, pitch = SCALE m_pitch + "
+                         'OFFSET (rad); the comet: 0.86,-0.004 (docs/glider.md)')
     sp.set_defaults(func=cmd_import)
 
     sp = sub.add_parser('derivatives', help='evaluate x_dot = f(x, u) on a CSV table')

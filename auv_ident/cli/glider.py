@@ -81,7 +81,7 @@ def cmd_validate(args):
     vehicle, _, record, window = _inputs(args)
     result = validate_glider(record, window, vehicle)
     print('\n'.join(format_validation(result, vehicle, window)))
-    return EXIT_UNTRUSTED if result['flagged'] else 0
+    return EXIT_UNTRUSTED if result['untrusted'] else 0
 
 
 def _common(sp):
@@ -113,6 +113,7 @@ def add_commands(sub):
     sp.set_defaults(func=cmd_calibrate)
     sp = verbs.add_parser('validate', help="a glider file's flight against the bag's DVL speed "
                                            'and depth rate; exit 3 when a DVL dive disagrees '
-                                           'with its pressure and pitch')
+                                           'with its pressure and pitch, or the model flies at '
+                                           'an angle of attack the dives do not show')
     _common(sp)
     sp.set_defaults(func=cmd_validate)

@@ -17,20 +17,23 @@ it (s since 1970 UTC: real stamps). Topics, at each stamp, the actuators first:
   where logged; the rest 0 with the variance 1e6 (not measured), as
   :mod:`auv_ident.offline.import_bag` writes them;
 - ``/glider/ctd`` std_msgs/Float64MultiArray, one dimension labelled with the fields
-  :data:`CTD_FIELDS`: pressure (Pa, gauge), in-situ density (kg/m^3; NaN in the raw logs:
-  they hold conductivity, temperature and pressure, and the TEOS-10 density they give is
-  not computed here), temperature (degC), conductivity (S/m);
+  :data:`CTD_FIELDS`: pressure (Pa, gauge), in-situ density (kg/m^3: the processed file's
+  TEOS-10 one; from the raw logs' conductivity, temperature and pressure, EOS-80's
+  (:mod:`auv_ident.core.glider.seawater`), NaN where the CTD gave no valid salinity),
+  temperature (degC), conductivity (S/m);
 - ``/dvl/speed_through_water`` geometry_msgs/TwistWithCovarianceStamped, only where the
   speed through water is valid (npy: the DVL's; raw logs: none), linear.x in m/s.
 
-The raw logs' pitch is the glider's m_pitch as logged; the processed file's is gliderflight's
-calibrated one (x 0.86, -0.004 rad): the two differ by that correction.
+The raw logs' pitch is the glider's m_pitch as logged, or corrected at import with the
+inclinometer's calibration (``pitch_correction``: theta = scale m_pitch + offset); the processed
+file's is gliderflight's calibrated one (x 0.86, -0.004 rad for the comet).
 
 metadata.yaml custom_data: ``auv_ident.vehicle`` (slocum_glider), ``frame`` (ned),
 ``simulated`` (false), ``format``, ``source`` (file names), ``source_sha256`` (of the files,
 in order), ``measured`` (names), ``samples``, ``stamp_epoch_ns`` (0: the stamps are absolute),
 ``stamp_epoch``, ``stamp_epoch_nominal`` (false), ``noise_std_estimate`` (pressure Pa, pitch
-rad: the white-noise 1-sigma of the data), ``command``.
+rad: the white-noise 1-sigma of the data), ``command``, ``pitch_correction`` (scale,offset
+applied to the raw m_pitch; 1.0,0.0 as logged).
 """
 from dataclasses import dataclass
 import hashlib
@@ -41,6 +44,7 @@ from rosbags.typesys import get_typestore, Stores
 
 from auv_ident.bags.reader import bag_topics, read_bag
 from auv_ident.core.glider.record import G, GliderRecord
+from auv_ident.core.glider.seawater import ctd_density
 from auv_ident.core.model.state import Input, N_INPUT, State
 from auv_ident.offline.import_bag import UNMEASURED_VARIANCE
 from auv_ident.offline.importers import RunFileError, white_noise_std
@@ -81,6 +85,8 @@ class GliderLog:
     conductivity : S/m; pitch, roll, heading : rad; pumped_volume : m^3;
     battery_position : m; fin : rad; speed_through_water : m/s
     fmt : 'slocum' or 'npy'; sources : file paths; sha256 : their digests
+    pitch_correction : (scale, offset rad) applied to the raw logs' m_pitch ((1, 0): as
+        logged; the processed file's pitch is gliderflight's calibrated one)
     """
 
     t: np.ndarray
@@ -98,6 +104,7 @@ class GliderLog:
     fmt: str
     sources: list
     sha256: list
+    pitch_correction: tuple = (1.0, 0.0)
 
     def depth(self):
         """(N,) m: pressure / (rho g) where the density is known, else 10 m/bar."""
@@ -179,11 +186,12 @@ def _on(t, series, scale=1.0):
     return np.interp(t, ts, vs) * scale
 
 
-def read_slocum_logs(paths, cache_dirs=None):
+def read_slocum_logs(paths, cache_dirs=None, pitch_correction=(1.0, 0.0)):
     """The raw logs (.dbd engineering, .ebd science, any number, any order) as a
     :class:`GliderLog` on the CTD times inside the engineering logs' span: the science values
     where the CTD stamped them, the engineering ones (4 s) interpolated linearly onto those
-    times."""
+    times; the density from the CTD (EOS-80); the pitch scale m_pitch + offset
+    (pitch_correction: the inclinometer's calibration, rad)."""
     paths = [Path(p) for p in paths]
     logs = read_slocum_files(paths, cache_dirs)
     t, p_bar = _stacked(logs, 'sci_water_pressure', 'sci_ctd41cp_timestamp')
@@ -201,16 +209,21 @@ def read_slocum_logs(paths, cache_dirs=None):
     if len(t) < 3:
         raise RunFileError(f'{", ".join(p.name for p in paths)}: fewer than 3 CTD samples '
                            "inside the engineering logs' time: give the .dbd logs as well")
+    temperature = _on(t, _stacked(logs, 'sci_water_temp', ctd))
+    conductivity = _on(t, _stacked(logs, 'sci_water_cond', ctd))
+    scale, offset = pitch_correction
     return GliderLog(
-        t=t, pressure=p_bar * BAR, density=_nan(len(t)),
-        temperature=_on(t, _stacked(logs, 'sci_water_temp', ctd)),
-        conductivity=_on(t, _stacked(logs, 'sci_water_cond', ctd)),
-        pitch=_on(t, _stacked(logs, 'm_pitch')), roll=_on(t, _stacked(logs, 'm_roll')),
+        t=t, pressure=p_bar * BAR,
+        density=ctd_density(conductivity, temperature, p_bar * BAR),
+        temperature=temperature, conductivity=conductivity,
+        pitch=scale * _on(t, _stacked(logs, 'm_pitch')) + offset,
+        roll=_on(t, _stacked(logs, 'm_roll')),
         heading=np.mod(_on(t, _stacked(logs, 'm_heading')), 2.0 * np.pi),
         pumped_volume=_on(t, _stacked(logs, 'm_ballast_pumped'), CC),
         battery_position=_on(t, _stacked(logs, 'm_battpos'), INCH),
         fin=_on(t, _stacked(logs, 'm_fin')), speed_through_water=_nan(len(t)),
-        fmt='slocum', sources=paths, sha256=[lg.sha256 for lg in logs])
+        fmt='slocum', sources=paths, sha256=[lg.sha256 for lg in logs],
+        pitch_correction=(float(scale), float(offset)))
 
 
 def _odometry_state(log):
@@ -313,6 +326,7 @@ def write_glider_bag(log, path, command='', compression='zstd'):
         'auv_ident.noise_std_estimate': ' '.join(f'{k}={v!r}'
                                                  for k, v in noise_estimates(log).items()),
         'auv_ident.command': command,
+        'auv_ident.pitch_correction': ','.join(repr(v) for v in log.pitch_correction),
     }
     topics = {k: v for k, v in TOPIC_TYPES.items()
               if k != DVL_TOPIC or np.isfinite(log.speed_through_water).any()}
@@ -347,10 +361,13 @@ def read_glider_bag(path):
         raise RunFileError(f'{path}: {CTD_TOPIC}, {ODOM_TOPIC} and {ACTUATOR_TOPIC} do not hold '
                            'the same stamps: not a bag written by import --format slocum/npy')
     values = np.array([ctd[s] for s in stamps])
-    if not np.all(np.isfinite(values[:, 1])):
-        raise RunFileError(f'{path}: no in-situ density in {CTD_TOPIC} (a bag of the raw '
-                           'Slocum logs): import the processed file (--format npy) for the '
-                           'flight model')
+    missing = ~np.isfinite(values[:, 1])
+    if missing.any():
+        raise RunFileError(f'{path}: {int(missing.sum())} of {len(stamps)} samples have no '
+                           f'in-situ density in {CTD_TOPIC} (the first at '
+                           f'{np.datetime64(int(stamps[missing][0] // NS_PER_S), "s")} UTC: the '
+                           "CTD's conductivity or temperature missing there, or a salinity "
+                           'outside 2-42); the flight model needs it at every sample')
     temperature = values[:, 2] if np.all(np.isfinite(values[:, 2])) else None
     return GliderRecord(t=stamps / NS_PER_S, pressure=values[:, 0],
                         pitch=np.array([pitch[s] for s in stamps]),
@@ -359,8 +376,12 @@ def read_glider_bag(path):
                         speed_through_water=np.array([dvl.get(s, np.nan) for s in stamps]))
 
 
-def import_glider_files(fmt, files, out, command=''):
-    """``import --format slocum|npy``: read, write the bag; returns the lines to print."""
+def import_glider_files(fmt, files, out, command='', pitch_correction=None):
+    """``import --format slocum|npy``: read, write the bag; returns the lines to print.
+    pitch_correction: (scale, offset rad) of the raw logs' m_pitch, or None (as logged)."""
+    if pitch_correction is not None and fmt != 'slocum':
+        raise RunFileError('--pitch-correction is for --format slocum (the raw m_pitch); the '
+                           "processed file's pitch is calibrated already")
     if fmt == 'npy':
         npys = [f for f in files if str(f).endswith('.npy')]
         if len(npys) != 1:
@@ -371,7 +392,7 @@ def import_glider_files(fmt, files, out, command=''):
         if logs:
             add_ctd_from_logs(log, read_slocum_logs(logs))
     else:
-        log = read_slocum_logs(files)
+        log = read_slocum_logs(files, pitch_correction=pitch_correction or (1.0, 0.0))
     write_glider_bag(log, out, command=command)
     noise = noise_estimates(log)
     _, measured = _odometry_state(log)

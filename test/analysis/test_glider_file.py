@@ -143,3 +143,21 @@ def test_the_commands_on_the_comet_give_the_campaigns_figures(tmp_path, capsys):
     assert lines[0].startswith('data quality: 1 of 18 DVL dives flagged: 2016-06-23T21:41:50')
     row = next(r for r in lines if r.startswith('| flagged out |')).split('|')
     assert row[2].strip() == '+0.32 (0.10)' and row[3].strip() == '1.24'
+
+
+def test_an_uncalibrated_inclinometer_is_named_first(dives, tmp_path, capsys):
+    """The dives logged by an inclinometer that reads 1/0.86 of the pitch (the comet's raw
+    m_pitch): the depth rate still calibrates (C_D0 takes the difference up), but the model then
+    flies at an angle of attack the DVL's dives do not show, its speed a few cm/s low: validate
+    says so on its first line, exit 3. With the pitch as flown, the same line is not there."""
+    bag = _bag(replace(dives, pitch=dives.pitch / 0.86), tmp_path)
+    mine = tmp_path / 'mine.yaml'
+    assert _run(capsys, 'glider', 'calibrate', '--vehicle', 'slocum_comet', '--bag', str(bag),
+                '--vehicle-out', str(mine))[0] == 0
+    code, lines, _ = _run(capsys, 'glider', 'validate', '--vehicle', str(mine), '--bag',
+                          str(bag))
+    assert code == EXIT_UNTRUSTED
+    assert lines[0].startswith('NOT consistent: angle of attack: the model flies at')
+    assert 'is the pitch calibrated' in lines[0]
+    row = next(r for r in lines if r.startswith('| flagged out |'))
+    assert float(row.split('|')[2].split()[0]) < -1.0          # cm/s: the speed is low

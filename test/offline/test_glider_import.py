@@ -1,7 +1,8 @@
 """``import --format npy|slocum`` (offline/glider_import.py): the comet glider's processed file
 and raw logs written as bags (strictly decodable, real stamps, the 6-DOF readers see our
 joints), read back into the flight model's record to the bit, the raw logs against the
-processed file, and the bad inputs named. The real data come from ../shared/realdata (skipped
+processed file (the density from the raw CTD, the pitch with the inclinometer's correction),
+and the bad inputs named. The real data come from ../shared/realdata (skipped
 without them); the bad-input cases use small files written here."""
 from collections import Counter
 
@@ -86,14 +87,21 @@ def test_raw_logs_against_the_processed_file(tmp_path):
     # m_battpos (in) in m: within the glider's +-1.5 in travel, moved dive against climb
     battery = log.battery_position
     assert np.all(np.abs(battery) < 1.5 * 0.0254) and np.ptp(battery) > 0.5 * 0.0254
+    # the density from the raw CTD (EOS-80 at the PSS-78 salinity) against the processed
+    # file's TEOS-10 one: an offset of -0.053 kg/m^3 (TEOS-10's Baltic composition anomaly,
+    # which EOS-80 does not know), the same to 0.006 kg/m^3 from the surface to 42 m
+    d = log.density[at] - npy.density[same]
+    assert -0.06 < np.median(d) < -0.045 and np.ptp(np.percentile(d, [1, 99])) < 0.008
     out = tmp_path / 'raw'
     assert cli_main(['import', '--format', 'slocum', *map(str, sorted(data.glob('*.[de]bd'))),
-                     '--out', str(out)]) == 0
+                     '--out', str(out), '--pitch-correction', '0.86,-0.004']) == 0
     meta = bag_custom_data(out)
     assert meta['auv_ident.format'] == 'slocum' and meta['auv_ident.measured'] == 'z phi theta psi'
     assert meta['auv_ident.samples'] == str(len(log.t))
-    with pytest.raises(RunFileError, match='no in-situ density'):
-        read_glider_bag(out)
+    assert meta['auv_ident.pitch_correction'] == '0.86,-0.004'
+    rec = read_glider_bag(out)          # the bag holds the log's samples, in order
+    assert len(rec.t) == len(log.t) and np.array_equal(rec.density, log.density)
+    assert np.allclose(rec.pitch, 0.86 * log.pitch - 0.004, atol=1e-12)
 
 
 def test_bad_glider_inputs_are_named(tmp_path, capsys):
@@ -114,6 +122,16 @@ def test_bad_glider_inputs_are_named(tmp_path, capsys):
     assert cli_main(['import', '--format', 'hsva', str(bad), str(bad),
                      '--out', str(tmp_path / 'y')]) != 0
     assert 'reads one file, not 2' in capsys.readouterr().err
+    for argv, culprit in (
+            (['--format', 'npy', str(bad), '--pitch-correction', '0.86,0'], 'processed file'),
+            (['--format', 'hsva', str(bad), '--pitch-correction', '0.86,0'], 'not hsva'),
+            (['--format', 'slocum', str(bad), '--pitch-correction', '0.86'], 'two numbers'),
+            (['--format', 'slocum', str(bad), '--pitch-correction', '86,-0.004'],
+             'an inclinometer calibration; this is not')):
+        assert cli_main(['import', *argv, '--out', str(tmp_path / 'p')]) == 2
+        err = capsys.readouterr().err
+        assert culprit in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / 'p').exists()
     t = np.arange(5.0) + 1.5e9
     t[3] = t[2]
     rows = np.vstack([t, np.ones(5), -0.4 * np.ones(5), np.zeros(5), np.full(5, 1005.0),

@@ -252,3 +252,51 @@ def compare_speeds(speed_a: np.ndarray, speed_b: np.ndarray, record: GliderRecor
     return Comparison(rms_a=rms_a, rms_b=rms_b, difference=rms_a - rms_b,
                       difference_std=d_std / (rms_a + rms_b), dives=len(groups),
                       samples=int(use.sum()))
+
+
+@dataclass
+class AngleOfAttackAgreement:
+    """A flight model's angle of attack against the one the DVL, the pressure and the pitch
+    imply (:func:`angle_of_attack_agreement`): deg, the model's median |alpha| and glide angle
+    over the consistent dives' DVL samples, the dives' centre and spread, z = (model - centre)
+    / spread, the limit on |z| (the consistency check's), the speed error the difference
+    implies (m/s, model - DVL) and whether it is beyond the limit."""
+
+    model_deg: float
+    implied_deg: float
+    spread_deg: float
+    glide_deg: float
+    z: float
+    z_limit: float
+    speed_error: float
+    disagrees: bool
+
+
+def angle_of_attack_agreement(flight: Flight, record: GliderRecord, check: DvlConsistency,
+                              kept_times: np.ndarray) -> AngleOfAttackAgreement | None:
+    """Does the model fly at the angle of attack the instruments imply? Over the record's
+    DVL samples at kept_times (s since 1970: the dives that passed ``check``, which may have
+    run over a longer record). None without a spread to judge by (fewer than
+    :data:`MIN_DIVES` dives) or without such samples.
+
+    The depth-rate calibration fits the vertical speed |dz/dt| = U sin(|theta| + alpha); the
+    split of it into U and the glide angle rests on the pitch and the model's angle of attack
+    (its lift and drag). On the DVL's dives the three instruments fix alpha without a model
+    (:func:`consistent_dvl`'s centre). A model whose alpha lies outside the dives' own scatter
+    by more than the check's limit flies them at an angle no dive shows: for the same depth
+    rate its speed is off by about ``-U cot(|gamma|) (alpha_model - alpha_c)``. The usual
+    cause is an uncalibrated inclinometer (the comet's raw m_pitch reads 1/0.86 of its pitch:
+    an implied alpha of 0.4 deg against the model's 3.9, a speed 3.8 cm/s low); else the lift
+    slope or the induced drag."""
+    use = np.isin(record.t, kept_times) & np.isfinite(record.speed_through_water)
+    if not math.isfinite(check.z_limit) or not check.spread_deg > 0.0 or not use.any():
+        return None
+    alpha = float(np.degrees(np.median(np.abs(flight.angle_of_attack[use]))))
+    gamma = float(np.degrees(np.median(np.abs(flight.glide_angle[use]))))
+    speed = float(np.median(flight.speed[use]))
+    z = (alpha - check.centre_deg) / check.spread_deg
+    error = -speed * math.radians(alpha - check.centre_deg) / math.tan(math.radians(gamma))
+    return AngleOfAttackAgreement(model_deg=alpha, implied_deg=check.centre_deg,
+                                  spread_deg=check.spread_deg, glide_deg=gamma, z=z,
+                                  z_limit=check.z_limit, speed_error=error,
+                                  disagrees=bool(abs(z) > check.z_limit))
