@@ -305,11 +305,10 @@ class IdentifierNode(IntakeNode):
         when a command and an odometry message arrive together the command is taken first;
         the odometry read raw, from its CDR bytes into one reused view (ros/cdr.py)."""
         imap = self.session.input_map
-        # With use_sim_time, a command without a header is stamped with the /clock value
-        # taken last before it (ros/intake.py): a played bag's commands get their log times
-        self.intake = Intake(self, self.session.settings.intake_period_s,
-                             sim_clock=self.get_parameter('use_sim_time').value and any(
-                                 not e.stamped for e in imap.commands))
+        # with use_sim_time, a command without a header is stamped with the /clock value
+        # taken last before it (ros/intake.py Intake.for_inputs)
+        self.intake = Intake.for_inputs(self, self.session.settings.intake_period_s,
+                                        imap.inputs)
         self.sub_commands = []
         for entry in imap.commands:
             cls = message_class(entry.type, entry.topic)

@@ -79,6 +79,17 @@ class Intake:
         if sim_clock:
             self.sub_clock = self.subscribe(ClockMessage, '/clock', self._on_clock, STREAM_QOS)
 
+    @classmethod
+    def for_inputs(cls, node, period_s, entries):
+        """The intake of ``node``'s input-map inputs ``entries`` (session/input_map.py
+        InputEntry), taken every ``period_s``: with ``sim_clock`` when the node runs on sim
+        time (its ``use_sim_time`` parameter) and an input has no header, whose messages are
+        then stamped with the /clock taken last before them (a played bag's commands get their
+        log times, module docstring)."""
+        sim_clock = bool(node.get_parameter('use_sim_time').value) and any(
+            not e.stamped for e in entries)
+        return cls(node, period_s, sim_clock=sim_clock)
+
     def subscribe(self, msg_type, topic, callback, qos, raw=False, **kwargs):
         """An input subscription (rclpy create_subscription's arguments); ``callback(message,
         receive_ns)``, the message's bytes with ``raw``."""

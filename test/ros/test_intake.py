@@ -6,10 +6,12 @@ import time
 import pytest
 import rclpy
 from rclpy.experimental import EventsExecutor
+from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
 from auv_ident.ros.intake import Intake, IntakeNode
 from auv_ident.ros.toolkit import STREAM_QOS
+from auv_ident.session.input_map import FLOAT64, InputEntry, JOINT_STATE, ODOMETRY
 from auv_ident.session.settings import IdentifierSettings, ParameterError
 
 
@@ -91,6 +93,26 @@ def test_period_zero_takes_each_message_as_it_arrives(ctx):
         assert got and got[0][0] == 7.0 and before <= got[0][1] <= time.time_ns()
     finally:
         node.destroy_node()
+
+
+def test_an_intake_for_inputs_follows_the_clock_only_on_sim_time_with_a_headerless_input(ctx):
+    """Intake.for_inputs (both node paths' constructor): a /clock subscription exactly when
+    the node has use_sim_time and an input has no header to stamp its messages."""
+    odom = InputEntry('odom', 'odom', ODOMETRY, 'odometry')
+    stamped = InputEntry('actuators', 'actuators', JOINT_STATE, 'command')
+    headerless = InputEntry('thrust', 'thrust', FLOAT64, 'command')
+    cases = [(True, (headerless, odom), True), (True, (stamped, odom), False),
+             (False, (headerless, odom), False)]
+    for i, (sim_time, entries, follows) in enumerate(cases):
+        node = IntakeNode(f'intake_clock_{i}', context=ctx, parameter_overrides=[
+            Parameter('use_sim_time', Parameter.Type.BOOL, sim_time)])
+        try:
+            intake = Intake.for_inputs(node, 0.02, entries)
+            assert (intake.sub_clock is not None) is follows, (sim_time, entries)
+            assert ('/clock' in intake.callbacks) is follows
+            assert intake.period_s == 0.02
+        finally:
+            node.destroy_node()
 
 
 def test_the_intake_period_is_checked_where_it_enters():
