@@ -27,7 +27,10 @@ default map, odom_actuators:
         ``/clock`` taken before it (a played bag: the player's ``publish_clock`` gives each
         message's log time, so the node stamps it as replay_bag does).
     ``/clock`` rosgraph_msgs/Clock, with ``use_sim_time`` only: the node's own subscription
-        (RELIABLE, depth 1000), taken in arrival order with the inputs (ros/intake.py).
+        (RELIABLE, depth 1000), taken with the inputs: batched, in the order they were
+        published (each message's source_timestamp; a player publishes a message's /clock
+        just before it); with ``intake_period_s`` 0, in the order the executor takes them as
+        they arrive (ros/intake.py).
     ``odom`` nav_msgs/Odometry: measured state, in the convention of ``frame``; the message
         covariances are the measurement noise (``noise_source`` 'message', the default) or
         ignored (``noise_source`` 'parameter': ``noise_std`` is the noise model).
