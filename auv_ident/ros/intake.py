@@ -68,7 +68,7 @@ class Intake:
         self.period_s = float(period_s)
         self.callbacks = {}
         self._polled = []          # (subscription, callback), in subscription order
-        self._pending = []         # taken, received after the last take began (take)
+        self._pending = []         # taken, received after the last take began: the next runs them
         self._arrivals = 0         # messages taken so far: the last tie-break of the order
         self.timer = None
         if self.period_s > 0.0:
@@ -106,21 +106,25 @@ class Intake:
 
     def take(self):
         """Run the callbacks of every message the batched subscriptions received before this
-        call, in the order they were published (module docstring); returns how many. A
-        message received while the subscriptions are read waits for the next call: one read
-        after another is not one instant, and a /clock published before a command but received
-        after the read of /clock would otherwise come after the command."""
+        call, and of every message the previous call deferred, in the order they were published
+        (module docstring); returns how many. A message received while the subscriptions are
+        read waits for the next call: one read after another is not one instant, and a /clock
+        published before a command but received after the read of /clock would otherwise come
+        after the command. Which messages those are is told by their rmw receive time against
+        the system clock, two clocks that may disagree; so what one call deferred the next runs
+        whatever its receive time says: a receive clock ahead of ours delays a message by one
+        period at most, never holds it."""
         start_ns = time.time_ns()
-        batch = self._pending
+        ready = self._pending       # deferred by the last call: run now, unconditionally
+        self._pending = []
         for index, (sub, callback) in enumerate(self._polled):
             with sub.handle:
                 while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
                     msg, info = taken
                     self._arrivals += 1
-                    batch.append((info['source_timestamp'], index, self._arrivals,
-                                  info['received_timestamp'], msg, callback))
-        ready = [m for m in batch if m[3] <= start_ns]
-        self._pending = [m for m in batch if m[3] > start_ns] if len(ready) < len(batch) else []
+                    item = (info['source_timestamp'], index, self._arrivals,
+                            info['received_timestamp'], msg, callback)
+                    (ready if item[3] <= start_ns else self._pending).append(item)
         ready.sort(key=lambda item: item[:3])
         for _, _, _, received_ns, msg, callback in ready:
             callback(msg, received_ns if self.sub_clock is None else self.receive_ns())

@@ -12,6 +12,7 @@ from std_msgs.msg import Float64
 from auv_ident.ros.intake import Intake, IntakeNode
 from auv_ident.ros.toolkit import STREAM_QOS
 from auv_ident.session.input_map import FLOAT64, InputEntry, JOINT_STATE, ODOMETRY
+from auv_ident.session.messages import NS_PER_S
 from auv_ident.session.settings import IdentifierSettings, ParameterError
 
 
@@ -70,6 +71,78 @@ def test_a_batch_is_taken_in_the_order_it_was_published_across_topics(ctx):
         assert got[-1][:2] == ('/intake_b', 6.0)
     finally:
         node.destroy_node()
+
+
+class _QueuedSubscription:
+    """A subscription's handle as Intake.take reads it: messages queued by the test, each
+    with the MessageInfo it says."""
+
+    def __init__(self, msg_type, raw):
+        self.msg_type, self.raw, self.handle, self.queue = msg_type, raw, self, []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_exc):
+        return False
+
+    def take_message(self, _msg_type, _raw):
+        return self.queue.pop(0) if self.queue else None
+
+
+class _QueuedNode:
+    """What Intake needs of a node, with queued subscriptions and no timer (take is called
+    by the test)."""
+
+    def __init__(self):
+        self.polled, self.subs = set(), {}
+
+    def create_timer(self, *_args, **_kwargs):
+        return None
+
+    def create_subscription(self, msg_type, topic, _callback, _qos, raw=False):
+        self.subs[topic] = _QueuedSubscription(msg_type, raw)
+        return self.subs[topic]
+
+
+def test_a_receive_clock_ahead_delays_a_message_by_one_take_at_most():
+    """The rmw's received_timestamp 10 s ahead of the system clock: every message looks
+    received after the take began, so each take defers what it reads; the next runs it all the
+    same, in publication order with what it takes itself (a message received in time and
+    published earlier goes first). Without that, nothing would be run for 10 s."""
+    node = _QueuedNode()
+    intake = Intake(node, 0.02)
+    got = []
+    for topic in ('/clock_like', '/command'):
+        intake.subscribe(Float64, topic, lambda m, _ns, t=topic: got.append((t, m.data)),
+                         STREAM_QOS)
+    published = 0
+
+    def queue(topic, value, ahead_s):
+        nonlocal published
+        published += 1
+        node.subs[topic].queue.append((Float64(data=value), {
+            'source_timestamp': published,
+            'received_timestamp': time.time_ns() + int(ahead_s * NS_PER_S)}))
+
+    sent = []
+    for k in range(5):
+        for topic in ('/clock_like', '/command'):
+            queue(topic, float(k), 10.0)
+            sent.append((topic, float(k)))
+        intake.take()
+        # every message queued before the previous take has reached its callback
+        assert got == sent[:2 * k]
+    assert intake.take() == 2 and got == sent
+    assert intake.take() == 0
+    # what the last take deferred goes with, and after, an earlier-published message received in
+    # time
+    queue('/command', 10.0, 10.0)
+    assert intake.take() == 0
+    node.subs['/clock_like'].queue.append((Float64(data=9.0), {
+        'source_timestamp': 0, 'received_timestamp': time.time_ns()}))
+    assert intake.take() == 2
+    assert got[-2:] == [('/clock_like', 9.0), ('/command', 10.0)]
 
 
 def test_period_zero_takes_each_message_as_it_arrives(ctx):
