@@ -77,9 +77,9 @@ def main(argv=None):
         Parameter('sample_time', value=T), Parameter('publish_rate_hz', value=a.publish_rate)])
     parts = {'deserialize': 0.0, 'session': 0.0, 'on_odom': 0.0, 'publish': 0.0}
     clock = time.thread_time
-    node.session.on_input = _timed(node.session.on_input, parts, 'session')
-    node.session.on_odom = _timed(node.session.on_odom, parts, 'on_odom')
-    node.publish_estimate = _timed(node.publish_estimate, parts, 'publish')
+    node.odom.session.on_input = _timed(node.odom.session.on_input, parts, 'session')
+    node.odom.session.on_odom = _timed(node.odom.session.on_odom, parts, 'on_odom')
+    node.odom.publish_estimate = _timed(node.odom.publish_estimate, parts, 'publish')
     cmd_t = odom_t = 0.0
     prof = cProfile.Profile() if a.profile else None
     for k, (cmd, odom) in enumerate(payloads):
@@ -91,9 +91,9 @@ def main(argv=None):
         t0 = clock()
         msg = deserialize_message(cmd, JointState)
         t1 = clock()
-        node.on_actuators(msg)
+        node.odom.on_actuators(msg)
         t2 = clock()
-        node.on_odom_payload(odom)
+        node.odom.on_odom_payload(odom)
         t3 = clock()
         parts['deserialize'] += t1 - t0
         cmd_t += t2 - t1

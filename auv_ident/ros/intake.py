@@ -68,7 +68,7 @@ class Intake:
         self.period_s = float(period_s)
         self.callbacks = {}
         self._polled = []          # (subscription, callback), in subscription order
-        self._pending = []         # taken, received after the last take began (take)
+        self._pending = []         # taken, received after the last take began: the next runs them
         self._arrivals = 0         # messages taken so far: the last tie-break of the order
         self.timer = None
         if self.period_s > 0.0:
@@ -78,6 +78,17 @@ class Intake:
         self.sub_clock = None
         if sim_clock:
             self.sub_clock = self.subscribe(ClockMessage, '/clock', self._on_clock, STREAM_QOS)
+
+    @classmethod
+    def for_inputs(cls, node, period_s, entries):
+        """The intake of ``node``'s input-map inputs ``entries`` (session/input_map.py
+        InputEntry), taken every ``period_s``: with ``sim_clock`` when the node runs on sim
+        time (its ``use_sim_time`` parameter) and an input has no header, whose messages are
+        then stamped with the /clock taken last before them (a played bag's commands get their
+        log times, module docstring)."""
+        sim_clock = bool(node.get_parameter('use_sim_time').value) and any(
+            not e.stamped for e in entries)
+        return cls(node, period_s, sim_clock=sim_clock)
 
     def subscribe(self, msg_type, topic, callback, qos, raw=False, **kwargs):
         """An input subscription (rclpy create_subscription's arguments); ``callback(message,
@@ -95,21 +106,25 @@ class Intake:
 
     def take(self):
         """Run the callbacks of every message the batched subscriptions received before this
-        call, in the order they were published (module docstring); returns how many. A
-        message received while the subscriptions are read waits for the next call: one read
-        after another is not one instant, and a /clock published before a command but received
-        after the read of /clock would otherwise come after the command."""
+        call, and of every message the previous call deferred, in the order they were published
+        (module docstring); returns how many. A message received while the subscriptions are
+        read waits for the next call: one read after another is not one instant, and a /clock
+        published before a command but received after the read of /clock would otherwise come
+        after the command. Which messages those are is told by their rmw receive time against
+        the system clock, two clocks that may disagree; so what one call deferred the next runs
+        whatever its receive time says: a receive clock ahead of ours delays a message by one
+        period at most, never holds it."""
         start_ns = time.time_ns()
-        batch = self._pending
+        ready = self._pending       # deferred by the last call: run now, unconditionally
+        self._pending = []
         for index, (sub, callback) in enumerate(self._polled):
             with sub.handle:
                 while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
                     msg, info = taken
                     self._arrivals += 1
-                    batch.append((info['source_timestamp'], index, self._arrivals,
-                                  info['received_timestamp'], msg, callback))
-        ready = [m for m in batch if m[3] <= start_ns]
-        self._pending = [m for m in batch if m[3] > start_ns] if len(ready) < len(batch) else []
+                    item = (info['source_timestamp'], index, self._arrivals,
+                            info['received_timestamp'], msg, callback)
+                    (ready if item[3] <= start_ns else self._pending).append(item)
         ready.sort(key=lambda item: item[:3])
         for _, _, _, received_ns, msg, callback in ready:
             callback(msg, received_ns if self.sub_clock is None else self.receive_ns())

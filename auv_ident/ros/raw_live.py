@@ -62,9 +62,7 @@ class RawLive:
                                                      DIAGNOSTICS_QOS)
         imap = self.session.input_map
         inputs = imap.commands + imap.sensors
-        self.intake = Intake(node, settings.intake_period_s,
-                             sim_clock=node.get_parameter('use_sim_time').value and any(
-                                 not e.stamped for e in inputs))
+        self.intake = Intake.for_inputs(node, settings.intake_period_s, imap.inputs)
         self.subscriptions = []
         for entry in inputs:
             cls = message_class(entry.type, entry.topic)

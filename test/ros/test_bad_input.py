@@ -424,17 +424,17 @@ class _Recorder:
 def _node(ctx, **params):
     node = IdentifierNode(context=ctx, parameter_overrides=[Parameter(k, value=v)
                                                             for k, v in params.items()])
-    node.pub_estimate = _Recorder(node.pub_estimate.msg_type)
-    node.pub_covariance = _Recorder(node.pub_covariance.msg_type)
+    node.odom.pub_estimate = _Recorder(node.odom.pub_estimate.msg_type)
+    node.odom.pub_covariance = _Recorder(node.odom.pub_covariance.msg_type)
     node.log_lines = []
-    node._emit = lambda level, text: node.log_lines.append((level, text))
+    node.odom._emit = lambda level, text: node.log_lines.append((level, text))
     return node
 
 
 def _feed_node(node, messages):
-    events = []
+    events, live = [], node.odom
     for topic, msg in messages:
-        events.append(node.on_actuators(msg) if topic == ACTUATOR_TOPIC else node.on_odom(msg))
+        events.append(live.on_actuators(msg) if topic == ACTUATOR_TOPIC else live.on_odom(msg))
     return events
 
 
@@ -468,9 +468,9 @@ def reference(run):
 
 
 def _assert_finite_published(node):
-    for m in node.pub_estimate.msgs:
+    for m in node.odom.pub_estimate.msgs:
         assert np.all(np.isfinite(m.position)) and np.all(np.isfinite(m.velocity))
-    for m in node.pub_covariance.msgs:
+    for m in node.odom.pub_covariance.msgs:
         assert np.all(np.isfinite(m.data))
 
 
@@ -504,11 +504,11 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
         t0 = time.monotonic()
         node_events = _feed_node(node, messages)
         wall = time.monotonic() - t0
-        assert node.internal_errors == 0
+        assert node.odom.internal_errors == 0
         assert [e.kind for e in node_events] == [e.kind for e in events]
-        assert node.session.counters.reasons == session.counters.reasons
+        assert node.odom.session.counters.reasons == session.counters.reasons
         _assert_finite_published(node)
-        assert len(node.pub_estimate.msgs) == sum(e.good for e in events)
+        assert len(node.odom.pub_estimate.msgs) == sum(e.good for e in events)
         # rate limit: at most one line per (topic, code) per 5 s, and each names its problem
         for key in keys:
             topic, code = key.split(': ')
@@ -521,9 +521,9 @@ def test_corpus_case(case, run, reference, ctx, tmp_path):
                     if lv == 'warning' and 'states no usable covariance' not in t
                     and 'repeated exactly for' not in t]
         assert len(warnings) <= len(keys) * (1 + int(wall // 5.0) + 1), warnings
-        st = node.diagnostic_status()
+        st = node.odom.diagnostic_status()
         assert int({v.key: v.value for v in st.values}['internal_errors']) == 0
-        node_final = node.session.last_good.estimate
+        node_final = node.odom.session.last_good.estimate
     finally:
         node.destroy_node()
     assert np.array_equal(node_final, session.last_good.estimate)
@@ -587,20 +587,20 @@ def test_forced_non_positive_definite_covariance_is_repaired(run, ctx):
     node = _node(ctx)
     try:
         _feed_node(node, _prefix(run, 300))
-        f = node.session.stream.ekf
+        f = node.odom.session.stream.ekf
         w, V = np.linalg.eigh(f.P)
         w[-1] = -w[-1]                          # the largest eigenvalue made negative
         f.P = (V * w) @ V.T
-        before = node.session.last_good.estimate.copy()
+        before = node.odom.session.last_good.estimate.copy()
         evs = _feed_node(node, _clean(run, [300]))
         ev = evs[-1]
         assert ev.kind == 'update' and ev.code == 'repaired' and ev.good
         assert 'not positive definite' in ev.reason and 'repaired' in ev.reason
-        assert node.session.counters.repairs == 1 and node.session.counters.errors == 0
-        p = node.session.model.p_coef      # the coefficients (the current follows them)
+        assert node.odom.session.counters.repairs == 1 and node.odom.session.counters.errors == 0
+        p = node.odom.session.model.p_coef      # the coefficients (the current follows them)
         assert np.all(np.abs(ev.estimate[:p] - before[:p]) < 0.05 * np.abs(before[:p]))
         assert any('repaired' in t for lv, t in node.log_lines)
-        kv = {v.key: v.value for v in node.diagnostic_status().values}
+        kv = {v.key: v.value for v in node.odom.diagnostic_status().values}
         assert kv['repairs'] == '1'
         evs = _feed_node(node, _clean(run, range(301, len(run.t))))
         assert all(e.kind == 'update' and e.good for e in evs if e.kind != 'command')
@@ -614,27 +614,27 @@ def test_unrepairable_covariance_resets_from_the_last_good_estimate(run, ctx, tm
     node = _node(ctx, save_path=str(save))
     try:
         _feed_node(node, _prefix(run, 300))
-        good = node.session.last_good
-        n_published = len(node.pub_estimate.msgs)
-        node.session.stream.ekf.P[3, 3] = math.nan
+        good = node.odom.session.last_good
+        n_published = len(node.odom.pub_estimate.msgs)
+        node.odom.session.stream.ekf.P[3, 3] = math.nan
         ev = _feed_node(node, _clean(run, [300]))[-1]
         assert ev.kind == 'error' and 'cannot be repaired' in ev.reason
         assert 'coefficients from the last good estimate' in ev.reason
-        assert len(node.pub_estimate.msgs) == n_published          # nothing published
-        st = node.diagnostic_status()
+        assert len(node.odom.pub_estimate.msgs) == n_published          # nothing published
+        st = node.odom.diagnostic_status()
         assert st.level == DiagnosticStatus.ERROR and st.message == 'diverging'
-        assert node.session.last_good is good
-        ok, _ = node.save()                                       # ~/save: the last good one
+        assert node.odom.session.last_good is good
+        ok, _ = node.odom.save()                                       # ~/save: the last good one
         assert ok and json.loads(save.read_text())['estimate'] == list(good.estimate)
         # restarted from the last good estimate with 4x its covariance
         ev = _feed_node(node, _clean(run, [301]))[-1]
         assert ev.kind == 'update'
-        est, cov = node.session.estimate_now()
+        est, cov = node.odom.session.estimate_now()
         assert np.allclose(np.sqrt(np.diag(cov)), 2.0 * good.std, rtol=0.02)
         assert np.allclose(est, good.estimate, rtol=1e-3)
         _feed_node(node, _clean(run, range(302, len(run.t))))
         _assert_finite_published(node)
-        assert node.session.last_good.stamp_ns > good.stamp_ns
+        assert node.odom.session.last_good.stamp_ns > good.stamp_ns
     finally:
         node.destroy_node()
 
@@ -650,27 +650,28 @@ def test_absurd_burst_never_reaches_the_estimate_and_long_bursts_reset(run, ctx)
         published_before = None
         for i, (topic, msg) in enumerate(messages):
             if topic == ACTUATOR_TOPIC:
-                node.on_actuators(msg)
+                node.odom.on_actuators(msg)
                 continue
             k = i // 2
             if k == SEG[0]:
-                published_before = node.pub_estimate.msgs[-1]
-            ev = node.on_odom(msg)
+                published_before = node.odom.pub_estimate.msgs[-1]
+            ev = node.odom.on_odom(msg)
             if SEG[0] <= k < SEG[0] + 60:
                 assert ev.kind in ('rejected', 'error') or not ev.good
-                levels.append(node.diagnostic_status().level)
-                resets.append(node.session.counters.guard_resets)
-        assert node.session.counters.outliers >= 40 and node.session.counters.guard_resets >= 1
+                levels.append(node.odom.diagnostic_status().level)
+                resets.append(node.odom.session.counters.guard_resets)
+        counters = node.odom.session.counters
+        assert counters.outliers >= 40 and counters.guard_resets >= 1
         assert DiagnosticStatus.ERROR in levels
         # ERROR as soon as the guard's window is inconsistent; the reset GUARD_SECONDS later
         inconsistent_for = T * (resets.index(1) - levels.index(DiagnosticStatus.ERROR))
         assert inconsistent_for == pytest.approx(GUARD_SECONDS, abs=1.5 * T), levels
         # nothing published during the burst: the first estimate after it is good data's
         burst_stamps = {int(round(run.t[k] * 1e9)) for k in range(SEG[0], SEG[0] + 60)}
-        for m in node.pub_estimate.msgs:
+        for m in node.odom.pub_estimate.msgs:
             assert m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec \
                 not in burst_stamps
-        after = [m for m in node.pub_estimate.msgs
+        after = [m for m in node.odom.pub_estimate.msgs
                  if m.header.stamp.sec >= run.t[SEG[0] + 60]]
         assert after
         before = np.array(published_before.position)
@@ -702,9 +703,9 @@ def test_every_distinct_problem_is_named_while_another_floods(run, ctx):
                     and 'repeated exactly for' not in t]
         assert len([t for t in warnings if 'non-finite' in t]) == 1
         assert len([t for t in warnings if 'implausible fin' in t]) == 1
-        assert node.session.counters.reasons['odom: non-finite'] == 40
+        assert node.odom.session.counters.reasons['odom: non-finite'] == 40
         time.sleep(0.01)
-        node._warn_limit.period = 0.0          # the next line carries the suppressed count
+        node.odom._warn_limit.period = 0.0          # the next line carries the suppressed count
         _feed_node(node, bad(SEG[0]))
         last = [t for lv, t in node.log_lines if lv == 'warning'][-1]
         assert 'non-finite' in last and '39 more like it' in last
@@ -1025,24 +1026,24 @@ def test_legitimate_data_pass_untouched():
 def test_estimate_file_is_autosaved_while_updates_arrive(run, ctx, tmp_path, monkeypatch):
     """Besides ~/save and shutdown, the 1 Hz timer rewrites save_path every
     AUTOSAVE_PERIOD_S while new updates arrive (atomically), so a SIGKILL loses little."""
-    import auv_ident.ros.identifier_node as mod
+    import auv_ident.ros.odom_live as mod
     save = tmp_path / 'auto.json'
     node = _node(ctx, save_path=str(save))
-    node.pub_diagnostics = _Recorder()
+    node.odom.pub_diagnostics = _Recorder()
     try:
         monkeypatch.setattr(mod, 'AUTOSAVE_PERIOD_S', 0.0)
-        node.on_timer()
+        node.odom.on_timer()
         assert not save.exists()                    # no update yet: nothing to save
         _feed_node(node, _prefix(run, 50))
-        node.on_timer()
+        node.odom.on_timer()
         assert json.loads(save.read_text())['steps'] == 50
         mtime = save.stat().st_mtime_ns
-        node.on_timer()                             # nothing new: not rewritten
+        node.odom.on_timer()                             # nothing new: not rewritten
         assert save.stat().st_mtime_ns == mtime
         _feed_node(node, _clean(run, range(50, 80)))
-        node.on_timer()
+        node.odom.on_timer()
         doc = json.loads(save.read_text())
-        assert doc['steps'] == 80 and doc['estimate'] == list(node.session.last_good.estimate)
+        assert doc['steps'] == 80 and doc['estimate'] == list(node.odom.session.last_good.estimate)
         assert not list(tmp_path.glob('.*.tmp'))    # atomic: no temp file left
     finally:
         node.destroy_node()

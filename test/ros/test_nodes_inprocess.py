@@ -96,9 +96,9 @@ def _feed(node, messages):
     events = []
     for topic, _, msg in messages:
         if topic == ACTUATOR_TOPIC:
-            node.on_actuators(msg)
+            node.odom.on_actuators(msg)
         elif topic == ODOM_TOPIC:
-            events.append(node.on_odom(msg))
+            events.append(node.odom.on_odom(msg))
     return events
 
 
@@ -142,8 +142,8 @@ def test_identifier_parameter_overrides(ctx, nodes):
         coefficients=['Z_w', 'M_ds'], initial=[-0.2, -0.05], measured=['u', 'w', 'q', 'z'],
         noise_mode='matching', sample_time=0.1, frame='enu'))
     nodes.append(ident)
-    s = ident.session
-    assert ident.names == ['Z_w', 'M_ds', 'current_n', 'current_e']   # the current estimated
+    s = ident.odom.session
+    assert ident.odom.names == ['Z_w', 'M_ds', 'current_n', 'current_e']   # the current estimated
     assert np.allclose(s.theta0, [-0.2, -0.05, 0.0, 0.0])
     assert s.measured.tolist() == [c in ('u', 'w', 'q', 'z') for c in
                                    ('u', 'v', 'w', 'p', 'q', 'r', 'x', 'y', 'z', 'phi',
@@ -152,8 +152,8 @@ def test_identifier_parameter_overrides(ctx, nodes):
     default = IdentifierNode(context=ctx)
     nodes.append(default)
     v = load_vehicle('nps_auv2')
-    assert default.names == list(v.identify_default) + ['current_n', 'current_e']
-    assert np.allclose(default.session.theta0[:5],
+    assert default.odom.names == list(v.identify_default) + ['current_n', 'current_e']
+    assert np.allclose(default.odom.session.theta0[:5],
                        Model(v, v.identify_default).theta_true * 1.5)
 
 
@@ -194,12 +194,12 @@ def test_current_parameters_reach_the_simulator_and_the_identifier(ctx, nodes):
     assert still.run.current is None
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
     nodes.append(ident)
-    assert ident.names == list(load_vehicle('nps_auv2').identify_default)
+    assert ident.odom.names == list(load_vehicle('nps_auv2').identify_default)
     given = IdentifierNode(context=ctx, parameter_overrides=_params(
         current='estimate', current_down=True, velocity_reference='water', current_walk=1e-3))
     nodes.append(given)
-    assert given.names[-3:] == ['current_n', 'current_e', 'current_d']
-    assert given.session.model.velocity_reference == 'water'
+    assert given.odom.names[-3:] == ['current_n', 'current_e', 'current_d']
+    assert given.odom.session.model.velocity_reference == 'water'
 
 
 def test_config_files_hold_the_defaults(ctx, nodes):
@@ -216,8 +216,8 @@ def test_config_files_hold_the_defaults(ctx, nodes):
             assert filed._parameters[name].value == param.value, (fname, name)
         if cls is IdentifierNode:
             for field in ('q_state', 'noise_std', 'measured'):
-                assert np.array_equal(getattr(filed.session.cfg, field),
-                                      getattr(plain.session.cfg, field)), field
+                assert np.array_equal(getattr(filed.odom.session.cfg, field),
+                                      getattr(plain.odom.session.cfg, field)), field
 
 
 # --- simulator -------------------------------------------------------------------------------
@@ -257,15 +257,15 @@ def test_simulator_publishes_the_run(ctx, nodes):
 def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_path):
     ident = IdentifierNode(context=ctx)
     ex, probe, estimates, covariances, _ = _probe_identifier(ctx, nodes, ident)
-    assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0
-                       and ident.pub_covariance.get_subscription_count() > 0)
+    assert _spin_until(ex, lambda: ident.odom.pub_estimate.get_subscription_count() > 0
+                       and ident.odom.pub_covariance.get_subscription_count() > 0)
     messages = _ordered_messages(run)
     events = []
     for topic, _, msg in messages:
         if topic == ACTUATOR_TOPIC:
-            ident.on_actuators(msg)
+            ident.odom.on_actuators(msg)
         elif topic == ODOM_TOPIC:
-            events.append(ident.on_odom(msg))
+            events.append(ident.odom.on_odom(msg))
             ex.spin_once(timeout_sec=0.0)
     updates = [e for e in events if e.kind == 'update']
     assert len(updates) == len(run.t)         # the command comes first: nothing rejected
@@ -300,7 +300,7 @@ def test_identifier_publishes_estimates_and_replay_matches(ctx, nodes, run, tmp_
     # converging from the 50 % offset in 20 s
     # (K_v within 50 %: at first it shares the sway information with the unknown current,
     # estimated by default)
-    truth = ident.session.model.theta_true[:5]
+    truth = ident.odom.session.model.theta_true[:5]
     tol = np.array([0.25, 0.25, 0.25, 0.25, 0.5])
     assert np.all(np.abs(last.estimate[:5] - truth) < tol * np.abs(truth))
 
@@ -335,22 +335,22 @@ def test_identifier_reads_odometry_bytes_as_the_messages(ctx, nodes, run):
     from rclpy.serialization import serialize_message
     ident = IdentifierNode(context=ctx)
     nodes.append(ident)
-    assert ident.sub_odom.raw
+    assert ident.odom.sub_odom.raw
     session = IdentSession()
     for topic, _, msg in _ordered_messages(run)[:3 * 60]:
         if topic == ACTUATOR_TOPIC:
-            ident.on_actuators(msg)
+            ident.odom.on_actuators(msg)
             session.on_actuators(msg)
         elif topic == ODOM_TOPIC:
-            got = ident.on_odom_payload(serialize_message(msg))
+            got = ident.odom.on_odom_payload(serialize_message(msg))
             expected = session.on_odom(msg)
             assert (got.kind, got.stamp_ns, got.reason) == (expected.kind, expected.stamp_ns,
                                                             expected.reason)
             assert np.array_equal(got.estimate, expected.estimate)
-    assert ident.session.counters.odom_accepted == 60
-    ev = ident.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
+    assert ident.odom.session.counters.odom_accepted == 60
+    ev = ident.odom.on_odom_payload(b'\x00\x01\x00\x00' + b'\xff' * 40)
     assert ev.kind == 'rejected' and ev.code == 'conversion' and 'Undecodable' in ev.reason
-    assert ident.session.counters.odom_rejected == 1 and ident.internal_errors == 0
+    assert ident.odom.session.counters.odom_rejected == 1 and ident.odom.internal_errors == 0
 
 
 def test_publish_rate_thins_the_estimates_not_the_updates(ctx, nodes, run):
@@ -360,15 +360,15 @@ def test_publish_rate_thins_the_estimates_not_the_updates(ctx, nodes, run):
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(publish_rate_hz=2.0))
     nodes.append(ident)
     published = []
-    ident.publish_estimate = published.append
+    ident.odom.publish_estimate = published.append
     session = IdentSession()
     good = []
     for topic, _, msg in _ordered_messages(run):
         if topic == ACTUATOR_TOPIC:
-            ident.on_actuators(msg)
+            ident.odom.on_actuators(msg)
             session.on_actuators(msg)
         elif topic == ODOM_TOPIC:
-            got, expected = ident.on_odom(msg), session.on_odom(msg)
+            got, expected = ident.odom.on_odom(msg), session.on_odom(msg)
             assert (got.kind, got.stamp_ns, got.good) == (expected.kind, expected.stamp_ns,
                                                            expected.good)
             assert np.array_equal(got.estimate, expected.estimate)
@@ -387,57 +387,58 @@ def test_identifier_rejects_bad_messages_and_recovers(ctx, nodes, run, monkeypat
     messages = _ordered_messages(run)
     # odometry before any command: rejected
     first_odom = messages[1][2]
-    ev = ident.on_odom(first_odom)
+    ev = ident.odom.on_odom(first_odom)
     assert ev.kind == 'rejected' and 'no actuator command' in ev.reason
     events = _feed(ident, messages[:3 * 40])
     assert [e.kind for e in events] == ['update'] * 40
-    good = ident.session.last_good
+    good = ident.odom.session.last_good
     t = float(run.t[40])
     # non-finite measured field
     x = run.y[40].copy()
     x[2] = math.nan
-    ev = ident.on_odom(state_to_odometry(t, x))
+    ev = ident.odom.on_odom(state_to_odometry(t, x))
     assert ev.kind == 'rejected' and 'non-finite' in ev.reason and ' w' in ev.reason
     # duplicate stamp
-    ev = ident.on_odom(state_to_odometry(float(run.t[39]), run.y[39]))
+    ev = ident.odom.on_odom(state_to_odometry(float(run.t[39]), run.y[39]))
     assert ev.kind == 'rejected' and 'not after the previous' in ev.reason
     # a JointState without the expected joints / with a non-finite command
     bad = JointState(name=['a'], position=[0.0], velocity=[0.0])
-    ev = ident.on_actuators(bad)
+    ev = ident.odom.on_actuators(bad)
     assert ev.kind == 'rejected' and 'lacks joint' in ev.reason
     u = run.u[40].copy()
     u[0] = math.inf
-    ev = ident.on_actuators(actuators_to_joint_state(t, u))
+    ev = ident.odom.on_actuators(actuators_to_joint_state(t, u))
     assert ev.kind == 'rejected' and 'non-finite command' in ev.reason
     # a wrong message type on the odometry callback
-    ev = ident.on_odom(JointState())
+    ev = ident.odom.on_odom(JointState())
     assert ev.kind == 'rejected'
-    assert ident.session.counters.odom_rejected == 4 and ident.session.counters.cmd_rejected == 2
-    assert ident.session.last_good is good
+    counters = ident.odom.session.counters
+    assert counters.odom_rejected == 4 and counters.cmd_rejected == 2
+    assert ident.odom.session.last_good is good
 
     # a core error: logged, ERROR on /diagnostics, filter restarted, last good kept
     def boom(t, y):
         raise DivergenceError('covariance lost positive definiteness (test)')
-    monkeypatch.setattr(ident.session.stream, 'add_measurement', boom)
-    ev = ident.on_odom(messages[3 * 40 + 1][2])
+    monkeypatch.setattr(ident.odom.session.stream, 'add_measurement', boom)
+    ev = ident.odom.on_odom(messages[3 * 40 + 1][2])
     assert ev.kind == 'error' and 'DivergenceError' in ev.reason
-    st = ident.diagnostic_status()
+    st = ident.odom.diagnostic_status()
     assert st.level == DiagnosticStatus.ERROR and st.message == 'diverging'
-    assert ident.session.last_good is good and not ident.session.started
-    est, _ = ident.session.estimate_now()
+    assert ident.odom.session.last_good is good and not ident.odom.session.started
+    est, _ = ident.odom.session.estimate_now()
     assert np.array_equal(est, good.estimate)
     # the restarted filter takes data again (buffered commands kept)
     events = _feed(ident, messages[3 * 41:3 * 60])
     assert events and all(e.kind == 'update' for e in events)
-    assert ident.session.counters.errors == 1
-    assert ident.diagnostic_status().level == DiagnosticStatus.ERROR   # until 200 updates
+    assert ident.odom.session.counters.errors == 1
+    assert ident.odom.diagnostic_status().level == DiagnosticStatus.ERROR   # until 200 updates
 
 
 def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     save = tmp_path / 'est.json'
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(save_path=str(save)))
     ex, probe, _, _, diags = _probe_identifier(ctx, nodes, ident)
-    assert ident.diagnostic_status().message == 'waiting for data'
+    assert ident.odom.diagnostic_status().message == 'waiting for data'
     _feed(ident, _ordered_messages(run))
     assert _spin_until(ex, lambda: diags, timeout=5.0)   # the 1 Hz timer
     st = diags[-1].status[0]
@@ -447,7 +448,7 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     kv = {v.key: v.value for v in st.values}
     assert int(kv['accepted']) == len(run.t) and int(kv['rejected']) == 0
     assert 0.5 < float(kv['mean_nis_per_dof']) < 2.0
-    for name in ident.names:
+    for name in ident.odom.names:
         assert float(kv[name]) == float(repr(float(kv[name])))
         assert float(kv[name + '_std']) > 0
         # the coefficients' random walk; the current is constant by default (current_walk 0)
@@ -455,7 +456,7 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
         assert kv[name + '_verdict'] in ('identifiable', 'weak', 'not excited')
     assert float(kv['R_u']) == pytest.approx(0.01 ** 2)
     # the live diagnosis (session/live_diagnosis.py): 20 s fill the 200-update window
-    verdicts, diagnosis = ident.session.diagnosis()
+    verdicts, diagnosis = ident.odom.session.diagnosis()
     assert kv['consistent'] == {True: 'true', False: 'false', None: 'not judged'}[
         diagnosis['consistent']]
     assert kv['diagnosis'] == diagnosis['messages'][0]
@@ -476,8 +477,8 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     assert doc['diagnosis']['messages'][0] == kv['diagnosis']
     assert doc['live_noise_model']['state'] == kv['noise_state'] == 'holds'
     assert doc['live_noise_model']['reruns'] == 0 and kv['noise_scale_w'] == '1.0'
-    s = ident.session
-    assert doc['vehicle'] == 'nps_auv2' and doc['coefficients'] == ident.names
+    s = ident.odom.session
+    assert doc['vehicle'] == 'nps_auv2' and doc['coefficients'] == ident.odom.names
     assert doc['estimate'] == list(s.last_good.estimate)
     assert np.allclose(doc['covariance'], s.last_good.cov, rtol=0, atol=0)
     assert doc['std'] == pytest.approx(list(s.last_good.std))
@@ -486,15 +487,15 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
 
     fut = client_reset.call_async(Trigger.Request())
     assert _spin_until(ex, fut.done)
-    assert fut.result().success and not ident.session.started
-    assert ident.diagnostic_status().message == 'waiting for data'
+    assert fut.result().success and not ident.odom.session.started
+    assert ident.odom.diagnostic_status().message == 'waiting for data'
 
     # warm start from the file: starts at its estimate, with its covariance
     warm = IdentifierNode(context=ctx, parameter_overrides=_params(warm_start=str(save)))
     nodes.append(warm)
-    p = warm.session.model.p_coef    # the coefficients; the current starts afresh
-    assert np.array_equal(warm.session.theta0[:p], doc['estimate'][:p])
-    est, cov = warm.session.estimate_now()
+    p = warm.odom.session.model.p_coef    # the coefficients; the current starts afresh
+    assert np.array_equal(warm.odom.session.theta0[:p], doc['estimate'][:p])
+    est, cov = warm.odom.session.estimate_now()
     assert np.allclose(cov[:p, :p], np.asarray(doc['covariance'])[:p, :p])
     ev = _feed(warm, _ordered_messages(run)[:6])[-1]
     assert ev.kind == 'update'
@@ -503,7 +504,7 @@ def test_diagnostics_services_and_estimate_file(ctx, nodes, run, tmp_path):
     # no save_path: the service says so
     plain = IdentifierNode(context=ctx)
     nodes.append(plain)
-    ok, message = plain.save()
+    ok, message = plain.odom.save()
     assert not ok and 'save_path' in message
 
 
@@ -516,12 +517,12 @@ def test_a_stuck_sensor_is_error_and_never_saved_as_last_good(ctx, nodes, run, t
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(save_path=str(save)))
     nodes.append(ident)
     published = []
-    publish = ident.publish_estimate
+    publish = ident.odom.publish_estimate
 
     def record(ev):
         published.append(ev.stamp_ns)
         publish(ev)
-    ident.publish_estimate = record
+    ident.odom.publish_estimate = record
     k0 = 200
     frozen = [m for m in _ordered_messages(run) if m[0] == ODOM_TOPIC][k0 - 1][2]
     last_real = stamp_to_ns(frozen.header.stamp)
@@ -535,12 +536,12 @@ def test_a_stuck_sensor_is_error_and_never_saved_as_last_good(ctx, nodes, run, t
             k += 1
         messages.append((topic, t_ns, msg))
     lines = []
-    ident._emit = lambda level, text: lines.append((level, text))
+    ident.odom._emit = lambda level, text: lines.append((level, text))
     wall = time.monotonic()
     events = _feed(ident, messages)
     wall = time.monotonic() - wall
     assert [e.code for e in events[k0:]] == ['repeated'] * (len(run.t) - k0)
-    st = ident.diagnostic_status()
+    st = ident.odom.diagnostic_status()
     kv = {v.key: v.value for v in st.values}
     assert st.level == DiagnosticStatus.ERROR
     assert st.message == ('stuck sensor: position, attitude, linear velocity, angular velocity '
@@ -550,8 +551,8 @@ def test_a_stuck_sensor_is_error_and_never_saved_as_last_good(ctx, nodes, run, t
     assert max(published) == last_real
     ident.shutdown_save()
     doc = json.loads(save.read_text())
-    assert doc['stamp_ns'] == last_real == ident.session.last_good.stamp_ns
-    assert doc['estimate'] == list(ident.session.last_good.estimate)
+    assert doc['stamp_ns'] == last_real == ident.odom.session.last_good.stamp_ns
+    assert doc['estimate'] == list(ident.odom.session.last_good.estimate)
     # the fault said once, the repeats' warning rate-limited (one line per 5 s)
     assert sum('Its repeats are not fed' in text for _, text in lines) == 1
     repeats = [text for _, text in lines if text.startswith('rejected odom: every measured')]
@@ -590,19 +591,19 @@ def test_a_silent_actuator_topic_is_warned_about_not_dropped(ctx, nodes, run):
     ident = IdentifierNode(context=ctx)
     nodes.append(ident)
     lines = []
-    ident._emit = lambda level, text: lines.append((level, text))
+    ident.odom._emit = lambda level, text: lines.append((level, text))
     messages = _ordered_messages(run)
     first = [m for m in messages if m[0] == ACTUATOR_TOPIC][:1]
     odom = [m for m in messages if m[0] == ODOM_TOPIC][:100]
     events = _feed(ident, first + odom)         # one command, then 5 s of odometry
     assert all(e.kind == 'update' for e in events)
-    assert ident.check_actuator_publisher() == 0
+    assert ident.odom.check_actuator_publisher() == 0
     warned = [t for lv, t in lines if lv == 'warning' and 'no publisher' in t]
     assert len(warned) == 1 and 'last command is held' in warned[0]
-    ident.check_actuator_publisher()            # no odometry since: nothing more to say
+    ident.odom.check_actuator_publisher()            # no odometry since: nothing more to say
     assert len([t for _, t in lines if 'no publisher' in t]) == 1
-    ident.on_timer()
-    values = {v.key: v.value for v in ident.diagnostic_status().values}
+    ident.odom.on_timer()
+    values = {v.key: v.value for v in ident.odom.diagnostic_status().values}
     assert values['actuator_publishers'] == '0'
 
 
@@ -613,20 +614,20 @@ def test_lost_odometry_is_counted_and_warned_about(ctx, nodes, run):
     ident = IdentifierNode(context=ctx)
     nodes.append(ident)
     lines = []
-    ident._emit = lambda level, text: lines.append((level, text))
+    ident.odom._emit = lambda level, text: lines.append((level, text))
     messages = _ordered_messages(run)
     odom = [i for i, m in enumerate(messages) if m[0] == ODOM_TOPIC]
     missing = set(odom[40:-1:3])
     _feed(ident, [m for i, m in enumerate(messages) if i not in missing])
-    ident.on_timer()
-    values = {v.key: v.value for v in ident.diagnostic_status().values}
+    ident.odom.on_timer()
+    values = {v.key: v.value for v in ident.odom.diagnostic_status().values}
     assert values['odom_lost'] == str(len(missing)) and values['odom_lost_event'] == '0'
     assert float(values['odom_rate_hz']) == pytest.approx(20.0, rel=0.01)
     warned = [t for lv, t in lines if lv == 'warning' and 'lost' in t]
     assert len(warned) == 1
     assert warned[0].startswith(f'odom: {len(missing)} messages lost')
     assert 'lower rate' in warned[0] and 'depth 1000' in warned[0]
-    ident.on_timer()                            # nothing new lost: nothing more said
+    ident.odom.on_timer()                            # nothing new lost: nothing more said
     assert len([t for _, t in lines if 'lost' in t]) == 1
 
 
@@ -647,14 +648,14 @@ def test_identifier_publishes_the_water_current(ctx, nodes):
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(ident)
         ex.add_node(probe)
-        assert _spin_until(ex, lambda: ident.pub_current.get_subscription_count() > 0)
+        assert _spin_until(ex, lambda: ident.odom.pub_current.get_subscription_count() > 0)
         events = _feed(ident, _ordered_messages(run_c, frame))
         last = [e for e in events if e.kind == 'update' and e.good][-1]
         assert _spin_until(ex, lambda: got and stamp_to_ns(got[-1].header.stamp)
                            == last.stamp_ns)
         msg = got[-1]
         assert msg.header.frame_id == world
-        i_n, i_e = ident.names.index('current_n'), ident.names.index('current_e')
+        i_n, i_e = ident.odom.names.index('current_n'), ident.odom.names.index('current_e')
         north, east = last.estimate[i_n], last.estimate[i_e]
         lin = msg.twist.twist.linear
         expect = (north, east, 0.0) if frame == 'ned' else (east, north, 0.0)
@@ -674,7 +675,7 @@ def test_identifier_publishes_the_water_current(ctx, nodes):
             node.destroy_node()
     still = IdentifierNode(context=ctx, parameter_overrides=_params(current='none'))
     nodes.append(still)
-    assert still.pub_current is None      # the only place the topic is created
+    assert still.odom.pub_current is None      # the only place the topic is created
 
 
 def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
@@ -692,8 +693,8 @@ def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(
         coefficients=['auto', 'Z_ds'], auto_window=5.0, save_path=str(save)))
     ex, _, estimates, covariances, diags = _probe_identifier(ctx, nodes, ident)
-    assert ident.names == ['Z_ds', 'current_n', 'current_e']
-    assert _spin_until(ex, lambda: ident.pub_estimate.get_subscription_count() > 0)
+    assert ident.odom.names == ['Z_ds', 'current_n', 'current_e']
+    assert _spin_until(ex, lambda: ident.odom.pub_estimate.get_subscription_count() > 0)
 
     def auto_values():
         return {kv.key: kv.value for kv in diags[-1].status[0].values} if diags else {}
@@ -706,7 +707,7 @@ def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
     kv = auto_values()
     assert kv['auto_window_s'] == '5.0' and kv['auto_chosen'] == ''
     assert kv['auto_named'] == 'Z_ds'
-    kept_s = ident.session.auto.data_s
+    kept_s = ident.odom.session.auto.data_s
     assert kept_s == pytest.approx(1.95)
     assert kv['diagnosis'] == (f'choosing coefficients from the data ({kept_s:.1f} of 5 s); '
                                'identifying Z_ds meanwhile')
@@ -715,17 +716,17 @@ def test_identifier_chooses_the_coefficients_live(ctx, nodes, tmp_path):
     assert _spin_until(ex, lambda: auto_values().get('auto_state') == 'chosen', timeout=30.0)
     kv = auto_values()
     chosen = kv['auto_chosen'].split(',')
-    sel = ident.session.auto.selection
+    sel = ident.odom.session.auto.selection
     assert chosen == sel.chosen and chosen[0] == 'Z_ds' and len(chosen) > 1
     assert int(kv['auto_left_out_count']) == len(sel.left_out) == len(v.names) - len(chosen)
     assert all(kv['auto_left_out_' + n] == why for n, why in sel.left_out.items())
     assert kv['diagnosis_1'].startswith('coefficients chosen from 5.0 s of data')
     names = chosen + ['current_n', 'current_e']
-    assert ident.names == names
+    assert ident.odom.names == names
     assert _spin_until(ex, lambda: list(estimates[-1].name) == names and len(
         covariances[-1].data) == len(names) ** 2)
     assert covariances[-1].layout.dim[0].label == 'row:' + ','.join(names)
-    ok, _ = ident.save()
+    ok, _ = ident.odom.save()
     doc = json.loads(save.read_text())
     assert ok and doc['coefficients'] == names and doc['selection']['state'] == 'chosen'
     assert doc['selection']['left_out'] == sel.left_out
@@ -745,14 +746,14 @@ def test_identifier_reads_the_topics_of_an_input_map(ctx, nodes, run, tmp_path):
     path.write_text(yaml.safe_dump({'version': 1, 'inputs': inputs}))
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(input_map=str(path)))
     ex, _, estimates, _, _ = _probe_identifier(ctx, nodes, ident)
-    subs = {s.topic_name: s.msg_type for s in ident.sub_commands + [ident.sub_odom]}
+    subs = {s.topic_name: s.msg_type for s in ident.odom.sub_commands + [ident.odom.sub_odom]}
     assert subs == {'/nav/odometry': Odometry,
                     **{f'/cmd/{a}': Float64 for a in fins + ('n_rpm',)}}
     # the receive time: the node's clock, for a message without a header
     before = time.time_ns()
-    ev = ident.on_input('delta_r', Float64(data=1.0))
+    ev = ident.odom.on_input('delta_r', Float64(data=1.0))
     assert ev.code == 'holding' and before <= ev.stamp_ns <= time.time_ns()
-    ident.session.reset()
+    ident.odom.session.reset()
     messages = []       # (bag topic, receive/log time, message) as a recorder would see them
     for k in range(len(run.t)):
         (_, t_ns, cmd), (_, _, odom) = sorted(sample_messages(run, k, 'ned')[:2],
@@ -765,11 +766,11 @@ def test_identifier_reads_the_topics_of_an_input_map(ctx, nodes, run, tmp_path):
     node_updates = []
     for topic, t_ns, msg in messages:
         if topic == '/nav/odometry':
-            ev = ident.on_odom(msg)
+            ev = ident.odom.on_odom(msg)
             node_updates.append(ev)
             ex.spin_once(timeout_sec=0.0)
         else:
-            ident.on_input(topic.rsplit('/', 1)[1], msg, t_ns)
+            ident.odom.on_input(topic.rsplit('/', 1)[1], msg, t_ns)
     assert all(e.kind == 'update' for e in node_updates)
     s = IdentSession(IdentifierSettings.from_values(input_map=str(path)))
     ups = replay_messages(messages, s)
@@ -794,19 +795,19 @@ def test_a_headerless_command_takes_the_clock_taken_before_it_with_sim_time(ctx,
     ident = IdentifierNode(context=ctx, parameter_overrides=_params(
         vehicle='bluerov2_heavy', input_map='bluerov2_heavy', use_sim_time=True))
     nodes.append(ident)
-    clock = ident.intake.sub_clock
+    clock = ident.odom.intake.sub_clock
     assert clock is not None and clock.topic_name == '/clock'
     assert clock.qos_profile.depth == 1000
     pwm = Float64MultiArray(data=[1500.0] * 8)
-    on_clock = ident.intake.callbacks['/clock']
+    on_clock = ident.odom.intake.callbacks['/clock']
     on_clock(Clock(clock=Time(sec=1758031200, nanosec=4353801)), 0)
-    ev = ident.on_input('thrusters', pwm)
+    ev = ident.odom.on_input('thrusters', pwm)
     assert ev.stamp_ns == 1758031200004353801
     on_clock(Clock(clock=Time(sec=1758031201, nanosec=0)), 0)
-    assert ident.on_input('thrusters', pwm).stamp_ns == 1758031201000000000
+    assert ident.odom.on_input('thrusters', pwm).stamp_ns == 1758031201000000000
     plain = IdentifierNode(context=ctx, parameter_overrides=_params(
         vehicle='bluerov2_heavy', input_map='bluerov2_heavy'))
     nodes.append(plain)
-    assert plain.intake.sub_clock is None
+    assert plain.odom.intake.sub_clock is None
     before = time.time_ns()
-    assert before <= plain.on_input('thrusters', pwm).stamp_ns <= time.time_ns()
+    assert before <= plain.odom.on_input('thrusters', pwm).stamp_ns <= time.time_ns()
