@@ -19,13 +19,14 @@ with the map's message type, taken as ``intake_period_s`` says (ros/intake.py: e
 default, a batch at a time in the order they were published; 0: each as it arrives). The
 default map, odom_actuators:
     ``actuators`` sensor_msgs/JointState: commands (conversions.py layout). The command inputs
-        are created before the odometry, so when both are waiting the executor takes the
-        command first. Commands of other forms (JointState with other joint names,
-        Float64MultiArray by index, one Float64 per actuator, in other units) hold each
-        actuator's last value (session/inputs.py); a message without a header is stamped
-        with its receive time: when DDS received it, or with ``use_sim_time`` the last
-        ``/clock`` taken before it (a played bag: the player's ``publish_clock`` gives each
-        message's log time, so the node stamps it as replay_bag does).
+        are created before the odometry, so when both are waiting and published at the same
+        instant the command is taken first (batched: a tie of publication times; with
+        ``intake_period_s`` 0: the executor's order). Commands of other forms (JointState with
+        other joint names, Float64MultiArray by index, one Float64 per actuator, in other
+        units) hold each actuator's last value (session/inputs.py); a message without a header
+        is stamped with its receive time: when DDS received it, or with ``use_sim_time`` the
+        last ``/clock`` taken before it (a played bag: the player's ``publish_clock`` gives
+        each message's log time, so the node stamps it as replay_bag does).
     ``/clock`` rosgraph_msgs/Clock, with ``use_sim_time`` only: the node's own subscription
         (RELIABLE, depth 1000), taken with the inputs: batched, in the order they were
         published (each message's source_timestamp; a player publishes a message's /clock

@@ -12,7 +12,7 @@ import copy
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
 import numpy as np
@@ -30,7 +30,13 @@ from auv_ident.ros.cdr import (
     UndecodableMessage,
 )
 from auv_ident.ros.intake import Intake
-from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
+from auv_ident.ros.toolkit import (
+    DIAGNOSTICS_QOS,
+    identifier_status,
+    LATCHED_QOS,
+    message_class,
+    STREAM_QOS,
+)
 from auv_ident.session.auto_choice import run_in_thread
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.messages import (
@@ -44,13 +50,10 @@ from auv_ident.session.session import Event, IdentSession
 from auv_ident.session.status import diagnostic_values
 from auv_ident.session.warning_limiter import WarningLimiter
 
-STATUS_NAME = 'auv_ident identifier'
 DIAGNOSTICS_PERIOD_S = 1.0
 WARN_THROTTLE_S = 5.0
 ERROR_THROTTLE_S = 1.0
 AUTOSAVE_PERIOD_S = 10.0
-LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
-          'ERROR': DiagnosticStatus.ERROR}
 
 
 class OdomLive:
@@ -356,9 +359,7 @@ class OdomLive:
         values = diagnostic_values(s, h, [('actuator_publishers', str(self.actuator_publishers)),
                                           ('internal_errors', str(self.internal_errors)),
                                           ('odom_lost_event', str(self.odom_lost_event))])
-        return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
-                                hardware_id=s.vehicle.name,
-                                values=[KeyValue(key=k, value=v) for k, v in values])
+        return identifier_status(h, s.vehicle.name, values)
 
     def check_actuator_publisher(self):
         """Live staleness rule: a held command is the norm (drivers publish on change), so

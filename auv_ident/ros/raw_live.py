@@ -16,7 +16,7 @@ and the sensor errors; also at shutdown) as on the odometry path.
 """
 from array import array
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.serialization import deserialize_message, serialize_message
@@ -26,15 +26,17 @@ from std_srvs.srv import Trigger
 
 from auv_ident.ros.cdr import estimate_templates, ImuView, UndecodableMessage
 from auv_ident.ros.intake import Intake
-from auv_ident.ros.toolkit import DIAGNOSTICS_QOS, LATCHED_QOS, message_class, STREAM_QOS
+from auv_ident.ros.toolkit import (
+    DIAGNOSTICS_QOS,
+    identifier_status,
+    LATCHED_QOS,
+    message_class,
+    STREAM_QOS,
+)
 from auv_ident.session.estimate_file import write_estimate_json
 from auv_ident.session.input_map import IMU
 from auv_ident.session.messages import NS_PER_S, PublishGate
 from auv_ident.session.raw_session import RawSession
-
-STATUS_NAME = 'auv_ident identifier'
-LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
-          'ERROR': DiagnosticStatus.ERROR}
 
 
 class RawLive:
@@ -139,10 +141,7 @@ class RawLive:
     def diagnostic_status(self):
         s = self.session
         h = s.health()
-        return DiagnosticStatus(level=LEVELS[h.level], name=STATUS_NAME, message=h.message,
-                                hardware_id=s.vehicle.name,
-                                values=[KeyValue(key=k, value=v)
-                                        for k, v in s.diagnostic_values()])
+        return identifier_status(h, s.vehicle.name, s.diagnostic_values())
 
     def publish_diagnostics(self):
         if not self.node.context.ok():

@@ -59,6 +59,7 @@ import threading
 import time
 from typing import Any, Callable, NamedTuple, Optional
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, ParameterUninitializedException
@@ -425,3 +426,17 @@ def message_class(msgtype, topic):
     except (BagError, ImportError, AttributeError):
         raise ConfigError(f'topic {topic}: message type {msgtype!r} is not installed '
                           '(no importable rclpy class)') from None
+
+
+IDENTIFIER_STATUS_NAME = 'auv_ident identifier'
+_LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
+           'ERROR': DiagnosticStatus.ERROR}
+
+
+def identifier_status(health, hardware_id, values):
+    """The identifier's DiagnosticStatus (both paths, ros/identifier_node.py docstring): a
+    session's Health (level 'OK' / 'WARN' / 'ERROR', message), the vehicle's name and the
+    (key, value) text pairs."""
+    return DiagnosticStatus(level=_LEVELS[health.level], name=IDENTIFIER_STATUS_NAME,
+                            message=health.message, hardware_id=hardware_id,
+                            values=[KeyValue(key=k, value=v) for k, v in values])
