@@ -35,6 +35,12 @@ from auv_ident.core.glider.vehicle import GliderVehicle, NUMBERS, TEXTS
 # what ours identifies on a Slocum's dives (docs/glider.md, "What the dives identify")
 DEFAULT_FREE = ('hull_volume', 'drag_zero_lift')
 IDENTIFIED = 'identifiable'
+# the lift and drag coefficients a calibration may move from the glider file's (published)
+# values before it is called implausible: a factor of 1.5 either way (published Slocum C_D0:
+# 0.14-0.2, Merckelbach et al. 2019). Beyond it the usual cause is an uncalibrated pitch (the
+# comet's raw m_pitch moves C_D0 from 0.155 to 0.240), else a file of another glider
+COEFFICIENTS = ('drag_zero_lift', 'induced_drag', 'lift_slope')
+PLAUSIBLE_FACTOR = 1.5
 
 
 def utc(t: float) -> str:
@@ -62,7 +68,9 @@ def calibrate_glider(record: GliderRecord, vehicle: GliderVehicle,
     """Calibrate a glider file's dynamic flight model on a record (its temperature left out:
     docs/glider.md says why). Returns {'calibration': Calibration, 'others': name -> verdict
     dict of each parameter of EXTRA not freed, had it alone been freed beside them, 'dives': the
-    number of dives, 'untrusted': the freed parameters the dives did not identify}."""
+    number of dives, 'untrusted': the freed parameters the dives did not identify,
+    'implausible': name -> calibrated / file's value of the lift and drag coefficients moved
+    beyond PLAUSIBLE_FACTOR}."""
     if 'thermal_expansion' in free:
         raise ConfigError("thermal_expansion: the flight model leaves the hull's thermal "
                           "expansion out (with the water's temperature as the hull's it is "
@@ -71,9 +79,14 @@ def calibrate_glider(record: GliderRecord, vehicle: GliderVehicle,
     cal = calibrate(record, vehicle.params, 'dynamic', free)
     # each alone beside the freed ones, as docs/glider.md's table: what freeing it would cost
     others = {n: identifiability(record, cal, (n,))[n] for n in EXTRA if n not in free}
+    implausible = {n: cal.value(n) / getattr(vehicle.params, n) for n in free
+                   if n in COEFFICIENTS and not (1.0 / PLAUSIBLE_FACTOR
+                                                 <= cal.value(n) / getattr(vehicle.params, n)
+                                                 <= PLAUSIBLE_FACTOR)}
     return {'calibration': cal, 'others': others,
             'dives': _dives(record),
-            'untrusted': [n for n in free if cal.verdicts[n]['verdict'] != IDENTIFIED]}
+            'untrusted': [n for n in free if cal.verdicts[n]['verdict'] != IDENTIFIED],
+            'implausible': implausible}
 
 
 def _columns(record: GliderRecord) -> dict:
@@ -107,6 +120,12 @@ def format_calibration(result: dict, vehicle: GliderVehicle, record: GliderRecor
     if result['untrusted']:
         first = (f'NOT identified: {", ".join(result["untrusted"])} '
                  '(the dives do not fix them: see the verdicts below): ' + where)
+    elif result['implausible']:
+        moved = ', '.join(f"{n} x {r:.2f} of the file's" for n, r in
+                          result['implausible'].items())
+        first = (f'NOT plausible: {moved} (beyond x {PLAUSIBLE_FACTOR:g} either way: is the '
+                 "pitch calibrated, import --pitch-correction? is the file this glider's?): "
+                 + where)
     else:
         first = 'identified: ' + where
     L = [first, '',
@@ -229,7 +248,8 @@ def calibration_json(result: dict, vehicle: GliderVehicle, record: GliderRecord)
             'dives': result['dives'], 'window_m': list(cal.window), 'samples': cal.samples,
             'estimates': {n: list(v) for n, v in cal.estimates().items()},
             'verdicts': {n: v['verdict'] for n, v in cal.verdicts.items()},
-            'untrusted': result['untrusted'], 'depth_rate_rms': cal.rms, 'lags': cal.lags,
+            'untrusted': result['untrusted'], 'implausible': result['implausible'],
+            'depth_rate_rms': cal.rms, 'lags': cal.lags,
             'others': {n: {'std': v['crb_std'], 'verdict': v['verdict']}
                        for n, v in result['others'].items()},
             'params': asdict(cal.params), 'seconds': cal.seconds}

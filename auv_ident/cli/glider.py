@@ -73,7 +73,7 @@ def cmd_calibrate(args):
         with open(args.vehicle_out, 'w') as f:
             f.write(calibrated_file_text(raw, vehicle, result, source))
         print(f'wrote {args.vehicle_out}')
-    return EXIT_UNTRUSTED if result['untrusted'] else 0
+    return EXIT_UNTRUSTED if result['untrusted'] or result['implausible'] else 0
 
 
 def cmd_validate(args):
@@ -101,7 +101,8 @@ def add_commands(sub):
     verbs = g.add_subparsers(dest='glider_cmd', required=True)
     sp = verbs.add_parser('calibrate', help="calibrate a glider file's flight model on the "
                                             "dives of a bag (the depth rate); exit 3 when a "
-                                            'freed parameter is not identified')
+                                            'freed parameter is not identified or a drag or '
+                                            "lift coefficient moves beyond x 1.5 of the file's")
     _common(sp)
     sp.add_argument('--free', default='hull_volume,drag_zero_lift',
                     help='the parameters to identify (default hull_volume,drag_zero_lift; '

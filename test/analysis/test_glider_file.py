@@ -147,13 +147,17 @@ def test_the_commands_on_the_comet_give_the_campaigns_figures(tmp_path, capsys):
 
 def test_an_uncalibrated_inclinometer_is_named_first(dives, tmp_path, capsys):
     """The dives logged by an inclinometer that reads 1/0.86 of the pitch (the comet's raw
-    m_pitch): the depth rate still calibrates (C_D0 takes the difference up), but the model then
-    flies at an angle of attack the DVL's dives do not show, its speed a few cm/s low: validate
-    says so on its first line, exit 3. With the pitch as flown, the same line is not there."""
+    m_pitch): the depth rate still calibrates, C_D0 taking the difference up beyond x 1.5 of
+    the published value (calibrate: NOT plausible, exit 3); the model then flies at an angle
+    of attack the DVL's dives do not show, its speed a few cm/s low: validate says so on its
+    first line, exit 3. With the pitch as flown, neither line is there (the tests above)."""
     bag = _bag(replace(dives, pitch=dives.pitch / 0.86), tmp_path)
     mine = tmp_path / 'mine.yaml'
-    assert _run(capsys, 'glider', 'calibrate', '--vehicle', 'slocum_comet', '--bag', str(bag),
-                '--vehicle-out', str(mine))[0] == 0
+    code, lines, _ = _run(capsys, 'glider', 'calibrate', '--vehicle', 'slocum_comet', '--bag',
+                          str(bag), '--vehicle-out', str(mine))
+    # C_D0 x 1.7 of the published value: the calibration says so first (the file is written)
+    assert code == EXIT_UNTRUSTED and mine.exists()
+    assert lines[0].startswith('NOT plausible: drag_zero_lift x 1.')
     code, lines, _ = _run(capsys, 'glider', 'validate', '--vehicle', str(mine), '--bag',
                           str(bag))
     assert code == EXIT_UNTRUSTED
