@@ -60,6 +60,9 @@ def cmd_calibrate(args):
     )
     check_outputs(args, '--json', '--vehicle-out')
     free = tuple(n.strip() for n in args.free.split(',') if n.strip())
+    if not free:
+        raise AuvIdentError(f'--free {args.free!r}: name the parameters to calibrate '
+                            '(e.g. hull_volume,drag_zero_lift)')
     vehicle, raw, _, window = _inputs(args)
     result = calibrate_glider(window, vehicle, free)
     print('\n'.join(format_calibration(result, vehicle, window)))

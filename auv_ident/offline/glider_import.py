@@ -340,7 +340,11 @@ def read_glider_bag(path):
     be there (a bag of the processed file; the raw logs' bags have none)."""
     ctd, pitch, pumped, dvl = {}, {}, {}, {}
     topics = [CTD_TOPIC, ODOM_TOPIC, ACTUATOR_TOPIC]
-    if DVL_TOPIC in bag_topics(path):
+    present = bag_topics(path)
+    if CTD_TOPIC not in present:
+        raise RunFileError(f"{path}: no {CTD_TOPIC} topic: not a glider bag (a glider's logs "
+                           'become one with import --format slocum|npy, docs/glider.md)')
+    if DVL_TOPIC in present:
         topics.append(DVL_TOPIC)
     for topic, t_ns, msg in read_bag(path, topics={k: TOPIC_TYPES[k] for k in topics}):
         if topic == CTD_TOPIC:

@@ -7,6 +7,7 @@ exit 2, before any work. On the comet's record (skipped without it): the command
 campaign's figures (docs/glider.md)."""
 from dataclasses import replace
 import json
+from pathlib import Path
 
 from glider_dives import dvl_on_descents, synthetic_dives, TRUE
 import numpy as np
@@ -106,6 +107,7 @@ def test_validate_judges_the_flight_and_flags_a_dive_whose_dvl_disagrees(dives, 
     (['--free', 'thermal_expansion'], 'thermal_expansion: the flight model leaves'),
     (['--free', 'hull_volume,wings'], "glider parameter 'wings' cannot be calibrated"),
     (['--from', 'yesterday'], "'yesterday': not a time"),
+    (['--free', ','], "--free ',': name the parameters"),
     (['--from', '2030-01-01T00:00:00Z'], 'holds 0 samples of the bag'),
 ])
 def test_bad_options_are_named_in_one_line(bag, capsys, argv, culprit):
@@ -118,6 +120,10 @@ def test_a_6dof_file_or_an_existing_output_is_refused_before_the_work(bag, tmp_p
     code, _, err = _run(capsys, 'glider', 'validate', '--vehicle', 'nps_auv2', '--bag',
                         str(bag))
     assert code == 2 and 'not a glider file' in err
+    shipped = Path(__file__).resolve().parents[2] / 'bags' / 'nps_auv2_ident'
+    code, _, err = _run(capsys, 'glider', 'calibrate', '--vehicle', 'slocum_comet', '--bag',
+                        str(shipped))
+    assert code == 2 and 'not a glider bag' in err and len(err.splitlines()) == 1
     taken = tmp_path / 'taken.yaml'
     taken.write_text('mine\n')
     code, lines, err = _run(capsys, 'glider', 'calibrate', '--vehicle', 'slocum_comet',

@@ -186,6 +186,8 @@ def test_bad_input_is_named():
         replace(PRIOR, drag_zero_lift=-0.1)
     with pytest.raises(ConfigError, match='wing_span'):
         calibrate(synthetic_dives(TRUE, 5, n_cycles=1), PRIOR, 'dynamic', ('wing_span',))
+    with pytest.raises(ConfigError, match='no parameter to calibrate'):
+        calibrate(synthetic_dives(TRUE, 5, n_cycles=1), PRIOR, 'dynamic', ())
     with pytest.raises(DataError, match='pitch'):
         GliderRecord(t=np.arange(3.0), pressure=np.zeros(3), pitch=[0.0, np.nan, 0.0],
                      pumped_volume=np.zeros(3), density=np.full(3, 1000.0))

@@ -162,6 +162,8 @@ def calibrate(record: GliderRecord, start: GliderParameters, model: str = 'dynam
     if model not in FLIGHT_MODELS:
         raise ConfigError(f'glider model {model!r}: one of {", ".join(FLIGHT_MODELS)}')
     free = tuple(free)
+    if not free:
+        raise ConfigError('glider calibration: no parameter to calibrate (free is empty)')
     _check_names(free)
     t0 = time.perf_counter()
     f, mask, x0, scale = residual_function(record, start, free, model, window,
