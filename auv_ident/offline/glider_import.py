@@ -337,7 +337,7 @@ def read_glider_bag(path):
     """The :class:`~auv_ident.core.glider.record.GliderRecord` of a glider bag: pressure,
     density and temperature from ``/glider/ctd``, pitch from ``/odom``, the pumped volume from
     ``/actuators``, the DVL speed where ``/dvl/speed_through_water`` has one. The density must
-    be there (a bag of the processed file; the raw logs' bags have none)."""
+    be there at every sample (the processed file's, or the raw logs' CTD's: EOS-80)."""
     ctd, pitch, pumped, dvl = {}, {}, {}, {}
     topics = [CTD_TOPIC, ODOM_TOPIC, ACTUATOR_TOPIC]
     present = bag_topics(path)
