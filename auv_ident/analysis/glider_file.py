@@ -22,7 +22,13 @@ import numpy as np
 
 from auv_ident.analysis.glider import EXTRA, format_dvl_check, format_flagged, judge, utc_text
 from auv_ident.core.errors import ConfigError, DataError
-from auv_ident.core.glider.calibration import calibrate, identifiability
+from auv_ident.core.glider.calibration import (
+    calibrate,
+    DEPTH_WINDOW,
+    fit_window,
+    identifiability,
+    MIN_SAMPLES,
+)
 from auv_ident.core.glider.flight import dynamic_flight
 from auv_ident.core.glider.record import GliderRecord
 from auv_ident.core.glider.validation import (
@@ -189,10 +195,16 @@ def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderV
     firmer spread). Returns {'check': DvlConsistency dict or None (no DVL speed), 'scores':
     judge()'s {'all', 'consistent'} or None, 'flagged': flagged dives in the window}."""
     window = GliderRecord(**{**_columns(window), 'temperature': None})
+    deep = int(fit_window(window).sum())
+    if deep < MIN_SAMPLES:
+        raise DataError(f'the window {utc(window.t[0])} .. {utc(window.t[-1])} holds {deep} '
+                        f'samples between {DEPTH_WINDOW[0]:g} and {DEPTH_WINDOW[1]:g} m: no '
+                        f'dive to judge (at least {MIN_SAMPLES})')
     flight = dynamic_flight(vehicle.params, window)
-    if not np.isfinite(record.speed_through_water).any():
+    if not np.isfinite(window.speed_through_water).any():
         return {'check': None, 'scores': {'all': judge(flight, window, window.t)['all']},
-                'flagged': [], 'dives': _dives(window)}
+                'flagged': [], 'dives': _dives(window), 'untrusted': False,
+                'dvl_elsewhere': bool(np.isfinite(record.speed_through_water).any())}
     check = consistent_dvl(record)
     kept_times = record.t[check.keep]
     scores = judge(flight, window, kept_times)
@@ -211,7 +223,8 @@ def format_validation(result: dict, vehicle: GliderVehicle, window: GliderRecord
     span = f'{utc(window.t[0])} .. {utc(window.t[-1])}'
     if result['check'] is None:
         s = result['scores']['all']
-        return [f'{vehicle.name} on {result["dives"]} dives, {span}: no DVL speed in the bag: '
+        where = 'this window' if result['dvl_elsewhere'] else 'the bag'
+        return [f'{vehicle.name} on {result["dives"]} dives, {span}: no DVL speed in {where}: '
                 'the speed through water is not judged',
                 f'depth rate (10-35 m) bias {100 * s["depth_rate_bias"]:+.2f} cm/s, RMS '
                 f'{100 * s["depth_rate_rms"]:.2f} cm/s']

@@ -96,6 +96,15 @@ def test_validate_judges_the_flight_and_flags_a_dive_whose_dvl_disagrees(dives, 
     assert code == EXIT_UNTRUSTED
     when = str(np.datetime64(int(check.dives[3].start), 's'))
     assert lines[0].startswith(f'data quality: 1 of 6 DVL dives flagged: {when}')
+    # a window without a DVL sample (the climb before the slow dive): its depth rate judged,
+    # the speed said not to be
+    has_dvl = np.isfinite(dives.speed_through_water)
+    end_before = dives.t[start - 1 - np.argmax(has_dvl[:start][::-1])]
+    climb = dives.t[(dives.t > end_before) & ~has_dvl]
+    climb = climb[climb < dives.t[has_dvl & (dives.t > end_before)][0]]
+    code, lines, _ = _run(capsys, 'glider', 'validate', '--vehicle', str(mine), '--bag',
+                          str(slow_bag), '--from', str(climb[0]), '--until', str(climb[-1]))
+    assert code == 0 and 'no DVL speed in this window' in lines[0]
     # a window without that dive: the check still runs over the bag, none in the window
     code, lines, _ = _run(capsys, 'glider', 'validate', '--vehicle', str(mine), '--bag',
                           str(slow_bag), '--until', str(check.dives[3].start - 1.0))
@@ -108,6 +117,7 @@ def test_validate_judges_the_flight_and_flags_a_dive_whose_dvl_disagrees(dives, 
     (['--free', 'hull_volume,wings'], "glider parameter 'wings' cannot be calibrated"),
     (['--from', 'yesterday'], "'yesterday': not a time"),
     (['--free', ','], "--free ',': name the parameters"),
+    (['--until', '1500000010'], 'samples in the depth window (10.0, 35.0) m; at least 50'),
     (['--from', '2030-01-01T00:00:00Z'], 'holds 0 samples of the bag'),
 ])
 def test_bad_options_are_named_in_one_line(bag, capsys, argv, culprit):
