@@ -16,6 +16,7 @@ glider: calibrate and validate").
 Times are s since 1970-01-01 UTC; speeds m/s (printed in cm/s).
 """
 from dataclasses import asdict
+import json
 import math
 
 import numpy as np
@@ -36,7 +37,7 @@ from auv_ident.core.glider.validation import (
     consistent_dvl,
     dvl_dives,
 )
-from auv_ident.core.glider.vehicle import GliderVehicle, NUMBERS, TEXTS
+from auv_ident.core.glider.vehicle import GliderVehicle, NUMBERS
 
 # what ours identifies on a Slocum's dives (docs/glider.md, "What the dives identify")
 DEFAULT_FREE = ('hull_volume', 'drag_zero_lift')
@@ -179,21 +180,22 @@ def calibrated_file_text(raw: dict, vehicle: GliderVehicle, result: dict, source
         if key in notes:
             L.append(f'# {notes[key]}')
         L.append(f'{key}: {float(values[key])!r}')
-    assert set(raw) <= set(NUMBERS) | set(TEXTS)
     return '\n'.join(L) + '\n'
 
 
 def _quoted(text: str) -> str:
     """A YAML double-quoted scalar (JSON's string syntax is YAML's)."""
-    import json
     return json.dumps(str(text))
 
 
 def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderVehicle) -> dict:
     """A glider file's dynamic flight over ``window`` (a part of ``record``) judged against
     the DVL speed; the consistency check runs over every dive of ``record`` (more dives, a
-    firmer spread). Returns {'check': DvlConsistency dict or None (no DVL speed), 'scores':
-    judge()'s {'all', 'consistent'} or None, 'flagged': flagged dives in the window}."""
+    firmer spread). Returns {'check': DvlConsistency dict or None (no DVL speed in the
+    window), 'scores': judge()'s {'all', 'consistent'} ({'all'} without a DVL), 'flagged':
+    the flagged dives in the window, 'angle_of_attack': AngleOfAttackAgreement dict or None,
+    'untrusted': a dive flagged or the angle of attack disagreeing, 'dives', 'dvl_dives'}.
+    DataError when the window holds no dive below the fit window's top."""
     window = GliderRecord(**{**_columns(window), 'temperature': None})
     deep = int(fit_window(window).sum())
     if deep < MIN_SAMPLES:
