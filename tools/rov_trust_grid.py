@@ -15,14 +15,19 @@ lines between the table's points, file: the file's own cubic). Then
 and the estimates and 1-sigmas against CELL/truth.json, as docs/vehicles.md's tables compare
 them (error of the magnitude, error / sigma). Printed per run: exit status, the first line's
 verdict, whether process noise was matched, the largest |error| / sigma and its coefficient,
-the largest |error| % and its coefficient, and "confidently wrong": exit 0 with some
-coefficient beyond 3 sigma and more than 10 % off. These are measurements, not assertions.
+the largest |error| % and its coefficient, the NEES of the identified coefficients under the
+printed covariance (chi-square with their number as degrees of freedom when the bars hold:
+99.9 % below 32.9 for 12) and "confidently wrong": exit 0 with some coefficient beyond 3 sigma
+and more than 10 % off. These are measurements, not assertions.
 
     PYTHONPATH=. .venv/bin/python tools/rov_trust_grid.py [--out DIR] [--cells A,B,...]
         [--seed 3] [--duration 600] [--reuse]
 
-A cell is LEVEL_PERTURB_LAG_CURVE[_auto], e.g. 10_0.3_0.3_table_auto. With --reuse, bags and
-results already in --out are kept.
+A cell is LEVEL_PERTURB_LAG_CURVE[_auto][_stdF], e.g. 10_0.1_0.3_file_std10_auto: noise x10,
+thrust +10 %, motor lag 0.3 s, the file's curve, --coefficients auto, --noise-std F times the
+default (what the divergence's message advises when the configured noise is far too small).
+With --reuse, bags and results already in --out are kept. Table in docs/vehicles.md ("Loud
+coloured noise and model error together").
 """
 import argparse
 import json
@@ -41,10 +46,12 @@ from auv_ident.core.model.sensors import DEFAULT_NOISE_STD  # noqa: E402
 
 DEFAULT_LEVEL = (0.5, 2.0)  # the generator's per-channel noise factor, U(a, b)
 TAU = (2.0, 5.0)            # s, long correlation times
-GRID = ('1_0.1_0_table', '3_0.1_0_table', '10_0.1_0_table',
-        '1_0.1_0.3_table', '3_0.1_0.3_table', '10_0.1_0.3_table',
-        '10_0.3_0_table', '10_0.3_0.3_table', '3_0.3_0.3_table',
-        '10_0.1_0_file', '10_0.1_0.3_file', '1_0.3_0.3_file')
+GRID = ('1_0.1_0_table', '3_0.1_0_table', '10_0.1_0_table', '10_0.1_0_table_std10',
+        '10_0.3_0_table', '10_0.1_0_file', '1_0.1_0.3_table', '3_0.1_0.3_table',
+        '5_0.1_0.3_table', '10_0.1_0.3_table', '10_0.1_0.3_table_std10', '3_0.1_0.15_table',
+        '5_0.1_0.15_table', '10_0.1_0.15_table_std10', '3_0.3_0.3_table', '10_0.3_0.3_table',
+        '1_0.3_0.3_file', '10_0.1_0.3_file', '10_0.1_0.3_file_std10',
+        '10_0.1_0.3_file_std10_auto')
 
 
 def parse_cell(cell):
@@ -140,14 +147,15 @@ def main(argv=None):
     ap.add_argument('--reuse', action='store_true')
     args = ap.parse_args(argv)
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    print('| noise x | thrust perturb | motor lag s | curve | set | exit | first line | '
+    print('| seed | noise x | thrust perturb | motor lag s | curve | set | exit | first line | '
           'process noise | max abs(error)/sigma | max abs(error) % | NEES (dof) | '
           'confidently wrong |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for cell in args.cells.split(','):
         r = one(args, cell)
         level, perturb, lag, curve, auto, std = parse_cell(cell)
-        head = (f'| {level:g} | {perturb:g} | {lag:g} | {curve} | {"auto" if auto else "named"}'
+        head = (f'| {args.seed} | {level:g} | {perturb:g} | {lag:g} | {curve} | '
+                + ('auto' if auto else 'named')
                 + ('' if std == 1 else f', noise_std x{std:g}')
                 + f' | {r["rc"]} | {r["first"] if r["rc"] == 2 else r["first"].split(":")[0]} |')
         if 'zmax' not in r:
