@@ -219,6 +219,10 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
     several = len(paths) > 1 if together is None else together
     if several:
         settings = _several_bags(settings)
+    if 'noise_std' in settings.given and 'noise_source' not in settings.given:
+        # a noise_std given is the noise to start from (as for several bags), not a fallback
+        # for the messages without covariances
+        settings = settings.with_values(noise_source='parameter')
     metas = [bag_custom_data(p) for p in paths]
     v = bags_vehicle(paths, metas, settings.vehicle if 'vehicle' in settings.given else None)
     auto, names = coefficient_request(v, settings.coefficients)
@@ -248,7 +252,7 @@ def identify_replayed(paths, settings=None, refine_pass=True, progress=None, tog
     def cfg_of(model, noise):
         cfg = ex.make_config(model.theta_names[:model.p_coef], noise_mode='fixed',
                              noise_std=noise, initial_offset=initial_offset)
-        if several and q_given:
+        if q_given:
             cfg.q_state = np.asarray(settings.q_state, dtype=float)
         return cfg
 

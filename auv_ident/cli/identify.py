@@ -70,11 +70,11 @@ def cmd_identify(args):
         from auv_ident.analysis.bag_identify import identify_bags
         doc, table = identify_bags(args.bag, settings, refine_pass=not args.no_refine)
         print(table)
-    elif {'noise_std', 'q_state'} & settings.given:
-        raise AuvIdentError('--noise-std and --q-state apply to several bags (identify --bag A '
-                            '--bag B ...)')
     elif args.bag and settings.input_map and _raw_map(settings.input_map):
         from auv_ident.analysis.raw_identify import identify_raw_bag
+        if {'noise_std', 'q_state'} & settings.given:
+            raise AuvIdentError('--noise-std and --q-state: the raw-sensor path does not take '
+                                'them (the fused odometry path does)')
         if args.estimate_out:
             raise AuvIdentError('--estimate-out: not written for a raw-sensor map yet')
         doc, table = identify_raw_bag(args.bag[0], settings)

@@ -149,3 +149,27 @@ def test_independent_tank_session_with_a_motor_lag_identifies_its_time_constant(
         t = truth[name]
         assert abs(c['estimate'] - t) <= 0.05 * abs(t), (name, c['estimate'], t)
         assert abs(c['estimate'] - t) <= 3 * c['std'], (name, c['estimate'], t, c['std'])
+
+
+@pytest.mark.slow
+def test_an_unmodelled_motor_lag_under_loud_coloured_noise_is_not_called_consistent(tmp_path):
+    """The confidently wrong case of tools/rov_trust_grid.py (cell 10_0.1_0.3_file_std10):
+    a 0.3 s motor lag the shipped file does not model, AR(1) noise at 10x the generator's
+    level (5-20 x its base, correlation 2-5 s), identified with the noise_std raised 10x (the
+    configured pass diverges otherwise, exit 2). Before the cross-correlation with the
+    commands' changes the first line said consistent (exit 0) with X_u +1.05 against -13.7 at
+    5.4 sigma: the residuals' cross-correlation with the held PWM levels was 4.3 sd (limit
+    4.5), with their changes it is 10.6 sd at a lag of 0.3 s, the motor lag."""
+    from auv_ident.core.model.sensors import DEFAULT_NOISE_STD
+    out = tmp_path / 'lag_loud'
+    assert generate(['--out', str(out), '--seed', '3', '--duration', '600', '--curve', 'file',
+                     '--motor-lag', '0.3', '--noise-level', '5,20', '--noise-tau', '2,5']) == 0
+    model = tmp_path / 'm.json'
+    assert cli_main(['identify', '--vehicle', 'bluerov2_heavy', '--bag', str(out / 'bag'),
+                     '--input-map', 'bluerov2_heavy', '--noise-source', 'parameter',
+                     '--noise-std', ','.join(f'{10 * v:g}' for v in DEFAULT_NOISE_STD),
+                     '--json', str(model)]) == 3
+    doc = json.loads(model.read_text())
+    assert doc['diagnosis']['consistent'] is False
+    check = doc['diagnosis']['checks']['residual_input_correlation']
+    assert check['input'].startswith('the changes of t') and abs(check['z']) > 4.5, check

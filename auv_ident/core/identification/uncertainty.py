@@ -530,6 +530,26 @@ def verdicts_from_covariance(cov: np.ndarray, estimate: np.ndarray, names: Seque
     return out
 
 
+def command_changes(white: np.ndarray, U: np.ndarray,
+                    bounds: Sequence[int] | None = None) -> np.ndarray:
+    """(N, q) each input's change since the previous sample with a residual, on the rows that
+    have one (NaN elsewhere, and on each run's first such row: bounds as for split_rows, None
+    for one run). The commands' first differences are the input prewhitened: a pilot's held
+    sticks or a slow fin schedule are correlated over seconds, so the cross-correlation with
+    their levels has a wide Bartlett variance, while an error in the response to a change (a
+    thruster's lag, an actuator's rate) shows against the changes within a fraction of a
+    second. Rows without a residual (a command between two odometry samples) are skipped: the
+    change is counted at the next measured sample, the first whose prediction it enters."""
+    white = np.asarray(white, dtype=float)
+    U = np.asarray(U, dtype=float)
+    out = np.full_like(U, np.nan)
+    starts = [0, U.shape[0]] if bounds is None else list(bounds)
+    for a, b in zip(starts[:-1], starts[1:]):
+        rows = a + np.flatnonzero(np.isfinite(white[a:b]).any(axis=1))
+        out[rows[1:]] = U[rows[1:]] - U[rows[:-1]]
+    return out
+
+
 def input_correlation(white: np.ndarray, U: np.ndarray, max_lag: int,
                       names: Sequence[str] | None = None,
                       input_names: Sequence[str] | None = None,
