@@ -34,7 +34,7 @@ from auv_ident.offline.raw_bag import raw_bag_records, raw_sensor_config
 from auv_ident.offline.replay import bag_custom_data
 from auv_ident.offline.tf_static import tf_mountings
 from auv_ident.session.input_map import load_input_map
-from auv_ident.session.raw_session import check_raw_settings
+from auv_ident.session.raw_session import check_raw_settings, check_raw_vehicle
 from auv_ident.session.stuck import describe_spans, STUCK_SAMPLES, STUCK_SECONDS, StuckSpan
 from auv_ident.vehicles import load_vehicle
 
@@ -115,6 +115,7 @@ def identify_raw_bag(path, settings, passes=2):
     check_raw_settings(settings)
     imap = load_input_map(settings.input_map)
     v = load_vehicle(settings.vehicle)
+    check_raw_vehicle(v)
     names = results.coefficient_list(v, settings.coefficients)
     records, t0 = raw_bag_records(path, imap, v)
     records, spans = drop_repeats(records)

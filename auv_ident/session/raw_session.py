@@ -26,6 +26,7 @@ from auv_ident.core.filter.augmented import FilterConfig
 from auv_ident.core.filter.raw import RawMeasurement, RawSensorFilter
 from auv_ident.core.model.hydrodynamics import Model
 from auv_ident.core.model.state import Input, N_INPUT
+from auv_ident.core.model.vehicle import Vehicle
 from auv_ident.session.estimate_file import estimate_document
 from auv_ident.session.guard import Event, Health
 from auv_ident.session.input_map import IMU, InputMap, InputMapError, load_input_map, NAVSAT
@@ -69,6 +70,18 @@ def check_raw_settings(settings: IdentifierSettings) -> None:
                                         'only ' + ', '.join(RAW_SETTINGS) + also)
 
 
+def check_raw_vehicle(vehicle: Vehicle) -> None:
+    """ParameterError naming ``vehicle`` when the raw-sensor path cannot drive it: its
+    filter takes the fin vehicles' command vector (state.Input), not thruster commands."""
+    if vehicle.thrusters:
+        raise ParameterError('vehicle', f'{vehicle.name}: a thruster-driven vehicle '
+                                        f'({len(vehicle.thrusters)} thrusters); the raw-sensor '
+                                        "path reads fin vehicles' commands only for now: give "
+                                        'its navigation solution (nav_msgs/Odometry) with the '
+                                        'thrusters through an odometry input map (config/inputs/'
+                                        'bluerov2_heavy.yaml, docs/your_data.md)')
+
+
 def has_raw_sensors(settings: IdentifierSettings) -> bool:
     """True if the settings' input map has raw-sensor inputs (then the live node runs a
     RawSession); ParameterError naming input_map for a map that cannot be read."""
@@ -105,6 +118,7 @@ class RawSession:
         check_raw_settings(settings)
         self.settings = settings
         self.vehicle = vehicle_named(settings.vehicle)
+        check_raw_vehicle(self.vehicle)
         try:
             self.input_map: InputMap = load_input_map(settings.input_map)
             for e in self.input_map.sensors:
