@@ -15,7 +15,7 @@ glider: calibrate and validate").
 
 Times are s since 1970-01-01 UTC; speeds m/s (printed in cm/s).
 """
-from dataclasses import asdict
+from dataclasses import asdict, replace
 import json
 import math
 
@@ -82,23 +82,17 @@ def calibrate_glider(record: GliderRecord, vehicle: GliderVehicle,
         raise ConfigError("thermal_expansion: the flight model leaves the hull's thermal "
                           "expansion out (with the water's temperature as the hull's it is "
                           'refuted: docs/glider.md)')
-    record = GliderRecord(**{**_columns(record), 'temperature': None})
+    record = replace(record, temperature=None)
     cal = calibrate(record, vehicle.params, 'dynamic', free)
     # each alone beside the freed ones, as docs/glider.md's table: what freeing it would cost
     others = {n: identifiability(record, cal, (n,))[n] for n in EXTRA if n not in free}
-    implausible = {n: cal.value(n) / getattr(vehicle.params, n) for n in free
-                   if n in COEFFICIENTS and not (1.0 / PLAUSIBLE_FACTOR
-                                                 <= cal.value(n) / getattr(vehicle.params, n)
-                                                 <= PLAUSIBLE_FACTOR)}
+    ratios = {n: cal.value(n) / getattr(vehicle.params, n) for n in free if n in COEFFICIENTS}
+    implausible = {n: r for n, r in ratios.items()
+                   if not 1.0 / PLAUSIBLE_FACTOR <= r <= PLAUSIBLE_FACTOR}
     return {'calibration': cal, 'others': others,
             'dives': _dives(record),
             'untrusted': [n for n in free if cal.verdicts[n]['verdict'] != IDENTIFIED],
             'implausible': implausible}
-
-
-def _columns(record: GliderRecord) -> dict:
-    return {n: getattr(record, n) for n in ('t', 'pressure', 'pitch', 'pumped_volume',
-                                            'density', 'temperature', 'speed_through_water')}
 
 
 def _dives(record: GliderRecord, top: float = 10.0, hysteresis: float = 5.0) -> int:
@@ -196,7 +190,7 @@ def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderV
     the flagged dives in the window, 'angle_of_attack': AngleOfAttackAgreement dict or None,
     'untrusted': a dive flagged or the angle of attack disagreeing, 'dives', 'dvl_dives'}.
     DataError when the window holds no dive below the fit window's top."""
-    window = GliderRecord(**{**_columns(window), 'temperature': None})
+    window = replace(window, temperature=None)
     deep = int(fit_window(window).sum())
     if deep < MIN_SAMPLES:
         raise DataError(f'the window {utc(window.t[0])} .. {utc(window.t[-1])} holds {deep} '
@@ -210,12 +204,11 @@ def validate_glider(record: GliderRecord, window: GliderRecord, vehicle: GliderV
     check = consistent_dvl(record)
     kept_times = record.t[check.keep]
     scores = judge(flight, window, kept_times)
-    starts = {float(window.t[idx[0]]) for idx in dvl_dives(window)}
     flagged = [d for d in check.as_dict()['dives']
                if not d['kept'] and window.t[0] <= d['start'] <= window.t[-1]]
     agreement = angle_of_attack_agreement(flight, window, check, kept_times)
     return {'check': check.as_dict(), 'scores': scores, 'flagged': flagged,
-            'dives': _dives(window), 'dvl_dives': len(starts),
+            'dives': _dives(window), 'dvl_dives': len(dvl_dives(window)),
             'angle_of_attack': None if agreement is None else asdict(agreement),
             'untrusted': bool(flagged) or bool(agreement and agreement.disagrees)}
 
