@@ -28,12 +28,13 @@ def utc_time(text):
 def _inputs(args):
     """(GliderVehicle, raw file dict, whole record, the record's window) of the options."""
     from auv_ident.analysis.glider_file import time_window
-    from auv_ident.core.glider.vehicle import glider_from_file
+    from auv_ident.core.glider.vehicle import glider_from_dict
     from auv_ident.core.vehicle_files import read_yaml_file
     from auv_ident.offline.glider_import import read_glider_bag
     from auv_ident.vehicles import resolve_vehicle_path
     path = resolve_vehicle_path(args.vehicle)
-    vehicle = glider_from_file(path)
+    raw = read_yaml_file(path)          # read once: checked here, rewritten by --vehicle-out
+    vehicle = glider_from_dict(raw, path)
     start = None if args.start is None else utc_time(args.start)
     end = None if args.until is None else utc_time(args.until)
     if start is not None and end is not None and end <= start:
@@ -41,7 +42,7 @@ def _inputs(args):
     if not os.path.exists(args.bag):
         raise AuvIdentError(f'--bag {args.bag}: no such bag')
     record = read_glider_bag(args.bag)
-    return vehicle, read_yaml_file(path), record, time_window(record, start, end)
+    return vehicle, raw, record, time_window(record, start, end)
 
 
 def _window_text(args, window):
